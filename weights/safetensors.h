@@ -1,0 +1,63 @@
+// Reader for the safetensors format (8-byte LE header length, JSON header, raw LE C-order data).
+// The file is mmapped; tensors are views into it. Everything in the header is validated at open:
+// header length within the file, JSON well formed, dtype known, shape non-negative, offsets inside the
+// data area, ordered, non-overlapping, and end - begin == elements * dtype size.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "weights/file_mapping.h"
+#include "weights/tensor_types.h"
+
+namespace act {
+
+struct SafetensorsTensor {
+  std::string name;
+  DType dtype = DType::kF32;
+  std::vector<int64_t> shape;
+  const uint8_t* data = nullptr;  ///< points into the mapping
+  size_t nbytes = 0;
+
+  uint64_t elements() const { return shape_elements(shape); }
+  /// The tensor converted to float32 (from F32, F16 or BF16); throws kInvalidArgument otherwise.
+  std::vector<float> to_f32() const;
+};
+
+class SafetensorsFile {
+ public:
+  /// Opens and validates `path`. Throws act::Error (kNotFound, kIoError, kDataLoss with the file name
+  /// and what is wrong, e.g. "header length 9999 exceeds file size 100").
+  static SafetensorsFile open(const std::string& path);
+
+  const std::string& path() const { return mapping_.path(); }
+  bool contains(const std::string& name) const { return index_.count(name) != 0; }
+  /// Throws kNotFound naming the tensor and the file.
+  const SafetensorsTensor& get(const std::string& name) const;
+  const SafetensorsTensor* find(const std::string& name) const;
+  /// Tensor names in sorted order.
+  std::vector<std::string> names() const;
+  const std::map<std::string, std::string>& metadata() const { return metadata_; }
+
+ private:
+  FileMapping mapping_;
+  std::map<std::string, SafetensorsTensor> index_;
+  std::map<std::string, std::string> metadata_;
+};
+
+/// A tensor to write (used by tests and by act_eval --output).
+struct SafetensorsWriteTensor {
+  std::string name;
+  DType dtype = DType::kF32;
+  std::vector<int64_t> shape;
+  const void* data = nullptr;
+  size_t nbytes = 0;
+};
+
+/// Writes a safetensors file atomically (temporary file in the same folder, then rename).
+/// Throws act::Error on I/O failure or inconsistent sizes; leaves no partial file behind.
+void write_safetensors(const std::string& path, const std::vector<SafetensorsWriteTensor>& tensors,
+                       const std::map<std::string, std::string>& metadata = {});
+
+}  // namespace act

@@ -1,0 +1,137 @@
+// actengine public API: run a converted LeRobot ACT policy (.actb blob).
+//
+//   auto engine = act::Engine::open("model.actb", {.threads = 4});
+//   if (!engine.ok()) { std::cerr << engine.status().to_string(); ... }
+//   act::Observation obs;
+//   obs.images = {act::ImageView::rgb_u8(frame.data, 480, 640)};
+//   obs.state = state;                       // raw units, model_info().state_dim values
+//   std::vector<float> chunk(engine->model_info().chunk_values());
+//   act::Status s = (*engine)->infer(obs, chunk);   // [chunk_size x action_dim], raw units
+//
+// Thread safety: an Engine owns its buffers and its thread pool; one Engine must not be used from
+// two threads at once (infer() is not reentrant). Different Engines share nothing and may run side
+// by side in any threads. A Policy is bound to one Engine and has the same rule.
+// No call throws; failures come back as act::Status with a message naming the problem.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "actengine/status.h"
+
+namespace act {
+
+struct EngineOptions {
+  /// Worker threads for one inference; 0 = one per online core.
+  int threads = 0;
+  /// Verify the blob's checksum at open (reads the whole file once).
+  bool verify_checksum = true;
+};
+
+struct CameraInfo {
+  std::string key;  ///< feature key, e.g. "observation.images.front"
+  int height = 0;
+  int width = 0;
+};
+
+/// What a loaded model expects and produces; everything is derived from the blob's config.
+struct ModelInfo {
+  std::vector<CameraInfo> cameras;  ///< in token order (the config's input_features order)
+  int state_dim = 0;                ///< robot state values per observation (0 = no state input)
+  int env_state_dim = 0;            ///< environment state values (0 = none)
+  int action_dim = 0;
+  int chunk_size = 0;
+  int n_action_steps = 0;
+  bool temporal_ensembling = false;
+  double temporal_ensemble_coeff = 0.0;
+  std::string precision;  ///< "fp32"
+  std::string summary;    ///< one line: backbone, dims, layers, cameras
+  size_t chunk_values() const { return static_cast<size_t>(chunk_size) * action_dim; }
+};
+
+/// One camera image, viewed (not copied). Either uint8 RGB, height x width x 3, rows `row_stride`
+/// bytes apart (0 = packed); or float32 RGB channel-first 3 x height x width with values in [0, 1].
+struct ImageView {
+  enum class Format { kRgbU8Hwc, kRgbF32Chw };
+  Format format = Format::kRgbU8Hwc;
+  const void* data = nullptr;
+  int height = 0;
+  int width = 0;
+  size_t row_stride = 0;
+
+  static ImageView rgb_u8(const uint8_t* data, int height, int width, size_t row_stride = 0) {
+    return {Format::kRgbU8Hwc, data, height, width, row_stride};
+  }
+  static ImageView rgb_f32_chw(const float* data, int height, int width) {
+    return {Format::kRgbF32Chw, data, height, width, 0};
+  }
+};
+
+/// One observation: an image per camera (in ModelInfo::cameras order) and the raw state vectors.
+struct Observation {
+  std::vector<ImageView> images;
+  std::span<const float> state;
+  std::span<const float> env_state;
+};
+
+class Engine {
+ public:
+  /// Opens an .actb blob (mmap, no copy), builds and plans the network, starts the thread pool.
+  static StatusOr<std::unique_ptr<Engine>> open(const std::string& blob_path, const EngineOptions& options = {});
+  ~Engine();
+  Engine(const Engine&) = delete;
+  Engine& operator=(const Engine&) = delete;
+
+  const ModelInfo& model_info() const;
+  int threads() const;
+
+  /// Runs the network on one observation and writes the raw (un-normalised) action chunk,
+  /// chunk_size x action_dim row-major, into `actions` (which must hold chunk_values() floats).
+  /// Validates image count, sizes, state lengths and that every input value is finite.
+  Status infer(const Observation& observation, std::span<float> actions);
+  /// As infer(), but writes the normalised network output (before un-normalisation).
+  Status infer_normalized(const Observation& observation, std::span<float> actions_normalized);
+
+  class Impl;
+  Impl& impl() { return *impl_; }  ///< internal (tests and tools); not part of the stable API
+
+ private:
+  explicit Engine(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// LeRobot's select_action: returns one action per control step.
+///  - n_action_steps queue (temporal ensembling off): runs the network when the queue is empty and
+///    queues the first n_action_steps rows of the chunk;
+///  - temporal ensembling (coeff set, n_action_steps == 1): runs every step and averages all
+///    predictions of the current step with weights exp(-coeff * i), i = 0 the oldest, using LeRobot's
+///    exact online update.
+/// Ensembling happens on normalised actions, then the result is un-normalised (as LeRobot's current
+/// layout does).
+class Policy {
+ public:
+  explicit Policy(Engine& engine);
+  ~Policy();
+  Policy(Policy&&) noexcept;
+  Policy& operator=(Policy&&) noexcept;
+
+  /// Writes action_dim raw action values into `action`.
+  Status select_action(const Observation& observation, std::span<float> action);
+  /// Empties the queue / ensemble (call at the start of an episode).
+  void reset();
+  /// True when the next select_action() will run the network.
+  bool will_infer_next() const;
+
+ private:
+  class State;
+  std::unique_ptr<State> state_;
+};
+
+/// Library version, "0.1.0".
+const char* version();
+
+}  // namespace act

@@ -1,0 +1,91 @@
+// ModelConfig: every fact about an ACT model that changes the computation. One struct, read from a
+// LeRobot config.json at import and stored in (and read back from) the .actb blob's header. Shapes
+// elsewhere are derived from it, never re-typed.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace act {
+
+enum class Activation { kRelu, kGelu, kGlu };
+enum class NormMode { kIdentity, kMeanStd, kMinMax };
+
+const char* activation_name(Activation a);
+const char* norm_mode_name(NormMode m);
+
+struct CameraConfig {
+  std::string key;  ///< e.g. "observation.images.front"
+  int height = 0;
+  int width = 0;
+};
+
+/// How one feature is (un)normalised. The statistics themselves are tensors in the blob:
+/// "norm.<key>.sub" / "norm.<key>.div" for inputs:  y = (x - sub) / div * mul + add
+/// (MEAN_STD: sub = mean, div = std + eps, mul 1, add 0; MIN_MAX: sub = min, div = range, mul 2, add -1)
+/// and "unnorm.action.scale" / "unnorm.action.offset" / "unnorm.action.shift":
+/// x = (y + shift) * scale + offset (MEAN_STD: 0, std, mean; MIN_MAX: 1, range / 2, min).
+struct FeatureNorm {
+  NormMode mode = NormMode::kIdentity;
+};
+
+struct ModelConfig {
+  // Backbone.
+  std::string backbone = "resnet18";    ///< resnet18/34/50/101/152
+  std::vector<int> backbone_blocks;     ///< blocks per stage, e.g. {2,2,2,2}
+  bool bottleneck = false;              ///< resnet50+: Bottleneck blocks (feature map 2048 channels)
+  bool dilate_layer4 = false;           ///< replace_final_stride_with_dilation
+  // Inputs / outputs, in token order.
+  std::vector<CameraConfig> cameras;
+  std::string state_key = "observation.state";
+  int state_dim = 0;  ///< 0 = no robot state
+  std::string env_state_key;
+  int env_state_dim = 0;  ///< 0 = no environment state
+  int action_dim = 0;
+  // Transformer.
+  int dim_model = 512;
+  int n_heads = 8;
+  int dim_feedforward = 3200;
+  Activation activation = Activation::kRelu;
+  int n_encoder_layers = 4;
+  int n_decoder_layers = 1;
+  bool pre_norm = false;
+  // Chunking.
+  int chunk_size = 100;
+  int n_action_steps = 100;
+  std::optional<double> temporal_ensemble_coeff;
+  // Normalisation mode per input feature key (cameras, state, env) and for the action.
+  std::vector<std::pair<std::string, NormMode>> input_norm;
+  NormMode action_norm = NormMode::kIdentity;
+
+  // Derived facts.
+  int head_dim() const { return dim_model / n_heads; }
+  int feature_channels() const { return bottleneck ? 2048 : 512; }
+  /// Feature-map size of a camera: ceil(H/32) x ceil(W/32), or /16 when layer4 is dilated.
+  int feature_height(const CameraConfig& cam) const;
+  int feature_width(const CameraConfig& cam) const;
+  /// 1 (latent) + state? + env?
+  int n_1d_tokens() const { return 1 + (state_dim > 0) + (env_state_dim > 0); }
+  int n_tokens() const;  ///< encoder sequence length
+  NormMode input_norm_mode(const std::string& key) const;
+  /// Multiply-accumulates of one inference, by the formula of the spec (§8), split by stage.
+  struct Macs {
+    double backbone = 0, projections = 0, encoder = 0, decoder = 0, head = 0;
+    double total() const { return backbone + projections + encoder + decoder + head; }
+  };
+  Macs macs() const;
+  /// "resnet18, D 512, 8 heads, FFN 3200 relu, 4+1 layers post-norm, chunk 100, 1 camera 480x640, state 6, action 6"
+  std::string summary() const;
+
+  /// Checks every invariant (positive dims, D % n_heads, D % 4, n_action_steps <= chunk_size,
+  /// ensembling needs n_action_steps == 1, ...). Throws act::Error(kInvalidArgument / kUnimplemented).
+  void validate() const;
+  nlohmann::json to_json() const;
+  /// Parses and validates; throws act::Error(kDataLoss) naming the missing or malformed field.
+  static ModelConfig from_json(const nlohmann::json& j);
+};
+
+}  // namespace act

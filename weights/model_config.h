@@ -32,6 +32,21 @@ struct FeatureNorm {
   NormMode mode = NormMode::kIdentity;
 };
 
+/// One convolution of the backbone (BatchNorm folded in, so it has a bias).
+struct ConvSpec {
+  std::string name;  ///< torchvision path without "model.backbone.", e.g. "layer2.0.conv1"
+  std::string bn;    ///< its BatchNorm path, e.g. "layer2.0.bn1"
+  int in_c = 0, out_c = 0, kernel = 1, stride = 1, pad = 0, dilation = 1;
+};
+
+/// A residual block: convs[0..n) in sequence (ReLU after all but the last), plus an optional
+/// downsample conv on the shortcut; out = ReLU(last conv + shortcut).
+struct BlockSpec {
+  std::vector<ConvSpec> convs;
+  bool has_downsample = false;
+  ConvSpec downsample;
+};
+
 struct ModelConfig {
   // Backbone.
   std::string backbone = "resnet18";    ///< resnet18/34/50/101/152
@@ -62,6 +77,9 @@ struct ModelConfig {
   NormMode action_norm = NormMode::kIdentity;
 
   // Derived facts.
+  /// The stem conv (7x7/2) and then, stage by stage, every residual block of the backbone.
+  ConvSpec stem() const;
+  std::vector<std::vector<BlockSpec>> backbone_stages() const;
   int head_dim() const { return dim_model / n_heads; }
   int feature_channels() const { return bottleneck ? 2048 : 512; }
   /// Feature-map size of a camera: ceil(H/32) x ceil(W/32), or /16 when layer4 is dilated.

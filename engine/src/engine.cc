@@ -1,0 +1,189 @@
+#include <cmath>
+#include <new>
+
+#include "engine/src/engine_impl.h"
+#include "weights/blob_names.h"
+#include "weights/error.h"
+
+namespace act {
+
+namespace bn = blob_names;
+
+const char* version() { return "0.1.0"; }
+
+// ---------------------------------------------------------------------------------------- Impl
+
+float Engine::Impl::InputNorm::apply(float x, size_t i) const {
+  switch (mode) {
+    case NormMode::kIdentity: return x;
+    case NormMode::kMeanStd: return (x - sub[i]) / div[i];
+    case NormMode::kMinMax: return (x - sub[i]) / div[i] * 2.0f - 1.0f;
+  }
+  return x;
+}
+
+Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t size) const {
+  InputNorm n;
+  n.mode = config_.input_norm_mode(key);
+  if (n.mode == NormMode::kIdentity) return n;
+  const std::vector<int64_t> shape = {static_cast<int64_t>(size)};
+  for (const auto& [name, ptr] : {std::pair{bn::norm_sub(key), &n.sub}, std::pair{bn::norm_div(key), &n.div}}) {
+    const ActbTensor& t = blob_.get(name);
+    if (t.shape != shape) fail(StatusCode::kDataLoss, blob_.path() + ": \"" + name + "\" has shape " + shape_string(t.shape));
+    *ptr = t.f32();
+  }
+  return n;
+}
+
+Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, bool keep_intermediates)
+    : blob_(ActbFile::open(blob_path, options.verify_checksum)),
+      config_(ModelConfig::from_json(blob_.config())),
+      pool_(options.threads) {
+  const std::string precision = blob_.config().value("precision", "");
+  if (precision != "fp32") {
+    fail(StatusCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32)");
+  }
+  network_ = std::make_unique<graph::ActNetwork>(config_, blob_);
+  network_->plan(pool_.threads(), keep_intermediates);
+
+  for (const auto& cam : config_.cameras) {
+    info_.cameras.push_back({cam.key, cam.height, cam.width});
+    camera_norm_.push_back(input_norm(cam.key, 3));
+  }
+  if (config_.state_dim > 0) state_norm_ = input_norm(config_.state_key, static_cast<size_t>(config_.state_dim));
+  if (config_.env_state_dim > 0) env_norm_ = input_norm(config_.env_state_key, static_cast<size_t>(config_.env_state_dim));
+  if (config_.action_norm != NormMode::kIdentity) {
+    const std::vector<int64_t> shape = {config_.action_dim};
+    for (const auto& [name, ptr] : {std::pair{bn::kUnnormShift, &unnorm_shift_}, std::pair{bn::kUnnormScale, &unnorm_scale_},
+                                    std::pair{bn::kUnnormOffset, &unnorm_offset_}}) {
+      const ActbTensor& t = blob_.get(name);
+      if (t.shape != shape) fail(StatusCode::kDataLoss, blob_.path() + ": \"" + std::string(name) + "\" has the wrong shape");
+      *ptr = t.f32();
+    }
+  }
+  info_.state_dim = config_.state_dim;
+  info_.env_state_dim = config_.env_state_dim;
+  info_.action_dim = config_.action_dim;
+  info_.chunk_size = config_.chunk_size;
+  info_.n_action_steps = config_.n_action_steps;
+  info_.temporal_ensembling = config_.temporal_ensemble_coeff.has_value();
+  info_.temporal_ensemble_coeff = config_.temporal_ensemble_coeff.value_or(0.0);
+  info_.precision = precision;
+  info_.summary = config_.summary();
+}
+
+void Engine::Impl::load_image(size_t camera, const ImageView& image) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const std::string what = "image " + std::to_string(camera) + " (" + cam.key + ")";
+  if (image.data == nullptr) fail(StatusCode::kInvalidArgument, what + " has no data");
+  if (image.height != cam.height || image.width != cam.width) {
+    fail(StatusCode::kInvalidArgument, what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) +
+         ", the model expects " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
+  }
+  const InputNorm& norm = camera_norm_[camera];
+  float* dst = network_->camera_input(camera);
+  const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
+  if (image.format == ImageView::Format::kRgbU8Hwc) {
+    const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;
+    if (stride < w * 3) fail(StatusCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
+    // uint8 -> [0, 1] by a float32 division, as LeRobot does (255 -> exactly 1.0); then normalise.
+    float lut[3][256];
+    for (size_t c = 0; c < 3; ++c) {
+      for (int v = 0; v < 256; ++v) lut[c][v] = norm.apply(static_cast<float>(v) / 255.0f, c);
+    }
+    const auto* src = static_cast<const uint8_t*>(image.data);
+    for (size_t y = 0; y < h; ++y) {
+      const uint8_t* row = src + y * stride;
+      float* out = dst + y * w * 3;
+      for (size_t i = 0; i < w * 3; ++i) out[i] = lut[i % 3][row[i]];
+    }
+  } else {
+    const auto* src = static_cast<const float*>(image.data);
+    for (size_t c = 0; c < 3; ++c) {
+      for (size_t i = 0; i < h * w; ++i) {
+        const float v = src[c * h * w + i];
+        if (!std::isfinite(v)) fail(StatusCode::kInvalidArgument, what + " contains NaN or Inf");
+        dst[i * 3 + c] = norm.apply(v, c);
+      }
+    }
+  }
+}
+
+void Engine::Impl::load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm,
+                               float* dst) {
+  if (values.size() != expected) {
+    fail(StatusCode::kInvalidArgument, std::string(what) + " has " + std::to_string(values.size()) +
+         " values, the model expects " + std::to_string(expected));
+  }
+  for (size_t i = 0; i < expected; ++i) {
+    if (!std::isfinite(values[i])) fail(StatusCode::kInvalidArgument, std::string(what) + "[" + std::to_string(i) + "] is not finite");
+    dst[i] = norm.apply(values[i], i);
+  }
+}
+
+void Engine::Impl::run(const Observation& obs, std::span<float> actions_normalized) {
+  if (obs.images.size() != config_.cameras.size()) {
+    fail(StatusCode::kInvalidArgument, "observation has " + std::to_string(obs.images.size()) + " images, the model has " +
+         std::to_string(config_.cameras.size()) + " cameras");
+  }
+  if (actions_normalized.size() != info_.chunk_values()) {
+    fail(StatusCode::kInvalidArgument, "action buffer holds " + std::to_string(actions_normalized.size()) +
+         " values, the chunk has " + std::to_string(info_.chunk_values()));
+  }
+  for (size_t c = 0; c < obs.images.size(); ++c) load_image(c, obs.images[c]);
+  if (config_.state_dim > 0) {
+    load_vector("state", obs.state, static_cast<size_t>(config_.state_dim), state_norm_, network_->state_input());
+  } else if (!obs.state.empty()) {
+    fail(StatusCode::kInvalidArgument, "the model takes no robot state, but the observation has one");
+  }
+  if (config_.env_state_dim > 0) {
+    load_vector("environment state", obs.env_state, static_cast<size_t>(config_.env_state_dim), env_norm_,
+                network_->env_state_input());
+  } else if (!obs.env_state.empty()) {
+    fail(StatusCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
+  }
+  network_->run(pool_);
+  const float* out = network_->actions_normalized();
+  std::copy(out, out + actions_normalized.size(), actions_normalized.begin());
+}
+
+void Engine::Impl::unnormalize(std::span<const float> normalized, std::span<float> raw, size_t rows) const {
+  const size_t a = static_cast<size_t>(config_.action_dim);
+  for (size_t r = 0; r < rows; ++r) {
+    for (size_t i = 0; i < a; ++i) {
+      const float y = normalized[r * a + i];
+      raw[r * a + i] = unnorm_scale_ ? (y + unnorm_shift_[i]) * unnorm_scale_[i] + unnorm_offset_[i] : y;
+    }
+  }
+}
+
+// -------------------------------------------------------------------------------------- Engine
+
+Engine::Engine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Engine::~Engine() = default;
+
+StatusOr<std::unique_ptr<Engine>> Engine::open(const std::string& blob_path, const EngineOptions& options) {
+  std::unique_ptr<Engine> engine;
+  Status s = guarded([&] {
+    if (options.threads < 0) fail(StatusCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
+    engine.reset(new Engine(std::make_unique<Impl>(blob_path, options, false)));
+  });
+  if (!s.ok()) return s;
+  return engine;
+}
+
+const ModelInfo& Engine::model_info() const { return impl_->info(); }
+int Engine::threads() const { return impl_->threads(); }
+
+Status Engine::infer_normalized(const Observation& observation, std::span<float> actions_normalized) {
+  return guarded([&] { impl_->run(observation, actions_normalized); });
+}
+
+Status Engine::infer(const Observation& observation, std::span<float> actions) {
+  return guarded([&] {
+    impl_->run(observation, actions);
+    impl_->unnormalize(actions, actions, static_cast<size_t>(impl_->info().chunk_size));
+  });
+}
+
+}  // namespace act

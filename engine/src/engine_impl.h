@@ -1,0 +1,74 @@
+// Engine internals, shared by engine.cc and policy.cc, and used by tests to read intermediates.
+#pragma once
+
+#include <memory>
+#include <new>
+#include <span>
+#include <string>
+
+#include "actengine/engine.h"
+#include "graph/act_network.h"
+#include "graph/thread_pool.h"
+#include "weights/actb.h"
+#include "weights/error.h"
+#include "weights/model_config.h"
+
+namespace act {
+
+class Engine::Impl {
+ public:
+  /// Opens the blob and plans the network. keep_intermediates gives every graph value its own
+  /// memory so it can be read after infer (tests); it costs memory, never results.
+  /// Throws act::Error.
+  Impl(const std::string& blob_path, const EngineOptions& options, bool keep_intermediates);
+
+  const ModelInfo& info() const { return info_; }
+  const ModelConfig& config() const { return config_; }
+  int threads() const { return pool_.threads(); }
+  graph::ActNetwork& network() { return *network_; }
+
+  /// Validates and normalises the observation into the network's inputs, runs it, and copies the
+  /// normalised chunk out. Throws act::Error(kInvalidArgument) on a bad observation.
+  void run(const Observation& observation, std::span<float> actions_normalized);
+  /// x = (y + shift) * scale + offset per action dimension, for `rows` rows.
+  void unnormalize(std::span<const float> normalized, std::span<float> raw, size_t rows) const;
+
+ private:
+  struct InputNorm {
+    NormMode mode = NormMode::kIdentity;
+    const float* sub = nullptr;
+    const float* div = nullptr;
+    float apply(float x, size_t i) const;
+  };
+  InputNorm input_norm(const std::string& key, size_t size) const;
+  void load_image(size_t camera, const ImageView& image);
+  void load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm, float* dst);
+
+  ActbFile blob_;
+  ModelConfig config_;
+  ModelInfo info_;
+  ThreadPool pool_;
+  std::unique_ptr<graph::ActNetwork> network_;
+  std::vector<InputNorm> camera_norm_;
+  InputNorm state_norm_, env_norm_;
+  const float* unnorm_shift_ = nullptr;
+  const float* unnorm_scale_ = nullptr;
+  const float* unnorm_offset_ = nullptr;
+};
+
+/// Runs `fn`, turning act::Error and std exceptions into a Status (the API never throws).
+template <typename Fn>
+Status guarded(Fn&& fn) {
+  try {
+    fn();
+    return Status();
+  } catch (const Error& e) {
+    return e.status();
+  } catch (const std::bad_alloc&) {
+    return Status(StatusCode::kInternal, "out of memory");
+  } catch (const std::exception& e) {
+    return Status(StatusCode::kInternal, e.what());
+  }
+}
+
+}  // namespace act

@@ -1,0 +1,241 @@
+#include "graph/act_network.h"
+
+#include "weights/blob_names.h"
+#include "weights/error.h"
+
+namespace act::graph {
+
+namespace bn = blob_names;
+
+namespace {
+std::string cam_prefix(size_t camera) { return "cam" + std::to_string(camera) + "."; }
+}  // namespace
+
+const float* ActNetwork::weight(const std::string& name, const std::vector<int64_t>& shape) const {
+  const ActbTensor* t = blob_.find(name);
+  if (!t) fail(StatusCode::kDataLoss, blob_.path() + ": missing tensor \"" + name + "\"");
+  if (t->shape != shape) {
+    fail(StatusCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+         ", the model config implies " + shape_string(shape));
+  }
+  return t->f32();
+}
+
+ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
+                           MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
+  const ValueId y = graph_.add_value(out_name, {rows, out});
+  auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
+  op->name = out_name;
+  graph_.add_op(std::move(op));
+  return y;
+}
+
+ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix) {
+  const int D = config_.dim_model;
+  const ValueId y = graph_.add_value(out_name, {rows, D});
+  auto op = std::make_unique<LayerNormOp>(rows, D, weight(weight_prefix + ".weight", {D}), weight(weight_prefix + ".bias", {D}), x, y);
+  op->name = out_name;
+  graph_.add_op(std::move(op));
+  return y;
+}
+
+ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v) {
+  const int D = config_.dim_model;
+  const ValueId y = graph_.add_value(out_name, {nq, D});
+  auto op = std::make_unique<AttentionOp>(nq, nk, D, config_.n_heads, q, k, v, y);
+  op->name = out_name;
+  graph_.add_op(std::move(op));
+  return y;
+}
+
+ValueId ActNetwork::backbone(size_t camera) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const std::string p = cam_prefix(camera);
+  const ValueId image = graph_.add_input(p + "image", {cam.height, cam.width, 3});
+  camera_inputs_.push_back(image);
+
+  int h = cam.height, w = cam.width;
+  // One folded conv: returns its output value and updates h, w.
+  auto conv = [&](const ConvSpec& c, ValueId x, int& ch, int& cw, bool relu, ValueId residual, const std::string& name) {
+    kernels::Conv2dShape s;
+    s.in_h = ch;
+    s.in_w = cw;
+    s.in_c = c.in_c;
+    s.kernel_h = s.kernel_w = c.kernel;
+    s.stride = c.stride;
+    s.pad = c.pad;
+    s.dilation = c.dilation;
+    s.out_h = kernels::Conv2dShape::out_dim(ch, c.kernel, c.stride, c.pad, c.dilation);
+    s.out_w = kernels::Conv2dShape::out_dim(cw, c.kernel, c.stride, c.pad, c.dilation);
+    s.out_c = c.out_c;
+    const ValueId y = graph_.add_value(name, {s.out_h, s.out_w, s.out_c});
+    auto op = std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), {c.out_c, c.kernel, c.kernel, c.in_c}),
+                                         weight(bn::conv_bias(c.name), {c.out_c}), relu, x, residual, y);
+    op->name = name;
+    graph_.add_op(std::move(op));
+    ch = s.out_h;
+    cw = s.out_w;
+    return y;
+  };
+
+  ValueId x = conv(config_.stem(), image, h, w, true, kNoValue, p + "backbone.stem");
+  const int pooled_h = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1);
+  const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
+  const ValueId pooled = graph_.add_value(p + "backbone.maxpool", {pooled_h, pooled_w, 64});
+  auto pool = std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x, pooled);
+  pool->name = p + "backbone.maxpool";
+  graph_.add_op(std::move(pool));
+  x = pooled;
+  h = pooled_h;
+  w = pooled_w;
+
+  const auto stages = config_.backbone_stages();
+  for (size_t s = 0; s < stages.size(); ++s) {
+    for (size_t b = 0; b < stages[s].size(); ++b) {
+      const BlockSpec& block = stages[s][b];
+      const std::string bp = p + "backbone.layer" + std::to_string(s + 1) + "." + std::to_string(b) + ".";
+      int sh = h, sw = w;
+      ValueId shortcut = x;
+      if (block.has_downsample) shortcut = conv(block.downsample, x, sh, sw, false, kNoValue, bp + "downsample");
+      ValueId y = x;
+      int bh = h, bw = w;
+      for (size_t i = 0; i < block.convs.size(); ++i) {
+        const bool last = i + 1 == block.convs.size();
+        const std::string name = last && b + 1 == stages[s].size() ? p + "backbone.layer" + std::to_string(s + 1)
+                                                                    : bp + "conv" + std::to_string(i + 1);
+        // The last conv of a block adds the shortcut, then ReLU (fused).
+        y = conv(block.convs[i], y, bh, bw, true, last ? shortcut : kNoValue, name);
+      }
+      x = y;
+      h = bh;
+      w = bw;
+    }
+  }
+  // 1x1 input projection with bias: the NHWC feature map is already [h*w tokens, C] row-major.
+  const int C = config_.feature_channels(), D = config_.dim_model;
+  return linear(p + "img_feat_proj", h * w, C, D, MatrixRef::of(x, static_cast<size_t>(C)), bn::kImgProjWeight,
+                MatrixRef::of_constant(weight(bn::kImgProjBias, {D}), 0));
+}
+
+ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name) {
+  const int D = config_.dim_model, F = config_.dim_feedforward;
+  const bool glu = config_.activation == Activation::kGlu;
+  const Epilogue act = config_.activation == Activation::kRelu ? Epilogue::kRelu
+                       : config_.activation == Activation::kGelu ? Epilogue::kGelu
+                                                                  : Epilogue::kNone;
+  ValueId h = linear(out_name + ".ffn_hidden", rows, D, F, MatrixRef::of(x, static_cast<size_t>(D)), prefix + "linear1.weight",
+                     MatrixRef::of_constant(weight(prefix + "linear1.bias", {F}), 0), {}, act);
+  int hidden = F;
+  if (glu) {
+    hidden = F / 2;
+    const ValueId g = graph_.add_value(out_name + ".ffn_glu", {rows, hidden});
+    auto op = std::make_unique<GluOp>(rows, F, h, g);
+    op->name = out_name + ".ffn_glu";
+    graph_.add_op(std::move(op));
+    h = g;
+  }
+  return linear(out_name, rows, hidden, D, MatrixRef::of(h, static_cast<size_t>(hidden)), prefix + "linear2.weight",
+                MatrixRef::of_constant(weight(prefix + "linear2.bias", {D}), 0), MatrixRef::of(residual, static_cast<size_t>(D)));
+}
+
+ValueId ActNetwork::encoder_layer(int l, ValueId x) {
+  const int D = config_.dim_model, N = config_.n_tokens();
+  const size_t d = static_cast<size_t>(D);
+  const std::string p = "encoder_layer" + std::to_string(l);
+  const std::string w = bn::enc(l, "");
+  const ValueId attn_in = config_.pre_norm ? layernorm(p + ".norm1", N, x, w + "norm1") : x;
+  const ValueId qkv = linear(p + ".qkv", N, D, 3 * D, MatrixRef::of(attn_in, d), w + "in_proj.weight",
+                             MatrixRef::of_constant(weight(w + "in_proj.bias", {N, 3 * D}), 3 * d));
+  const ValueId a = attention(p + ".attn", N, N, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
+                              MatrixRef::of(qkv, 3 * d, 2 * d));
+  ValueId x1 = linear(p + ".attn_out", N, D, D, MatrixRef::of(a, d), w + "out_proj.weight",
+                      MatrixRef::of_constant(weight(w + "out_proj.bias", {D}), 0), MatrixRef::of(x, d));
+  if (!config_.pre_norm) x1 = layernorm(p + ".norm1", N, x1, w + "norm1");
+  const ValueId ffn_in = config_.pre_norm ? layernorm(p + ".norm2", N, x1, w + "norm2") : x1;
+  const bool last = l + 1 == config_.n_encoder_layers;
+  ValueId out = ffn(w, N, ffn_in, x1, config_.pre_norm ? p + "_out" : p + ".ffn_out");
+  if (!config_.pre_norm) out = layernorm(p + "_out", N, out, w + "norm2");
+  if (last && config_.pre_norm) return layernorm("encoder_out", N, out, "encoder.norm");
+  return out;
+}
+
+ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
+  const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;
+  const size_t d = static_cast<size_t>(D);
+  const std::string p = "decoder_layer" + std::to_string(l);
+  const std::string w = bn::dec(l, "");
+
+  // Self-attention block -> y1 (a constant row for layer 0, whose input is zero).
+  MatrixRef y1;
+  MatrixRef cross_q;
+  if (l == 0) {
+    y1 = MatrixRef::of_constant(weight(w + "const_y", {D}), 0);
+    cross_q = MatrixRef::of_constant(weight(w + "cross_q", {T, D}), d);
+  } else {
+    const ValueId self_in = config_.pre_norm ? layernorm(p + ".norm1", T, y, w + "norm1") : y;
+    const ValueId qkv = linear(p + ".qkv", T, D, 3 * D, MatrixRef::of(self_in, d), w + "self_in_proj.weight",
+                               MatrixRef::of_constant(weight(w + "self_in_proj.bias", {T, 3 * D}), 3 * d));
+    const ValueId a = attention(p + ".self_attn", T, T, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
+                                MatrixRef::of(qkv, 3 * d, 2 * d));
+    ValueId s = linear(p + ".self_out", T, D, D, MatrixRef::of(a, d), w + "self_out_proj.weight",
+                       MatrixRef::of_constant(weight(w + "self_out_proj.bias", {D}), 0), MatrixRef::of(y, d));
+    if (!config_.pre_norm) s = layernorm(p + ".norm1", T, s, w + "norm1");
+    y1 = MatrixRef::of(s, d);
+    const ValueId q_in = config_.pre_norm ? layernorm(p + ".norm2", T, s, w + "norm2") : s;
+    const ValueId q = linear(p + ".cross_q", T, D, D, MatrixRef::of(q_in, d), w + "cross_q_proj.weight",
+                             MatrixRef::of_constant(weight(w + "cross_q_proj.bias", {T, D}), d));
+    cross_q = MatrixRef::of(q, d);
+  }
+  // Cross-attention over the encoder memory: keys carry the encoder positions (folded into the bias table).
+  const ValueId kv = linear(p + ".cross_kv", N, D, 2 * D, MatrixRef::of(memory, d), w + "cross_kv_proj.weight",
+                            MatrixRef::of_constant(weight(w + "cross_kv_proj.bias", {N, 2 * D}), 2 * d));
+  const ValueId c = attention(p + ".cross_attn", T, N, cross_q, MatrixRef::of(kv, 2 * d, 0), MatrixRef::of(kv, 2 * d, d));
+  ValueId y2 = linear(p + ".cross_out", T, D, D, MatrixRef::of(c, d), w + "cross_out_proj.weight",
+                      MatrixRef::of_constant(weight(w + "cross_out_proj.bias", {D}), 0), y1);
+  if (!config_.pre_norm) y2 = layernorm(p + ".norm2", T, y2, w + "norm2");
+  const ValueId ffn_in = config_.pre_norm ? layernorm(p + ".norm3", T, y2, w + "norm3") : y2;
+  ValueId out = ffn(w, T, ffn_in, y2, config_.pre_norm ? p + "_out" : p + ".ffn_out");
+  if (!config_.pre_norm) out = layernorm(p + "_out", T, out, w + "norm3");
+  return out;
+}
+
+ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob) : config_(config), blob_(blob) {
+  const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;
+  const size_t d = static_cast<size_t>(D);
+
+  std::vector<ConcatRowsOp::Part> tokens;
+  tokens.push_back({MatrixRef::of_constant(weight(bn::kLatentToken, {D}), d), 1});
+  if (config_.state_dim > 0) {
+    state_input_ = graph_.add_input("state", {1, config_.state_dim});
+    const ValueId t = linear("state_token", 1, config_.state_dim, D, MatrixRef::of(state_input_, static_cast<size_t>(config_.state_dim)),
+                             bn::kStateProjWeight, MatrixRef::of_constant(weight(bn::kStateProjBias, {D}), 0));
+    tokens.push_back({MatrixRef::of(t, d), 1});
+  }
+  if (config_.env_state_dim > 0) {
+    env_input_ = graph_.add_input("env_state", {1, config_.env_state_dim});
+    const ValueId t = linear("env_token", 1, config_.env_state_dim, D, MatrixRef::of(env_input_, static_cast<size_t>(config_.env_state_dim)),
+                             bn::kEnvProjWeight, MatrixRef::of_constant(weight(bn::kEnvProjBias, {D}), 0));
+    tokens.push_back({MatrixRef::of(t, d), 1});
+  }
+  for (size_t c = 0; c < config_.cameras.size(); ++c) {
+    const ValueId feats = backbone(c);
+    tokens.push_back({MatrixRef::of(feats, d), static_cast<int>(graph_.value(feats).shape[0])});
+  }
+  ValueId x = graph_.add_value("encoder_in_tokens", {N, D});
+  auto concat = std::make_unique<ConcatRowsOp>(D, std::move(tokens), x);
+  concat->name = "encoder_in_tokens";
+  graph_.add_op(std::move(concat));
+  weight(bn::kEncoderPos, {N, D});  // present for inspection; its effect is folded into the bias tables
+
+  for (int l = 0; l < config_.n_encoder_layers; ++l) x = encoder_layer(l, x);
+  const ValueId memory = x;
+
+  ValueId y = kNoValue;
+  for (int l = 0; l < config_.n_decoder_layers; ++l) y = decoder_layer(l, y, memory);
+  const ValueId out = layernorm("decoder_out", T, y, "decoder.norm");
+  actions_ = linear("actions_normalized", T, D, config_.action_dim, MatrixRef::of(out, d), bn::kHeadWeight,
+                    MatrixRef::of_constant(weight(bn::kHeadBias, {config_.action_dim}), 0));
+  graph_.mark_output(actions_);
+}
+
+}  // namespace act::graph

@@ -1,0 +1,105 @@
+#include "graph/graph.h"
+
+#include <algorithm>
+#include <map>
+
+#include "weights/error.h"
+
+namespace act::graph {
+
+namespace {
+constexpr size_t kAlignFloats = 16;  // 64 bytes
+size_t align_up(size_t n) { return (n + kAlignFloats - 1) / kAlignFloats * kAlignFloats; }
+}  // namespace
+
+ValueId Graph::add_value(std::string name, std::vector<int64_t> shape) {
+  Value v;
+  v.name = std::move(name);
+  v.elements = 1;
+  for (int64_t d : shape) v.elements *= static_cast<size_t>(d);
+  v.shape = std::move(shape);
+  values_.push_back(std::move(v));
+  return static_cast<ValueId>(values_.size() - 1);
+}
+
+ValueId Graph::add_input(std::string name, std::vector<int64_t> shape) {
+  const ValueId id = add_value(std::move(name), std::move(shape));
+  values_.back().pinned = true;
+  return id;
+}
+
+void Graph::mark_output(ValueId id) { values_[static_cast<size_t>(id)].pinned = true; }
+
+ValueId Graph::find(const std::string& name) const {
+  for (size_t i = 0; i < values_.size(); ++i) {
+    if (values_[i].name == name) return static_cast<ValueId>(i);
+  }
+  return kNoValue;
+}
+
+double Graph::total_macs() const {
+  double total = 0;
+  for (const auto& op : ops_) total += op->macs();
+  return total;
+}
+
+void Graph::plan(int threads, bool keep_all_values) {
+  // Lifetimes.
+  for (auto& v : values_) v.first_use = v.last_use = -1;
+  for (size_t i = 0; i < ops_.size(); ++i) {
+    const int idx = static_cast<int>(i);
+    for (ValueId in : ops_[i]->inputs) values_[static_cast<size_t>(in)].last_use = idx;
+    for (ValueId out : ops_[i]->outputs) {
+      Value& v = values_[static_cast<size_t>(out)];
+      if (v.first_use < 0) v.first_use = idx;
+      v.last_use = std::max(v.last_use, idx);
+    }
+  }
+  const int end = static_cast<int>(ops_.size());
+  // Greedy placement, largest values first, each at the lowest offset that does not overlap a value
+  // whose lifetime intersects its own.
+  std::vector<size_t> order(values_.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return values_[a].elements > values_[b].elements; });
+  struct Placed {
+    size_t begin, end;
+    int first, last;
+  };
+  std::vector<Placed> placed;
+  size_t total = 0;
+  for (size_t i : order) {
+    Value& v = values_[i];
+    const bool whole_run = v.pinned || keep_all_values;
+    const int first = whole_run ? -1 : v.first_use;
+    const int last = whole_run ? end : v.last_use;
+    const size_t size = align_up(std::max<size_t>(v.elements, 1));
+    std::vector<std::pair<size_t, size_t>> busy;
+    for (const auto& p : placed) {
+      if (p.first <= last && first <= p.last) busy.emplace_back(p.begin, p.end);
+    }
+    std::sort(busy.begin(), busy.end());
+    size_t offset = 0;
+    for (const auto& [b, e] : busy) {
+      if (offset + size <= b) break;
+      offset = std::max(offset, e);
+    }
+    v.offset = offset;
+    placed.push_back({offset, offset + size, first, last});
+    total = std::max(total, offset + size);
+  }
+  scratch_per_thread_ = 0;
+  for (const auto& op : ops_) scratch_per_thread_ = std::max(scratch_per_thread_, align_up(op->scratch_per_thread()));
+  scratch_offset_ = total;
+  arena_.assign(total + scratch_per_thread_ * static_cast<size_t>(std::max(threads, 1)), 0.0f);
+  planned_ = true;
+}
+
+void Graph::run(ThreadPool& pool) {
+  check(planned_, StatusCode::kInternal, "Graph::run before plan");
+  check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), StatusCode::kInternal,
+        "graph planned for fewer threads than the pool has");
+  RunContext ctx(arena_.data(), values_, pool, arena_.data() + scratch_offset_, scratch_per_thread_);
+  for (const auto& op : ops_) op->run(ctx);
+}
+
+}  // namespace act::graph

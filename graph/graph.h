@@ -1,0 +1,114 @@
+// The network as a list of typed ops over planned buffers.
+//
+// Values are float tensors that live in one arena. plan() gives every value an arena offset from its
+// lifetime (first writer .. last reader), reusing memory of values that are dead, and sizes the
+// per-thread scratch the ops asked for; after plan() nothing is allocated again, however many times
+// run() is called. With keep_all_values every value gets its own memory, so tests can read every
+// intermediate after a run.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "graph/thread_pool.h"
+
+namespace act::graph {
+
+using ValueId = int;
+inline constexpr ValueId kNoValue = -1;
+
+struct Value {
+  std::string name;
+  std::vector<int64_t> shape;
+  size_t elements = 0;
+  size_t offset = 0;   ///< in floats, into the arena (valid after plan())
+  int first_use = -1;  ///< op index that writes it (-1: a graph input)
+  int last_use = -1;   ///< last op index that reads it
+  bool pinned = false; ///< inputs and outputs: alive for the whole run
+};
+
+/// What an op sees when it runs: the arena, the pool, per-thread scratch.
+class RunContext {
+ public:
+  RunContext(float* arena, const std::vector<Value>& values, ThreadPool& pool, float* scratch, size_t scratch_per_thread)
+      : arena_(arena), values_(values), pool_(pool), scratch_(scratch), scratch_per_thread_(scratch_per_thread) {}
+  float* data(ValueId id) const { return arena_ + values_[static_cast<size_t>(id)].offset; }
+  ThreadPool& pool() const { return pool_; }
+  float* scratch(int thread) const { return scratch_ + static_cast<size_t>(thread) * scratch_per_thread_; }
+
+ private:
+  float* arena_;
+  const std::vector<Value>& values_;
+  ThreadPool& pool_;
+  float* scratch_;
+  size_t scratch_per_thread_;
+};
+
+/// A read-only matrix operand: a graph value or a constant (weights in the blob), with a column offset
+/// and a leading dimension. ld == 0 broadcasts one row to every row.
+struct MatrixRef {
+  ValueId value = kNoValue;
+  const float* constant = nullptr;
+  size_t col_offset = 0;
+  size_t ld = 0;
+  const float* resolve(const RunContext& ctx) const {
+    return (value == kNoValue ? constant : ctx.data(value)) + col_offset;
+  }
+  static MatrixRef of(ValueId v, size_t ld, size_t col_offset = 0) { return {v, nullptr, col_offset, ld}; }
+  static MatrixRef of_constant(const float* p, size_t ld) { return {kNoValue, p, 0, ld}; }
+};
+
+class Op {
+ public:
+  virtual ~Op() = default;
+  virtual const char* type() const = 0;
+  virtual void run(const RunContext& ctx) const = 0;
+  /// Floats of scratch each thread needs while this op runs.
+  virtual size_t scratch_per_thread() const { return 0; }
+  /// Multiply-accumulates of one run (for profiling and the benchmark's GMAC/s).
+  virtual double macs() const { return 0.0; }
+
+  std::string name;
+  std::vector<ValueId> inputs;
+  std::vector<ValueId> outputs;
+};
+
+class Graph {
+ public:
+  ValueId add_value(std::string name, std::vector<int64_t> shape);
+  /// A value the caller writes before run() (pinned).
+  ValueId add_input(std::string name, std::vector<int64_t> shape);
+  /// Keeps a value alive to the end of the run so the caller can read it.
+  void mark_output(ValueId id);
+  /// Appends an op; its inputs/outputs must already be set.
+  template <typename OpT>
+  OpT& add_op(std::unique_ptr<OpT> op) {
+    OpT& ref = *op;
+    ops_.push_back(std::move(op));
+    return ref;
+  }
+
+  void plan(int threads, bool keep_all_values);
+  void run(ThreadPool& pool);
+
+  float* data(ValueId id) { return arena_.data() + values_[static_cast<size_t>(id)].offset; }
+  const Value& value(ValueId id) const { return values_[static_cast<size_t>(id)]; }
+  /// The value of that name, or kNoValue.
+  ValueId find(const std::string& name) const;
+  const std::vector<std::unique_ptr<Op>>& ops() const { return ops_; }
+  size_t arena_bytes() const { return arena_.size() * sizeof(float); }
+  double total_macs() const;
+
+ private:
+  std::vector<Value> values_;
+  std::vector<std::unique_ptr<Op>> ops_;
+  std::vector<float> arena_;  // values, then per-thread scratch
+  size_t scratch_offset_ = 0;
+  size_t scratch_per_thread_ = 0;
+  bool planned_ = false;
+};
+
+}  // namespace act::graph

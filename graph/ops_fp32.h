@@ -1,0 +1,116 @@
+// The FP32 ops of the ACT graph. Each op splits its work into tiles over the thread pool and calls
+// the float kernels in kernels/fp32 for each tile.
+#pragma once
+
+#include <vector>
+
+#include "graph/graph.h"
+#include "kernels/fp32/fp32_kernels.h"
+
+namespace act::graph {
+
+enum class Epilogue { kNone, kRelu, kGelu };
+
+/// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
+/// Weights [out_c, kh, kw, in_c]. Tiles of output pixels; im2col of one tile into per-thread scratch
+/// (a 1x1 stride-1 conv reads its input directly).
+class Conv2dOp : public Op {
+ public:
+  Conv2dOp(const kernels::Conv2dShape& shape, const float* weight, const float* bias, bool relu, ValueId input,
+           ValueId residual, ValueId output);
+  const char* type() const override { return "conv2d_f32"; }
+  void run(const RunContext& ctx) const override;
+  size_t scratch_per_thread() const override;
+  double macs() const override;
+
+ private:
+  bool direct() const;
+  kernels::Conv2dShape s_;
+  const float* weight_;
+  const float* bias_;
+  bool relu_;
+  ValueId residual_;
+};
+
+class MaxPoolOp : public Op {
+ public:
+  MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output);
+  const char* type() const override { return "maxpool_f32"; }
+  void run(const RunContext& ctx) const override;
+
+ private:
+  int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
+};
+
+/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in]; bias is a vector (ld 0) or a
+/// per-row table; the residual may be a broadcast row.
+class LinearOp : public Op {
+ public:
+  LinearOp(int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias, MatrixRef residual,
+           Epilogue epilogue, ValueId output);
+  const char* type() const override { return "linear_f32"; }
+  void run(const RunContext& ctx) const override;
+  double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
+
+ private:
+  int rows_, in_, out_;
+  MatrixRef x_, bias_, residual_;
+  const float* weight_;
+  Epilogue epilogue_;
+};
+
+/// GLU over the last axis: y = a * sigmoid(b), a the first half of each row, b the second.
+class GluOp : public Op {
+ public:
+  GluOp(int rows, int cols_in, ValueId input, ValueId output);
+  const char* type() const override { return "glu_f32"; }
+  void run(const RunContext& ctx) const override;
+
+ private:
+  int rows_, cols_in_;
+};
+
+class LayerNormOp : public Op {
+ public:
+  LayerNormOp(int rows, int cols, const float* gamma, const float* beta, ValueId input, ValueId output);
+  const char* type() const override { return "layernorm_f32"; }
+  void run(const RunContext& ctx) const override;
+
+ private:
+  int rows_, cols_;
+  const float* gamma_;
+  const float* beta_;
+};
+
+/// Multi-head scaled dot-product attention, no mask: out[:, head] = softmax(q_h k_h^T / sqrt(d)) v_h.
+/// q [nq, D], k and v [nk, D] as matrix references (usually column slices of one fused projection).
+class AttentionOp : public Op {
+ public:
+  AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k, MatrixRef v, ValueId output);
+  const char* type() const override { return "attention_f32"; }
+  void run(const RunContext& ctx) const override;
+  size_t scratch_per_thread() const override;
+  double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
+
+ private:
+  int nq_, nk_, dim_, heads_;
+  MatrixRef q_, k_, v_;
+};
+
+/// Stacks row blocks (graph values or constant rows) into one [rows, cols] value.
+class ConcatRowsOp : public Op {
+ public:
+  struct Part {
+    MatrixRef source;
+    int rows;
+  };
+  ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output);
+  const char* type() const override { return "concat_rows_f32"; }
+  void run(const RunContext& ctx) const override;
+
+ private:
+  int cols_;
+  std::vector<Part> parts_;
+};
+
+}  // namespace act::graph

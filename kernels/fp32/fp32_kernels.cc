@@ -1,0 +1,122 @@
+#include "kernels/fp32/fp32_kernels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include <Eigen/Core>
+
+namespace act::kernels {
+
+namespace {
+using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using ConstMap = Eigen::Map<const RowMajor, 0, Eigen::OuterStride<>>;
+using Map = Eigen::Map<RowMajor, 0, Eigen::OuterStride<>>;
+}  // namespace
+
+void gemm_f32_nt(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c,
+                 size_t ldc) {
+  ConstMap am(a, m, k, Eigen::OuterStride<>(static_cast<Eigen::Index>(lda)));
+  ConstMap bm(b, n, k, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldb)));
+  Map cm(c, m, n, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldc)));
+  cm.noalias() = am * bm.transpose();
+}
+
+void gemm_f32_nn(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c,
+                 size_t ldc) {
+  ConstMap am(a, m, k, Eigen::OuterStride<>(static_cast<Eigen::Index>(lda)));
+  ConstMap bm(b, k, n, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldb)));
+  Map cm(c, m, n, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldc)));
+  cm.noalias() = am * bm;
+}
+
+void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, int count, float* patches) {
+  const size_t patch = static_cast<size_t>(s.patch_size());
+  const size_t run = static_cast<size_t>(s.in_c);
+  for (int i = 0; i < count; ++i) {
+    const int pixel = pixel_begin + i;
+    const int oy = pixel / s.out_w;
+    const int ox = pixel % s.out_w;
+    float* dst = patches + static_cast<size_t>(i) * patch;
+    for (int ky = 0; ky < s.kernel_h; ++ky) {
+      const int iy = oy * s.stride - s.pad + ky * s.dilation;
+      for (int kx = 0; kx < s.kernel_w; ++kx, dst += run) {
+        const int ix = ox * s.stride - s.pad + kx * s.dilation;
+        if (iy < 0 || iy >= s.in_h || ix < 0 || ix >= s.in_w) {
+          std::memset(dst, 0, run * sizeof(float));
+        } else {
+          std::memcpy(dst, input + (static_cast<size_t>(iy) * s.in_w + ix) * run, run * sizeof(float));
+        }
+      }
+    }
+  }
+}
+
+void maxpool_nhwc_f32(int in_h, int in_w, int channels, int kernel, int stride, int pad, int out_h, int out_w,
+                      const float* input, float* output, int row_begin, int row_end) {
+  (void)out_h;
+  for (int oy = row_begin; oy < row_end; ++oy) {
+    for (int ox = 0; ox < out_w; ++ox) {
+      float* dst = output + (static_cast<size_t>(oy) * out_w + ox) * channels;
+      std::fill(dst, dst + channels, -std::numeric_limits<float>::infinity());
+      for (int ky = 0; ky < kernel; ++ky) {
+        const int iy = oy * stride - pad + ky;
+        if (iy < 0 || iy >= in_h) continue;
+        for (int kx = 0; kx < kernel; ++kx) {
+          const int ix = ox * stride - pad + kx;
+          if (ix < 0 || ix >= in_w) continue;
+          const float* src = input + (static_cast<size_t>(iy) * in_w + ix) * channels;
+          for (int c = 0; c < channels; ++c) dst[c] = std::max(dst[c], src[c]);
+        }
+      }
+    }
+  }
+}
+
+void layernorm_rows_f32(int rows, int cols, const float* x, size_t ldx, const float* gamma, const float* beta,
+                        float eps, float* y, size_t ldy) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float* yr = y + static_cast<size_t>(r) * ldy;
+    // Two passes in double: the mean and variance of a row of a few hundred values, exact enough that
+    // only the final float rounding differs from PyTorch.
+    double sum = 0.0;
+    for (int c = 0; c < cols; ++c) sum += xr[c];
+    const double mean = sum / cols;
+    double sq = 0.0;
+    for (int c = 0; c < cols; ++c) {
+      const double d = xr[c] - mean;
+      sq += d * d;
+    }
+    const float inv_std = static_cast<float>(1.0 / std::sqrt(sq / cols + static_cast<double>(eps)));
+    const float mean_f = static_cast<float>(mean);
+    for (int c = 0; c < cols; ++c) yr[c] = (xr[c] - mean_f) * inv_std * gamma[c] + beta[c];
+  }
+}
+
+void softmax_rows_f32(int rows, int cols, float* x, size_t ldx) {
+  for (int r = 0; r < rows; ++r) {
+    float* xr = x + static_cast<size_t>(r) * ldx;
+    float max_v = xr[0];
+    for (int c = 1; c < cols; ++c) max_v = std::max(max_v, xr[c]);
+    float sum = 0.0f;
+    for (int c = 0; c < cols; ++c) {
+      xr[c] = std::exp(xr[c] - max_v);
+      sum += xr[c];
+    }
+    const float inv = 1.0f / sum;
+    for (int c = 0; c < cols; ++c) xr[c] *= inv;
+  }
+}
+
+void relu_f32(size_t n, float* x) {
+  for (size_t i = 0; i < n; ++i) x[i] = std::max(x[i], 0.0f);
+}
+
+void gelu_f32(size_t n, float* x) {
+  constexpr float kInvSqrt2 = 0.70710678118654752f;
+  for (size_t i = 0; i < n; ++i) x[i] = 0.5f * x[i] * (1.0f + std::erf(x[i] * kInvSqrt2));
+}
+
+}  // namespace act::kernels

@@ -1,0 +1,45 @@
+// LeRobot ACT checkpoint folder -> the folded FP32 inference weights of the .actb blob.
+//
+// Reads config.json, model.safetensors and (current layout) the pre/post-processor files, checks
+// every tensor the config implies (name, shape, dtype) and refuses anything it would otherwise have to
+// ignore. At import it folds BatchNorm into the convs, drops the training-only VAE weights, and
+// precomputes the observation-independent parts of the network (see fold notes in the .cc).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "weights/model_config.h"
+
+namespace act {
+
+struct NamedTensor {
+  std::string name;
+  std::vector<int64_t> shape;
+  std::vector<float> values;
+};
+
+struct ImportedModel {
+  ModelConfig config;
+  std::vector<NamedTensor> tensors;  ///< blob tensors (names in weights/blob_names.h)
+  std::string layout;                ///< "current" (processor files) or "legacy" (buffers in the weights)
+  size_t checkpoint_tensors = 0;     ///< tensors in model.safetensors
+  uint64_t checkpoint_values = 0;
+  size_t training_only_tensors = 0;  ///< dropped (VAE encoder, training targets)
+  uint64_t training_only_values = 0;
+  std::vector<std::string> notes;    ///< things a user should know (e.g. features without statistics)
+
+  uint64_t blob_values() const;
+  const NamedTensor* find(const std::string& name) const;
+};
+
+/// Imports a LeRobot ACT checkpoint folder (either layout). Throws act::Error naming the file and the
+/// problem: kNotFound (missing file / tensor), kDataLoss (malformed), kInvalidArgument (shape mismatch,
+/// inconsistent config), kUnimplemented (a valid LeRobot setting this engine does not run).
+ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir);
+
+/// Writes the imported model as an FP32 .actb blob (atomically). Returns the file size in bytes.
+size_t write_fp32_blob(const ImportedModel& model, const std::string& path);
+
+}  // namespace act

@@ -1,0 +1,282 @@
+#include "weights/model_config.h"
+
+#include <cmath>
+#include <sstream>
+
+#include "weights/error.h"
+
+namespace act {
+
+const char* activation_name(Activation a) {
+  switch (a) {
+    case Activation::kRelu: return "relu";
+    case Activation::kGelu: return "gelu";
+    case Activation::kGlu: return "glu";
+  }
+  return "?";
+}
+
+const char* norm_mode_name(NormMode m) {
+  switch (m) {
+    case NormMode::kIdentity: return "IDENTITY";
+    case NormMode::kMeanStd: return "MEAN_STD";
+    case NormMode::kMinMax: return "MIN_MAX";
+  }
+  return "?";
+}
+
+namespace {
+
+int ceil_half(int n) { return (n + 1) / 2; }
+
+ConvSpec conv(std::string name, std::string bn, int in_c, int out_c, int kernel, int stride, int dilation) {
+  return {std::move(name), std::move(bn), in_c, out_c, kernel, stride, kernel == 1 ? 0 : dilation, dilation};
+}
+
+}  // namespace
+
+ConvSpec ModelConfig::stem() const { return {"conv1", "bn1", 3, 64, 7, 2, 3, 1}; }
+
+std::vector<std::vector<BlockSpec>> ModelConfig::backbone_stages() const {
+  // torchvision ResNet._make_layer; with replace_final_stride_with_dilation, layer4 trades its stride
+  // for dilation 2 in every block after the first.
+  std::vector<std::vector<BlockSpec>> stages;
+  int in_c = 64;
+  int dilation = 1;
+  for (size_t s = 0; s < backbone_blocks.size(); ++s) {
+    const int planes = 64 << s;
+    int stride = s == 0 ? 1 : 2;
+    const int previous_dilation = dilation;
+    if (s == 3 && dilate_layer4) {
+      dilation *= stride;
+      stride = 1;
+    }
+    const int out_c = bottleneck ? planes * 4 : planes;
+    std::vector<BlockSpec> blocks;
+    for (int b = 0; b < backbone_blocks[s]; ++b) {
+      const std::string p = "layer" + std::to_string(s + 1) + "." + std::to_string(b) + ".";
+      const int block_stride = b == 0 ? stride : 1;
+      const int block_dilation = b == 0 ? previous_dilation : dilation;
+      BlockSpec block;
+      if (bottleneck) {
+        block.convs.push_back(conv(p + "conv1", p + "bn1", in_c, planes, 1, 1, 1));
+        block.convs.push_back(conv(p + "conv2", p + "bn2", planes, planes, 3, block_stride, block_dilation));
+        block.convs.push_back(conv(p + "conv3", p + "bn3", planes, out_c, 1, 1, 1));
+      } else {
+        block.convs.push_back(conv(p + "conv1", p + "bn1", in_c, planes, 3, block_stride, block_dilation));
+        block.convs.push_back(conv(p + "conv2", p + "bn2", planes, planes, 3, 1, block_dilation));
+      }
+      if (b == 0 && (block_stride != 1 || in_c != out_c)) {
+        block.has_downsample = true;
+        block.downsample = conv(p + "downsample.0", p + "downsample.1", in_c, out_c, 1, block_stride, 1);
+      }
+      blocks.push_back(std::move(block));
+      in_c = out_c;
+    }
+    stages.push_back(std::move(blocks));
+  }
+  return stages;
+}
+
+int ModelConfig::feature_height(const CameraConfig& cam) const {
+  int h = ceil_half(ceil_half(cam.height));  // stem, max-pool
+  for (int s = 1; s < 4; ++s) {
+    if (!(s == 3 && dilate_layer4)) h = ceil_half(h);
+  }
+  return h;
+}
+
+int ModelConfig::feature_width(const CameraConfig& cam) const {
+  return feature_height(CameraConfig{cam.key, cam.width, cam.height});
+}
+
+int ModelConfig::n_tokens() const {
+  int n = n_1d_tokens();
+  for (const auto& cam : cameras) n += feature_height(cam) * feature_width(cam);
+  return n;
+}
+
+NormMode ModelConfig::input_norm_mode(const std::string& key) const {
+  for (const auto& [k, mode] : input_norm) {
+    if (k == key) return mode;
+  }
+  return NormMode::kIdentity;
+}
+
+ModelConfig::Macs ModelConfig::macs() const {
+  Macs m;
+  const double D = dim_model, F = dim_feedforward, N = n_tokens(), T = chunk_size;
+  for (const auto& cam : cameras) {
+    // Walk the same layout the graph runs, counting weight uses per output pixel.
+    auto out = [](int n, const ConvSpec& c) { return (n + 2 * c.pad - c.dilation * (c.kernel - 1) - 1) / c.stride + 1; };
+    auto count = [&](const ConvSpec& c, int h, int w) {
+      m.backbone += static_cast<double>(c.in_c) * c.out_c * c.kernel * c.kernel * h * w;
+    };
+    const ConvSpec st = stem();
+    int h = out(cam.height, st), w = out(cam.width, st);
+    count(st, h, w);
+    h = ceil_half(h);
+    w = ceil_half(w);
+    for (const auto& stage : backbone_stages()) {
+      for (const auto& block : stage) {
+        int bh = h, bw = w;
+        for (const auto& c : block.convs) {
+          bh = out(bh, c);
+          bw = out(bw, c);
+          count(c, bh, bw);
+        }
+        if (block.has_downsample) count(block.downsample, bh, bw);
+        h = bh;
+        w = bw;
+      }
+    }
+    m.projections += static_cast<double>(feature_channels()) * D * h * w;
+  }
+  m.projections += 32.0 * D + static_cast<double>(state_dim) * D + static_cast<double>(env_state_dim) * D;
+  m.encoder = n_encoder_layers * (4 * N * D * D + 2 * N * N * D + 2 * N * D * F);
+  m.decoder = n_decoder_layers * (6 * T * D * D + 2 * T * T * D + 2 * N * D * D + 2 * T * N * D + 2 * T * D * F);
+  m.head = T * D * action_dim;
+  return m;
+}
+
+std::string ModelConfig::summary() const {
+  std::ostringstream s;
+  s << backbone << (dilate_layer4 ? " (dilated layer4)" : "") << ", D " << dim_model << ", " << n_heads
+    << " heads, FFN " << dim_feedforward << " " << activation_name(activation) << ", " << n_encoder_layers << "+"
+    << n_decoder_layers << " layers " << (pre_norm ? "pre-norm" : "post-norm") << ", chunk " << chunk_size
+    << ", " << cameras.size() << (cameras.size() == 1 ? " camera" : " cameras");
+  for (const auto& cam : cameras) s << " " << cam.height << "x" << cam.width;
+  s << ", state " << state_dim;
+  if (env_state_dim > 0) s << ", env state " << env_state_dim;
+  s << ", action " << action_dim;
+  return s.str();
+}
+
+void ModelConfig::validate() const {
+  auto bad = [](const std::string& msg) { fail(StatusCode::kInvalidArgument, "invalid model config: " + msg); };
+  if (backbone_blocks.size() != 4) bad("backbone must have 4 stages");
+  for (int b : backbone_blocks) {
+    if (b < 1 || b > 64) bad("backbone stage with " + std::to_string(b) + " blocks");
+  }
+  if (dilate_layer4 && !bottleneck) {
+    fail(StatusCode::kUnimplemented,
+         "replace_final_stride_with_dilation needs a Bottleneck ResNet (resnet50+); torchvision refuses "
+         "dilation in BasicBlock (" + backbone + ")");
+  }
+  if (cameras.empty()) {
+    fail(StatusCode::kUnimplemented, "the model has no camera (VISUAL) input; image-less ACT is not supported");
+  }
+  for (const auto& cam : cameras) {
+    if (cam.height < 1 || cam.width < 1 || cam.height > 8192 || cam.width > 8192) {
+      bad("camera " + cam.key + " has size " + std::to_string(cam.height) + "x" + std::to_string(cam.width));
+    }
+  }
+  if (state_dim < 0 || state_dim > 65536 || env_state_dim < 0 || env_state_dim > 65536) bad("state dimension out of range");
+  if (action_dim < 1 || action_dim > 65536) bad("action_dim must be positive");
+  if (dim_model < 4 || dim_model > 65536) bad("dim_model " + std::to_string(dim_model));
+  if (n_heads < 1 || dim_model % n_heads != 0) {
+    bad("dim_model " + std::to_string(dim_model) + " is not divisible by n_heads " + std::to_string(n_heads));
+  }
+  if (dim_model % 4 != 0) bad("dim_model must be a multiple of 4 (2-D sinusoidal embedding)");
+  if (dim_feedforward < 1 || dim_feedforward > 1 << 20) bad("dim_feedforward " + std::to_string(dim_feedforward));
+  if (activation == Activation::kGlu && dim_feedforward % 2 != 0) bad("glu needs an even dim_feedforward");
+  if (n_encoder_layers < 1 || n_encoder_layers > 256) bad("n_encoder_layers " + std::to_string(n_encoder_layers));
+  if (n_decoder_layers < 1 || n_decoder_layers > 256) bad("n_decoder_layers " + std::to_string(n_decoder_layers));
+  if (chunk_size < 1 || chunk_size > 100000) bad("chunk_size " + std::to_string(chunk_size));
+  if (n_action_steps < 1 || n_action_steps > chunk_size) {
+    bad("n_action_steps " + std::to_string(n_action_steps) + " must be in [1, chunk_size " +
+        std::to_string(chunk_size) + "]");
+  }
+  if (temporal_ensemble_coeff) {
+    if (!std::isfinite(*temporal_ensemble_coeff)) bad("temporal_ensemble_coeff is not finite");
+    if (n_action_steps != 1) {
+      bad("temporal ensembling needs n_action_steps == 1 (LeRobot's rule), got " + std::to_string(n_action_steps));
+    }
+  }
+}
+
+namespace {
+
+nlohmann::json norm_to_json(NormMode m) { return norm_mode_name(m); }
+
+NormMode norm_from_json(const nlohmann::json& j) {
+  const std::string s = j.get<std::string>();
+  if (s == "IDENTITY") return NormMode::kIdentity;
+  if (s == "MEAN_STD") return NormMode::kMeanStd;
+  if (s == "MIN_MAX") return NormMode::kMinMax;
+  fail(StatusCode::kDataLoss, "unknown normalisation mode '" + s + "'");
+}
+
+Activation activation_from_string(const std::string& s) {
+  if (s == "relu") return Activation::kRelu;
+  if (s == "gelu") return Activation::kGelu;
+  if (s == "glu") return Activation::kGlu;
+  fail(StatusCode::kDataLoss, "unknown activation '" + s + "'");
+}
+
+}  // namespace
+
+nlohmann::json ModelConfig::to_json() const {
+  nlohmann::json j;
+  j["backbone"] = backbone;
+  j["backbone_blocks"] = backbone_blocks;
+  j["bottleneck"] = bottleneck;
+  j["dilate_layer4"] = dilate_layer4;
+  j["cameras"] = nlohmann::json::array();
+  for (const auto& cam : cameras) j["cameras"].push_back({{"key", cam.key}, {"height", cam.height}, {"width", cam.width}});
+  j["state_key"] = state_key;
+  j["state_dim"] = state_dim;
+  j["env_state_key"] = env_state_key;
+  j["env_state_dim"] = env_state_dim;
+  j["action_dim"] = action_dim;
+  j["dim_model"] = dim_model;
+  j["n_heads"] = n_heads;
+  j["dim_feedforward"] = dim_feedforward;
+  j["activation"] = activation_name(activation);
+  j["n_encoder_layers"] = n_encoder_layers;
+  j["n_decoder_layers"] = n_decoder_layers;
+  j["pre_norm"] = pre_norm;
+  j["chunk_size"] = chunk_size;
+  j["n_action_steps"] = n_action_steps;
+  j["temporal_ensemble_coeff"] = temporal_ensemble_coeff ? nlohmann::json(*temporal_ensemble_coeff) : nlohmann::json();
+  j["input_norm"] = nlohmann::json::array();
+  for (const auto& [key, mode] : input_norm) j["input_norm"].push_back({{"key", key}, {"mode", norm_to_json(mode)}});
+  j["action_norm"] = norm_to_json(action_norm);
+  return j;
+}
+
+ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
+  ModelConfig c;
+  try {
+    c.backbone = j.at("backbone").get<std::string>();
+    c.backbone_blocks = j.at("backbone_blocks").get<std::vector<int>>();
+    c.bottleneck = j.at("bottleneck").get<bool>();
+    c.dilate_layer4 = j.at("dilate_layer4").get<bool>();
+    for (const auto& cam : j.at("cameras")) {
+      c.cameras.push_back({cam.at("key").get<std::string>(), cam.at("height").get<int>(), cam.at("width").get<int>()});
+    }
+    c.state_key = j.at("state_key").get<std::string>();
+    c.state_dim = j.at("state_dim").get<int>();
+    c.env_state_key = j.at("env_state_key").get<std::string>();
+    c.env_state_dim = j.at("env_state_dim").get<int>();
+    c.action_dim = j.at("action_dim").get<int>();
+    c.dim_model = j.at("dim_model").get<int>();
+    c.n_heads = j.at("n_heads").get<int>();
+    c.dim_feedforward = j.at("dim_feedforward").get<int>();
+    c.activation = activation_from_string(j.at("activation").get<std::string>());
+    c.n_encoder_layers = j.at("n_encoder_layers").get<int>();
+    c.n_decoder_layers = j.at("n_decoder_layers").get<int>();
+    c.pre_norm = j.at("pre_norm").get<bool>();
+    c.chunk_size = j.at("chunk_size").get<int>();
+    c.n_action_steps = j.at("n_action_steps").get<int>();
+    if (!j.at("temporal_ensemble_coeff").is_null()) c.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
+    for (const auto& e : j.at("input_norm")) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
+    c.action_norm = norm_from_json(j.at("action_norm"));
+  } catch (const nlohmann::json::exception& e) {
+    fail(StatusCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
+  }
+  c.validate();
+  return c;
+}
+
+}  // namespace act

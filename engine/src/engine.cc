@@ -63,6 +63,7 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
   }
   info_.state_dim = config_.state_dim;
   info_.env_state_dim = config_.env_state_dim;
+  info_.env_state_key = config_.env_state_key;
   info_.action_dim = config_.action_dim;
   info_.chunk_size = config_.chunk_size;
   info_.n_action_steps = config_.n_action_steps;

@@ -43,6 +43,7 @@ struct ModelInfo {
   std::vector<CameraInfo> cameras;  ///< in token order (the config's input_features order)
   int state_dim = 0;                ///< robot state values per observation (0 = no state input)
   int env_state_dim = 0;            ///< environment state values (0 = none)
+  std::string env_state_key;        ///< its feature key, e.g. "observation.environment_state"
   int action_dim = 0;
   int chunk_size = 0;
   int n_action_steps = 0;

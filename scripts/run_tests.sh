@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs the dependencies, builds actengine and runs every test: the Release build with warnings as
+# errors, then the whole suite again under AddressSanitizer + UndefinedBehaviorSanitizer.
+# This is README command (2) and what CI runs (.ci/run).
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+cd "$root"
+jobs="${ACT_JOBS:-$(nproc)}"
+
+"$root/scripts/install_deps.sh"
+
+echo "== Release build (-Werror) =="
+ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh"
+echo "== Release tests =="
+ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
+
+if [ "${ACT_SKIP_SANITIZERS:-0}" != "1" ]; then
+  echo "== ASan + UBSan build =="
+  ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DACT_SANITIZE=ON \
+    -DACT_BUILD_BENCH=OFF
+  echo "== ASan + UBSan tests =="
+  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"
+fi
+echo "all tests passed"

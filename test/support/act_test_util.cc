@@ -1,0 +1,62 @@
+#include "support/act_test_util.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "weights/lerobot_import.h"
+
+namespace fs = std::filesystem;
+
+namespace act::test {
+
+std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem) {
+  const std::string path = (fs::path(scratch) / (stem + ".actb")).string();
+  write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);
+  return path;
+}
+
+std::vector<float> nchw_to_hwc(const float* src, int channels, int height, int width) {
+  std::vector<float> out(static_cast<size_t>(channels) * height * width);
+  const size_t plane = static_cast<size_t>(height) * width;
+  for (int c = 0; c < channels; ++c) {
+    for (size_t i = 0; i < plane; ++i) out[i * channels + c] = src[c * plane + i];
+  }
+  return out;
+}
+
+::testing::AssertionResult all_close(const std::string& what, const float* ours, const float* ref, size_t n, double tol) {
+  if (n == 0) return ::testing::AssertionFailure() << what << ": nothing to compare";
+  double worst = -1.0;
+  size_t worst_i = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const double diff = std::fabs(static_cast<double>(ours[i]) - ref[i]);
+    const double ratio = std::isnan(diff) ? INFINITY : diff / (1.0 + std::fabs(static_cast<double>(ref[i])));
+    if (ratio > worst) {
+      worst = ratio;
+      worst_i = i;
+    }
+  }
+  if (worst <= tol) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << what << ": element " << worst_i << " is " << ours[worst_i] << ", reference "
+                                       << ref[worst_i] << " (|diff|/(1+|ref|) = " << worst << " > " << tol << ")";
+}
+
+void patch_checkpoint(const std::string& src, const std::string& dst, const std::string& config_patch_json) {
+  fs::create_directories(dst);
+  for (const auto& entry : fs::directory_iterator(src)) {
+    const fs::path target = fs::path(dst) / entry.path().filename();
+    if (entry.path().filename() == "config.json") continue;
+    fs::create_symlink(fs::absolute(entry.path()), target);
+  }
+  std::ifstream in(fs::path(src) / "config.json");
+  nlohmann::ordered_json config = nlohmann::ordered_json::parse(in);
+  const nlohmann::ordered_json patch = nlohmann::ordered_json::parse(config_patch_json);
+  for (const auto& [key, value] : patch.items()) config[key] = value;
+  std::ofstream(fs::path(dst) / "config.json") << config.dump(4);
+}
+
+}  // namespace act::test

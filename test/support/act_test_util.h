@@ -1,0 +1,26 @@
+// Helpers for model-level tests: convert checkpoints into blobs, compare tensors with references.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "weights/safetensors.h"
+
+namespace act::test {
+
+/// act_convert in-process: imports `checkpoint_dir` and writes `<scratch>/<stem>.actb`; returns its path.
+std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem = "model");
+
+/// NCHW (batch 1) -> HWC, the engine's layout.
+std::vector<float> nchw_to_hwc(const float* src, int channels, int height, int width);
+
+/// Asserts |ours - ref| <= tol * (1 + |ref|) elementwise; reports the worst element.
+::testing::AssertionResult all_close(const std::string& what, const float* ours, const float* ref, size_t n, double tol);
+
+/// Copies a checkpoint folder into `dst` with config.json fields replaced by `config_patch` (a JSON
+/// object merged into the config); big files are symlinked.
+void patch_checkpoint(const std::string& src, const std::string& dst, const std::string& config_patch_json);
+
+}  // namespace act::test

@@ -23,9 +23,9 @@ int main(int argc, char** argv) {
   app.add_option("-i,--input", input_path, "observations (safetensors)")->required();
   app.add_option("-o,--output", output_path, "write the raw action chunks as 'action' [N, chunk, action_dim]");
   app.add_flag("--compare", compare, "compare with 'output.action' from the input file; exit 1 beyond --tol");
-  app.add_option("--tol", tol, "tolerance: |ours - ref| <= tol * (1 + |ref|)", true)->check(CLI::PositiveNumber);
-  app.add_option("-t,--threads", threads, "threads (0 = all cores)", true)->check(CLI::NonNegativeNumber);
-  app.add_option("--images", images, "which image tensors to read: auto (float if present), f32, u8", true)
+  app.add_option("--tol", tol, "tolerance: |ours - ref| <= tol * (1 + |ref|)")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("-t,--threads", threads, "threads (0 = all cores)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--images", images, "which image tensors to read: auto (float if present), f32, u8")->capture_default_str()
       ->check(CLI::IsMember({"auto", "f32", "u8"}));
   CLI11_PARSE(app, argc, argv);
 

@@ -12,13 +12,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
+struct CommandResult {
   int exit_code = -1;
   std::string output;  // stdout + stderr
 };
 
-Run run(const std::string& command) {
-  Run r;
+CommandResult run_command(const std::string& command) {
+  CommandResult r;
   FILE* pipe = popen((command + " 2>&1").c_str(), "r");
   if (!pipe) return r;
   char buf[4096];
@@ -32,21 +32,21 @@ Run run(const std::string& command) {
 std::string q(const std::string& s) { return "'" + s + "'"; }
 
 TEST(ActConvertCli, HelpDescribesUsage) {
-  const Run r = run(std::string(ACT_CONVERT_BIN) + " --help");
+  const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " --help");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_NE(r.output.find("checkpoint"), std::string::npos);
   EXPECT_NE(r.output.find("--output"), std::string::npos);
 }
 
 TEST(ActConvertCli, MissingArgumentsIsAUsageError) {
-  const Run r = run(std::string(ACT_CONVERT_BIN));
+  const CommandResult r = run_command(std::string(ACT_CONVERT_BIN));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("required"), std::string::npos) << r.output;
 }
 
 TEST(ActConvertCli, MissingCheckpointNamesThePath) {
   const std::string dir = act::test::scratch_dir();
-  const Run r = run(std::string(ACT_CONVERT_BIN) + " " + q(dir + "/nope") + " -o " + q(dir + "/m.actb"));
+  const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(dir + "/nope") + " -o " + q(dir + "/m.actb"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find(dir + "/nope"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir + "/m.actb"));
@@ -58,7 +58,7 @@ TEST(ActConvertCli, ConvertsAndEvalReproducesLeRobot) {
     ACT_REQUIRE_PATH(src);
     const std::string dir = act::test::scratch_dir();
     const std::string blob = dir + "/" + fixture + ".actb";
-    const Run c = run(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob));
+    const CommandResult c = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob));
     ASSERT_EQ(c.exit_code, 0) << c.output;
     EXPECT_NE(c.output.find("resnet18, D 64, 4 heads"), std::string::npos) << c.output;
     EXPECT_NE(c.output.find(fixture == "act-tiny" ? "current LeRobot layout" : "legacy LeRobot layout"), std::string::npos);
@@ -66,13 +66,13 @@ TEST(ActConvertCli, ConvertsAndEvalReproducesLeRobot) {
     ASSERT_TRUE(fs::exists(blob));
 
     const std::string out = dir + "/actions.safetensors";
-    const Run e = run(std::string(ACT_EVAL_BIN) + " --model " + q(blob) + " --input " + q(src + "/reference.safetensors") +
+    const CommandResult e = run_command(std::string(ACT_EVAL_BIN) + " --model " + q(blob) + " --input " + q(src + "/reference.safetensors") +
                       " --compare --output " + q(out));
     EXPECT_EQ(e.exit_code, 0) << e.output;
     EXPECT_NE(e.output.find("PASS"), std::string::npos) << e.output;
     EXPECT_TRUE(fs::exists(out));
     // The uint8 twin of the images gives the same answer.
-    const Run u8 = run(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " + q(src + "/reference.safetensors") +
+    const CommandResult u8 = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " + q(src + "/reference.safetensors") +
                        " --compare --images u8 --threads 1");
     EXPECT_EQ(u8.exit_code, 0) << u8.output;
   }
@@ -83,9 +83,9 @@ TEST(ActEvalCli, CompareFailsBeyondTolerance) {
   ACT_REQUIRE_PATH(src);
   const std::string dir = act::test::scratch_dir();
   const std::string blob = dir + "/tiny.actb";
-  ASSERT_EQ(run(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob) + " -q").exit_code, 0);
+  ASSERT_EQ(run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob) + " -q").exit_code, 0);
   // The legacy fixture's reference belongs to other weights: the comparison must fail.
-  const Run e = run(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " +
+  const CommandResult e = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " +
                     q(act::test::fixture_dir("act-tiny-legacy") + "/reference.safetensors") + " --compare");
   EXPECT_EQ(e.exit_code, 1) << e.output;
   EXPECT_NE(e.output.find("FAIL"), std::string::npos) << e.output;
@@ -94,19 +94,19 @@ TEST(ActEvalCli, CompareFailsBeyondTolerance) {
 TEST(ActEvalCli, CorruptModelAndMissingInputAreClearErrors) {
   const std::string dir = act::test::scratch_dir();
   std::ofstream(dir + "/junk.actb") << "this is not a model";
-  const Run bad_model = run(std::string(ACT_EVAL_BIN) + " -m " + q(dir + "/junk.actb") + " -i " + q(dir + "/x"));
+  const CommandResult bad_model = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(dir + "/junk.actb") + " -i " + q(dir + "/x"));
   EXPECT_EQ(bad_model.exit_code, 1);
   EXPECT_NE(bad_model.output.find("junk.actb"), std::string::npos) << bad_model.output;
 
   const std::string src = act::test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(src);
   const std::string blob = dir + "/tiny.actb";
-  ASSERT_EQ(run(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob) + " -q").exit_code, 0);
-  const Run no_input = run(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " + q(dir + "/missing.safetensors"));
+  ASSERT_EQ(run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob) + " -q").exit_code, 0);
+  const CommandResult no_input = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " + q(dir + "/missing.safetensors"));
   EXPECT_EQ(no_input.exit_code, 1);
   EXPECT_NE(no_input.output.find("missing.safetensors"), std::string::npos) << no_input.output;
   // An observation file without output.action cannot be compared.
-  const Run no_ref = run(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " +
+  const CommandResult no_ref = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " +
                          q(src + "/policy_preprocessor_step_3_normalizer_processor.safetensors") + " --compare");
   EXPECT_EQ(no_ref.exit_code, 1);
   EXPECT_NE(no_ref.output.find("input.observation.state"), std::string::npos) << no_ref.output;

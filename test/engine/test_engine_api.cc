@@ -1,0 +1,202 @@
+// The public API: bad observations and blobs are clear errors; results do not depend on threads,
+// memory planning or which Engine runs them; two Engines run side by side.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "actengine/engine.h"
+#include "engine/src/engine_impl.h"
+#include "support/act_test_util.h"
+#include "support/test_paths.h"
+
+namespace fs = std::filesystem;
+
+namespace act {
+namespace {
+
+class EngineApiTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string fixture = test::fixture_dir("act-tiny");
+    ACT_REQUIRE_PATH(fixture);
+    scratch_ = test::scratch_dir();
+    blob_ = test::convert_checkpoint(fixture, scratch_);
+    auto e = Engine::open(blob_, {.threads = 2});
+    ASSERT_TRUE(e.ok()) << e.status().to_string();
+    engine_ = std::move(e.value());
+    const auto& cam = engine_->model_info().cameras[0];
+    image_.resize(static_cast<size_t>(cam.height) * cam.width * 3);
+    for (size_t i = 0; i < image_.size(); ++i) image_[i] = static_cast<uint8_t>((i * 37) % 251);
+    state_ = {0.3f, -1.2f};
+  }
+  Observation observation() {
+    const auto& cam = engine_->model_info().cameras[0];
+    Observation obs;
+    obs.images = {ImageView::rgb_u8(image_.data(), cam.height, cam.width)};
+    obs.state = state_;
+    return obs;
+  }
+  std::vector<float> chunk() { return std::vector<float>(engine_->model_info().chunk_values()); }
+  void expect_invalid(const Observation& obs, const std::string& needle) {
+    auto out = chunk();
+    const Status s = engine_->infer(obs, out);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << s.to_string();
+    EXPECT_NE(s.message().find(needle), std::string::npos) << s.message() << " (expected: " << needle << ")";
+  }
+
+  std::string scratch_, blob_;
+  std::unique_ptr<Engine> engine_;
+  std::vector<uint8_t> image_;
+  std::vector<float> state_;
+};
+
+TEST_F(EngineApiTest, ModelInfoDescribesTheModel) {
+  const ModelInfo& info = engine_->model_info();
+  ASSERT_EQ(info.cameras.size(), 1u);
+  EXPECT_EQ(info.cameras[0].key, "observation.images.front");
+  EXPECT_EQ(info.cameras[0].height, 96);
+  EXPECT_EQ(info.cameras[0].width, 128);
+  EXPECT_EQ(info.state_dim, 2);
+  EXPECT_EQ(info.action_dim, 2);
+  EXPECT_EQ(info.chunk_size, 10);
+  EXPECT_EQ(info.precision, "fp32");
+  EXPECT_EQ(engine_->threads(), 2);
+}
+
+TEST_F(EngineApiTest, BadObservationsAreNamed) {
+  const auto& cam = engine_->model_info().cameras[0];
+  {
+    Observation obs = observation();
+    obs.images[0].width = cam.width - 1;
+    expect_invalid(obs, "the model expects 96x128");
+  }
+  {
+    Observation obs = observation();
+    obs.images.clear();
+    expect_invalid(obs, "0 images");
+  }
+  {
+    Observation obs = observation();
+    obs.images[0].data = nullptr;
+    expect_invalid(obs, "no data");
+  }
+  {
+    Observation obs = observation();
+    const std::vector<float> short_state = {1.0f};
+    obs.state = short_state;
+    expect_invalid(obs, "state has 1 values");
+  }
+  {
+    Observation obs = observation();
+    const std::vector<float> nan_state = {1.0f, NAN};
+    obs.state = nan_state;
+    expect_invalid(obs, "state[1] is not finite");
+  }
+  {
+    Observation obs = observation();
+    const std::vector<float> env = {1.0f};
+    obs.env_state = env;
+    expect_invalid(obs, "no environment state");
+  }
+  {
+    std::vector<float> chw(3 * static_cast<size_t>(cam.height) * cam.width, 0.5f);
+    chw[17] = INFINITY;
+    Observation obs = observation();
+    obs.images = {ImageView::rgb_f32_chw(chw.data(), cam.height, cam.width)};
+    expect_invalid(obs, "NaN or Inf");
+  }
+  {
+    std::vector<float> too_small(3);
+    EXPECT_EQ(engine_->infer(observation(), too_small).code(), StatusCode::kInvalidArgument);
+  }
+}
+
+TEST_F(EngineApiTest, RowStrideIsHonoured) {
+  const auto& cam = engine_->model_info().cameras[0];
+  const size_t row = static_cast<size_t>(cam.width) * 3, stride = row + 13;
+  std::vector<uint8_t> padded(stride * cam.height, 255);
+  for (int y = 0; y < cam.height; ++y) std::copy_n(image_.data() + y * row, row, padded.data() + y * stride);
+  Observation obs = observation();
+  auto expected = chunk(), got = chunk();
+  ASSERT_TRUE(engine_->infer(obs, expected).ok());
+  obs.images = {ImageView::rgb_u8(padded.data(), cam.height, cam.width, stride)};
+  ASSERT_TRUE(engine_->infer(obs, got).ok());
+  EXPECT_EQ(expected, got);
+}
+
+TEST_F(EngineApiTest, SameResultForAnyThreadCountAndMemoryPlan) {
+  auto reference = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), reference).ok());
+  for (int threads : {1, 3}) {
+    for (bool keep_all : {false, true}) {
+      Engine::Impl impl(blob_, {.threads = threads}, keep_all);
+      auto normalized = chunk(), raw = chunk();
+      impl.run(observation(), normalized);
+      impl.unnormalize(normalized, raw, static_cast<size_t>(impl.info().chunk_size));
+      // Tiles are split the same way whatever the thread count, so results are bit-identical.
+      EXPECT_EQ(raw, reference) << threads << " threads, keep_all " << keep_all;
+    }
+  }
+  // Repeated runs reuse the planned buffers and give the same answer.
+  auto again = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), again).ok());
+  EXPECT_EQ(again, reference);
+}
+
+TEST_F(EngineApiTest, TwoEnginesRunSideBySide) {
+  auto reference = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), reference).ok());
+  auto other = Engine::open(blob_, {.threads = 1});
+  ASSERT_TRUE(other.ok());
+  std::vector<std::vector<float>> results(2, chunk());
+  std::vector<Status> statuses(2);
+  Engine* engines[2] = {engine_.get(), other->get()};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 2; ++t) {
+    threads.emplace_back([&, t] {
+      for (int i = 0; i < 5 && statuses[t].ok(); ++i) statuses[t] = engines[t]->infer(observation(), results[t]);
+    });
+  }
+  for (auto& th : threads) th.join();
+  for (int t = 0; t < 2; ++t) {
+    EXPECT_TRUE(statuses[t].ok()) << statuses[t].to_string();
+    EXPECT_EQ(results[t], reference);
+  }
+}
+
+TEST_F(EngineApiTest, CorruptBlobsAreClearErrors) {
+  {
+    auto e = Engine::open(scratch_ + "/missing.actb");
+    EXPECT_EQ(e.status().code(), StatusCode::kNotFound);
+    EXPECT_NE(e.status().message().find("missing.actb"), std::string::npos);
+  }
+  const auto size = fs::file_size(blob_);
+  for (uintmax_t cut : {uintmax_t{0}, uintmax_t{7}, uintmax_t{100}, size / 2, size - 1}) {
+    const std::string path = scratch_ + "/cut" + std::to_string(cut) + ".actb";
+    fs::copy_file(blob_, path);
+    fs::resize_file(path, cut);
+    auto e = Engine::open(path);
+    EXPECT_FALSE(e.ok()) << "truncated to " << cut;
+    EXPECT_EQ(e.status().code(), StatusCode::kDataLoss) << e.status().to_string();
+    EXPECT_NE(e.status().message().find(path), std::string::npos) << e.status().message();
+  }
+  {
+    const std::string path = scratch_ + "/flipped.actb";
+    fs::copy_file(blob_, path);
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(static_cast<std::streamoff>(size - 1000));
+    f.put('\x5a');
+    f.close();
+    auto e = Engine::open(path);
+    EXPECT_EQ(e.status().code(), StatusCode::kDataLoss);
+    EXPECT_NE(e.status().message().find("checksum"), std::string::npos) << e.status().message();
+  }
+  auto negative = Engine::open(blob_, {.threads = -1});
+  EXPECT_EQ(negative.status().code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace act

@@ -1,0 +1,170 @@
+// The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
+// stride / padding / dilation the ResNet backbones use.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "kernels/fp32/fp32_kernels.h"
+
+namespace act::kernels {
+namespace {
+
+std::vector<float> random_vector(size_t n, std::mt19937& rng, float lo = -1.0f, float hi = 1.0f) {
+  std::uniform_real_distribution<float> d(lo, hi);
+  std::vector<float> v(n);
+  for (auto& x : v) x = d(rng);
+  return v;
+}
+
+// Direct convolution in double: NHWC input, OHWI weights.
+std::vector<double> conv_naive(const Conv2dShape& s, const std::vector<float>& x, const std::vector<float>& w) {
+  std::vector<double> y(static_cast<size_t>(s.out_h) * s.out_w * s.out_c, 0.0);
+  for (int oy = 0; oy < s.out_h; ++oy)
+    for (int ox = 0; ox < s.out_w; ++ox)
+      for (int o = 0; o < s.out_c; ++o) {
+        double acc = 0.0;
+        for (int ky = 0; ky < s.kernel_h; ++ky)
+          for (int kx = 0; kx < s.kernel_w; ++kx) {
+            const int iy = oy * s.stride - s.pad + ky * s.dilation, ix = ox * s.stride - s.pad + kx * s.dilation;
+            if (iy < 0 || iy >= s.in_h || ix < 0 || ix >= s.in_w) continue;
+            for (int c = 0; c < s.in_c; ++c)
+              acc += static_cast<double>(x[(static_cast<size_t>(iy) * s.in_w + ix) * s.in_c + c]) *
+                     w[((static_cast<size_t>(o) * s.kernel_h + ky) * s.kernel_w + kx) * s.in_c + c];
+          }
+        y[(static_cast<size_t>(oy) * s.out_w + ox) * s.out_c + o] = acc;
+      }
+  return y;
+}
+
+struct ConvCase {
+  int h, w, cin, cout, kernel, stride, pad, dilation;
+};
+
+TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
+  std::mt19937 rng(7);
+  const ConvCase cases[] = {
+      {13, 17, 3, 8, 7, 2, 3, 1},   // stem, odd sizes
+      {9, 11, 5, 7, 3, 1, 1, 1},    // 3x3/1
+      {10, 7, 4, 6, 3, 2, 1, 1},    // 3x3/2
+      {8, 9, 6, 5, 1, 2, 0, 1},     // 1x1/2 downsample
+      {7, 6, 3, 4, 3, 1, 2, 2},     // dilated 3x3 (layer4 with dilation)
+      {1, 1, 3, 2, 3, 1, 1, 1},     // a single pixel: everything but the centre tap is padding
+      {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
+  };
+  for (const ConvCase& c : cases) {
+    Conv2dShape s;
+    s.in_h = c.h;
+    s.in_w = c.w;
+    s.in_c = c.cin;
+    s.out_c = c.cout;
+    s.kernel_h = s.kernel_w = c.kernel;
+    s.stride = c.stride;
+    s.pad = c.pad;
+    s.dilation = c.dilation;
+    s.out_h = Conv2dShape::out_dim(c.h, c.kernel, c.stride, c.pad, c.dilation);
+    s.out_w = Conv2dShape::out_dim(c.w, c.kernel, c.stride, c.pad, c.dilation);
+    const auto x = random_vector(static_cast<size_t>(c.h) * c.w * c.cin, rng);
+    const auto w = random_vector(static_cast<size_t>(c.cout) * s.patch_size(), rng);
+    const auto expected = conv_naive(s, x, w);
+    const int pixels = s.out_h * s.out_w;
+    std::vector<float> y(static_cast<size_t>(pixels) * c.cout, NAN);
+    // Ragged tiles: 5 pixels at a time.
+    for (int p0 = 0; p0 < pixels; p0 += 5) {
+      const int count = std::min(5, pixels - p0);
+      std::vector<float> patches(static_cast<size_t>(count) * s.patch_size(), NAN);
+      im2col_nhwc_f32(s, x.data(), p0, count, patches.data());
+      gemm_f32_nt(count, c.cout, s.patch_size(), patches.data(), static_cast<size_t>(s.patch_size()), w.data(),
+                  static_cast<size_t>(s.patch_size()), y.data() + static_cast<size_t>(p0) * c.cout, static_cast<size_t>(c.cout));
+    }
+    for (size_t i = 0; i < y.size(); ++i) {
+      ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
+          << "case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
+    }
+  }
+}
+
+TEST(Fp32Kernels, GemmWithStridesMatchesNaive) {
+  std::mt19937 rng(3);
+  for (int m : {1, 7, 33}) {
+    for (int n : {1, 5, 64}) {
+      for (int k : {1, 9, 100}) {
+        const size_t lda = k + 3, ldb = k + 1, ldc = n + 2;
+        const auto a = random_vector(m * lda, rng), b = random_vector(n * ldb, rng);
+        std::vector<float> c(m * ldc, 42.0f);
+        gemm_f32_nt(m, n, k, a.data(), lda, b.data(), ldb, c.data(), ldc);
+        std::vector<float> bt(static_cast<size_t>(k) * (n + 4));  // B^T, row-major [k x n], ld n+4
+        for (int i = 0; i < n; ++i)
+          for (int j = 0; j < k; ++j) bt[j * (n + 4) + i] = b[i * ldb + j];
+        std::vector<float> c2(m * ldc, 42.0f);
+        gemm_f32_nn(m, n, k, a.data(), lda, bt.data(), n + 4, c2.data(), ldc);
+        for (int i = 0; i < m; ++i) {
+          for (int j = 0; j < n; ++j) {
+            double acc = 0;
+            for (int t = 0; t < k; ++t) acc += static_cast<double>(a[i * lda + t]) * b[j * ldb + t];
+            ASSERT_NEAR(c[i * ldc + j], acc, 1e-5 * k);
+            ASSERT_NEAR(c2[i * ldc + j], acc, 1e-5 * k);
+          }
+          for (size_t j = n; j < ldc; ++j) ASSERT_EQ(c[i * ldc + j], 42.0f) << "wrote past n";
+        }
+      }
+    }
+  }
+}
+
+TEST(Fp32Kernels, MaxPoolIgnoresPadding) {
+  // All-negative input: if padding (0) took part in the max, the border outputs would be 0.
+  const int h = 7, w = 5, c = 3;
+  std::mt19937 rng(1);
+  const auto x = random_vector(static_cast<size_t>(h) * w * c, rng, -5.0f, -1.0f);
+  const int oh = Conv2dShape::out_dim(h, 3, 2, 1, 1), ow = Conv2dShape::out_dim(w, 3, 2, 1, 1);
+  std::vector<float> y(static_cast<size_t>(oh) * ow * c);
+  maxpool_nhwc_f32(h, w, c, 3, 2, 1, oh, ow, x.data(), y.data(), 0, oh);
+  for (int oy = 0; oy < oh; ++oy)
+    for (int ox = 0; ox < ow; ++ox)
+      for (int ch = 0; ch < c; ++ch) {
+        float best = -INFINITY;
+        for (int iy = std::max(0, oy * 2 - 1); iy <= std::min(h - 1, oy * 2 + 1); ++iy)
+          for (int ix = std::max(0, ox * 2 - 1); ix <= std::min(w - 1, ox * 2 + 1); ++ix)
+            best = std::max(best, x[(iy * w + ix) * c + ch]);
+        EXPECT_EQ(y[(oy * ow + ox) * c + ch], best);
+        EXPECT_LT(best, 0.0f);
+      }
+}
+
+TEST(Fp32Kernels, LayerNormSoftmaxAndActivations) {
+  std::mt19937 rng(5);
+  const int rows = 3, cols = 37;
+  auto x = random_vector(rows * cols, rng, -3.0f, 5.0f);
+  const auto gamma = random_vector(cols, rng), beta = random_vector(cols, rng);
+  std::vector<float> y(rows * cols);
+  layernorm_rows_f32(rows, cols, x.data(), cols, gamma.data(), beta.data(), 1e-5f, y.data(), cols);
+  for (int r = 0; r < rows; ++r) {
+    double mean = 0, var = 0;
+    for (int c = 0; c < cols; ++c) mean += x[r * cols + c];
+    mean /= cols;
+    for (int c = 0; c < cols; ++c) var += (x[r * cols + c] - mean) * (x[r * cols + c] - mean);
+    var /= cols;
+    for (int c = 0; c < cols; ++c)
+      EXPECT_NEAR(y[r * cols + c], (x[r * cols + c] - mean) / std::sqrt(var + 1e-5) * gamma[c] + beta[c], 1e-5);
+  }
+  auto s = x;
+  s[0] = 80.0f;  // large logits must not overflow
+  softmax_rows_f32(rows, cols, s.data(), cols);
+  for (int r = 0; r < rows; ++r) {
+    double sum = 0;
+    for (int c = 0; c < cols; ++c) sum += s[r * cols + c];
+    EXPECT_NEAR(sum, 1.0, 1e-5);
+  }
+  EXPECT_NEAR(s[0], 1.0, 1e-6);
+  std::vector<float> g = {-3.0f, -0.5f, 0.0f, 0.7f, 4.0f};
+  gelu_f32(g.size(), g.data());
+  const double in[] = {-3.0, -0.5, 0.0, 0.7, 4.0};
+  for (size_t i = 0; i < g.size(); ++i) EXPECT_NEAR(g[i], 0.5 * in[i] * (1 + std::erf(in[i] / std::sqrt(2.0))), 1e-6);
+  std::vector<float> r = {-1.0f, 0.0f, 2.0f};
+  relu_f32(r.size(), r.data());
+  EXPECT_EQ(r, (std::vector<float>{0.0f, 0.0f, 2.0f}));
+}
+
+}  // namespace
+}  // namespace act::kernels

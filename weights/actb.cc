@@ -1,0 +1,435 @@
+#include "weights/actb.h"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <utility>
+
+#include "weights/error.h"
+#include "weights/file_util.h"
+
+namespace act {
+
+namespace {
+
+constexpr char kMagic[8] = {'A', 'C', 'T', 'B', 'L', 'O', 'B', '\0'};
+constexpr size_t kFixedHeaderSize = 64;
+// A real header is a few hundred KB; anything near this is corrupt.
+constexpr uint64_t kMaxHeaderSize = 100'000'000;
+
+[[noreturn]] void corrupt(const std::string& path, const std::string& what) {
+  fail(StatusCode::kDataLoss, "'" + path + "': " + what);
+}
+
+uint32_t read_le32(const uint8_t* p) {
+  return static_cast<uint32_t>(p[0]) | static_cast<uint32_t>(p[1]) << 8 | static_cast<uint32_t>(p[2]) << 16 |
+         static_cast<uint32_t>(p[3]) << 24;
+}
+
+uint64_t read_le64(const uint8_t* p) {
+  uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+
+void put_le32(uint32_t v, uint8_t* p) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+
+void put_le64(uint64_t v, uint8_t* p) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+
+std::string hex32(uint32_t v) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "0x%08x", static_cast<unsigned>(v));
+  return buf;
+}
+
+uint64_t align_up(uint64_t v) { return (v + kActbAlignment - 1) / kActbAlignment * kActbAlignment; }
+
+// zlib's crc32() takes a 32-bit length; feed large buffers in pieces.
+uint32_t crc_update(uint32_t crc, const uint8_t* data, size_t size) {
+  while (size > 0) {
+    const size_t n = std::min<size_t>(size, size_t{1} << 30);
+    crc = static_cast<uint32_t>(::crc32(crc, data, static_cast<uInt>(n)));
+    data += n;
+    size -= n;
+  }
+  return crc;
+}
+
+uint32_t crc_zeros(uint32_t crc, size_t size) {
+  static constexpr uint8_t kZeros[kActbAlignment] = {};
+  while (size > 0) {
+    const size_t n = std::min(size, sizeof kZeros);
+    crc = crc_update(crc, kZeros, n);
+    size -= n;
+  }
+  return crc;
+}
+
+// Shared by writer (kInvalidArgument) and reader (kDataLoss): returns "" when the params fit the shape.
+std::string check_quant(const QuantParams& q, const std::vector<int64_t>& shape) {
+  if (q.scales.empty()) {
+    return q.zero_points.empty() ? "" : "quant has zero_points but no scales";
+  }
+  if (q.zero_points.size() != q.scales.size()) {
+    return "quant has " + std::to_string(q.scales.size()) + " scales but " + std::to_string(q.zero_points.size()) +
+           " zero_points";
+  }
+  for (float s : q.scales) {
+    if (!std::isfinite(s) || s <= 0.0f) return "quant scale " + std::to_string(s) + " is not a positive finite number";
+  }
+  if (q.scales.size() > 1) {
+    if (q.axis < 0 || static_cast<size_t>(q.axis) >= shape.size()) {
+      return "quant axis " + std::to_string(q.axis) + " is out of range for shape " + shape_string(shape);
+    }
+    if (static_cast<uint64_t>(shape[static_cast<size_t>(q.axis)]) != q.scales.size()) {
+      return "quant has " + std::to_string(q.scales.size()) + " scales but shape " + shape_string(shape) +
+             " has " + std::to_string(shape[static_cast<size_t>(q.axis)]) + " channels on axis " +
+             std::to_string(q.axis);
+    }
+  }
+  return "";
+}
+
+// Reads the optional "quant" object of a tensor entry; returns "" or what is wrong.
+std::string parse_quant(const nlohmann::json& j, QuantParams* q) {
+  if (!j.is_object()) return std::string("'quant' must be an object, got ") + j.type_name();
+  const auto scales = j.find("scales");
+  const auto zps = j.find("zero_points");
+  const auto axis = j.find("axis");
+  if (scales == j.end() || !scales->is_array()) return "'quant' needs a 'scales' array";
+  if (zps == j.end() || !zps->is_array()) return "'quant' needs a 'zero_points' array";
+  if (axis == j.end()) return "'quant' needs an 'axis'";
+  q->scales.reserve(scales->size());
+  for (const auto& s : *scales) {
+    if (!s.is_number()) return "quant scales must be numbers";
+    // Range-check before narrowing: converting an out-of-range double to float is undefined.
+    const auto d = s.get<double>();
+    if (!(std::fabs(d) <= static_cast<double>(std::numeric_limits<float>::max()))) {
+      return "quant scale " + std::to_string(d) + " is out of float range";
+    }
+    q->scales.push_back(static_cast<float>(d));
+  }
+  q->zero_points.reserve(zps->size());
+  for (const auto& z : *zps) {
+    int64_t v = 0;
+    if (!detail::json_to_i64(z, &v) || v < std::numeric_limits<int32_t>::min() ||
+        v > std::numeric_limits<int32_t>::max()) {
+      return "quant zero_points must be 32-bit integers";
+    }
+    q->zero_points.push_back(static_cast<int32_t>(v));
+  }
+  int64_t a = 0;
+  if (!detail::json_to_i64(*axis, &a) || a < std::numeric_limits<int32_t>::min() ||
+      a > std::numeric_limits<int32_t>::max()) {
+    return "quant axis must be a 32-bit integer";
+  }
+  q->axis = static_cast<int32_t>(a);
+  return "";
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------- tensor
+
+const float* ActbTensor::f32() const {
+  if (dtype != DType::kF32) {
+    fail(StatusCode::kInvalidArgument, "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", not F32");
+  }
+  // Data is 64-byte aligned inside the mapping (checked at open), so viewing it as floats is safe.
+  return static_cast<const float*>(static_cast<const void*>(data));
+}
+
+// ---------------------------------------------------------------------------------------------- writer
+
+void ActbWriter::add_tensor(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data,
+                            size_t nbytes, QuantParams quant) {
+  const std::string where = "actb tensor '" + name + "': ";
+  if (name.empty()) fail(StatusCode::kInvalidArgument, "actb tensor with an empty name");
+  if (index_.count(name) != 0) fail(StatusCode::kInvalidArgument, where + "duplicate tensor name");
+  uint64_t elements = 0;
+  try {
+    elements = shape_elements(shape);
+  } catch (const Error& e) {
+    fail(StatusCode::kInvalidArgument, where + e.what());
+  }
+  uint64_t expected = 0;
+  if (!detail::checked_mul(elements, dtype_size(dtype), &expected) || expected != nbytes) {
+    fail(StatusCode::kInvalidArgument, where + "shape " + shape_string(shape) + " with dtype " + dtype_name(dtype) +
+                                           " does not match " + std::to_string(nbytes) + " bytes");
+  }
+  if (data == nullptr && nbytes != 0) fail(StatusCode::kInvalidArgument, where + "data is null");
+  const std::string quant_error = check_quant(quant, shape);
+  if (!quant_error.empty()) fail(StatusCode::kInvalidArgument, where + quant_error);
+
+  Pending p{name, dtype, std::move(shape), {}, std::move(quant)};
+  if (nbytes != 0) {
+    const auto* bytes = static_cast<const uint8_t*>(data);
+    p.bytes.assign(bytes, bytes + nbytes);
+  }
+  index_.emplace(name, tensors_.size());
+  tensors_.push_back(std::move(p));
+}
+
+void ActbWriter::add_f32(const std::string& name, std::vector<int64_t> shape, const std::vector<float>& values) {
+  add_tensor(name, DType::kF32, std::move(shape), values.data(), values.size() * sizeof(float));
+}
+
+size_t ActbWriter::write(const std::string& path) const {
+  // The reader insists on an object; refuse to produce a file it would reject.
+  if (!config_.is_object()) {
+    fail(StatusCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
+                                           config_.type_name());
+  }
+  // Lay the tensors out back to back, each at a 64-byte aligned offset in the data area.
+  nlohmann::ordered_json dir = nlohmann::ordered_json::array();
+  std::vector<uint64_t> offsets;
+  offsets.reserve(tensors_.size());
+  uint64_t cursor = 0;
+  for (const Pending& t : tensors_) {
+    cursor = align_up(cursor);
+    offsets.push_back(cursor);
+    nlohmann::ordered_json e = nlohmann::ordered_json::object();
+    e["name"] = t.name;
+    e["dtype"] = dtype_name(t.dtype);
+    e["shape"] = t.shape;
+    e["offset"] = cursor;
+    e["nbytes"] = t.bytes.size();
+    if (!t.quant.empty()) {
+      nlohmann::ordered_json q = nlohmann::ordered_json::object();
+      q["scales"] = t.quant.scales;
+      q["zero_points"] = t.quant.zero_points;
+      q["axis"] = t.quant.axis;
+      e["quant"] = std::move(q);
+    }
+    dir.push_back(std::move(e));
+    cursor += t.bytes.size();
+  }
+  const uint64_t data_size = cursor;
+
+  nlohmann::ordered_json header = nlohmann::ordered_json::object();
+  header["producer"] = producer_;
+  header["config"] = config_;
+  header["tensors"] = std::move(dir);
+  const std::string text = detail::dump_json(header, "the .actb header of '" + path + "'");
+  if (text.size() > kMaxHeaderSize) {
+    fail(StatusCode::kInvalidArgument, "'" + path + "': .actb header of " + std::to_string(text.size()) +
+                                           " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
+  }
+  const uint64_t data_offset = align_up(kFixedHeaderSize + text.size());
+
+  // The checksum covers everything after the fixed header, including the zero padding.
+  uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
+  crc = crc_update(crc, reinterpret_cast<const uint8_t*>(text.data()), text.size());
+  crc = crc_zeros(crc, data_offset - kFixedHeaderSize - text.size());
+  for (size_t i = 0; i < tensors_.size(); ++i) {
+    const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
+    crc = crc_update(crc, tensors_[i].bytes.data(), tensors_[i].bytes.size());
+    crc = crc_zeros(crc, end - offsets[i] - tensors_[i].bytes.size());
+  }
+
+  uint8_t fixed[kFixedHeaderSize] = {};
+  std::memcpy(fixed, kMagic, sizeof kMagic);
+  put_le32(kActbFormatVersion, fixed + 8);
+  put_le64(text.size(), fixed + 16);
+  put_le64(data_offset, fixed + 24);
+  put_le64(data_size, fixed + 32);
+  put_le64(crc, fixed + 40);
+
+  detail::AtomicFileWriter out(path);
+  out.write(fixed, sizeof fixed);
+  out.write(text.data(), text.size());
+  out.write_zeros(data_offset - kFixedHeaderSize - text.size());
+  for (size_t i = 0; i < tensors_.size(); ++i) {
+    const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
+    out.write(tensors_[i].bytes.data(), tensors_[i].bytes.size());
+    out.write_zeros(end - offsets[i] - tensors_[i].bytes.size());
+  }
+  const size_t total = out.bytes_written();
+  out.commit();
+  return total;
+}
+
+// ---------------------------------------------------------------------------------------------- reader
+
+ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
+  ActbFile f;
+  f.mapping_ = FileMapping::open(path);
+  const uint8_t* base = f.mapping_.data();
+  const uint64_t size = f.mapping_.size();
+
+  // Fixed header.
+  if (size < sizeof kMagic) {
+    corrupt(path, "truncated or not an .actb file: file has " + std::to_string(size) +
+                      " bytes, too short for the magic");
+  }
+  if (std::memcmp(base, kMagic, sizeof kMagic) != 0) corrupt(path, "not an .actb file (bad magic)");
+  if (size < kFixedHeaderSize) {
+    corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, the fixed header needs " +
+                      std::to_string(kFixedHeaderSize));
+  }
+  f.version_ = read_le32(base + 8);
+  if (f.version_ != kActbFormatVersion) {
+    fail(StatusCode::kUnimplemented, "'" + path + "': format version " + std::to_string(f.version_) +
+                                         ", this build reads " + std::to_string(kActbFormatVersion));
+  }
+  const uint32_t reserved0 = read_le32(base + 12);
+  const uint64_t header_size = read_le64(base + 16);
+  const uint64_t data_offset = read_le64(base + 24);
+  const uint64_t data_size = read_le64(base + 32);
+  const uint64_t checksum = read_le64(base + 40);
+  bool reserved_zero = reserved0 == 0;
+  for (size_t i = 48; i < kFixedHeaderSize; ++i) reserved_zero = reserved_zero && base[i] == 0;
+  if (!reserved_zero) corrupt(path, "reserved fixed-header bytes are not zero");
+
+  uint64_t expected_size = 0;
+  if (!detail::checked_add(data_offset, data_size, &expected_size)) {
+    corrupt(path, "data_offset " + std::to_string(data_offset) + " + data_size " + std::to_string(data_size) +
+                      " overflows");
+  }
+  if (expected_size > size) {
+    corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, header says " +
+                      std::to_string(expected_size));
+  }
+  if (expected_size < size) {
+    corrupt(path, "file has " + std::to_string(size) + " bytes, header says " + std::to_string(expected_size) +
+                      " (trailing garbage)");
+  }
+  if (header_size > kMaxHeaderSize) {
+    corrupt(path, "header_size " + std::to_string(header_size) + " exceeds the limit of " +
+                      std::to_string(kMaxHeaderSize));
+  }
+  if (data_offset % kActbAlignment != 0) {
+    corrupt(path, "data_offset " + std::to_string(data_offset) + " is not 64-byte aligned");
+  }
+  if (data_offset < kFixedHeaderSize + header_size) {
+    corrupt(path, "JSON header of " + std::to_string(header_size) + " bytes at offset 64 overruns data_offset " +
+                      std::to_string(data_offset));
+  }
+  if (checksum > std::numeric_limits<uint32_t>::max()) {
+    corrupt(path, "checksum field " + std::to_string(checksum) + " is not a zero-extended CRC-32");
+  }
+  if (verify_checksum) {
+    uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
+    crc = crc_update(crc, base + kFixedHeaderSize, static_cast<size_t>(size - kFixedHeaderSize));
+    if (crc != checksum) {
+      corrupt(path, "checksum mismatch (stored " + hex32(static_cast<uint32_t>(checksum)) + ", computed " +
+                        hex32(crc) + "): the file is corrupt");
+    }
+  }
+
+  // JSON header.
+  nlohmann::json header =
+      detail::parse_json_header(path, base + kFixedHeaderSize, static_cast<size_t>(header_size));
+  if (!header.is_object()) corrupt(path, std::string("JSON header must be an object, got ") + header.type_name());
+  const auto producer = header.find("producer");
+  if (producer == header.end() || !producer->is_string()) corrupt(path, "JSON header needs a 'producer' string");
+  f.producer_ = producer->get<std::string>();
+  const auto config = header.find("config");
+  if (config == header.end() || !config->is_object()) corrupt(path, "JSON header needs a 'config' object");
+  f.config_ = std::move(*config);
+  const auto tensors = header.find("tensors");
+  if (tensors == header.end() || !tensors->is_array()) corrupt(path, "JSON header needs a 'tensors' array");
+
+  // Tensor directory.
+  const uint8_t* data_area = base + data_offset;
+  f.tensors_.reserve(tensors->size());
+  for (size_t i = 0; i < tensors->size(); ++i) {
+    const nlohmann::json& e = (*tensors)[i];
+    std::string where = "tensors[" + std::to_string(i) + "]: ";
+    if (!e.is_object()) corrupt(path, where + "must be an object, got " + e.type_name());
+    const auto name = e.find("name");
+    if (name == e.end() || !name->is_string() || name->get_ref<const std::string&>().empty()) {
+      corrupt(path, where + "needs a non-empty 'name' string");
+    }
+    ActbTensor t;
+    t.name = name->get<std::string>();
+    where = "tensor '" + t.name + "': ";
+    if (f.index_.count(t.name) != 0) corrupt(path, where + "duplicate tensor name");
+
+    const auto dtype = e.find("dtype");
+    if (dtype == e.end() || !dtype->is_string()) corrupt(path, where + "needs a 'dtype' string");
+    if (!parse_dtype(dtype->get_ref<const std::string&>(), &t.dtype)) {
+      corrupt(path, where + "unknown dtype '" + dtype->get_ref<const std::string&>().substr(0, 32) + "'");
+    }
+    const auto shape = e.find("shape");
+    if (shape == e.end()) corrupt(path, where + "missing 'shape'");
+    std::string why;
+    if (!detail::json_to_shape(*shape, &t.shape, &why)) corrupt(path, where + why);
+    uint64_t elements = 0;
+    try {
+      elements = shape_elements(t.shape);
+    } catch (const Error& err) {
+      corrupt(path, where + err.what());
+    }
+    const auto offset_it = e.find("offset");
+    const auto nbytes_it = e.find("nbytes");
+    uint64_t offset = 0;
+    uint64_t nbytes = 0;
+    if (offset_it == e.end() || !detail::json_to_u64(*offset_it, &offset)) {
+      corrupt(path, where + "needs a non-negative integer 'offset'");
+    }
+    if (nbytes_it == e.end() || !detail::json_to_u64(*nbytes_it, &nbytes)) {
+      corrupt(path, where + "needs a non-negative integer 'nbytes'");
+    }
+    uint64_t expected = 0;
+    if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected) || expected != nbytes) {
+      corrupt(path, where + "nbytes " + std::to_string(nbytes) + " does not match shape " + shape_string(t.shape) +
+                        " with dtype " + dtype_name(t.dtype));
+    }
+    if (offset % kActbAlignment != 0) {
+      corrupt(path, where + "offset " + std::to_string(offset) + " is not 64-byte aligned");
+    }
+    uint64_t end = 0;
+    if (!detail::checked_add(offset, nbytes, &end) || end > data_size) {
+      corrupt(path, where + "bytes [" + std::to_string(offset) + ", +" + std::to_string(nbytes) +
+                        ") are out of bounds of the data area of " + std::to_string(data_size) + " bytes");
+    }
+    const auto quant = e.find("quant");
+    if (quant != e.end()) {
+      std::string error = parse_quant(*quant, &t.quant);
+      if (error.empty()) error = check_quant(t.quant, t.shape);
+      if (!error.empty()) corrupt(path, where + error);
+    }
+    t.data = data_area + offset;
+    t.nbytes = static_cast<size_t>(nbytes);
+    f.index_.emplace(t.name, f.tensors_.size());
+    f.tensors_.push_back(std::move(t));
+  }
+
+  // Overlap check over non-empty tensors in offset order.
+  std::vector<const ActbTensor*> order;
+  order.reserve(f.tensors_.size());
+  for (const ActbTensor& t : f.tensors_) {
+    if (t.nbytes != 0) order.push_back(&t);
+  }
+  std::sort(order.begin(), order.end(), [](const ActbTensor* a, const ActbTensor* b) { return a->data < b->data; });
+  const ActbTensor* furthest = nullptr;
+  for (const ActbTensor* t : order) {
+    if (furthest != nullptr && t->data < furthest->data + furthest->nbytes) {
+      corrupt(path, "tensors '" + furthest->name + "' and '" + t->name + "' overlap");
+    }
+    if (furthest == nullptr || t->data + t->nbytes > furthest->data + furthest->nbytes) furthest = t;
+  }
+  return f;
+}
+
+const ActbTensor* ActbFile::find(const std::string& name) const {
+  const auto it = index_.find(name);
+  return it == index_.end() ? nullptr : &tensors_[it->second];
+}
+
+const ActbTensor& ActbFile::get(const std::string& name) const {
+  const ActbTensor* t = find(name);
+  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + path() + "'");
+  return *t;
+}
+
+}  // namespace act

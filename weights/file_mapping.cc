@@ -1,0 +1,96 @@
+#include "weights/file_mapping.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <limits>
+#include <system_error>
+#include <utility>
+
+#include "weights/error.h"
+
+namespace act {
+
+namespace {
+
+// std::error_code gives strerror text without strerror()'s shared static buffer.
+std::string errno_text(int err) { return std::error_code(err, std::generic_category()).message(); }
+
+// Closes the descriptor on every path out of open().
+class FdGuard {
+ public:
+  explicit FdGuard(int fd) : fd_(fd) {}
+  ~FdGuard() { ::close(fd_); }
+  FdGuard(const FdGuard&) = delete;
+  FdGuard& operator=(const FdGuard&) = delete;
+  int get() const { return fd_; }
+
+ private:
+  int fd_;
+};
+
+}  // namespace
+
+FileMapping FileMapping::open(const std::string& path) {
+  int fd;
+  do {
+    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  } while (fd < 0 && errno == EINTR);
+  if (fd < 0) {
+    const int err = errno;
+    const StatusCode code = (err == ENOENT || err == ENOTDIR) ? StatusCode::kNotFound : StatusCode::kIoError;
+    fail(code, "cannot open '" + path + "': " + errno_text(err));
+  }
+  FdGuard guard(fd);
+
+  struct stat st{};
+  if (::fstat(fd, &st) != 0) {
+    fail(StatusCode::kIoError, "cannot stat '" + path + "': " + errno_text(errno));
+  }
+  // Directories and devices open fine with O_RDONLY but cannot be mapped as weights.
+  if (!S_ISREG(st.st_mode)) {
+    fail(StatusCode::kIoError, "cannot map '" + path + "': not a regular file");
+  }
+  if (st.st_size < 0 || static_cast<uint64_t>(st.st_size) > std::numeric_limits<size_t>::max()) {
+    fail(StatusCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +
+                                   " does not fit in the address space");
+  }
+
+  FileMapping m;
+  m.path_ = path;
+  m.size_ = static_cast<size_t>(st.st_size);
+  if (m.size_ == 0) return m;  // mmap rejects length 0
+
+  void* p = ::mmap(nullptr, m.size_, PROT_READ, MAP_PRIVATE, fd, 0);
+  if (p == MAP_FAILED) {
+    fail(StatusCode::kIoError, "cannot mmap '" + path + "' (" + std::to_string(m.size_) +
+                                   " bytes): " + errno_text(errno));
+  }
+  m.data_ = static_cast<const uint8_t*>(p);
+  return m;
+}
+
+FileMapping::~FileMapping() {
+  if (data_ != nullptr) ::munmap(const_cast<uint8_t*>(data_), size_);
+}
+
+FileMapping::FileMapping(FileMapping&& other) noexcept
+    : data_(std::exchange(other.data_, nullptr)),
+      size_(std::exchange(other.size_, 0)),
+      path_(std::exchange(other.path_, std::string())) {}
+
+FileMapping& FileMapping::operator=(FileMapping&& other) noexcept {
+  if (this != &other) {
+    if (data_ != nullptr) ::munmap(const_cast<uint8_t*>(data_), size_);
+    data_ = std::exchange(other.data_, nullptr);
+    size_ = std::exchange(other.size_, 0);
+    path_ = std::exchange(other.path_, std::string());
+  }
+  return *this;
+}
+
+}  // namespace act

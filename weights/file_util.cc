@@ -1,0 +1,226 @@
+#include "weights/file_util.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <set>
+#include <system_error>
+#include <utility>
+
+#include "weights/error.h"
+
+namespace act::detail {
+
+namespace {
+
+std::string errno_text(int err) { return std::error_code(err, std::generic_category()).message(); }
+
+// Keeps error messages readable when untrusted input contains huge strings.
+std::string clip(std::string s, size_t max_len = 300) {
+  if (s.size() > max_len) {
+    s.resize(max_len);
+    s += "...";
+  }
+  return s;
+}
+
+}  // namespace
+
+AtomicFileWriter::AtomicFileWriter(std::string path)
+    : path_(std::move(path)), temp_path_(path_ + ".tmp." + std::to_string(::getpid())) {
+  // O_TRUNC rather than O_EXCL: a stale temp file left by a crashed process with the same pid (common
+  // in containers) must not block writing forever. O_NOFOLLOW: never write through a planted symlink.
+  do {
+    fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, 0644);
+  } while (fd_ < 0 && errno == EINTR);
+  if (fd_ < 0) {
+    const int err = errno;
+    fail(StatusCode::kIoError,
+         "cannot write '" + path_ + "': cannot create '" + temp_path_ + "': " + errno_text(err));
+  }
+}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!committed_) ::unlink(temp_path_.c_str());
+}
+
+void AtomicFileWriter::write(const void* data, size_t size) {
+  const auto* p = static_cast<const uint8_t*>(data);
+  size_t left = size;
+  while (left > 0) {
+    // Linux writes at most ~2 GiB per call; loop on partial writes and EINTR.
+    const size_t chunk = std::min<size_t>(left, size_t{1} << 30);
+    const ssize_t n = ::write(fd_, p, chunk);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      fail(StatusCode::kIoError, "cannot write '" + path_ + "' (via '" + temp_path_ + "'): " + errno_text(err));
+    }
+    if (n == 0) {
+      fail(StatusCode::kIoError, "cannot write '" + path_ + "' (via '" + temp_path_ + "'): write returned 0");
+    }
+    p += n;
+    left -= static_cast<size_t>(n);
+  }
+  written_ += size;
+}
+
+void AtomicFileWriter::write_zeros(size_t size) {
+  static constexpr uint8_t kZeros[256] = {};
+  while (size > 0) {
+    const size_t n = std::min(size, sizeof kZeros);
+    write(kZeros, n);
+    size -= n;
+  }
+}
+
+void AtomicFileWriter::commit() {
+  // fsync before rename: otherwise a crash can leave the new name pointing at unwritten blocks.
+  if (::fsync(fd_) != 0) {
+    const int err = errno;
+    fail(StatusCode::kIoError, "cannot write '" + path_ + "': fsync of '" + temp_path_ + "' failed: " +
+                                   errno_text(err));
+  }
+  const int fd = std::exchange(fd_, -1);
+  if (::close(fd) != 0) {
+    const int err = errno;
+    fail(StatusCode::kIoError, "cannot write '" + path_ + "': close of '" + temp_path_ + "' failed: " +
+                                   errno_text(err));
+  }
+  if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
+    const int err = errno;
+    fail(StatusCode::kIoError,
+         "cannot write '" + path_ + "': rename from '" + temp_path_ + "' failed: " + errno_text(err));
+  }
+  committed_ = true;
+  // Best effort: persist the directory entry. Some file systems refuse fsync on directories.
+  std::string dir = std::filesystem::path(path_).parent_path().string();
+  if (dir.empty()) dir = ".";
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    (void)::fsync(dfd);
+    ::close(dfd);
+  }
+}
+
+nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, size_t size) {
+  // The key sets of the objects currently open, innermost last; keys only occur in the innermost one.
+  std::vector<std::set<std::string>> open_objects;
+  std::string duplicate;
+  bool has_duplicate = false;
+  size_t depth = 0;
+  size_t max_depth = 0;
+  auto callback = [&](int /*depth*/, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+    using Event = nlohmann::json::parse_event_t;
+    if (event == Event::object_start || event == Event::array_start) {
+      max_depth = std::max(max_depth, ++depth);
+    } else if ((event == Event::object_end || event == Event::array_end) && depth > 0) {
+      --depth;
+    }
+    if (event == Event::object_start) {
+      open_objects.emplace_back();
+    } else if (event == Event::object_end) {
+      if (!open_objects.empty()) open_objects.pop_back();
+    } else if (event == Event::key && !open_objects.empty() && parsed.is_string()) {
+      const auto& key = parsed.get_ref<const std::string&>();
+      if (!open_objects.back().insert(key).second && !has_duplicate) {
+        has_duplicate = true;
+        duplicate = key;
+      }
+    }
+    return true;
+  };
+
+  const char* begin = reinterpret_cast<const char*>(data);
+  // nlohmann stops at a NUL byte as if the input ended there, which would let anything after it pass
+  // unchecked. Valid JSON text never contains a raw NUL, so reject it up front.
+  if (const void* nul = size == 0 ? nullptr : std::memchr(begin, 0, size); nul != nullptr) {
+    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: NUL byte at offset " +
+                                    std::to_string(static_cast<const char*>(nul) - begin));
+  }
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(begin, begin + size, callback);
+  } catch (const nlohmann::json::exception& e) {
+    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: " + clip(e.what()));
+  }
+  // Parsing and destroying are iterative in nlohmann, but copying, comparing and dumping recurse: bound
+  // the depth so no later use of the header can overflow the stack.
+  if (max_depth > kMaxJsonDepth) {
+    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: nested deeper than " +
+                                    std::to_string(kMaxJsonDepth) + " levels");
+  }
+  if (has_duplicate) {
+    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: duplicate key '" + clip(duplicate) + "'");
+  }
+  return j;
+}
+
+void throw_dump_error(const std::string& what, const char* reason) {
+  fail(StatusCode::kInvalidArgument, "cannot serialise " + what + " as JSON: " + clip(reason));
+}
+
+bool json_to_i64(const nlohmann::json& j, int64_t* out) {
+  if (j.is_number_unsigned()) {
+    const auto v = j.get<uint64_t>();
+    if (v > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) return false;
+    *out = static_cast<int64_t>(v);
+    return true;
+  }
+  if (j.is_number_integer()) {
+    *out = j.get<int64_t>();
+    return true;
+  }
+  return false;
+}
+
+bool json_to_u64(const nlohmann::json& j, uint64_t* out) {
+  if (j.is_number_unsigned()) {
+    *out = j.get<uint64_t>();
+    return true;
+  }
+  if (j.is_number_integer()) {
+    const auto v = j.get<int64_t>();
+    if (v < 0) return false;
+    *out = static_cast<uint64_t>(v);
+    return true;
+  }
+  return false;
+}
+
+bool json_to_shape(const nlohmann::json& j, std::vector<int64_t>* shape, std::string* why) {
+  if (!j.is_array()) {
+    *why = std::string("shape must be an array, got ") + j.type_name();
+    return false;
+  }
+  shape->clear();
+  shape->reserve(j.size());
+  for (const auto& d : j) {
+    int64_t v = 0;
+    if (!json_to_i64(d, &v)) {
+      if (d.is_number_unsigned()) {
+        *why = "dimension " + std::to_string(d.get<uint64_t>()) + " is too large";
+      } else if (d.is_number_float()) {
+        *why = "shape has a non-integer dimension";
+      } else {
+        *why = std::string("shape dimensions must be integers, got ") + d.type_name();
+      }
+      return false;
+    }
+    if (v < 0) {
+      *why = "negative dimension " + std::to_string(v) + " in shape";
+      return false;
+    }
+    shape->push_back(v);
+  }
+  return true;
+}
+
+}  // namespace act::detail

@@ -1,0 +1,74 @@
+// Internal helpers shared by the safetensors and .actb code: atomic file writes, checked integer
+// arithmetic, and JSON header handling that never lets an nlohmann exception escape.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace act::detail {
+
+/// Writes a file atomically: data goes to "<path>.tmp.<pid>" in the same folder, and commit() fsyncs
+/// and renames it over `path`. If commit() is never reached (an exception, a failed write) the
+/// destructor removes the temporary file, so `path` either keeps its old content or gets the new one.
+class AtomicFileWriter {
+ public:
+  /// Creates the temporary file. Throws act::Error(kIoError) naming both paths.
+  explicit AtomicFileWriter(std::string path);
+  ~AtomicFileWriter();
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+
+  void write(const void* data, size_t size);
+  void write_zeros(size_t size);
+  /// fsync, close, rename into place, then (best effort) fsync the folder so the rename is durable.
+  void commit();
+
+  size_t bytes_written() const { return written_; }
+  const std::string& temp_path() const { return temp_path_; }
+
+ private:
+  std::string path_;
+  std::string temp_path_;
+  int fd_ = -1;
+  size_t written_ = 0;
+  bool committed_ = false;
+};
+
+/// a + b / a * b, false on uint64 overflow.
+inline bool checked_add(uint64_t a, uint64_t b, uint64_t* out) { return !__builtin_add_overflow(a, b, out); }
+inline bool checked_mul(uint64_t a, uint64_t b, uint64_t* out) { return !__builtin_mul_overflow(a, b, out); }
+
+/// Deepest nesting of arrays/objects accepted in a file header (real headers use fewer than 10).
+inline constexpr size_t kMaxJsonDepth = 256;
+
+/// Parses `size` bytes of untrusted JSON. Throws act::Error(kDataLoss) starting with "'<path>': " on a
+/// syntax error, on nesting deeper than kMaxJsonDepth, or on a key that appears twice in one object
+/// (nlohmann would silently keep the last).
+nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, size_t size);
+
+[[noreturn]] void throw_dump_error(const std::string& what, const char* reason);
+
+/// Serialises `j`; converts nlohmann's errors (e.g. a string that is not valid UTF-8) into
+/// act::Error(kInvalidArgument) mentioning `what`.
+template <typename Json>
+std::string dump_json(const Json& j, const std::string& what) {
+  try {
+    return j.dump();
+  } catch (const nlohmann::json::exception& e) {
+    throw_dump_error(what, e.what());
+  }
+}
+
+/// JSON integer (signed or unsigned storage) -> int64 / uint64; false for non-integers or out of range.
+/// Floats are rejected even when integral (2.0): the writers never produce them.
+bool json_to_i64(const nlohmann::json& j, int64_t* out);
+bool json_to_u64(const nlohmann::json& j, uint64_t* out);
+
+/// A shape: array of integers >= 0. On failure returns false and sets *why.
+bool json_to_shape(const nlohmann::json& j, std::vector<int64_t>* shape, std::string* why);
+
+}  // namespace act::detail

@@ -4,7 +4,7 @@
 # the generator and of the shared reference tools, so re-running ctest costs nothing; any change to
 # either regenerates.  Presets run in parallel, one per core (ACT_GEN_JOBS overrides).
 #
-#   test/tools/generate_test_checkpoints.sh OUT_DIR [SHARED_DIR]     (default SHARED_DIR: <repo>/../shared)
+#   test/tools/generate_test_checkpoints.sh OUT_DIR [SHARED_DIR]   (SHARED_DIR: <repo>/../shared)
 set -euo pipefail
 
 if [ $# -lt 1 ] || [ $# -gt 2 ]; then
@@ -19,7 +19,8 @@ generator=$here/make_test_checkpoint.py
 tools=$shared_dir/tools/act_reference
 
 if [ ! -f "$tools/spec_forward.py" ] || [ ! -f "$tools/act_harness/stio.py" ]; then
-  echo "error: shared reference tools not found in '$tools' (pass SHARED_DIR, the shared/ folder)" >&2
+  echo "error: shared reference tools not found in '$tools'" \
+       "(pass SHARED_DIR, the shared/ folder)" >&2
   exit 1
 fi
 if ! "$python" -c 'import torch, numpy' 2>/dev/null; then
@@ -28,7 +29,8 @@ if ! "$python" -c 'import torch, numpy' 2>/dev/null; then
   exit 1
 fi
 
-stamp=$(cat "$generator" "$tools/spec_forward.py" "$tools/act_harness/stio.py" | sha256sum | cut -d' ' -f1)
+stamp=$(cat "$generator" "$tools/spec_forward.py" "$tools/act_harness/stio.py" | sha256sum)
+stamp=${stamp%% *}
 mkdir -p "$out_dir"
 out_dir=$(cd "$out_dir" && pwd)
 
@@ -42,10 +44,11 @@ for preset in $("$python" "$generator" --list | cut -d' ' -f1); do
 done
 [ ${#todo[@]} -eq 0 ] && exit 0
 
-# One preset: generate (the generator replaces the folder atomically and self-checks it), then stamp.
+# One preset: generate (the generator replaces the folder atomically and self-checks it), stamp.
 generate_one() {
   local preset=$1 log="$out_dir/$1.log" start=$SECONDS
-  if "$python" "$generator" --preset "$preset" --out "$out_dir/$preset" --shared "$shared_dir" >"$log" 2>&1; then
+  if "$python" "$generator" --preset "$preset" --out "$out_dir/$preset" --shared "$shared_dir" \
+       >"$log" 2>&1; then
     echo "$stamp" >"$out_dir/$preset/.stamp"
     echo "$preset: generated in $((SECONDS - start)) s"
   else
@@ -58,7 +61,9 @@ export -f generate_one
 export python generator shared_dir out_dir stamp
 
 jobs=${ACT_GEN_JOBS:-$(nproc)}
-if ! printf '%s\n' "${todo[@]}" | OMP_NUM_THREADS=1 xargs -P "$jobs" -I{} bash -c 'generate_one "$1"' _ {}; then
+# shellcheck disable=SC2016  # $1 is expanded by the inner bash, on purpose
+if ! printf '%s\n' "${todo[@]}" \
+     | OMP_NUM_THREADS=1 xargs -P "$jobs" -I{} bash -c 'generate_one "$1"' _ {}; then
   echo "error: some test checkpoints failed to generate (see the .log files in $out_dir)" >&2
   exit 1
 fi

@@ -107,6 +107,10 @@ class Preset:
     samples: int = 3
 
 
+# The transformer of the small presets (the shared fixtures' act-tiny size).
+SMALL_TRANSFORMER = {"dim_model": 64, "n_heads": 4, "dim_feedforward": 128, "n_encoder_layers": 2,
+                     "n_decoder_layers": 1, "chunk_size": 10}
+
 PRESETS: dict[str, Preset] = {
     "default-480x640": Preset(
         description="LeRobot's default ACT (resnet18, D 512, 4+1 layers, chunk 100) on one "
@@ -149,24 +153,21 @@ PRESETS: dict[str, Preset] = {
         layout="current",
         cameras=[Camera("observation.images.front", 64, 96)],
         state_dim=3, action_dim=3, vision_backbone="resnet34", dilation=0, use_vae=False,
-        dim_model=64, n_heads=4, dim_feedforward=128, n_encoder_layers=2, n_decoder_layers=1,
-        chunk_size=10, n_action_steps=3),
+        **SMALL_TRANSFORMER, n_action_steps=3),
     "resnet50-dilation": Preset(
         description="resnet50 (Bottleneck, 2048-channel feature map) with "
                     "replace_final_stride_with_dilation true: layer4 dilated, feature map H/16",
         layout="current",
         cameras=[Camera("observation.images.front", 64, 64)],
         state_dim=2, action_dim=2, vision_backbone="resnet50", dilation=True,
-        dim_model=64, n_heads=4, dim_feedforward=128, n_encoder_layers=2, n_decoder_layers=1,
-        chunk_size=10, n_action_steps=10),
+        **SMALL_TRANSFORMER, n_action_steps=10),
     "quantiles-identity": Preset(
         description="IDENTITY images (raw [0,1] into the backbone), QUANTILES state (q01/q99), "
                     "QUANTILE10 action (q10/q90)",
         layout="current",
         cameras=[Camera("observation.images.front", 64, 96)],
         state_dim=3, action_dim=3,
-        dim_model=64, n_heads=4, dim_feedforward=128, n_encoder_layers=2, n_decoder_layers=1,
-        chunk_size=10, n_action_steps=10,
+        **SMALL_TRANSFORMER, n_action_steps=10,
         normalization_mapping={"VISUAL": "IDENTITY", "STATE": "QUANTILES",
                                "ACTION": "QUANTILE10"}),
 }

@@ -6,18 +6,20 @@ set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"
 jobs="${ACT_JOBS:-$(nproc)}"
+# Both build trees share the generated test checkpoints (generating them takes minutes).
+checkpoints="$root/build/test-checkpoints"
 
 "$root/scripts/install_deps.sh"
 
 echo "== Release build (-Werror) =="
-ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh"
+ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh" -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
 echo "== Release tests =="
 ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
 
 if [ "${ACT_SKIP_SANITIZERS:-0}" != "1" ]; then
   echo "== ASan + UBSan build =="
   ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DACT_SANITIZE=ON \
-    -DACT_BUILD_BENCH=OFF
+    -DACT_BUILD_BENCH=OFF -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
   echo "== ASan + UBSan tests =="
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"

@@ -18,6 +18,10 @@ namespace act {
 namespace {
 
 constexpr double kTol = 1e-4;
+// Intermediates against a float64 reference carry float32 round-off that grows with depth: through
+// resnet50's 16 bottleneck blocks it reaches ~3e-4 of (1 + |ref|) at layer4 (the float32 run of the
+// reference forward itself deviates by ~4e-4 absolute there). The chunks keep kTol.
+double intermediate_tolerance(const std::string& preset) { return preset == "resnet50-dilation" ? 5e-4 : kTol; }
 
 const char* const kPresets[] = {"default-480x640",   "default-360x640-legacy", "multicam-prenorm-gelu", "minmax-legacy-env",
                                 "resnet34-novae",    "resnet50-dilation",      "quantiles-identity"};
@@ -61,7 +65,8 @@ TEST_P(GeneratedCheckpointTest, ChunksMatchTheReference) {
                                                 : name);
           if (!r || id == graph::kNoValue) continue;
           const auto values = r->to_f32();
-          EXPECT_TRUE(test::all_close(what + " " + name, g.data(id), values.data(), values.size(), kTol));
+          EXPECT_TRUE(test::all_close(what + " " + name, g.data(id), values.data(), values.size(),
+                                      intermediate_tolerance(GetParam())));
         }
       }
     }

@@ -138,19 +138,25 @@ ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId 
                 MatrixRef::of_constant(weight(prefix + "linear2.bias", {D}), 0), MatrixRef::of(residual, static_cast<size_t>(D)));
 }
 
-ValueId ActNetwork::encoder_layer(int l, ValueId x) {
-  const int D = config_.dim_model, N = config_.n_tokens();
+ValueId ActNetwork::self_attention_block(const std::string& p, int rows, ValueId x, const std::string& w) {
+  const int D = config_.dim_model;
   const size_t d = static_cast<size_t>(D);
+  const ValueId attn_in = config_.pre_norm ? layernorm(p + ".norm1", rows, x, w + "norm1") : x;
+  // One GEMM for q, k and v; the positions' share of q and k is in the per-token bias table.
+  const ValueId qkv = linear(p + ".qkv", rows, D, 3 * D, MatrixRef::of(attn_in, d), w + "in_proj.weight",
+                             MatrixRef::of_constant(weight(w + "in_proj.bias", {rows, 3 * D}), 3 * d));
+  const ValueId a = attention(p + ".attn", rows, rows, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
+                              MatrixRef::of(qkv, 3 * d, 2 * d));
+  const ValueId out = linear(p + ".attn_out", rows, D, D, MatrixRef::of(a, d), w + "out_proj.weight",
+                             MatrixRef::of_constant(weight(w + "out_proj.bias", {D}), 0), MatrixRef::of(x, d));
+  return config_.pre_norm ? out : layernorm(p + ".norm1", rows, out, w + "norm1");
+}
+
+ValueId ActNetwork::encoder_layer(int l, ValueId x) {
+  const int N = config_.n_tokens();
   const std::string p = "encoder_layer" + std::to_string(l);
   const std::string w = bn::enc(l, "");
-  const ValueId attn_in = config_.pre_norm ? layernorm(p + ".norm1", N, x, w + "norm1") : x;
-  const ValueId qkv = linear(p + ".qkv", N, D, 3 * D, MatrixRef::of(attn_in, d), w + "in_proj.weight",
-                             MatrixRef::of_constant(weight(w + "in_proj.bias", {N, 3 * D}), 3 * d));
-  const ValueId a = attention(p + ".attn", N, N, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
-                              MatrixRef::of(qkv, 3 * d, 2 * d));
-  ValueId x1 = linear(p + ".attn_out", N, D, D, MatrixRef::of(a, d), w + "out_proj.weight",
-                      MatrixRef::of_constant(weight(w + "out_proj.bias", {D}), 0), MatrixRef::of(x, d));
-  if (!config_.pre_norm) x1 = layernorm(p + ".norm1", N, x1, w + "norm1");
+  const ValueId x1 = self_attention_block(p, N, x, w);
   const ValueId ffn_in = config_.pre_norm ? layernorm(p + ".norm2", N, x1, w + "norm2") : x1;
   const bool last = l + 1 == config_.n_encoder_layers;
   ValueId out = ffn(w, N, ffn_in, x1, config_.pre_norm ? p + "_out" : p + ".ffn_out");
@@ -172,14 +178,7 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
     y1 = MatrixRef::of_constant(weight(w + "const_y", {D}), 0);
     cross_q = MatrixRef::of_constant(weight(w + "cross_q", {T, D}), d);
   } else {
-    const ValueId self_in = config_.pre_norm ? layernorm(p + ".norm1", T, y, w + "norm1") : y;
-    const ValueId qkv = linear(p + ".qkv", T, D, 3 * D, MatrixRef::of(self_in, d), w + "self_in_proj.weight",
-                               MatrixRef::of_constant(weight(w + "self_in_proj.bias", {T, 3 * D}), 3 * d));
-    const ValueId a = attention(p + ".self_attn", T, T, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
-                                MatrixRef::of(qkv, 3 * d, 2 * d));
-    ValueId s = linear(p + ".self_out", T, D, D, MatrixRef::of(a, d), w + "self_out_proj.weight",
-                       MatrixRef::of_constant(weight(w + "self_out_proj.bias", {D}), 0), MatrixRef::of(y, d));
-    if (!config_.pre_norm) s = layernorm(p + ".norm1", T, s, w + "norm1");
+    const ValueId s = self_attention_block(p, T, y, w);
     y1 = MatrixRef::of(s, d);
     const ValueId q_in = config_.pre_norm ? layernorm(p + ".norm2", T, s, w + "norm2") : s;
     const ValueId q = linear(p + ".cross_q", T, D, D, MatrixRef::of(q_in, d), w + "cross_q_proj.weight",

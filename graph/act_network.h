@@ -33,6 +33,9 @@ class ActNetwork {
  private:
   const float* weight(const std::string& name, const std::vector<int64_t>& shape) const;
   ValueId backbone(size_t camera);
+  /// [LayerNorm1 (pre-norm)] -> fused qkv projection -> attention -> out projection + residual x
+  /// [-> LayerNorm1 (post-norm)]. Weights under `w` ("in_proj.*", "out_proj.*", "norm1.*").
+  ValueId self_attention_block(const std::string& prefix, int rows, ValueId x, const std::string& w);
   ValueId encoder_layer(int layer, ValueId x);
   ValueId decoder_layer(int layer, ValueId y, ValueId memory);
   ValueId ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name);

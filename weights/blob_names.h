@@ -40,8 +40,8 @@ inline std::string dec(int layer, const std::string& leaf) {
 //            out_proj.{weight,bias}, linear1.*, linear2.*, norm1.*, norm2.*
 //   decoder layer 0: const_y [D] (its observation-independent self-attention block),
 //            cross_q [T, D] (its constant cross-attention queries, projected)
-//   decoder layer >= 1: self_in_proj.weight [3D, D], self_in_proj.bias [T, 3D], self_out_proj.*,
-//            cross_q_proj.weight [D, D], cross_q_proj.bias [T, D]
+//   decoder layer >= 1: in_proj.weight [3D, D], in_proj.bias [T, 3D], out_proj.* (self-attention,
+//            named as in the encoder), cross_q_proj.weight [D, D], cross_q_proj.bias [T, D]
 //   every decoder layer: cross_kv_proj.weight [2D, D], cross_kv_proj.bias [N_tok, 2D],
 //            cross_out_proj.*, linear1.*, linear2.*, norm1..3.*
 inline const char* kEncoderNormWeight = "encoder.norm.weight";  // pre-norm only

@@ -781,10 +781,10 @@ class Importer {
         add(bn::dec(l, "const_y"), {D}, to_float(y1));
         add(bn::dec(l, "cross_q"), {T, D}, to_float(linear_d(q_in, T, D, cross_q_w.data(), cross_q_b.data(), D)));
       } else {
-        add(bn::dec(l, "self_in_proj.bias"), {T, 3 * D}, bias_table(qpos, T, D, self.in_w, self.in_b, 3 * D, 2 * D));
-        add(bn::dec(l, "self_in_proj.weight"), {3 * D, D}, std::move(self.in_w));
-        add(bn::dec(l, "self_out_proj.weight"), {D, D}, std::move(self.out_w));
-        add(bn::dec(l, "self_out_proj.bias"), {D}, std::move(self.out_b));
+        add(bn::dec(l, "in_proj.bias"), {T, 3 * D}, bias_table(qpos, T, D, self.in_w, self.in_b, 3 * D, 2 * D));
+        add(bn::dec(l, "in_proj.weight"), {3 * D, D}, std::move(self.in_w));
+        add(bn::dec(l, "out_proj.weight"), {D, D}, std::move(self.out_w));
+        add(bn::dec(l, "out_proj.bias"), {D}, std::move(self.out_b));
         add(bn::dec(l, "cross_q_proj.bias"), {T, D}, bias_table(qpos, T, D, cross_q_w, cross_q_b, D, D));
         add(bn::dec(l, "cross_q_proj.weight"), {D, D}, cross_q_w);
       }

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <cstring>
 #include <fstream>
 
 #include "support/act_test_util.h"
@@ -178,15 +179,32 @@ TEST_F(ImportTest, LegacyCheckpointWithoutItsNormalisationBuffers) {
                StatusCode::kNotFound, "observation.images.front");
 }
 
-TEST_F(ImportTest, CurrentLayoutFeatureWithoutStatisticsIsPassedThroughAndSaid) {
-  // The processor files hold statistics for every dataset feature, so point the state at a key with none.
+TEST_F(ImportTest, EnvStateInTheConfigButNotInTheWeights) {
   const std::string dir = patched(R"({"input_features": {
       "observation.state": {"type": "STATE", "shape": [2]},
       "observation.images.front": {"type": "VISUAL", "shape": [3, 96, 128]},
-      "observation.environment_state": {"type": "ENV", "shape": [2]}},
-      "normalization_mapping": {"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ACTION": "MEAN_STD", "ENV": "MEAN_STD"}})");
-  // The env projection weights are missing, which is what must be reported first.
+      "observation.environment_state": {"type": "ENV", "shape": [2]}}})");
   expect_error(dir, StatusCode::kNotFound, "encoder_env_state_input_proj");
+}
+
+TEST_F(ImportTest, CurrentLayoutFeatureWithoutStatisticsIsPassedThroughAndSaid) {
+  // LeRobot passes a feature whose statistics are absent through unchanged; so do we, and say so.
+  const std::string dir = patched("{}");
+  const std::string stats = "policy_preprocessor_step_3_normalizer_processor.safetensors";
+  const SafetensorsFile original = SafetensorsFile::open(tiny_ + "/" + stats);
+  std::vector<SafetensorsWriteTensor> kept;
+  for (const auto& name : original.names()) {
+    if (name.rfind("observation.state.", 0) == 0) continue;
+    const auto& t = original.get(name);
+    kept.push_back({name, t.dtype, t.shape, t.data, t.nbytes});
+  }
+  fs::remove(dir + "/" + stats);
+  write_safetensors(dir + "/" + stats, kept);
+  const ImportedModel m = import_lerobot_checkpoint(dir);
+  EXPECT_EQ(m.config.input_norm_mode("observation.state"), NormMode::kIdentity);
+  EXPECT_EQ(m.config.input_norm_mode("observation.images.front"), NormMode::kMeanStd);
+  ASSERT_FALSE(m.notes.empty());
+  EXPECT_NE(m.notes[0].find("observation.state"), std::string::npos) << m.notes[0];
 }
 
 TEST_F(ImportTest, FoldsTheConstantDecoderBlock) {
@@ -203,6 +221,67 @@ TEST_F(ImportTest, FoldsTheConstantDecoderBlock) {
   double mean = 0;
   for (size_t i = 0; i < 64; ++i) mean += (y->values[i] - b->values[i]) / g->values[i];
   EXPECT_NEAR(mean / 64, 0.0, 1e-5);
+}
+
+}  // namespace
+}  // namespace act
+
+namespace act {
+namespace {
+
+// Half-precision checkpoints: importing F16 / BF16 weights must give exactly what importing the same
+// (rounded) values stored as F32 gives.
+TEST(ImportHalfPrecision, F16AndBF16WeightsImportLikeTheirF32Values) {
+  const std::string tiny = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(tiny);
+  const std::string scratch = test::scratch_dir();
+  const SafetensorsFile original = SafetensorsFile::open(tiny + "/model.safetensors");
+  for (DType half : {DType::kF16, DType::kBF16}) {
+    std::vector<std::vector<uint16_t>> half_data;
+    std::vector<std::vector<float>> rounded_data;
+    std::vector<SafetensorsWriteTensor> half_tensors, rounded_tensors;
+    half_data.reserve(original.names().size());
+    rounded_data.reserve(original.names().size());
+    for (const auto& name : original.names()) {
+      const auto& t = original.get(name);
+      std::vector<float> v = t.to_f32();
+      std::vector<uint16_t> bits(v.size());
+      for (size_t i = 0; i < v.size(); ++i) {
+        if (half == DType::kF16) {
+          const _Float16 h = static_cast<_Float16>(v[i]);
+          std::memcpy(&bits[i], &h, 2);
+        } else {
+          uint32_t u;
+          std::memcpy(&u, &v[i], 4);
+          u += 0x7fffu + ((u >> 16) & 1u);  // round to nearest even (no NaNs in the weights)
+          bits[i] = static_cast<uint16_t>(u >> 16);
+        }
+      }
+      std::vector<float> rounded(v.size());
+      convert_to_f32(half, bits.data(), bits.size(), rounded.data());
+      half_data.push_back(std::move(bits));
+      rounded_data.push_back(std::move(rounded));
+      half_tensors.push_back({name, half, t.shape, half_data.back().data(), half_data.back().size() * 2});
+      rounded_tensors.push_back({name, DType::kF32, t.shape, rounded_data.back().data(), rounded_data.back().size() * 4});
+    }
+    const std::string half_dir = scratch + "/" + dtype_name(half), f32_dir = scratch + "/" + dtype_name(half) + "_as_f32";
+    for (const auto& [dir, tensors] : {std::pair{half_dir, &half_tensors}, std::pair{f32_dir, &rounded_tensors}}) {
+      fs::create_directories(dir);
+      for (const auto& entry : fs::directory_iterator(tiny)) {
+        if (entry.path().filename() != "model.safetensors") fs::create_symlink(entry.path(), fs::path(dir) / entry.path().filename());
+      }
+      write_safetensors(dir + "/model.safetensors", *tensors);
+    }
+    const ImportedModel from_half = import_lerobot_checkpoint(half_dir);
+    const ImportedModel from_f32 = import_lerobot_checkpoint(f32_dir);
+    ASSERT_EQ(from_half.tensors.size(), from_f32.tensors.size());
+    for (size_t i = 0; i < from_half.tensors.size(); ++i) {
+      EXPECT_EQ(from_half.tensors[i].name, from_f32.tensors[i].name);
+      EXPECT_EQ(from_half.tensors[i].values, from_f32.tensors[i].values) << dtype_name(half) << " " << from_half.tensors[i].name;
+    }
+    // The rounding really changed the weights (so the check above is not trivially true).
+    EXPECT_NE(from_f32.find("head.weight")->values, import_lerobot_checkpoint(tiny).find("head.weight")->values);
+  }
 }
 
 }  // namespace

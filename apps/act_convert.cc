@@ -20,6 +20,12 @@ std::string human_bytes(double bytes) {
   return buf;
 }
 
+std::string gmac(double macs) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f", macs / 1e9);
+  return buf;
+}
+
 std::string millions(double n) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.2f M", n / 1e6);
@@ -61,8 +67,8 @@ int main(int argc, char** argv) {
                 << " training-only (" << model.training_only_tensors << " tensors)\n"
                 << "blob         " << millions(static_cast<double>(model.blob_values())) << " values after BN folding and "
                 << "constant folding, fp32\n"
-                << "compute      " << macs.total() / 1e9 << " GMAC per inference (backbone " << macs.backbone / 1e9
-                << ", encoder " << macs.encoder / 1e9 << ", decoder " << macs.decoder / 1e9 << ")\n"
+                << "compute      " << gmac(macs.total()) << " GMAC per inference (backbone " << gmac(macs.backbone)
+                << ", encoder " << gmac(macs.encoder) << ", decoder " << gmac(macs.decoder) << ")\n"
                 << "wrote        " << output << " (" << human_bytes(static_cast<double>(bytes)) << ")\n";
       for (const auto& note : model.notes) std::cout << "note: " << note << "\n";
     }

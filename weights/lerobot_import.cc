@@ -130,10 +130,8 @@ struct ParsedConfig {
   int latent_dim = 32;
 };
 
-ParsedConfig parse_config(const fs::path& dir, std::vector<std::string>& notes) {
-  const fs::path path = dir / "config.json";
-  if (!fs::exists(path)) fail(StatusCode::kNotFound, "not a LeRobot checkpoint folder: " + path.string() + " is missing");
-  const OrderedJson j = read_json_file(path);
+// `path` names where the config came from in messages.
+ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vector<std::string>& notes) {
   if (!j.is_object()) fail(StatusCode::kDataLoss, path.string() + ": expected a JSON object");
   ConfigReader cfg(j, path.string());
   if (j.contains("input_shapes") && !j.contains("input_features")) {
@@ -339,24 +337,24 @@ UnnormVectors make_unnorm(LeRobotMode mode, const std::vector<float>& a, const s
 
 class Weights {
  public:
-  explicit Weights(const SafetensorsFile& file) : file_(file) {}
+  explicit Weights(const TensorSet& file) : file_(file) {}
 
   // Fetches a tensor as float, checking the shape; records it as used.
   std::vector<float> take(const std::string& name, const std::vector<int64_t>& shape) {
     const SafetensorsTensor* t = file_.find(name);
-    if (!t) fail(StatusCode::kNotFound, file_.path() + ": missing tensor \"" + name + "\" (expected " + shape_string(shape) + ")");
+    if (!t) fail(StatusCode::kNotFound, file_.origin() + ": missing tensor \"" + name + "\" (expected " + shape_string(shape) + ")");
     if (t->shape != shape) {
-      fail(StatusCode::kInvalidArgument, file_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+      fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
            ", the config implies " + shape_string(shape));
     }
     if (t->dtype != DType::kF32 && t->dtype != DType::kF16 && t->dtype != DType::kBF16) {
-      fail(StatusCode::kInvalidArgument, file_.path() + ": tensor \"" + name + "\" has dtype " + dtype_name(t->dtype) +
+      fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" has dtype " + dtype_name(t->dtype) +
            "; expected F32, F16 or BF16");
     }
     used_.insert(name);
     std::vector<float> v = t->to_f32();
     for (float x : v) {
-      if (!std::isfinite(x)) fail(StatusCode::kInvalidArgument, file_.path() + ": tensor \"" + name + "\" contains NaN or Inf");
+      if (!std::isfinite(x)) fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" contains NaN or Inf");
     }
     return v;
   }
@@ -365,7 +363,7 @@ class Weights {
   bool used(const std::string& name) const { return used_.count(name) != 0; }
 
  private:
-  const SafetensorsFile& file_;
+  const TensorSet& file_;
   std::set<std::string> used_;
 };
 
@@ -452,17 +450,19 @@ Mat bias_table(const Mat& pos, int rows, int D, const Mat& w, const Mat& b, int 
 
 class Importer {
  public:
-  explicit Importer(const fs::path& dir) : dir_(dir) {}
+  /// `dir` is the checkpoint folder for the current layout's processor files; empty for a legacy
+  /// state dict held in memory.
+  Importer(fs::path dir, std::string layout) : dir_(std::move(dir)) { out_.layout = std::move(layout); }
 
-  ImportedModel run() {
-    ParsedConfig pc = parse_config(dir_, out_.notes);
+  /// The config is parsed and validated before `open_weights` is called, so a config problem is
+  /// reported as such even when the weights are missing too.
+  ImportedModel run(const OrderedJson& config_json, const fs::path& config_path,
+                    const std::function<const TensorSet&()>& open_weights) {
+    ParsedConfig pc = parse_config(config_json, config_path, out_.notes);
     ModelConfig& m = pc.model;
     m.validate();
-    const fs::path weights_path = dir_ / "model.safetensors";
-    if (!fs::exists(weights_path)) fail(StatusCode::kNotFound, "checkpoint has no weights: " + weights_path.string() + " is missing");
-    const SafetensorsFile file = SafetensorsFile::open(weights_path.string());
+    const TensorSet& file = open_weights();
     Weights w(file);
-    out_.layout = fs::exists(dir_ / "policy_preprocessor.json") ? "current" : "legacy";
 
     import_normalisation(pc, file, w);
     import_backbone(m, w);
@@ -487,7 +487,7 @@ class Importer {
       std::string list;
       for (size_t i = 0; i < unexpected.size() && i < 8; ++i) list += (i ? ", " : "") + ("\"" + unexpected[i] + "\"");
       if (unexpected.size() > 8) list += ", ... (" + std::to_string(unexpected.size()) + " in all)";
-      fail(StatusCode::kInvalidArgument, weights_path.string() + ": tensors the config does not account for: " + list +
+      fail(StatusCode::kInvalidArgument, file.origin() + ": tensors the config does not account for: " + list +
            " (does config.json belong to these weights?)");
     }
     out_.config = m;
@@ -500,7 +500,7 @@ class Importer {
   }
 
   // ---- normalisation
-  void import_normalisation(ParsedConfig& pc, const SafetensorsFile& weights_file, Weights& w) {
+  void import_normalisation(ParsedConfig& pc, const TensorSet& weights_file, Weights& w) {
     ModelConfig& m = pc.model;
     const bool legacy = out_.layout == "legacy";
     float eps_in = kLegacyEps, eps_out = kLegacyEps;
@@ -535,7 +535,7 @@ class Importer {
         }
         return std::nullopt;
       };
-      in_where = out_where = weights_file.path();
+      in_where = out_where = weights_file.origin();
     } else {
       auto step = [&](const std::string& pipeline_file, const std::string& registry_name, float& eps,
                       std::map<std::string, LeRobotMode>& modes, std::optional<SafetensorsFile>& state,
@@ -818,7 +818,23 @@ class Importer {
 ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir) {
   const fs::path dir(checkpoint_dir);
   if (!fs::is_directory(dir)) fail(StatusCode::kNotFound, "checkpoint folder not found: " + checkpoint_dir);
-  return Importer(dir).run();
+  const fs::path config_path = dir / "config.json";
+  if (!fs::exists(config_path)) {
+    fail(StatusCode::kNotFound, "not a LeRobot checkpoint folder: " + config_path.string() + " is missing");
+  }
+  const OrderedJson config = read_json_file(config_path);
+  std::optional<SafetensorsFile> weights;
+  const auto open_weights = [&]() -> const TensorSet& {
+    const fs::path path = dir / "model.safetensors";
+    if (!fs::exists(path)) fail(StatusCode::kNotFound, "checkpoint has no weights: " + path.string() + " is missing");
+    return weights.emplace(SafetensorsFile::open(path.string()));
+  };
+  const std::string layout = fs::exists(dir / "policy_preprocessor.json") ? "current" : "legacy";
+  return Importer(dir, layout).run(config, config_path, open_weights);
+}
+
+ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict) {
+  return Importer({}, "legacy").run(config, state_dict.origin() + " config", [&]() -> const TensorSet& { return state_dict; });
 }
 
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path) {

@@ -10,7 +10,10 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "weights/model_config.h"
+#include "weights/safetensors.h"
 
 namespace act {
 
@@ -38,6 +41,10 @@ struct ImportedModel {
 /// problem: kNotFound (missing file / tensor), kDataLoss (malformed), kInvalidArgument (shape mismatch,
 /// inconsistent config), kUnimplemented (a valid LeRobot setting this engine does not run).
 ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir);
+
+/// Imports a LeRobot ACT model held in memory: the content of its config.json and a legacy-layout
+/// state dict (normalisation buffers included). The built-in synthetic models take this path.
+ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict);
 
 /// Writes the imported model as an FP32 .actb blob (atomically). Returns the file size in bytes.
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path);

@@ -123,6 +123,7 @@ std::vector<float> SafetensorsTensor::to_f32() const {
 SafetensorsFile SafetensorsFile::open(const std::string& path) {
   SafetensorsFile f;
   f.mapping_ = FileMapping::open(path);
+  f.origin_ = path;
   const uint8_t* base = f.mapping_.data();
   const size_t size = f.mapping_.size();
 
@@ -187,22 +188,38 @@ SafetensorsFile SafetensorsFile::open(const std::string& path) {
   return f;
 }
 
-const SafetensorsTensor* SafetensorsFile::find(const std::string& name) const {
+const SafetensorsTensor* TensorSet::find(const std::string& name) const {
   const auto it = index_.find(name);
   return it == index_.end() ? nullptr : &it->second;
 }
 
-const SafetensorsTensor& SafetensorsFile::get(const std::string& name) const {
+const SafetensorsTensor& TensorSet::get(const std::string& name) const {
   const SafetensorsTensor* t = find(name);
-  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + path() + "'");
+  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + origin_ + "'");
   return *t;
 }
 
-std::vector<std::string> SafetensorsFile::names() const {
+std::vector<std::string> TensorSet::names() const {
   std::vector<std::string> out;
   out.reserve(index_.size());
   for (const auto& [name, t] : index_) out.push_back(name);
   return out;
+}
+
+void OwnedTensorSet::add_f32(const std::string& name, std::vector<int64_t> shape, std::vector<float> values) {
+  if (index_.count(name)) fail(StatusCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
+  if (shape_elements(shape) != values.size()) {
+    fail(StatusCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(values.size()) +
+         " values for shape " + shape_string(shape));
+  }
+  std::vector<float>& stored = storage_[name] = std::move(values);
+  SafetensorsTensor t;
+  t.name = name;
+  t.dtype = DType::kF32;
+  t.shape = std::move(shape);
+  t.data = reinterpret_cast<const uint8_t*>(stored.data());
+  t.nbytes = stored.size() * sizeof(float);
+  index_.emplace(name, std::move(t));
 }
 
 void write_safetensors(const std::string& path, const std::vector<SafetensorsWriteTensor>& tensors,

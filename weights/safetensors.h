@@ -25,25 +25,49 @@ struct SafetensorsTensor {
   std::vector<float> to_f32() const;
 };
 
-class SafetensorsFile {
+/// Named tensor views, sorted by name: a safetensors file, or tensors built in memory.
+class TensorSet {
+ public:
+  /// Where the tensors come from, for error messages (a file path, or a description).
+  const std::string& origin() const { return origin_; }
+  bool contains(const std::string& name) const { return index_.count(name) != 0; }
+  /// Throws kNotFound naming the tensor and the origin.
+  const SafetensorsTensor& get(const std::string& name) const;
+  const SafetensorsTensor* find(const std::string& name) const;
+  /// Tensor names in sorted order.
+  std::vector<std::string> names() const;
+
+ protected:
+  std::string origin_;
+  std::map<std::string, SafetensorsTensor> index_;
+};
+
+class SafetensorsFile : public TensorSet {
  public:
   /// Opens and validates `path`. Throws act::Error (kNotFound, kIoError, kDataLoss with the file name
   /// and what is wrong, e.g. "header length 9999 exceeds file size 100").
   static SafetensorsFile open(const std::string& path);
 
   const std::string& path() const { return mapping_.path(); }
-  bool contains(const std::string& name) const { return index_.count(name) != 0; }
-  /// Throws kNotFound naming the tensor and the file.
-  const SafetensorsTensor& get(const std::string& name) const;
-  const SafetensorsTensor* find(const std::string& name) const;
-  /// Tensor names in sorted order.
-  std::vector<std::string> names() const;
   const std::map<std::string, std::string>& metadata() const { return metadata_; }
 
  private:
   FileMapping mapping_;
-  std::map<std::string, SafetensorsTensor> index_;
   std::map<std::string, std::string> metadata_;
+};
+
+/// Float32 tensors owned in memory (e.g. a synthetic model's state dict). Not copyable: the views
+/// point into its own storage.
+class OwnedTensorSet : public TensorSet {
+ public:
+  explicit OwnedTensorSet(std::string origin) { origin_ = std::move(origin); }
+  OwnedTensorSet(const OwnedTensorSet&) = delete;
+  OwnedTensorSet& operator=(const OwnedTensorSet&) = delete;
+  /// Throws kInvalidArgument on a duplicate name or a size that does not match the shape.
+  void add_f32(const std::string& name, std::vector<int64_t> shape, std::vector<float> values);
+
+ private:
+  std::map<std::string, std::vector<float>> storage_;
 };
 
 /// A tensor to write (used by tests and by act_eval --output).

@@ -21,12 +21,17 @@ const float* ActNetwork::weight(const std::string& name, const std::vector<int64
   return t->f32();
 }
 
+void ActNetwork::add(std::unique_ptr<Op> op, const std::string& name) {
+  op->name = name;
+  op->stage = stage_;
+  graph_.add_op(std::move(op));
+}
+
 ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                            MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
   const ValueId y = graph_.add_value(out_name, {rows, out});
   auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
-  op->name = out_name;
-  graph_.add_op(std::move(op));
+  add(std::move(op), out_name);
   return y;
 }
 
@@ -34,8 +39,7 @@ ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, 
   const int D = config_.dim_model;
   const ValueId y = graph_.add_value(out_name, {rows, D});
   auto op = std::make_unique<LayerNormOp>(rows, D, weight(weight_prefix + ".weight", {D}), weight(weight_prefix + ".bias", {D}), x, y);
-  op->name = out_name;
-  graph_.add_op(std::move(op));
+  add(std::move(op), out_name);
   return y;
 }
 
@@ -43,8 +47,7 @@ ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, Matri
   const int D = config_.dim_model;
   const ValueId y = graph_.add_value(out_name, {nq, D});
   auto op = std::make_unique<AttentionOp>(nq, nk, D, config_.n_heads, q, k, v, y);
-  op->name = out_name;
-  graph_.add_op(std::move(op));
+  add(std::move(op), out_name);
   return y;
 }
 
@@ -71,8 +74,7 @@ ValueId ActNetwork::backbone(size_t camera) {
     const ValueId y = graph_.add_value(name, {s.out_h, s.out_w, s.out_c});
     auto op = std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), {c.out_c, c.kernel, c.kernel, c.in_c}),
                                          weight(bn::conv_bias(c.name), {c.out_c}), relu, x, residual, y);
-    op->name = name;
-    graph_.add_op(std::move(op));
+    add(std::move(op), name);
     ch = s.out_h;
     cw = s.out_w;
     return y;
@@ -83,8 +85,7 @@ ValueId ActNetwork::backbone(size_t camera) {
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   const ValueId pooled = graph_.add_value(p + "backbone.maxpool", {pooled_h, pooled_w, 64});
   auto pool = std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x, pooled);
-  pool->name = p + "backbone.maxpool";
-  graph_.add_op(std::move(pool));
+  add(std::move(pool), p + "backbone.maxpool");
   x = pooled;
   h = pooled_h;
   w = pooled_w;
@@ -130,8 +131,7 @@ ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId 
     hidden = F / 2;
     const ValueId g = graph_.add_value(out_name + ".ffn_glu", {rows, hidden});
     auto op = std::make_unique<GluOp>(rows, F, h, g);
-    op->name = out_name + ".ffn_glu";
-    graph_.add_op(std::move(op));
+    add(std::move(op), out_name + ".ffn_glu");
     h = g;
   }
   return linear(out_name, rows, hidden, D, MatrixRef::of(h, static_cast<size_t>(hidden)), prefix + "linear2.weight",
@@ -216,19 +216,21 @@ ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob) : config
                              bn::kEnvProjWeight, MatrixRef::of_constant(weight(bn::kEnvProjBias, {D}), 0));
     tokens.push_back({MatrixRef::of(t, d), 1});
   }
+  stage_ = Stage::kBackbone;
   for (size_t c = 0; c < config_.cameras.size(); ++c) {
     const ValueId feats = backbone(c);
     tokens.push_back({MatrixRef::of(feats, d), static_cast<int>(graph_.value(feats).shape[0])});
   }
+  stage_ = Stage::kEncoder;
   ValueId x = graph_.add_value("encoder_in_tokens", {N, D});
   auto concat = std::make_unique<ConcatRowsOp>(D, std::move(tokens), x);
-  concat->name = "encoder_in_tokens";
-  graph_.add_op(std::move(concat));
+  add(std::move(concat), "encoder_in_tokens");
   weight(bn::kEncoderPos, {N, D});  // present for inspection; its effect is folded into the bias tables
 
   for (int l = 0; l < config_.n_encoder_layers; ++l) x = encoder_layer(l, x);
   const ValueId memory = x;
 
+  stage_ = Stage::kDecoder;
   ValueId y = kNoValue;
   for (int l = 0; l < config_.n_decoder_layers; ++l) y = decoder_layer(l, y, memory);
   const ValueId out = layernorm("decoder_out", T, y, "decoder.norm");

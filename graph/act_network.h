@@ -20,7 +20,7 @@ class ActNetwork {
   ActNetwork(const ModelConfig& config, const ActbFile& blob);
 
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
-  void run(ThreadPool& pool) { graph_.run(pool); }
+  void run(ThreadPool& pool, StageTimes* times = nullptr) { graph_.run(pool, times); }
 
   float* camera_input(size_t camera) { return graph_.data(camera_inputs_.at(camera)); }  ///< [H, W, 3]
   float* state_input() { return graph_.data(state_input_); }                          ///< [state_dim]
@@ -32,6 +32,8 @@ class ActNetwork {
 
  private:
   const float* weight(const std::string& name, const std::vector<int64_t>& shape) const;
+  /// Appends an op to the graph, named and tagged with the stage being built.
+  void add(std::unique_ptr<Op> op, const std::string& name);
   ValueId backbone(size_t camera);
   /// [LayerNorm1 (pre-norm)] -> fused qkv projection -> attention -> out projection + residual x
   /// [-> LayerNorm1 (post-norm)]. Weights under `w` ("in_proj.*", "out_proj.*", "norm1.*").
@@ -51,6 +53,7 @@ class ActNetwork {
   ValueId state_input_ = kNoValue;
   ValueId env_input_ = kNoValue;
   ValueId actions_ = kNoValue;
+  Stage stage_ = Stage::kOther;  // the stage the builder is in (state tokens count as "other")
 };
 
 }  // namespace act::graph

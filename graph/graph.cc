@@ -1,6 +1,7 @@
 #include "graph/graph.h"
 
 #include <algorithm>
+#include <chrono>
 #include <map>
 
 #include "weights/error.h"
@@ -94,12 +95,20 @@ void Graph::plan(int threads, bool keep_all_values) {
   planned_ = true;
 }
 
-void Graph::run(ThreadPool& pool) {
+void Graph::run(ThreadPool& pool, StageTimes* times) {
   check(planned_, StatusCode::kInternal, "Graph::run before plan");
   check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), StatusCode::kInternal,
         "graph planned for fewer threads than the pool has");
   RunContext ctx(arena_.data(), values_, pool, arena_.data() + scratch_offset_, scratch_per_thread_);
-  for (const auto& op : ops_) op->run(ctx);
+  if (times == nullptr) {
+    for (const auto& op : ops_) op->run(ctx);
+    return;
+  }
+  for (const auto& op : ops_) {
+    const auto start = std::chrono::steady_clock::now();
+    op->run(ctx);
+    (*times)[op->stage] += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
 }
 
 }  // namespace act::graph

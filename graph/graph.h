@@ -61,6 +61,17 @@ struct MatrixRef {
   static MatrixRef of_constant(const float* p, size_t ld) { return {kNoValue, p, 0, ld}; }
 };
 
+/// The part of the network an op belongs to, for per-stage timing.
+enum class Stage { kOther, kBackbone, kEncoder, kDecoder };
+inline constexpr int kStageCount = 4;
+
+/// Accumulated wall time per stage (seconds), filled by Graph::run when profiling.
+struct StageTimes {
+  double seconds[kStageCount] = {};
+  double& operator[](Stage s) { return seconds[static_cast<int>(s)]; }
+  double operator[](Stage s) const { return seconds[static_cast<int>(s)]; }
+};
+
 class Op {
  public:
   virtual ~Op() = default;
@@ -72,6 +83,7 @@ class Op {
   virtual double macs() const { return 0.0; }
 
   std::string name;
+  Stage stage = Stage::kOther;
   std::vector<ValueId> inputs;
   std::vector<ValueId> outputs;
 };
@@ -92,7 +104,8 @@ class Graph {
   }
 
   void plan(int threads, bool keep_all_values);
-  void run(ThreadPool& pool);
+  /// Runs every op in order. With `times`, adds each op's wall time to its stage.
+  void run(ThreadPool& pool, StageTimes* times = nullptr);
 
   float* data(ValueId id) { return arena_.data() + values_[static_cast<size_t>(id)].offset; }
   const Value& value(ValueId id) const { return values_[static_cast<size_t>(id)]; }

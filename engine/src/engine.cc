@@ -1,3 +1,4 @@
+#include <chrono>
 #include <cmath>
 #include <new>
 
@@ -38,7 +39,8 @@ Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t 
 Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, bool keep_intermediates)
     : blob_(ActbFile::open(blob_path, options.verify_checksum)),
       config_(ModelConfig::from_json(blob_.config())),
-      pool_(options.threads) {
+      pool_(options.threads),
+      profile_(options.profile) {
   const std::string precision = blob_.config().value("precision", "");
   if (precision != "fp32") {
     fail(StatusCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32)");
@@ -131,6 +133,8 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
     fail(StatusCode::kInvalidArgument, "action buffer holds " + std::to_string(actions_normalized.size()) +
          " values, the chunk has " + std::to_string(info_.chunk_values()));
   }
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
   for (size_t c = 0; c < obs.images.size(); ++c) load_image(c, obs.images[c]);
   if (config_.state_dim > 0) {
     load_vector("state", obs.state, static_cast<size_t>(config_.state_dim), state_norm_, network_->state_input());
@@ -143,9 +147,21 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
   } else if (!obs.env_state.empty()) {
     fail(StatusCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
   }
-  network_->run(pool_);
+  const auto preprocessed = Clock::now();
+  graph::StageTimes stages;
+  network_->run(pool_, profile_ ? &stages : nullptr);
   const float* out = network_->actions_normalized();
   std::copy(out, out + actions_normalized.size(), actions_normalized.begin());
+  if (profile_) {
+    const auto ms = [](double seconds) { return seconds * 1e3; };
+    timings_.preprocess_ms = std::chrono::duration<double, std::milli>(preprocessed - start).count();
+    timings_.backbone_ms = ms(stages[graph::Stage::kBackbone]);
+    timings_.encoder_ms = ms(stages[graph::Stage::kEncoder]);
+    timings_.decoder_ms = ms(stages[graph::Stage::kDecoder]);
+    timings_.total_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+    timings_.other_ms = timings_.total_ms - timings_.preprocess_ms - timings_.backbone_ms - timings_.encoder_ms -
+                        timings_.decoder_ms;
+  }
 }
 
 void Engine::Impl::unnormalize(std::span<const float> normalized, std::span<float> raw, size_t rows) const {
@@ -182,9 +198,18 @@ Status Engine::infer_normalized(const Observation& observation, std::span<float>
 
 Status Engine::infer(const Observation& observation, std::span<float> actions) {
   return guarded([&] {
+    const auto start = std::chrono::steady_clock::now();
     impl_->run(observation, actions);
     impl_->unnormalize(actions, actions, static_cast<size_t>(impl_->info().chunk_size));
+    if (impl_->profiling()) {
+      InferenceTimings& t = impl_->timings();
+      const double total = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+      t.other_ms += total - t.total_ms;  // un-normalising
+      t.total_ms = total;
+    }
   });
 }
+
+const InferenceTimings& Engine::last_timings() const { return impl_->timings(); }
 
 }  // namespace act

@@ -32,6 +32,9 @@ class Engine::Impl {
   void run(const Observation& observation, std::span<float> actions_normalized);
   /// x = (y + shift) * scale + offset per action dimension, for `rows` rows.
   void unnormalize(std::span<const float> normalized, std::span<float> raw, size_t rows) const;
+  /// Stage times of the last run (zeros unless profiling).
+  InferenceTimings& timings() { return timings_; }
+  bool profiling() const { return profile_; }
 
  private:
   struct InputNorm {
@@ -54,6 +57,8 @@ class Engine::Impl {
   const float* unnorm_shift_ = nullptr;
   const float* unnorm_scale_ = nullptr;
   const float* unnorm_offset_ = nullptr;
+  bool profile_ = false;
+  InferenceTimings timings_;
 };
 
 /// Runs `fn`, turning act::Error and std exceptions into a Status (the API never throws).

@@ -167,6 +167,23 @@ TEST_F(EngineApiTest, TwoEnginesRunSideBySide) {
   }
 }
 
+TEST_F(EngineApiTest, ProfilingReportsEveryStage) {
+  auto chunk_out = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), chunk_out).ok());
+  EXPECT_EQ(engine_->last_timings().total_ms, 0.0) << "profiling is off by default";
+  auto profiled = Engine::open(blob_, {.threads = 2, .profile = true});
+  ASSERT_TRUE(profiled.ok());
+  ASSERT_TRUE((*profiled)->infer(observation(), chunk_out).ok());
+  const InferenceTimings& t = (*profiled)->last_timings();
+  for (double stage : {t.preprocess_ms, t.backbone_ms, t.encoder_ms, t.decoder_ms}) {
+    EXPECT_GT(stage, 0.0);
+    EXPECT_LT(stage, t.total_ms);
+  }
+  EXPECT_GE(t.other_ms, 0.0);
+  // The backbone is >99% of this model's MACs.
+  EXPECT_GT(t.backbone_ms, t.encoder_ms + t.decoder_ms);
+}
+
 TEST_F(EngineApiTest, CorruptBlobsAreClearErrors) {
   {
     auto e = Engine::open(scratch_ + "/missing.actb");

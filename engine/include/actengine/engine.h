@@ -30,6 +30,19 @@ struct EngineOptions {
   int threads = 0;
   /// Verify the blob's checksum at open (reads the whole file once).
   bool verify_checksum = true;
+  /// Time every stage of every inference (see Engine::last_timings); costs a clock read per op.
+  bool profile = false;
+};
+
+/// Wall time of one inference by stage, in milliseconds. "other" is what belongs to no stage: the
+/// state tokens, copying the chunk out, un-normalising.
+struct InferenceTimings {
+  double preprocess_ms = 0;  ///< validating and normalising the observation
+  double backbone_ms = 0;    ///< ResNet and the image projections, all cameras
+  double encoder_ms = 0;
+  double decoder_ms = 0;     ///< decoder and action head
+  double other_ms = 0;
+  double total_ms = 0;
 };
 
 struct CameraInfo {
@@ -96,6 +109,8 @@ class Engine {
   Status infer(const Observation& observation, std::span<float> actions);
   /// As infer(), but writes the normalised network output (before un-normalisation).
   Status infer_normalized(const Observation& observation, std::span<float> actions_normalized);
+  /// Stage times of the last successful infer (all zero unless EngineOptions::profile is set).
+  const InferenceTimings& last_timings() const;
 
   class Impl;
   Impl& impl() { return *impl_; }  ///< internal (tests and tools); not part of the stable API

@@ -180,8 +180,6 @@ TEST_F(EngineApiTest, ProfilingReportsEveryStage) {
     EXPECT_LT(stage, t.total_ms);
   }
   EXPECT_GE(t.other_ms, 0.0);
-  // The backbone is >99% of this model's MACs.
-  EXPECT_GT(t.backbone_ms, t.encoder_ms + t.decoder_ms);
 }
 
 TEST_F(EngineApiTest, CorruptBlobsAreClearErrors) {

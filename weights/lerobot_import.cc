@@ -833,6 +833,13 @@ ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir) {
   return Importer(dir, layout).run(config, config_path, open_weights);
 }
 
+ModelConfig lerobot_model_config(const nlohmann::ordered_json& config, const std::string& where) {
+  std::vector<std::string> notes;
+  ModelConfig m = parse_config(config, where, notes).model;
+  m.validate();
+  return m;
+}
+
 ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict) {
   return Importer({}, "legacy").run(config, state_dict.origin() + " config", [&]() -> const TensorSet& { return state_dict; });
 }

@@ -42,6 +42,10 @@ struct ImportedModel {
 /// inconsistent config), kUnimplemented (a valid LeRobot setting this engine does not run).
 ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir);
 
+/// The architecture a LeRobot config.json describes (validated; normalisation not yet resolved,
+/// that needs the statistics). Throws act::Error like the import.
+ModelConfig lerobot_model_config(const nlohmann::ordered_json& config, const std::string& where);
+
 /// Imports a LeRobot ACT model held in memory: the content of its config.json and a legacy-layout
 /// state dict (normalisation buffers included). The built-in synthetic models take this path.
 ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict);

@@ -56,13 +56,15 @@ class SafetensorsFile : public TensorSet {
   std::map<std::string, std::string> metadata_;
 };
 
-/// Float32 tensors owned in memory (e.g. a synthetic model's state dict). Not copyable: the views
-/// point into its own storage.
+/// Float32 tensors owned in memory (e.g. a synthetic model's state dict). Movable (the storage moves
+/// with its buffers, so the views stay valid) but not copyable.
 class OwnedTensorSet : public TensorSet {
  public:
   explicit OwnedTensorSet(std::string origin) { origin_ = std::move(origin); }
   OwnedTensorSet(const OwnedTensorSet&) = delete;
   OwnedTensorSet& operator=(const OwnedTensorSet&) = delete;
+  OwnedTensorSet(OwnedTensorSet&&) = default;
+  OwnedTensorSet& operator=(OwnedTensorSet&&) = default;
   /// Throws kInvalidArgument on a duplicate name or a size that does not match the shape.
   void add_f32(const std::string& name, std::vector<int64_t> shape, std::vector<float> values);
 

@@ -1,0 +1,187 @@
+#include "weights/synthetic_model.h"
+
+#include <cmath>
+#include <random>
+#include <regex>
+
+#include "weights/error.h"
+
+namespace act {
+
+namespace {
+
+// Platform-independent random numbers: mt19937's output is fixed by the standard; the
+// distributions of <random> are not, so the transforms are ours.
+class Random {
+ public:
+  explicit Random(uint32_t seed) : engine_(seed) {}
+  double uniform(double lo, double hi) { return lo + (hi - lo) * (engine_() / 4294967296.0); }
+  double normal() {  // Box-Muller
+    const double u1 = (engine_() + 1.0) / 4294967297.0, u2 = engine_() / 4294967296.0;
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+  }
+  std::vector<float> normal(size_t n, double stddev, double mean = 0.0) {
+    std::vector<float> v(n);
+    for (auto& x : v) x = static_cast<float>(mean + stddev * normal());
+    return v;
+  }
+  std::vector<float> uniform(size_t n, double lo, double hi) {
+    std::vector<float> v(n);
+    for (auto& x : v) x = static_cast<float>(uniform(lo, hi));
+    return v;
+  }
+
+ private:
+  std::mt19937 engine_;
+};
+
+size_t count(const std::vector<int64_t>& shape) { return static_cast<size_t>(shape_elements(shape)); }
+
+}  // namespace
+
+nlohmann::ordered_json synthetic_config(const std::string& name) {
+  int height = 480, width = 640, state = 6, action = 6;
+  std::smatch m;
+  const std::regex size_pattern("([0-9]{1,5})x([0-9]{1,5})");
+  if (name == "default") {
+  } else if (name == "rover") {
+    height = 360;
+    state = action = 2;
+  } else if (std::regex_match(name, m, size_pattern)) {
+    width = std::stoi(m[1]);
+    height = std::stoi(m[2]);
+    if (width < 32 || height < 32 || width > 4096 || height > 4096) {
+      fail(StatusCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
+    }
+  } else {
+    fail(StatusCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or WxH such as 640x480)");
+  }
+  nlohmann::ordered_json c;
+  c["type"] = "act";
+  c["n_obs_steps"] = 1;
+  c["normalization_mapping"] = {{"VISUAL", "MEAN_STD"}, {"STATE", "MEAN_STD"}, {"ACTION", "MEAN_STD"}};
+  c["input_features"] = {{"observation.images.front", {{"type", "VISUAL"}, {"shape", {3, height, width}}}},
+                         {"observation.state", {{"type", "STATE"}, {"shape", {state}}}}};
+  c["output_features"] = {{"action", {{"type", "ACTION"}, {"shape", {action}}}}};
+  c["chunk_size"] = 100;
+  c["n_action_steps"] = 100;
+  c["vision_backbone"] = "resnet18";
+  c["replace_final_stride_with_dilation"] = false;
+  c["pre_norm"] = false;
+  c["dim_model"] = 512;
+  c["n_heads"] = 8;
+  c["dim_feedforward"] = 3200;
+  c["feedforward_activation"] = "relu";
+  c["n_encoder_layers"] = 4;
+  c["n_decoder_layers"] = 1;
+  c["use_vae"] = false;
+  c["latent_dim"] = 32;
+  c["temporal_ensemble_coeff"] = nullptr;
+  return c;
+}
+
+OwnedTensorSet synthetic_state_dict(const nlohmann::ordered_json& config, uint32_t seed) {
+  const ModelConfig m = lerobot_model_config(config, "built-in model config");
+  OwnedTensorSet dict("built-in synthetic model");
+  Random rng(seed);
+  const int D = m.dim_model, F = m.dim_feedforward, T = m.chunk_size;
+  const std::string p = "model.";
+
+  auto add = [&](const std::string& name, std::vector<int64_t> shape, std::vector<float> v) {
+    dict.add_f32(name, std::move(shape), std::move(v));
+  };
+  auto conv_bn = [&](const ConvSpec& c, bool residual_branch_end) {
+    const std::vector<int64_t> shape = {c.out_c, c.in_c, c.kernel, c.kernel};
+    add(p + "backbone." + c.name + ".weight", shape,
+        rng.normal(count(shape), std::sqrt(2.0 / (c.in_c * c.kernel * c.kernel))));
+    const std::string bn = p + "backbone." + c.bn + ".";
+    const size_t n = static_cast<size_t>(c.out_c);
+    // Damping the end of each residual branch keeps the residual stream from growing block by block.
+    add(bn + "weight", {c.out_c}, residual_branch_end ? rng.uniform(n, 0.2, 0.4) : rng.uniform(n, 0.7, 1.1));
+    add(bn + "bias", {c.out_c}, rng.uniform(n, -0.1, 0.1));
+    add(bn + "running_mean", {c.out_c}, rng.normal(n, 0.1));
+    add(bn + "running_var", {c.out_c}, rng.uniform(n, 0.8, 1.2));
+  };
+  conv_bn(m.stem(), false);
+  for (const auto& stage : m.backbone_stages()) {
+    for (const auto& block : stage) {
+      for (size_t i = 0; i < block.convs.size(); ++i) conv_bn(block.convs[i], i + 1 == block.convs.size());
+      if (block.has_downsample) conv_bn(block.downsample, true);
+    }
+  }
+
+  auto xavier = [&](int out, int in) {
+    const double a = std::sqrt(6.0 / (in + out));
+    return rng.uniform(static_cast<size_t>(out) * in, -a, a);
+  };
+  auto linear = [&](const std::string& name, int out, int in) {
+    add(name + ".weight", {out, in}, xavier(out, in));
+    add(name + ".bias", {out}, rng.uniform(static_cast<size_t>(out), -0.1, 0.1));
+  };
+  auto norm = [&](const std::string& name) {
+    add(name + ".weight", {D}, rng.uniform(static_cast<size_t>(D), 0.8, 1.2));
+    add(name + ".bias", {D}, rng.uniform(static_cast<size_t>(D), -0.1, 0.1));
+  };
+  auto attention = [&](const std::string& name) {
+    add(name + ".in_proj_weight", {3 * D, D}, xavier(3 * D, D));
+    add(name + ".in_proj_bias", {3 * D}, rng.uniform(3 * static_cast<size_t>(D), -0.1, 0.1));
+    linear(name + ".out_proj", D, D);
+  };
+  auto ffn = [&](const std::string& prefix) {
+    linear(prefix + "linear1", F, D);
+    linear(prefix + "linear2", D, m.activation == Activation::kGlu ? F / 2 : F);
+  };
+  for (int l = 0; l < m.n_encoder_layers; ++l) {
+    const std::string e = p + "encoder.layers." + std::to_string(l) + ".";
+    attention(e + "self_attn");
+    ffn(e);
+    norm(e + "norm1");
+    norm(e + "norm2");
+  }
+  if (m.pre_norm) norm(p + "encoder.norm");
+  for (int l = 0; l < m.n_decoder_layers; ++l) {
+    const std::string d = p + "decoder.layers." + std::to_string(l) + ".";
+    attention(d + "self_attn");
+    attention(d + "multihead_attn");
+    ffn(d);
+    norm(d + "norm1");
+    norm(d + "norm2");
+    norm(d + "norm3");
+  }
+  norm(p + "decoder.norm");
+  const int latent = config.value("latent_dim", 32);
+  linear(p + "encoder_latent_input_proj", D, latent);
+  if (m.state_dim > 0) linear(p + "encoder_robot_state_input_proj", D, m.state_dim);
+  if (m.env_state_dim > 0) linear(p + "encoder_env_state_input_proj", D, m.env_state_dim);
+  add(p + "encoder_img_feat_input_proj.weight", {D, m.feature_channels(), 1, 1}, xavier(D, m.feature_channels()));
+  add(p + "encoder_img_feat_input_proj.bias", {D}, rng.uniform(static_cast<size_t>(D), -0.1, 0.1));
+  add(p + "encoder_1d_feature_pos_embed.weight", {m.n_1d_tokens(), D}, rng.normal(static_cast<size_t>(m.n_1d_tokens()) * D, 1.0));
+  add(p + "decoder_pos_embed.weight", {T, D}, rng.normal(static_cast<size_t>(T) * D, 1.0));
+  linear(p + "action_head", m.action_dim, D);
+
+  // Normalisation buffers (legacy layout): ImageNet statistics for images, dataset-like ones for
+  // state and action.
+  for (const auto& cam : m.cameras) {
+    std::string flat = cam.key;
+    for (char& ch : flat) {
+      if (ch == '.') ch = '_';
+    }
+    add("normalize_inputs.buffer_" + flat + ".mean", {3, 1, 1}, {0.485f, 0.456f, 0.406f});
+    add("normalize_inputs.buffer_" + flat + ".std", {3, 1, 1}, {0.229f, 0.224f, 0.225f});
+  }
+  if (m.state_dim > 0) {
+    add("normalize_inputs.buffer_observation_state.mean", {m.state_dim}, rng.normal(static_cast<size_t>(m.state_dim), 1.0));
+    add("normalize_inputs.buffer_observation_state.std", {m.state_dim}, rng.uniform(static_cast<size_t>(m.state_dim), 0.5, 2.0));
+  }
+  add("unnormalize_outputs.buffer_action.mean", {m.action_dim}, rng.normal(static_cast<size_t>(m.action_dim), 1.0));
+  add("unnormalize_outputs.buffer_action.std", {m.action_dim}, rng.uniform(static_cast<size_t>(m.action_dim), 0.5, 2.0));
+  return dict;
+}
+
+ImportedModel make_synthetic_model(const std::string& name, uint32_t seed) {
+  const nlohmann::ordered_json config = synthetic_config(name);
+  const OwnedTensorSet dict = synthetic_state_dict(config, seed);
+  return import_lerobot_state_dict(config, dict);
+}
+
+}  // namespace act

@@ -1,0 +1,247 @@
+// act_bench: end-to-end latency of an ACT model, the numbers a TFLite or ONNX Runtime user reads at a
+// glance. Without --model it builds LeRobot's default ACT in-process (deterministic synthetic weights),
+// so a new user sees numbers with nothing to download.
+#include <CLI/CLI.hpp>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <random>
+
+#include "actengine/engine.h"
+#include "apps/bench_support.h"
+#include "apps/observation_file.h"
+#include "weights/actb.h"
+#include "weights/error.h"
+#include "weights/model_config.h"
+#include "weights/synthetic_model.h"
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+struct Options {
+  std::string model;
+  std::string config = "default";
+  std::string precision = "fp32";
+  int threads = 0;
+  int warmup_runs = 1;
+  int num_runs = 50;
+  double max_secs = 150.0;
+  std::string json_path, csv_path, input_path;
+  bool compare = false;
+  uint32_t seed = 1;
+};
+
+double ms_since(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
+
+// Synthetic observation: a smooth gradient with some texture (not constant, not pure noise), and a
+// small state vector; deterministic. `obs` views the vectors (their buffers survive a move).
+struct SyntheticInput {
+  std::vector<std::vector<uint8_t>> images;
+  std::vector<float> state, env;
+  act::Observation obs;
+};
+
+SyntheticInput make_input(const act::ModelInfo& info) {
+  SyntheticInput in;
+  std::mt19937 rng(42);
+  for (const auto& cam : info.cameras) {
+    std::vector<uint8_t> img(static_cast<size_t>(cam.height) * cam.width * 3);
+    for (int y = 0; y < cam.height; ++y) {
+      for (int x = 0; x < cam.width; ++x) {
+        for (int c = 0; c < 3; ++c) {
+          const int v = (x * 255 / cam.width + y * 255 / cam.height * (c + 1)) / (c + 2) + static_cast<int>(rng() % 32);
+          img[(static_cast<size_t>(y) * cam.width + x) * 3 + c] = static_cast<uint8_t>(std::min(v, 255));
+        }
+      }
+    }
+    in.images.push_back(std::move(img));
+  }
+  in.state.assign(static_cast<size_t>(info.state_dim), 0.1f);
+  in.env.assign(static_cast<size_t>(info.env_state_dim), 0.1f);
+  for (size_t c = 0; c < info.cameras.size(); ++c) {
+    in.obs.images.push_back(act::ImageView::rgb_u8(in.images[c].data(), info.cameras[c].height, info.cameras[c].width));
+  }
+  in.obs.state = in.state;
+  in.obs.env_state = in.env;
+  return in;
+}
+
+int run(const Options& opt) {
+  if (opt.precision != "fp32") {
+    act::fail(act::StatusCode::kUnimplemented, "--precision " + opt.precision + " is not available in this build yet (fp32)");
+  }
+  if (opt.compare) act::fail(act::StatusCode::kUnimplemented, "--compare needs the INT8 path, not available in this build yet");
+
+  // The model: a blob, or a built-in synthetic one written to a temporary blob.
+  std::string blob_path = opt.model, model_label = opt.model;
+  double build_ms = 0;
+  std::string temp_blob;
+  if (blob_path.empty()) {
+    const auto start = Clock::now();
+    const act::ImportedModel model = act::make_synthetic_model(opt.config, opt.seed);
+    temp_blob = (fs::temp_directory_path() / ("act_bench_" + std::to_string(::getpid()) + ".actb")).string();
+    act::write_fp32_blob(model, temp_blob);
+    blob_path = temp_blob;
+    build_ms = ms_since(start);
+    model_label = "built-in \"" + opt.config + "\" (synthetic weights, seed " + std::to_string(opt.seed) + ")";
+  }
+  const act::ActbFile blob_file = act::ActbFile::open(blob_path);
+  const act::ModelConfig config = act::ModelConfig::from_json(blob_file.config());
+  const size_t weight_bytes = blob_file.file_size();
+
+  const auto load_start = Clock::now();
+  auto engine_or = act::Engine::open(blob_path, {.threads = opt.threads, .profile = true});
+  const double load_ms = ms_since(load_start);
+  if (!temp_blob.empty()) fs::remove(temp_blob);  // the mapping stays valid
+  if (!engine_or.ok()) act::fail(engine_or.status().code(), engine_or.status().message());
+  act::Engine& engine = **engine_or;
+  const act::ModelInfo& info = engine.model_info();
+
+  // Inputs: real observations, or a synthetic one.
+  std::optional<act::ObservationBatch> batch;
+  SyntheticInput synthetic;
+  if (!opt.input_path.empty()) {
+    batch.emplace(act::ObservationBatch::read(opt.input_path, info));
+  } else {
+    synthetic = make_input(info);
+  }
+  auto observation = [&](int i) {
+    return batch ? batch->at(static_cast<size_t>(i) % batch->size()) : synthetic.obs;
+  };
+
+  std::vector<float> chunk(info.chunk_values());
+  auto infer = [&](int i) {
+    const act::Status s = engine.infer(observation(i), chunk);
+    if (!s.ok()) act::fail(s.code(), s.message());
+  };
+  const auto first_start = Clock::now();
+  infer(0);
+  const double first_ms = ms_since(first_start);
+  for (int i = 0; i < opt.warmup_runs; ++i) infer(i);
+
+  const bool progress = ::isatty(STDERR_FILENO);
+  std::vector<act::InferenceTimings> runs;
+  const auto bench_start = Clock::now();
+  for (int i = 0; i < opt.num_runs; ++i) {
+    infer(i);
+    runs.push_back(engine.last_timings());
+    if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt.num_runs, runs.back().total_ms);
+    if (ms_since(bench_start) > opt.max_secs * 1e3) break;
+  }
+  if (progress) std::fprintf(stderr, "\r%40s\r", "");
+  const double bench_ms = ms_since(bench_start);
+
+  // Statistics per stage.
+  const std::pair<const char*, double act::InferenceTimings::*> stages[] = {
+      {"preprocess", &act::InferenceTimings::preprocess_ms}, {"backbone", &act::InferenceTimings::backbone_ms},
+      {"encoder", &act::InferenceTimings::encoder_ms},       {"decoder", &act::InferenceTimings::decoder_ms},
+      {"other", &act::InferenceTimings::other_ms},           {"total", &act::InferenceTimings::total_ms}};
+  nlohmann::ordered_json stage_json;
+  std::vector<std::pair<std::string, act::LatencySummary>> summaries;
+  for (const auto& [name, member] : stages) {
+    std::vector<double> samples;
+    for (const auto& r : runs) samples.push_back(r.*member);
+    summaries.emplace_back(name, act::summarize(samples));
+    stage_json[name] = summaries.back().second.to_json();
+  }
+  const act::LatencySummary& total = summaries.back().second;
+  const auto macs = config.macs();
+  const double gmac = macs.total() / 1e9;
+  const double gmacs_per_s = gmac / (total.mean / 1e3);
+  const act::MachineInfo machine = act::read_machine_info();
+  const size_t rss = act::peak_rss_bytes();
+
+  // Report.
+  std::printf("actengine act_bench %s\n", act::version());
+  std::printf("model        %s\n             %s\n", model_label.c_str(), config.summary().c_str());
+  std::printf("compute      %.3f GMAC per inference (backbone %.3f, projections %.3f, encoder %.3f, decoder %.3f, head %.4f)\n",
+              gmac, macs.backbone / 1e9, macs.projections / 1e9, macs.encoder / 1e9, macs.decoder / 1e9, macs.head / 1e9);
+  std::printf("engine       %s, weights %.1f MB, GEMM fp32 (Eigen), %d threads\n", info.precision.c_str(),
+              static_cast<double>(weight_bytes) / 1e6, engine.threads());
+  std::printf("machine      %s\n", machine.one_line().c_str());
+  if (build_ms > 0) std::printf("build        %.0f ms (synthetic weights, import, blob)\n", build_ms);
+  std::printf("init         load + plan %.1f ms, first inference %.1f ms\n", load_ms, first_ms);
+  std::printf("runs         %zu timed (after %d warm-up) in %.1f s\n\n", runs.size(), opt.warmup_runs, bench_ms / 1e3);
+  std::printf("%-11s %9s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "mean", "std", "min", "p50", "p90", "p95", "p99",
+              "max");
+  for (const auto& [name, s] : summaries) {
+    std::printf("%-11s %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.mean, s.stddev, s.min, s.p50, s.p90,
+                s.p95, s.p99, s.max);
+  }
+  std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total.mean, gmacs_per_s);
+  std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss) / 1e6);
+
+  if (!opt.json_path.empty()) {
+    nlohmann::ordered_json j;
+    j["actengine_version"] = act::version();
+    j["model"] = {{"source", opt.model.empty() ? "built-in" : "blob"},
+                  {"name", model_label},
+                  {"summary", config.summary()},
+                  {"config", config.to_json()},
+                  {"precision", info.precision},
+                  {"weight_bytes", weight_bytes},
+                  {"gmac", {{"total", gmac},
+                            {"backbone", macs.backbone / 1e9},
+                            {"projections", macs.projections / 1e9},
+                            {"encoder", macs.encoder / 1e9},
+                            {"decoder", macs.decoder / 1e9},
+                            {"head", macs.head / 1e9}}}};
+    j["engine"] = {{"threads", engine.threads()}, {"gemm", "fp32 eigen"}};
+    j["machine"] = machine.to_json();
+    j["init"] = {{"build_ms", build_ms}, {"load_ms", load_ms}, {"first_inference_ms", first_ms}};
+    j["runs"] = {{"warmup", opt.warmup_runs}, {"timed", runs.size()}, {"seconds", bench_ms / 1e3}};
+    j["latency_ms"] = stage_json;
+    j["throughput_per_s"] = 1e3 / total.mean;
+    j["achieved_gmac_per_s"] = gmacs_per_s;
+    j["peak_rss_bytes"] = rss;
+    std::ofstream(opt.json_path) << j.dump(2) << "\n";
+  }
+  if (!opt.csv_path.empty()) {
+    std::ofstream csv(opt.csv_path);
+    csv << "run,preprocess_ms,backbone_ms,encoder_ms,decoder_ms,other_ms,total_ms\n";
+    for (size_t i = 0; i < runs.size(); ++i) {
+      const auto& r = runs[i];
+      csv << i << "," << r.preprocess_ms << "," << r.backbone_ms << "," << r.encoder_ms << "," << r.decoder_ms << ","
+          << r.other_ms << "," << r.total_ms << "\n";
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"act_bench: end-to-end latency of an ACT policy. Without --model it benchmarks a built-in synthetic "
+               "copy of LeRobot's default ACT (resnet18, D 512, 4+1 layers, one 480x640 camera)."};
+  Options opt;
+  app.add_option("-m,--model", opt.model, "an .actb blob (from act_convert); default: a built-in model");
+  app.add_option("--config", opt.config, "built-in model: default, rover (360x640, 2-dim state/action), or WxH")
+      ->capture_default_str();
+  app.add_option("--precision", opt.precision, "built-in model precision: fp32 or int8")
+      ->check(CLI::IsMember({"fp32", "int8"}))
+      ->capture_default_str();
+  app.add_option("-t,--threads", opt.threads, "threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();
+  app.add_option("-w,--warmup_runs", opt.warmup_runs, "untimed runs after the first inference")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("-n,--num_runs", opt.num_runs, "timed runs")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--max_secs", opt.max_secs, "stop timing after this many seconds")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--json", opt.json_path, "write every number (and machine info) as JSON");
+  app.add_option("--csv", opt.csv_path, "write per-run stage times as CSV");
+  app.add_option("--input", opt.input_path, "benchmark on observations from a safetensors file (act_eval's format)");
+  app.add_flag("--compare", opt.compare, "FP32 and INT8 of the same model, interleaved, with speed ratio and action error");
+  app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  try {
+    return run(opt);
+  } catch (const std::exception& e) {
+    std::cerr << "act_bench: error: " << e.what() << "\n";
+    return 1;
+  }
+}

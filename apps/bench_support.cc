@@ -1,0 +1,116 @@
+#include "apps/bench_support.h"
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+namespace act {
+
+nlohmann::ordered_json LatencySummary::to_json() const {
+  return {{"count", count}, {"mean", mean}, {"std", stddev}, {"min", min}, {"p50", p50},
+          {"p90", p90},     {"p95", p95},   {"p99", p99},    {"max", max}};
+}
+
+LatencySummary summarize(std::vector<double> samples) {
+  LatencySummary s;
+  s.count = samples.size();
+  if (samples.empty()) return s;
+  std::sort(samples.begin(), samples.end());
+  double sum = 0;
+  for (double v : samples) sum += v;
+  s.mean = sum / static_cast<double>(samples.size());
+  double sq = 0;
+  for (double v : samples) sq += (v - s.mean) * (v - s.mean);
+  s.stddev = samples.size() > 1 ? std::sqrt(sq / static_cast<double>(samples.size() - 1)) : 0.0;
+  auto percentile = [&](double p) {
+    const double pos = p / 100.0 * static_cast<double>(samples.size() - 1);
+    const size_t lo = static_cast<size_t>(pos);
+    const size_t hi = std::min(lo + 1, samples.size() - 1);
+    return samples[lo] + (samples[hi] - samples[lo]) * (pos - static_cast<double>(lo));
+  };
+  s.min = samples.front();
+  s.max = samples.back();
+  s.p50 = percentile(50);
+  s.p90 = percentile(90);
+  s.p95 = percentile(95);
+  s.p99 = percentile(99);
+  // The mean of doubles can land a rounding step outside [min, max]; keep the invariant exact.
+  s.mean = std::clamp(s.mean, s.min, s.max);
+  return s;
+}
+
+namespace {
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t");
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return b == std::string::npos ? "" : s.substr(b, e - b + 1);
+}
+
+std::string read_first_line(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  return trim(line);
+}
+
+}  // namespace
+
+MachineInfo read_machine_info() {
+  MachineInfo m;
+  m.online_cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  std::string line, arm_part, hardware;
+  while (std::getline(cpuinfo, line)) {
+    const auto colon = line.find(':');
+    if (colon == std::string::npos) continue;
+    const std::string key = trim(line.substr(0, colon)), value = trim(line.substr(colon + 1));
+    if ((key == "model name" || key == "Model") && m.cpu_model.empty()) m.cpu_model = value;
+    if (key == "CPU part" && arm_part.empty()) arm_part = value;
+    if (key == "Hardware" && hardware.empty()) hardware = value;
+    if (key == "cpu MHz" && m.cpu_mhz == 0) m.cpu_mhz = std::atof(value.c_str());
+    if ((key == "flags" || key == "Features") && m.cpu_flags.empty()) {
+      std::istringstream flags(value);
+      for (std::string f; flags >> f;) m.cpu_flags.push_back(f);
+    }
+  }
+  if (m.cpu_model.empty()) m.cpu_model = !hardware.empty() ? hardware : (!arm_part.empty() ? "ARM CPU part " + arm_part : "unknown CPU");
+  if (m.cpu_mhz == 0) {
+    const std::string khz = read_first_line("/sys/devices/system/cpu/cpu0/cpufreq/scaling_cur_freq");
+    if (!khz.empty()) m.cpu_mhz = std::atof(khz.c_str()) / 1000.0;
+  }
+  const std::string temp = read_first_line("/sys/class/thermal/thermal_zone0/temp");
+  if (!temp.empty()) m.temperature_c = std::atof(temp.c_str()) / 1000.0;
+  // Raspberry Pi firmware (vcgencmd get_throttled without vcgencmd).
+  m.throttled = read_first_line("/sys/devices/platform/soc/soc:firmware/get_throttled");
+  return m;
+}
+
+nlohmann::ordered_json MachineInfo::to_json() const {
+  nlohmann::ordered_json j = {{"cpu_model", cpu_model}, {"online_cores", online_cores}, {"cpu_flags", cpu_flags}};
+  j["cpu_mhz"] = cpu_mhz > 0 ? nlohmann::ordered_json(cpu_mhz) : nlohmann::ordered_json();
+  j["temperature_c"] = temperature_c >= 0 ? nlohmann::ordered_json(temperature_c) : nlohmann::ordered_json();
+  j["throttled"] = throttled.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json(throttled);
+  return j;
+}
+
+std::string MachineInfo::one_line() const {
+  std::ostringstream s;
+  s << cpu_model << ", " << online_cores << " cores";
+  if (cpu_mhz > 0) s << ", " << static_cast<int>(cpu_mhz) << " MHz";
+  if (temperature_c >= 0) s << ", " << temperature_c << " C";
+  if (!throttled.empty()) s << ", throttled=" << throttled;
+  return s.str();
+}
+
+size_t peak_rss_bytes() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<size_t>(usage.ru_maxrss) * 1024;  // Linux reports kB
+}
+
+}  // namespace act

@@ -1,0 +1,37 @@
+// Pieces of act_bench that are worth testing on their own: latency statistics and machine facts.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace act {
+
+/// Summary of a sample of latencies (any unit). Percentiles by linear interpolation between order
+/// statistics (numpy's default), so p50 <= p90 <= p95 <= p99 <= max always holds.
+struct LatencySummary {
+  size_t count = 0;
+  double mean = 0, stddev = 0, min = 0, p50 = 0, p90 = 0, p95 = 0, p99 = 0, max = 0;
+  nlohmann::ordered_json to_json() const;
+};
+LatencySummary summarize(std::vector<double> samples);
+
+/// What the benchmark ran on: CPU model, cores, flags, frequency; on a Raspberry Pi also the SoC
+/// temperature and the firmware's throttling flags when the kernel exposes them.
+struct MachineInfo {
+  std::string cpu_model;
+  int online_cores = 0;
+  std::vector<std::string> cpu_flags;  ///< x86 "flags" / ARM "Features"
+  double cpu_mhz = 0;                  ///< 0 when unknown
+  double temperature_c = -1;           ///< < 0 when unknown
+  std::string throttled;               ///< e.g. "0x0"; empty when unknown
+  nlohmann::ordered_json to_json() const;
+  std::string one_line() const;
+};
+MachineInfo read_machine_info();
+
+/// Peak resident set size of this process, in bytes.
+size_t peak_rss_bytes();
+
+}  // namespace act

@@ -1,0 +1,135 @@
+// act_bench: its JSON holds every number, and the numbers are consistent with each other and with
+// the model (never asserted against wall-clock limits).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "apps/bench_support.h"
+#include "support/command.h"
+#include "support/test_paths.h"
+#include "weights/lerobot_import.h"
+#include "weights/synthetic_model.h"
+
+namespace act {
+namespace {
+
+using test::q;
+using test::run_command;
+
+void expect_consistent_summary(const nlohmann::json& s, size_t runs, const std::string& what) {
+  EXPECT_EQ(s.at("count").get<size_t>(), runs) << what;
+  const double min = s.at("min"), p50 = s.at("p50"), p90 = s.at("p90"), p95 = s.at("p95"), p99 = s.at("p99"), max = s.at("max");
+  EXPECT_LE(min, p50) << what;
+  EXPECT_LE(p50, p90) << what;
+  EXPECT_LE(p90, p95) << what;
+  EXPECT_LE(p95, p99) << what;
+  EXPECT_LE(p99, max) << what;
+  EXPECT_LE(min, s.at("mean").get<double>()) << what;
+  EXPECT_LE(s.at("mean").get<double>(), max) << what;
+  EXPECT_GE(s.at("std").get<double>(), 0.0) << what;
+}
+
+TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
+  const std::string dir = test::scratch_dir();
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 -n 4 -w 1 -t 1 --json " + q(dir + "/b.json") +
+                             " --csv " + q(dir + "/b.csv"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("p99"), std::string::npos);
+  std::ifstream in(dir + "/b.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+
+  // The MAC count is the model's.
+  const double expected_gmac = lerobot_model_config(synthetic_config("96x64"), "test").macs().total() / 1e9;
+  EXPECT_NEAR(j["model"]["gmac"]["total"].get<double>(), expected_gmac, 1e-9 * expected_gmac);
+  double parts = 0;
+  for (const char* p : {"backbone", "projections", "encoder", "decoder", "head"}) parts += j["model"]["gmac"][p].get<double>();
+  EXPECT_NEAR(parts, expected_gmac, 1e-9 * expected_gmac);
+  EXPECT_EQ(j["model"]["config"]["cameras"][0]["width"], 96);
+  EXPECT_EQ(j["model"]["config"]["cameras"][0]["height"], 64);
+  EXPECT_GT(j["model"]["weight_bytes"].get<double>(), 1e6);
+  EXPECT_EQ(j["engine"]["threads"], 1);
+
+  const size_t runs = j["runs"]["timed"];
+  EXPECT_EQ(runs, 4u);
+  const auto& lat = j["latency_ms"];
+  for (const char* stage : {"preprocess", "backbone", "encoder", "decoder", "other", "total"}) {
+    expect_consistent_summary(lat.at(stage), runs, stage);
+  }
+  // Stage times add up to the total (each run's "other" is what the named stages leave).
+  double sum = 0;
+  for (const char* stage : {"preprocess", "backbone", "encoder", "decoder", "other"}) sum += lat[stage]["mean"].get<double>();
+  EXPECT_NEAR(sum, lat["total"]["mean"].get<double>(), 1e-6 * lat["total"]["mean"].get<double>());
+  const double mean_s = lat["total"]["mean"].get<double>() / 1e3;
+  EXPECT_NEAR(j["throughput_per_s"].get<double>(), 1.0 / mean_s, 1e-9 / mean_s);
+  EXPECT_NEAR(j["achieved_gmac_per_s"].get<double>(), expected_gmac / mean_s, 1e-6 * expected_gmac / mean_s);
+  EXPECT_GT(j["peak_rss_bytes"].get<double>(), 0.0);
+  EXPECT_FALSE(j["machine"]["cpu_model"].get<std::string>().empty());
+  EXPECT_GE(j["machine"]["online_cores"].get<int>(), 1);
+  EXPECT_GE(j["init"]["first_inference_ms"].get<double>(), 0.0);
+
+  // CSV: a header and one row per timed run, whose totals match the JSON's extremes.
+  std::ifstream csv(dir + "/b.csv");
+  std::string line;
+  std::getline(csv, line);
+  EXPECT_EQ(line, "run,preprocess_ms,backbone_ms,encoder_ms,decoder_ms,other_ms,total_ms");
+  size_t rows = 0;
+  double max_total = 0;
+  while (std::getline(csv, line)) {
+    ++rows;
+    max_total = std::max(max_total, std::stod(line.substr(line.rfind(',') + 1)));
+  }
+  EXPECT_EQ(rows, runs);
+  EXPECT_NEAR(max_total, lat["total"]["max"].get<double>(), 1e-3);
+}
+
+TEST(ActBench, BlobWithRealObservations) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = test::scratch_dir();
+  write_fp32_blob(import_lerobot_checkpoint(fixture), dir + "/tiny.actb");
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " -m " + q(dir + "/tiny.actb") + " --input " +
+                             q(fixture + "/reference.safetensors") + " -n 3 --json " + q(dir + "/b.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream in(dir + "/b.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["model"]["source"], "blob");
+  EXPECT_NEAR(j["model"]["gmac"]["total"].get<double>(), 0.446056832, 1e-9);
+}
+
+TEST(ActBench, BadArgumentsAreClearErrors) {
+  const std::string dir = test::scratch_dir();
+  auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 12345");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("12345"), std::string::npos) << r.output;
+  r = run_command(std::string(ACT_BENCH_BIN) + " -m " + q(dir + "/none.actb"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("none.actb"), std::string::npos) << r.output;
+  r = run_command(std::string(ACT_BENCH_BIN) + " --num_runs 0");
+  EXPECT_NE(r.exit_code, 0);
+  r = run_command(std::string(ACT_BENCH_BIN) + " --help");
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* flag : {"--warmup_runs", "--num_runs", "--max_secs", "--threads", "--json", "--csv", "--config"}) {
+    EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
+  }
+}
+
+TEST(LatencySummary, PercentilesInterpolateAndOrder) {
+  const LatencySummary s = summarize({5, 1, 4, 2, 3});
+  EXPECT_EQ(s.count, 5u);
+  EXPECT_DOUBLE_EQ(s.min, 1);
+  EXPECT_DOUBLE_EQ(s.max, 5);
+  EXPECT_DOUBLE_EQ(s.p50, 3);
+  EXPECT_DOUBLE_EQ(s.p90, 4.6);
+  EXPECT_DOUBLE_EQ(s.mean, 3);
+  EXPECT_NEAR(s.stddev, std::sqrt(2.5), 1e-12);
+  const LatencySummary one = summarize({7});
+  EXPECT_DOUBLE_EQ(one.p99, 7);
+  EXPECT_DOUBLE_EQ(one.stddev, 0);
+  EXPECT_EQ(summarize({}).count, 0u);
+}
+
+}  // namespace
+}  // namespace act

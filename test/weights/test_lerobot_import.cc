@@ -207,6 +207,27 @@ TEST_F(ImportTest, CurrentLayoutFeatureWithoutStatisticsIsPassedThroughAndSaid) 
   EXPECT_NE(m.notes[0].find("observation.state"), std::string::npos) << m.notes[0];
 }
 
+TEST_F(ImportTest, LegacyFallsBackToTrainingTargetStatisticsForActions) {
+  // A legacy model saved while normalize_targets and unnormalize_outputs shared memory keeps only
+  // normalize_targets.buffer_action.* (spec §10.2); the import must use those.
+  const std::string dir = patched("{}", /*legacy=*/true);
+  const SafetensorsFile original = SafetensorsFile::open(legacy_ + "/model.safetensors");
+  std::vector<SafetensorsWriteTensor> kept;
+  for (const auto& name : original.names()) {
+    if (name.rfind("unnormalize_outputs.", 0) == 0) continue;
+    const auto& t = original.get(name);
+    kept.push_back({name, t.dtype, t.shape, t.data, t.nbytes});
+  }
+  fs::remove(dir + "/model.safetensors");
+  write_safetensors(dir + "/model.safetensors", kept);
+  const ImportedModel with_fallback = import_lerobot_checkpoint(dir);
+  const ImportedModel reference = import_lerobot_checkpoint(legacy_);
+  for (const char* name : {"unnorm.action.scale", "unnorm.action.offset"}) {
+    ASSERT_NE(with_fallback.find(name), nullptr);
+    EXPECT_EQ(with_fallback.find(name)->values, reference.find(name)->values) << name;
+  }
+}
+
 TEST_F(ImportTest, FoldsTheConstantDecoderBlock) {
   const ImportedModel m = import_lerobot_checkpoint(tiny_);
   const NamedTensor* y = m.find("decoder.layers.0.const_y");

@@ -10,7 +10,7 @@ namespace {
 const GemmS8Kernels* built_table(Isa isa) {
   switch (isa) {
     case Isa::kRef: return gemm_s8_table_ref();
-    case Isa::kAvx2: return nullptr;
+    case Isa::kAvx2: return gemm_s8_table_avx2();
     case Isa::kAvx512Vnni: return nullptr;
     case Isa::kNeonDot: return nullptr;
   }

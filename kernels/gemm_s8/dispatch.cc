@@ -11,7 +11,7 @@ const GemmS8Kernels* built_table(Isa isa) {
   switch (isa) {
     case Isa::kRef: return gemm_s8_table_ref();
     case Isa::kAvx2: return gemm_s8_table_avx2();
-    case Isa::kAvx512Vnni: return nullptr;
+    case Isa::kAvx512Vnni: return gemm_s8_table_avx512vnni();
     case Isa::kNeonDot: return nullptr;
   }
   return nullptr;

@@ -12,7 +12,7 @@ const GemmS8Kernels* built_table(Isa isa) {
     case Isa::kRef: return gemm_s8_table_ref();
     case Isa::kAvx2: return gemm_s8_table_avx2();
     case Isa::kAvx512Vnni: return gemm_s8_table_avx512vnni();
-    case Isa::kNeonDot: return nullptr;
+    case Isa::kNeonDot: return gemm_s8_table_neondot();
   }
   return nullptr;
 }

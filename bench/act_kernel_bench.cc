@@ -3,7 +3,7 @@
 //     this core's measured peak in GMAC/s;
 //   - gemm_s8/<isa>/<shape>: the GEMM over ACT's real shapes (bench/shapes/act_gemm_s8.txt, or the
 //     file named by ACT_BENCH_SHAPES), counters GMAC/s (M*N*K per second, 1 MAC = 2 ops) and
-//     pct_peak (against that ISA's probe, measured once at start-up as the best of 40 short runs).
+//     pct_peak (against that ISA's sustained probe rate, measured once at start-up).
 // Wall-clock time throughout. On a shared machine use --benchmark_repetitions=N and read the "max"
 // aggregate of GMAC/s (the "min" of time): the least disturbed repetition.
 // Every variant the CPU can run is benchmarked; --benchmark_filter=avx512vnni picks one. The
@@ -77,16 +77,25 @@ constexpr Probe kProbes[] = {
     {"sdot", Isa::kNeonDot, peak_sdot, true},
 };
 
-// GMAC/s of a probe: the best of 40 short runs (~0.1 ms each), so that a run descheduled by other
-// work on a shared machine does not lower the peak the kernels are compared against.
+// Sustained GMAC/s of a probe: a ~20 ms warm-up (wide-vector instructions lower the clock after a
+// few tens of microseconds on many x86 cores, so a short burst would overstate the peak), then the
+// best of 10 runs of ~2 ms, so that a run descheduled by other work on a shared machine does not
+// lower the peak the kernels are compared against.
 double measure_peak(const Probe& p) {
-  double best = 0.0;
-  for (int rep = 0; rep < 40; ++rep) {
+  auto run = [&](uint64_t iters) {
     const auto t0 = std::chrono::steady_clock::now();
-    const uint64_t macs = p.fn(1u << 12);
+    const uint64_t macs = p.fn(iters);
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    best = std::max(best, static_cast<double>(macs) / s * 1e-9);
-  }
+    return static_cast<double>(macs) / s * 1e-9;
+  };
+  const double macs_per_iteration = static_cast<double>(p.fn(1));  // the probes need iterations >= 1
+  const double warm = run(1u << 14);  // GMAC/s of a short run, to size the timed runs
+  const auto iters_for = [&](double seconds) {
+    return static_cast<uint64_t>(seconds * warm * 1e9 / macs_per_iteration) + 1;
+  };
+  run(iters_for(0.02));
+  double best = 0.0;
+  for (int rep = 0; rep < 10; ++rep) best = std::max(best, run(iters_for(0.002)));
   return best;
 }
 

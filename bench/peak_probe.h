@@ -1,6 +1,7 @@
 // Register-only throughput probes of the INT8 multiply-accumulate instructions: tight loops of
 // independent instructions with no memory traffic, giving this core's measured peak to compare
 // the GEMM kernels against. Each returns the int8 MACs performed (0 when not built for this target).
+// `iterations` must be at least 1.
 #pragma once
 
 #include <cstdint>

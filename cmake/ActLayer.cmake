@@ -1,8 +1,13 @@
-# act_add_layer(name DIR dir [DEPS ...]): one OBJECT library per architectural layer, holding every
-# .cc file directly in that folder. The layers are linked together into libactengine.
+# act_add_layer(name DIR dir | DIRS dir... [DEPS ...]): one OBJECT library per architectural layer,
+# holding every .cc file directly in the given folder(s). The layers are linked together into
+# libactengine. Per-ISA kernel files get their instruction-set flags (act_set_isa_flags).
 function(act_add_layer name)
-  cmake_parse_arguments(ARG "" "DIR" "DEPS" ${ARGN})
-  file(GLOB sources CONFIGURE_DEPENDS ${ARG_DIR}/*.cc)
+  cmake_parse_arguments(ARG "" "DIR" "DIRS;DEPS" ${ARGN})
+  set(sources)
+  foreach(dir ${ARG_DIR} ${ARG_DIRS})
+    file(GLOB dir_sources CONFIGURE_DEPENDS ${dir}/*.cc)
+    list(APPEND sources ${dir_sources})
+  endforeach()
   if(NOT sources)  # a layer still being written: keep the build configurable
     set(sources ${CMAKE_CURRENT_BINARY_DIR}/${name}_empty.cc)
     file(WRITE ${sources} "// no sources yet\n")
@@ -13,4 +18,33 @@ function(act_add_layer name)
     $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/engine/include>)
   target_link_libraries(${name} PUBLIC ${ARG_DEPS})
   act_set_warnings(${name})
+  act_set_isa_flags(${sources})
+endfunction()
+
+# act_set_isa_flags(source...): per-file instruction-set flags, chosen by the file name's suffix
+# (the kernel naming grammar's ISA suffix):
+#   *_avx2.cc        -mavx2 -mfma                                   (x86-64 targets)
+#   *_avx512vnni.cc  -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl -mavx512vnni  (x86-64 targets)
+#   *_neondot.cc     -march=armv8.2-a+dotprod                       (AArch64 targets)
+# On other targets the file gets no flags and compiles to nothing but its has_built_*() stub
+# (its body is guarded by #if defined(__x86_64__) / defined(__aarch64__)). Only these files see
+# the flags, so the rest of the library runs on any CPU of the target architecture.
+# Must be called from the directory that creates the target using the sources.
+function(act_set_isa_flags)
+  if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")
+    set(act_x86 TRUE)
+  endif()
+  if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(aarch64|arm64|ARM64)$")
+    set(act_arm64 TRUE)
+  endif()
+  foreach(src ${ARGN})
+    if(act_x86 AND src MATCHES "_avx2\\.cc$")
+      set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-mavx2;-mfma")
+    elseif(act_x86 AND src MATCHES "_avx512vnni\\.cc$")
+      set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS
+        "-mavx2;-mfma;-mavx512f;-mavx512bw;-mavx512vl;-mavx512vnni")
+    elseif(act_arm64 AND src MATCHES "_neondot\\.cc$")
+      set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-march=armv8.2-a+dotprod")
+    endif()
+  endforeach()
 endfunction()

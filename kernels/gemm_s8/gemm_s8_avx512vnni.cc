@@ -1,0 +1,273 @@
+// gemm_s8 on AVX-512 VNNI: the 6x64c4 micro-kernel. Compiled with -mavx512f/bw/vl/vnni on x86-64
+// targets only; elsewhere this file is just the has_built stub.
+//
+// vpdpbusd multiplies 4 unsigned bytes by 4 signed bytes per int32 lane and adds the 4 products to
+// the accumulator without intermediate saturation (64 MACs per zmm instruction). Activations are
+// signed, so each 4-byte A group is broadcast and XORed with 0x80, which is A + 128 as an unsigned
+// byte; the packer folds the extra 128 * sum_k W[n][k] into kbias (XNNPACK's qs8-to-qu8 packing).
+//
+// Tile: 6 rows x 64 columns (4 zmm) x k-groups of 4. One k-group step = 4 weight loads, 6
+// broadcast+XOR, 24 vpdpbusd; 24 accumulators + 4 weights + A + the 0x80 constant = 30 of the 32
+// zmm registers. Why 64 columns: the XOR competes with vpdpbusd for the same ports (measured: one
+// XOR per 4 vpdpbusd costs ~20% of the peak), so each XORed A group should feed as many columns as
+// the registers allow.
+//
+// Rules for ISA files (see README.md): only intrinsics and internal-linkage code here.
+#include "kernels/gemm_s8/gemm_s8_variants.h"
+
+#if defined(__x86_64__)
+
+// GCC 12's _mm512_undefined_*() initialise a variable with itself, which -O3 reports as
+// -Wmaybe-uninitialized at the header's lines (fixed in GCC 13); silence it for the header only.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+#pragma GCC diagnostic pop
+
+#include <cstring>
+
+#include "kernels/common/check.h"
+
+namespace act::kernels {
+
+namespace {
+
+constexpr int kMR = 6;
+constexpr int kNR = 64;
+constexpr int kKR = 4;
+constexpr int kVecs = kNR / 16;
+constexpr size_t kPanelBlockBytes = size_t{1} << 20;  // weight panels kept in L2 per sweep
+
+// The lanes of vector j (columns [16j, 16j + 16) of the panel) that fall inside [lo, hi).
+__mmask16 vec_mask(int j, int lo, int hi) {
+  const int a = lo - 16 * j < 0 ? 0 : lo - 16 * j;
+  const int b = hi - 16 * j > 16 ? 16 : hi - 16 * j;
+  if (b <= a) return 0;
+  return static_cast<__mmask16>(((1u << b) - 1u) & ~((1u << a) - 1u));
+}
+
+// out[r][j] = kbias + sum over k-groups. The accumulators are a local array (copied out once) so
+// that GCC keeps them in registers; an out-parameter array would be stored every iteration.
+template <int R>
+inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kgroups, __m512i (&out)[R][kVecs]) {
+  const int8_t* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
+  __m512i acc[R][kVecs];
+#pragma GCC unroll 4
+  for (int j = 0; j < kVecs; ++j) {
+    const __m512i kbias = _mm512_loadu_si512(panel + 64 * j);
+#pragma GCC unroll 6
+    for (int r = 0; r < R; ++r) acc[r][j] = kbias;
+  }
+  const __m512i flip = _mm512_set1_epi8(static_cast<char>(0x80));
+  for (int g = 0; g < kgroups; ++g) {
+    const int8_t* wg = w + static_cast<size_t>(g) * (kNR * kKR);
+    const __m512i w0 = _mm512_loadu_si512(wg);
+    const __m512i w1 = _mm512_loadu_si512(wg + 64);
+    const __m512i w2 = _mm512_loadu_si512(wg + 128);
+    const __m512i w3 = _mm512_loadu_si512(wg + 192);
+#pragma GCC unroll 6
+    for (int r = 0; r < R; ++r) {
+      int32_t quad;
+      std::memcpy(&quad, a + static_cast<size_t>(r) * lda + static_cast<size_t>(g) * kKR, 4);
+      const __m512i av = _mm512_xor_si512(_mm512_set1_epi32(quad), flip);  // A + 128 as u8
+      acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], av, w0);
+      acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], av, w1);
+      acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], av, w2);
+      acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], av, w3);
+    }
+  }
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) {
+#pragma GCC unroll 4
+    for (int j = 0; j < kVecs; ++j) out[r][j] = acc[r][j];
+  }
+}
+
+struct EpiS8 {
+  const GemmS8OutS8& o;
+  __m512 scale[kVecs]{};
+  __mmask16 mask[kVecs]{};
+
+  void begin_panel(int n, int lo, int hi) {
+    for (int j = 0; j < kVecs; ++j) {
+      mask[j] = vec_mask(j, lo, hi);
+      scale[j] = _mm512_maskz_loadu_ps(mask[j], o.scale + n + 16 * j);
+    }
+  }
+  void row(int m, int n, const __m512i (&acc)[kVecs]) const {
+    const __m512 zo = _mm512_set1_ps(static_cast<float>(o.out_zero_point));
+    const __m512 qmin = _mm512_set1_ps(static_cast<float>(o.qmin));
+    const __m512 qmax = _mm512_set1_ps(static_cast<float>(o.qmax));
+    int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    for (int j = 0; j < kVecs; ++j) {
+      if (mask[j] == 0) continue;
+      __m512 v = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), scale[j]);
+      if (o.residual != nullptr) {
+        const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n + 16 * j;
+        const __m512i r = _mm512_sub_epi32(_mm512_cvtepi8_epi32(_mm_maskz_loadu_epi8(mask[j], rp)),
+                                           _mm512_set1_epi32(o.residual_zero_point));
+        v = _mm512_add_ps(v, _mm512_mul_ps(_mm512_cvtepi32_ps(r), _mm512_set1_ps(o.residual_scale)));
+      }
+      v = _mm512_add_ps(v, zo);
+      v = _mm512_max_ps(v, qmin);  // v > qmin ? v : qmin, as requant_ref.h
+      v = _mm512_min_ps(v, qmax);
+      // Round half to even (MXCSR default), then narrow; exact since v is within [qmin, qmax].
+      _mm_mask_storeu_epi8(cp + 16 * j, mask[j], _mm512_cvtsepi32_epi8(_mm512_cvtps_epi32(v)));
+    }
+  }
+};
+
+struct EpiF32 {
+  const GemmS8OutF32& o;
+  __m512 w_scale[kVecs]{}, bias[kVecs]{};
+  __mmask16 mask[kVecs]{};
+
+  void begin_panel(int n, int lo, int hi) {
+    for (int j = 0; j < kVecs; ++j) {
+      mask[j] = vec_mask(j, lo, hi);
+      w_scale[j] = _mm512_maskz_loadu_ps(mask[j], o.w_scale + n + 16 * j);
+      bias[j] = o.bias != nullptr ? _mm512_maskz_loadu_ps(mask[j], o.bias + n + 16 * j) : _mm512_setzero_ps();
+    }
+  }
+  void row(int m, int n, const __m512i (&acc)[kVecs]) const {
+    const __m512 a_scale = _mm512_set1_ps(o.a_row_scale != nullptr ? o.a_row_scale[m] : o.a_scale);
+    float* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    for (int j = 0; j < kVecs; ++j) {
+      if (mask[j] == 0) continue;
+      const __m512 s = _mm512_mul_ps(a_scale, w_scale[j]);
+      __m512 y = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), s);
+      y = _mm512_add_ps(y, bias[j]);
+      if (o.residual != nullptr) {
+        y = _mm512_add_ps(y, _mm512_maskz_loadu_ps(mask[j], o.residual + static_cast<size_t>(m) * o.ldr + n + 16 * j));
+      }
+      if (o.relu) y = _mm512_max_ps(y, _mm512_setzero_ps());  // y > 0 ? y : 0
+      _mm512_mask_storeu_ps(cp + 16 * j, mask[j], y);
+    }
+  }
+};
+
+struct EpiS32 {
+  const GemmS8OutS32& o;
+  __mmask16 mask[kVecs]{};
+
+  void begin_panel(int, int lo, int hi) {
+    for (int j = 0; j < kVecs; ++j) mask[j] = vec_mask(j, lo, hi);
+  }
+  void row(int m, int n, const __m512i (&acc)[kVecs]) const {
+    int32_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    for (int j = 0; j < kVecs; ++j) _mm512_mask_storeu_epi32(cp + 16 * j, mask[j], acc[j]);
+  }
+};
+
+template <int R, class Epi>
+void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
+          Epi& epi) {
+  __m512i acc[R][kVecs];
+  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp / kKR, acc);
+  if (g.a_row_zero_point != nullptr) {
+    // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
+    for (int j = 0; j < kVecs; ++j) {
+      const __m512i ksum = _mm512_loadu_si512(panel + 4 * kNR + 64 * j);
+      for (int r = 0; r < R; ++r) {
+        const __m512i dz = _mm512_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
+        acc[r][j] = _mm512_sub_epi32(acc[r][j], _mm512_mullo_epi32(dz, ksum));
+      }
+    }
+  }
+  epi.begin_panel(n, lo, hi);
+  for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
+}
+
+template <class Epi>
+void run(const GemmS8Args& g, size_t ldc, Epi& epi, int m0, int m1, int n0, int n1) {
+  const GemmS8PackedHeader& h = *static_cast<const GemmS8PackedHeader*>(g.packed_w);
+  ACT_DCHECK(h.magic == kGemmS8PackedMagic && h.layout == GemmS8Layout::kVnni64x4,
+             "packed_w was not written by pack_w_s8_64x4_goi_x80");
+  ACT_DCHECK(h.n == g.n && h.k == g.k, "packed_w has another shape");
+  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK && g.lda >= static_cast<size_t>(g.k), "bad k or lda");
+  ACT_DCHECK(ldc >= static_cast<size_t>(g.n), "ldc < n");
+  ACT_DCHECK(0 <= m0 && m0 <= m1 && m1 <= g.m && 0 <= n0 && n0 <= n1 && n1 <= g.n, "rectangle outside C");
+  (void)ldc;
+  if (m0 >= m1 || n0 >= n1) return;
+  const uint8_t* panels = static_cast<const uint8_t*>(g.packed_w) + sizeof(GemmS8PackedHeader);
+  const int p0 = n0 / kNR, p1 = (n1 + kNR - 1) / kNR;
+  const int fit = static_cast<int>(kPanelBlockBytes / h.panel_bytes);
+  const int block = fit > 1 ? fit : 1;
+  uint32_t paths = g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u;
+  for (int pb = p0; pb < p1; pb += block) {
+    const int pe = pb + block < p1 ? pb + block : p1;
+    for (int m = m0; m < m1; m += kMR) {
+      const int rows = m1 - m < kMR ? m1 - m : kMR;
+      paths |= rows == kMR ? kPathFullTile : kPathRowTail;
+      for (int p = pb; p < pe; ++p) {
+        const int n = p * kNR;
+        const int lo = n0 > n ? n0 - n : 0;
+        const int hi = n1 - n < kNR ? n1 - n : kNR;
+        if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
+        const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
+        switch (rows) {
+          case 6: tile<6>(g, h, panel, m, n, lo, hi, epi); break;
+          case 5: tile<5>(g, h, panel, m, n, lo, hi, epi); break;
+          case 4: tile<4>(g, h, panel, m, n, lo, hi, epi); break;
+          case 3: tile<3>(g, h, panel, m, n, lo, hi, epi); break;
+          case 2: tile<2>(g, h, panel, m, n, lo, hi, epi); break;
+          default: tile<1>(g, h, panel, m, n, lo, hi, epi); break;
+        }
+      }
+    }
+  }
+  if (g.covered != nullptr) g.covered->record(Isa::kAvx512Vnni, paths);
+}
+
+}  // namespace
+
+void gemm_s8s8_s8out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
+  ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
+  EpiS8 epi{o};
+  run(g, o.ldc, epi, m0, m1, n0, n1);
+}
+
+void gemm_s8s8_f32out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0,
+                                        int n1) {
+  EpiF32 epi{o};
+  run(g, o.ldc, epi, m0, m1, n0, n1);
+}
+
+void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutS32& o, int m0, int m1, int n0,
+                                        int n1) {
+  EpiS32 epi{o};
+  run(g, o.ldc, epi, m0, m1, n0, n1);
+}
+
+const GemmS8Kernels* gemm_s8_table_avx512vnni() {
+  static constexpr GemmS8Kernels kTable = {
+      Isa::kAvx512Vnni,
+      GemmS8Layout::kVnni64x4,
+      kMR,
+      kNR,
+      kKR,
+      "pack_w_s8_64x4_goi_x80",
+      "gemm_s8s8_s8out_6x64c4_avx512vnni",
+      "gemm_s8s8_f32out_6x64c4_avx512vnni",
+      "gemm_s8s8_s32out_6x64c4_avx512vnni",
+      [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kVnni64x4, n, k); },
+      pack_w_s8_64x4_goi_x80,
+      gemm_s8s8_s8out_6x64c4_avx512vnni,
+      gemm_s8s8_f32out_6x64c4_avx512vnni,
+      gemm_s8s8_s32out_6x64c4_avx512vnni,
+  };
+  return &kTable;
+}
+
+bool gemm_s8_has_built_avx512vnni() { return true; }
+
+}  // namespace act::kernels
+
+#else  // not x86-64: nothing to build
+
+namespace act::kernels {
+bool gemm_s8_has_built_avx512vnni() { return false; }
+const GemmS8Kernels* gemm_s8_table_avx512vnni() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

@@ -1,0 +1,321 @@
+// gemm_s8 on AArch64 with the dot-product extension: the 4x16c4 SDOT micro-kernel and the 1x16c4
+// kernel for the last M % 4 rows. Compiled with -march=armv8.2-a+dotprod on AArch64 targets only;
+// elsewhere this file is just the has_built stub.
+//
+// sdot v.4s, w.16b, a.4b[l] multiplies, per int32 lane, 4 signed weight bytes by the 4 activation
+// bytes of lane l and adds the sum to the accumulator (16 MACs per instruction). A rows are read in
+// place, 16 bytes (4 k-groups) per load; each k-group's 16 columns x 4 bytes are 4 q registers of
+// packed weights (pack_w_s8_16x4_goi), so no activation packing is needed (the property that
+// lets an indirect convolution reuse this kernel; XNNPACK's 4x16c4-neondot has the same shape).
+// 16 accumulators + 4 A registers + 4 weight registers = 24 of the 32 v registers.
+//
+// K tail: after the 16-byte steps, an 8-byte step and a 4-byte step; reads never pass the last
+// k-group (at most 3 bytes past A[m][K-1], inside the 16-byte slack).
+//
+// Rules for ISA files (see README.md): only intrinsics and internal-linkage code here.
+#include "kernels/gemm_s8/gemm_s8_variants.h"
+
+#if defined(__aarch64__)
+
+#include <arm_neon.h>
+
+#include <cstring>
+
+#include "kernels/common/check.h"
+
+namespace act::kernels {
+
+namespace {
+
+constexpr int kMR = 4;
+constexpr int kNR = 16;
+constexpr int kKR = 4;
+constexpr size_t kPanelBlockBytes = size_t{256} << 10;  // half the A76's 512 KB L2
+
+// One k-group (16 columns x 4 bytes) against lane L of each row's 16-byte A chunk.
+template <int R, int L>
+inline void step_q(const int8_t* wg, const int8x16_t (&av)[R], int32x4_t (&acc)[R][4]) {
+  const int8x16_t w0 = vld1q_s8(wg), w1 = vld1q_s8(wg + 16), w2 = vld1q_s8(wg + 32), w3 = vld1q_s8(wg + 48);
+  for (int r = 0; r < R; ++r) {
+    acc[r][0] = vdotq_laneq_s32(acc[r][0], w0, av[r], L);
+    acc[r][1] = vdotq_laneq_s32(acc[r][1], w1, av[r], L);
+    acc[r][2] = vdotq_laneq_s32(acc[r][2], w2, av[r], L);
+    acc[r][3] = vdotq_laneq_s32(acc[r][3], w3, av[r], L);
+  }
+}
+
+// The same against lane L of an 8-byte A chunk.
+template <int R, int L>
+inline void step_d(const int8_t* wg, const int8x8_t (&av)[R], int32x4_t (&acc)[R][4]) {
+  const int8x16_t w0 = vld1q_s8(wg), w1 = vld1q_s8(wg + 16), w2 = vld1q_s8(wg + 32), w3 = vld1q_s8(wg + 48);
+  for (int r = 0; r < R; ++r) {
+    acc[r][0] = vdotq_lane_s32(acc[r][0], w0, av[r], L);
+    acc[r][1] = vdotq_lane_s32(acc[r][1], w1, av[r], L);
+    acc[r][2] = vdotq_lane_s32(acc[r][2], w2, av[r], L);
+    acc[r][3] = vdotq_lane_s32(acc[r][3], w3, av[r], L);
+  }
+}
+
+// out[r][j] = kbias + sum over k. The accumulators are a local array (copied out once) so that
+// GCC keeps them in registers; an out-parameter array would be stored every iteration.
+template <int R>
+inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kp, int32x4_t (&out)[R][4]) {
+  int32x4_t acc[R][4];
+  const int8_t* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
+  const auto* kbias = static_cast<const int32_t*>(static_cast<const void*>(panel));
+  for (int j = 0; j < 4; ++j) {
+    const int32x4_t b = vld1q_s32(kbias + 4 * j);
+    for (int r = 0; r < R; ++r) acc[r][j] = b;
+  }
+  int k = 0;
+  for (; k + 16 <= kp; k += 16) {
+    int8x16_t av[R];
+    for (int r = 0; r < R; ++r) av[r] = vld1q_s8(a + static_cast<size_t>(r) * lda + k);
+    const int8_t* wk = w + static_cast<size_t>(k) * kNR;  // k-group k/4 starts at (k/4) * 64
+    step_q<R, 0>(wk, av, acc);
+    step_q<R, 1>(wk + 64, av, acc);
+    step_q<R, 2>(wk + 128, av, acc);
+    step_q<R, 3>(wk + 192, av, acc);
+  }
+  if (k + 8 <= kp) {
+    int8x8_t av[R];
+    for (int r = 0; r < R; ++r) av[r] = vld1_s8(a + static_cast<size_t>(r) * lda + k);
+    const int8_t* wk = w + static_cast<size_t>(k) * kNR;
+    step_d<R, 0>(wk, av, acc);
+    step_d<R, 1>(wk + 64, av, acc);
+    k += 8;
+  }
+  if (k < kp) {  // one k-group left
+    int8x8_t av[R];
+    for (int r = 0; r < R; ++r) {
+      int32_t quad;
+      std::memcpy(&quad, a + static_cast<size_t>(r) * lda + k, 4);
+      av[r] = vreinterpret_s8_s32(vdup_n_s32(quad));
+    }
+    step_d<R, 0>(w + static_cast<size_t>(k) * kNR, av, acc);
+  }
+  for (int r = 0; r < R; ++r) {
+    for (int j = 0; j < 4; ++j) out[r][j] = acc[r][j];
+  }
+}
+
+// Per-column float parameters of a panel, zero outside [lo, hi) so nothing past N is read.
+void load_cols(const float* p, int n, int lo, int hi, float32x4_t (&out)[4]) {
+  float tmp[kNR] = {};
+  const float* src = p + n;
+  if (lo != 0 || hi != kNR) {
+    std::memcpy(tmp + lo, p + n + lo, sizeof(float) * static_cast<size_t>(hi - lo));
+    src = tmp;
+  }
+  for (int j = 0; j < 4; ++j) out[j] = vld1q_f32(src + 4 * j);
+}
+
+struct EpiS8 {
+  const GemmS8OutS8& o;
+  float32x4_t scale[4]{};
+
+  void begin_panel(int n, int lo, int hi) { load_cols(o.scale, n, lo, hi, scale); }
+  void row(int m, int n, int lo, int hi, const int32x4_t (&acc)[4]) const {
+    const bool full = lo == 0 && hi == kNR;
+    float32x4_t v[4];
+    for (int j = 0; j < 4; ++j) v[j] = vmulq_f32(vcvtq_f32_s32(acc[j]), scale[j]);
+    if (o.residual != nullptr) {
+      const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n;
+      int8_t tmp[kNR] = {};
+      if (!full) {
+        std::memcpy(tmp + lo, rp + lo, static_cast<size_t>(hi - lo));
+        rp = tmp;
+      }
+      const int8x16_t rb = vld1q_s8(rp);
+      const int16x8_t r16[2] = {vmovl_s8(vget_low_s8(rb)), vmovl_high_s8(rb)};
+      const int32x4_t rzp = vdupq_n_s32(o.residual_zero_point);
+      const float32x4_t rscale = vdupq_n_f32(o.residual_scale);
+      for (int j = 0; j < 4; ++j) {
+        const int16x8_t h = r16[j / 2];
+        const int32x4_t r32 = vsubq_s32(j % 2 == 0 ? vmovl_s16(vget_low_s16(h)) : vmovl_high_s16(h), rzp);
+        v[j] = vaddq_f32(v[j], vmulq_f32(vcvtq_f32_s32(r32), rscale));
+      }
+    }
+    const float32x4_t zo = vdupq_n_f32(static_cast<float>(o.out_zero_point));
+    const float32x4_t qmin = vdupq_n_f32(static_cast<float>(o.qmin));
+    const float32x4_t qmax = vdupq_n_f32(static_cast<float>(o.qmax));
+    int32x4_t q[4];
+    for (int j = 0; j < 4; ++j) {
+      float32x4_t x = vaddq_f32(v[j], zo);
+      x = vmaxnmq_f32(x, qmin);  // v > qmin ? v : qmin (fmaxnm turns a NaN into qmin, like maxps)
+      x = vminnmq_f32(x, qmax);
+      q[j] = vcvtnq_s32_f32(x);  // round half to even
+    }
+    const int16x8_t q16a = vcombine_s16(vqmovn_s32(q[0]), vqmovn_s32(q[1]));
+    const int16x8_t q16b = vcombine_s16(vqmovn_s32(q[2]), vqmovn_s32(q[3]));
+    const int8x16_t q8 = vcombine_s8(vqmovn_s16(q16a), vqmovn_s16(q16b));  // exact: within [qmin, qmax]
+    int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    if (full) {
+      vst1q_s8(cp, q8);
+    } else {
+      int8_t tmp[kNR];
+      vst1q_s8(tmp, q8);
+      std::memcpy(cp + lo, tmp + lo, static_cast<size_t>(hi - lo));
+    }
+  }
+};
+
+struct EpiF32 {
+  const GemmS8OutF32& o;
+  float32x4_t w_scale[4]{}, bias[4]{};
+
+  void begin_panel(int n, int lo, int hi) {
+    load_cols(o.w_scale, n, lo, hi, w_scale);
+    if (o.bias != nullptr) {
+      load_cols(o.bias, n, lo, hi, bias);
+    } else {
+      for (auto& b : bias) b = vdupq_n_f32(0.0f);
+    }
+  }
+  void row(int m, int n, int lo, int hi, const int32x4_t (&acc)[4]) const {
+    const bool full = lo == 0 && hi == kNR;
+    const float32x4_t a_scale = vdupq_n_f32(o.a_row_scale != nullptr ? o.a_row_scale[m] : o.a_scale);
+    float res[kNR] = {};
+    const float* rp = nullptr;
+    if (o.residual != nullptr) {
+      rp = o.residual + static_cast<size_t>(m) * o.ldr + n;
+      if (!full) {
+        std::memcpy(res + lo, rp + lo, sizeof(float) * static_cast<size_t>(hi - lo));
+        rp = res;
+      }
+    }
+    float out[kNR];
+    float* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    float* dst = full ? cp : out;
+    for (int j = 0; j < 4; ++j) {
+      const float32x4_t s = vmulq_f32(a_scale, w_scale[j]);
+      float32x4_t y = vmulq_f32(vcvtq_f32_s32(acc[j]), s);
+      y = vaddq_f32(y, bias[j]);
+      if (rp != nullptr) y = vaddq_f32(y, vld1q_f32(rp + 4 * j));
+      if (o.relu) y = vmaxnmq_f32(y, vdupq_n_f32(0.0f));  // y > 0 ? y : 0 (NaN -> 0)
+      vst1q_f32(dst + 4 * j, y);
+    }
+    if (!full) std::memcpy(cp + lo, out + lo, sizeof(float) * static_cast<size_t>(hi - lo));
+  }
+};
+
+struct EpiS32 {
+  const GemmS8OutS32& o;
+  void begin_panel(int, int, int) {}
+  void row(int m, int n, int lo, int hi, const int32x4_t (&acc)[4]) const {
+    int32_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    if (lo == 0 && hi == kNR) {
+      for (int j = 0; j < 4; ++j) vst1q_s32(cp + 4 * j, acc[j]);
+    } else {
+      int32_t tmp[kNR];
+      for (int j = 0; j < 4; ++j) vst1q_s32(tmp + 4 * j, acc[j]);
+      std::memcpy(cp + lo, tmp + lo, sizeof(int32_t) * static_cast<size_t>(hi - lo));
+    }
+  }
+};
+
+template <int R, class Epi>
+void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
+          Epi& epi) {
+  int32x4_t acc[R][4];
+  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp, acc);
+  if (g.a_row_zero_point != nullptr) {
+    // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
+    const auto* ksum = static_cast<const int32_t*>(static_cast<const void*>(panel + 4 * kNR));
+    for (int r = 0; r < R; ++r) {
+      const int32x4_t dz = vdupq_n_s32(g.a_row_zero_point[m + r] - h.a_zero_point);
+      for (int j = 0; j < 4; ++j) acc[r][j] = vmlsq_s32(acc[r][j], dz, vld1q_s32(ksum + 4 * j));
+    }
+  }
+  epi.begin_panel(n, lo, hi);
+  for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
+}
+
+template <class Epi>
+void run(const GemmS8Args& g, size_t ldc, Epi& epi, int m0, int m1, int n0, int n1) {
+  const GemmS8PackedHeader& h = *static_cast<const GemmS8PackedHeader*>(g.packed_w);
+  ACT_DCHECK(h.magic == kGemmS8PackedMagic && h.layout == GemmS8Layout::kNeon16x4,
+             "packed_w was not written by pack_w_s8_16x4_goi");
+  ACT_DCHECK(h.n == g.n && h.k == g.k, "packed_w has another shape");
+  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK && g.lda >= static_cast<size_t>(g.k), "bad k or lda");
+  ACT_DCHECK(ldc >= static_cast<size_t>(g.n), "ldc < n");
+  ACT_DCHECK(0 <= m0 && m0 <= m1 && m1 <= g.m && 0 <= n0 && n0 <= n1 && n1 <= g.n, "rectangle outside C");
+  (void)ldc;
+  if (m0 >= m1 || n0 >= n1) return;
+  const uint8_t* panels = static_cast<const uint8_t*>(g.packed_w) + sizeof(GemmS8PackedHeader);
+  const int p0 = n0 / kNR, p1 = (n1 + kNR - 1) / kNR;
+  const int fit = static_cast<int>(kPanelBlockBytes / h.panel_bytes);
+  const int block = fit > 1 ? fit : 1;
+  uint32_t paths = g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u;
+  for (int pb = p0; pb < p1; pb += block) {
+    const int pe = pb + block < p1 ? pb + block : p1;
+    for (int m = m0; m < m1; m += kMR) {
+      const int rows = m1 - m < kMR ? m1 - m : kMR;
+      paths |= rows == kMR ? kPathFullTile : kPathRowTail;
+      for (int p = pb; p < pe; ++p) {
+        const int n = p * kNR;
+        const int lo = n0 > n ? n0 - n : 0;
+        const int hi = n1 - n < kNR ? n1 - n : kNR;
+        if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
+        const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
+        if (rows == kMR) {
+          tile<kMR>(g, h, panel, m, n, lo, hi, epi);
+        } else {
+          for (int r = 0; r < rows; ++r) tile<1>(g, h, panel, m + r, n, lo, hi, epi);  // 1x16c4
+        }
+      }
+    }
+  }
+  if (g.covered != nullptr) g.covered->record(Isa::kNeonDot, paths);
+}
+
+}  // namespace
+
+void gemm_s8s8_s8out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
+  ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
+  EpiS8 epi{o};
+  run(g, o.ldc, epi, m0, m1, n0, n1);
+}
+
+void gemm_s8s8_f32out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0, int n1) {
+  EpiF32 epi{o};
+  run(g, o.ldc, epi, m0, m1, n0, n1);
+}
+
+void gemm_s8s8_s32out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutS32& o, int m0, int m1, int n0, int n1) {
+  EpiS32 epi{o};
+  run(g, o.ldc, epi, m0, m1, n0, n1);
+}
+
+const GemmS8Kernels* gemm_s8_table_neondot() {
+  static constexpr GemmS8Kernels kTable = {
+      Isa::kNeonDot,
+      GemmS8Layout::kNeon16x4,
+      kMR,
+      kNR,
+      kKR,
+      "pack_w_s8_16x4_goi",
+      "gemm_s8s8_s8out_4x16c4_neondot",
+      "gemm_s8s8_f32out_4x16c4_neondot",
+      "gemm_s8s8_s32out_4x16c4_neondot",
+      [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kNeon16x4, n, k); },
+      pack_w_s8_16x4_goi,
+      gemm_s8s8_s8out_4x16c4_neondot,
+      gemm_s8s8_f32out_4x16c4_neondot,
+      gemm_s8s8_s32out_4x16c4_neondot,
+  };
+  return &kTable;
+}
+
+bool gemm_s8_has_built_neondot() { return true; }
+
+}  // namespace act::kernels
+
+#else  // not AArch64: nothing to build
+
+namespace act::kernels {
+bool gemm_s8_has_built_neondot() { return false; }
+const GemmS8Kernels* gemm_s8_table_neondot() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

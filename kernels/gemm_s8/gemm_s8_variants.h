@@ -1,0 +1,108 @@
+// Every gemm_s8 variant's kernels and packers by name (<family>_<dtypes>_<tile>_<isa>), and the
+// per-ISA tables that dispatch.cc combines. Callers normally go through gemm_s8.h's dispatch
+// (gemm_s8_kernels / gemm_s8_select); the names are here for tests and benchmarks.
+//
+// Common preconditions of every kernel below (checked with ACT_DCHECK):
+//   - args.packed_w was written by the packer of the same table for [args.n x args.k];
+//   - 1 <= args.k <= kGemmS8MaxK, args.lda >= args.k, ldc (and ldr) >= args.n;
+//   - 0 <= m0 <= m1 <= args.m, 0 <= n0 <= n1 <= args.n (an empty rectangle does nothing);
+//   - the kGemmS8ReadSlack bytes after the last element of every A row in [m0, m1) are readable;
+//   - the output rectangle does not overlap A, the packed weights or the epilogue's inputs
+//     (the residual may alias C only when it is the same element: ldr == ldc, same base);
+//   - the default floating-point environment (round to nearest, no flush-to-zero).
+// Only C[m0:m1, n0:n1] is written; per-column inputs are read only for columns in [n0, n1).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "kernels/gemm_s8/gemm_s8.h"
+
+namespace act::kernels {
+
+// ---- packers (pack.cc, portable: packing runs once at load) ----------------------------------
+
+/// Bytes of a packed buffer of `layout` for an [n x k] weight: a 64-byte header, then
+/// ceil(n / nr) panels of round_up(8 * nr + round_up(k, kr) * nr, 64) bytes.
+size_t gemm_s8_packed_size(GemmS8Layout layout, int n, int k);
+
+/// The packers, one per layout. Preconditions: 1 <= n, 1 <= k <= kGemmS8MaxK, ldw >= k, every
+/// W value in [-127, 127], `packed` 64-byte aligned and gemm_s8_packed_size() bytes long. `bias`
+/// (int32 [n], scale s_a * s_w[n]) may be null.
+void pack_w_s8_1x1_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                       void* packed);
+/// nr=8, kr=8; within a k-group the 8 columns are stored in the order 0,4,1,5,2,6,3,7 so that the
+/// AVX2 kernel's horizontal adds end in natural column order.
+void pack_w_s8_8x8_goi_pair4(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed);
+/// nr=64, kr=4; kbias also subtracts 128 * ksum because the kernel computes (A XOR 0x80) x W.
+void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed);
+/// nr=16, kr=4.
+void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                        void* packed);
+
+// ---- ref (gemm_s8_ref.cc): the normative scalar definition ----------------------------------
+
+/// Scalar reference, s8 output (requant_ref.h). Packed by pack_w_s8_1x1_goi.
+void gemm_s8s8_s8out_1x1c1_ref(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0, int n1);
+/// Scalar reference, f32 output. Packed by pack_w_s8_1x1_goi.
+void gemm_s8s8_f32out_1x1c1_ref(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0, int n1);
+/// Scalar reference, int32 accumulators. Packed by pack_w_s8_1x1_goi.
+void gemm_s8s8_s32out_1x1c1_ref(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0, int n1);
+const GemmS8Kernels* gemm_s8_table_ref();
+
+// ---- AVX2 (gemm_s8_avx2.cc, x86-64 only; -mavx2 -mfma) --------------------------------------
+// 2x8c8: A and W sign-extended to int16 and multiplied with vpmaddwd (exact; no vpmaddubsw
+// saturation). Packed by pack_w_s8_8x8_goi_pair4. Needs cpu_supports(Isa::kAvx2).
+
+/// True when this binary contains the AVX2 kernels (x86-64 builds).
+bool gemm_s8_has_built_avx2();
+/// The AVX2 table, or nullptr when not built.
+const GemmS8Kernels* gemm_s8_table_avx2();
+#if defined(__x86_64__)
+/// AVX2 2x8c8, s8 output.
+void gemm_s8s8_s8out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0, int n1);
+/// AVX2 2x8c8, f32 output.
+void gemm_s8s8_f32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0, int n1);
+/// AVX2 2x8c8, int32 output.
+void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0, int n1);
+#endif
+
+// ---- AVX-512 VNNI (gemm_s8_avx512vnni.cc, x86-64 only; -mavx512f/bw/vl/vnni) ----------------
+// 6x64c4: vpdpbusd on (A XOR 0x80) as u8 x W as s8, the +128 compensation folded into kbias.
+// Packed by pack_w_s8_64x4_goi_x80. Needs cpu_supports(Isa::kAvx512Vnni).
+
+bool gemm_s8_has_built_avx512vnni();
+const GemmS8Kernels* gemm_s8_table_avx512vnni();
+#if defined(__x86_64__)
+/// AVX-512 VNNI 6x64c4, s8 output.
+void gemm_s8s8_s8out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0,
+                                       int n1);
+/// AVX-512 VNNI 6x64c4, f32 output.
+void gemm_s8s8_f32out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0,
+                                        int n1);
+/// AVX-512 VNNI 6x64c4, int32 output.
+void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0,
+                                        int n1);
+#endif
+
+// ---- NEON dot product (gemm_s8_neondot.cc, AArch64 only; -march=armv8.2-a+dotprod) -----------
+// 4x16c4 SDOT micro-kernel (activations read in place, 4 k-groups per 16-byte load via
+// vdotq_laneq_s32) plus a 1x16c4 kernel for the last M % 4 rows. Packed by pack_w_s8_16x4_goi.
+// Needs cpu_supports(Isa::kNeonDot).
+
+bool gemm_s8_has_built_neondot();
+const GemmS8Kernels* gemm_s8_table_neondot();
+#if defined(__aarch64__)
+/// NEON SDOT 4x16c4 (+1x16c4 row tail), s8 output.
+void gemm_s8s8_s8out_4x16c4_neondot(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0, int n1);
+/// NEON SDOT 4x16c4 (+1x16c4 row tail), f32 output.
+void gemm_s8s8_f32out_4x16c4_neondot(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0,
+                                     int n1);
+/// NEON SDOT 4x16c4 (+1x16c4 row tail), int32 output.
+void gemm_s8s8_s32out_4x16c4_neondot(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0,
+                                     int n1);
+#endif
+
+}  // namespace act::kernels

@@ -1,0 +1,117 @@
+// The weight packers of every gemm_s8 variant. One generic routine; each named packer fixes the
+// layout (panel width nr, k-group kr, column order, activation shift). Plain C++ on purpose: it
+// runs once at load, on every architecture.
+#include <cstring>
+
+#include "kernels/common/check.h"
+#include "kernels/gemm_s8/gemm_s8_variants.h"
+
+namespace act::kernels {
+
+namespace {
+
+struct LayoutDesc {
+  GemmS8Layout layout;
+  int nr, kr;
+  int a_shift;  // 128 when the kernel feeds A + 128 (XOR 0x80) to an unsigned x signed product
+  bool pair4;   // AVX2: store columns 0,4,1,5,2,6,3,7 inside each k-group
+};
+
+constexpr LayoutDesc kLayouts[] = {
+    {GemmS8Layout::kRef1x1, 1, 1, 0, false},
+    {GemmS8Layout::kAvx2_8x8, 8, 8, 0, true},
+    {GemmS8Layout::kVnni64x4, 64, 4, 128, false},
+    {GemmS8Layout::kNeon16x4, 16, 4, 0, false},
+};
+
+const LayoutDesc& desc_of(GemmS8Layout layout) {
+  for (const LayoutDesc& d : kLayouts) {
+    if (d.layout == layout) return d;
+  }
+  ACT_CHECK(false, "unknown gemm_s8 layout");
+  return kLayouts[0];
+}
+
+size_t round_up(size_t x, size_t to) { return (x + to - 1) / to * to; }
+
+size_t panel_bytes(const LayoutDesc& d, int k) {
+  const size_t kp = round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr));
+  return round_up(8 * static_cast<size_t>(d.nr) + kp * static_cast<size_t>(d.nr), kGemmS8PackedAlign);
+}
+
+void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw, const int32_t* bias,
+                  int32_t a_zero_point, void* packed) {
+  ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK && ldw >= static_cast<size_t>(k), "bad weight shape");
+  ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
+  const int kp = static_cast<int>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
+  const size_t pbytes = panel_bytes(d, k);
+  const int panels = (n + d.nr - 1) / d.nr;
+
+  auto* base = static_cast<uint8_t*>(packed);
+  std::memset(base, 0, sizeof(GemmS8PackedHeader) + static_cast<size_t>(panels) * pbytes);
+  GemmS8PackedHeader h{};
+  h.magic = kGemmS8PackedMagic;
+  h.layout = d.layout;
+  h.n = n;
+  h.k = k;
+  h.nr = d.nr;
+  h.kr = d.kr;
+  h.kp = kp;
+  h.a_zero_point = a_zero_point;
+  h.a_shift = d.a_shift;
+  h.panel_bytes = pbytes;
+  std::memcpy(base, &h, sizeof h);
+
+  for (int p = 0; p < panels; ++p) {
+    uint8_t* panel = base + sizeof(GemmS8PackedHeader) + static_cast<size_t>(p) * pbytes;
+    auto* data = reinterpret_cast<int8_t*>(panel + 8 * static_cast<size_t>(d.nr));
+    for (int c = 0; c < d.nr; ++c) {
+      const int col = p * d.nr + c;
+      if (col >= n) break;  // columns past N stay zero
+      const int8_t* wrow = w + static_cast<size_t>(col) * ldw;
+      const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
+      int64_t sum = 0;
+      for (int kk = 0; kk < k; ++kk) {
+        ACT_DCHECK(wrow[kk] != -128, "gemm_s8 weights must lie in [-127, 127]");
+        sum += wrow[kk];
+        data[(static_cast<size_t>(kk / d.kr) * d.nr + slot) * d.kr + kk % d.kr] = wrow[kk];
+      }
+      // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
+      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - (int64_t{a_zero_point} + d.a_shift) * sum;
+      const auto ksum32 = static_cast<int32_t>(sum);
+      const auto kbias32 = static_cast<int32_t>(kbias);
+      std::memcpy(panel + 4 * static_cast<size_t>(c), &kbias32, 4);
+      std::memcpy(panel + 4 * static_cast<size_t>(d.nr + c), &ksum32, 4);
+    }
+  }
+}
+
+}  // namespace
+
+size_t gemm_s8_packed_size(GemmS8Layout layout, int n, int k) {
+  const LayoutDesc& d = desc_of(layout);
+  const size_t panels = (static_cast<size_t>(n) + static_cast<size_t>(d.nr) - 1) / static_cast<size_t>(d.nr);
+  return sizeof(GemmS8PackedHeader) + panels * panel_bytes(d, k);
+}
+
+void pack_w_s8_1x1_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                       void* packed) {
+  pack_generic(desc_of(GemmS8Layout::kRef1x1), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_w_s8_8x8_goi_pair4(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed) {
+  pack_generic(desc_of(GemmS8Layout::kAvx2_8x8), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed) {
+  pack_generic(desc_of(GemmS8Layout::kVnni64x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                        void* packed) {
+  pack_generic(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+}  // namespace act::kernels

@@ -1,0 +1,520 @@
+// The INT8 GEMM family: every variant this CPU can run (built and detected) against the scalar
+// reference, on the XNNPACK-style case lists (sizes around the tile, ragged K, strides, zero
+// points, clamps, scales, saturating operands) with MLAS-style sentinels, plus the dispatch, the
+// ACT_ISA override and the kernel naming grammar.
+//
+// ACT_ISA=<isa> restricts the variant tests to that variant. ACT_TEST_REQUIRE_ISAS=avx2,avx512vnni
+// (CI) makes the run fail unless those variants are available and ran.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <iostream>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/gemm_s8/gemm_s8_variants.h"
+#include "test/kernels/gemm_s8_tester.h"
+
+namespace act::kernels::test {
+namespace {
+
+// The variants under test: ACT_ISA's when set (an invalid value fails GemmS8Dispatch.ActIsa), else
+// every available one.
+std::vector<Isa> variants_under_test() {
+  const char* forced = std::getenv("ACT_ISA");
+  if (forced != nullptr && forced[0] != '\0') {
+    const IsaChoice c = choose_isa_from_env(gemm_s8_built_isas());
+    if (!c.ok()) return {};
+    return {c.isa};
+  }
+  return gemm_s8_available_isas();
+}
+
+std::vector<int> dedup_positive(std::vector<int> v) {
+  std::set<int> s;
+  for (int x : v) {
+    if (x >= 1) s.insert(x);
+  }
+  return {s.begin(), s.end()};
+}
+
+class GemmS8Variant : public ::testing::TestWithParam<Isa> {
+ protected:
+  const GemmS8Kernels& variant() const { return *gemm_s8_kernels(GetParam()); }
+  int mr() const { return variant().mr; }
+  int nr() const { return variant().nr; }
+  int kr() const { return variant().kr; }
+  // The K step of the main loop (NEON SDOT consumes 16 bytes of A per step).
+  int kblock() const { return GetParam() == Isa::kNeonDot ? 16 : kr(); }
+  std::vector<int> m_sizes() const { return dedup_positive({1, mr() - 1, mr(), mr() + 1, 2 * mr() + 1, 37}); }
+  std::vector<int> n_sizes() const {
+    return dedup_positive({1, nr() - 1, nr(), nr() + 1, 2 * nr() + 3, 3 * nr() - 5});
+  }
+  std::vector<int> k_sizes() const {
+    const int kb = kblock();
+    return dedup_positive({1, 2, kr() - 1, kr(), kr() + 1, kb - 1, kb, kb + 1, 2 * kb + kr() - 1, 2 * kb + 3, 67, 300});
+  }
+};
+
+TEST_P(GemmS8Variant, ShapesAroundTheTile) {
+  uint32_t seed = 1;
+  for (int m : m_sizes()) {
+    for (int n : n_sizes()) {
+      for (int k : {kblock() + 1, 2 * kblock() + 3}) {
+        for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
+          const int za = static_cast<int>(seed % 7) - 3;
+          GemmS8Tester().m(m).n(n).k(k).out(out).a_zero_point(za).seed(seed++).test(variant());
+        }
+      }
+    }
+  }
+}
+
+TEST_P(GemmS8Variant, RaggedK) {
+  uint32_t seed = 100;
+  for (int k : k_sizes()) {
+    for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
+      GemmS8Tester().m(mr() + 1).n(nr() + 1).k(k).out(out).a_zero_point(5).seed(seed++).test(variant());
+      GemmS8Tester().m(1).n(2 * nr() - 1).k(k).out(out).a_zero_point(-7).seed(seed++).test(variant());
+    }
+  }
+}
+
+TEST_P(GemmS8Variant, LargeShapes) {
+  GemmS8Tester().m(67).n(3 * nr() + 7).k(576).out(GemmOut::kS8).a_zero_point(-3).seed(7).test(variant());
+  GemmS8Tester().m(29).n(2 * nr() + 1).k(1153).out(GemmOut::kF32).per_row(true).seed(8).test(variant());
+  GemmS8Tester().m(2 * mr() + 3).n(4 * nr()).k(2304 + 7).out(GemmOut::kS32).a_zero_point(11).seed(9).test(variant());
+}
+
+TEST_P(GemmS8Variant, StridedAAndC) {
+  uint32_t seed = 200;
+  for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
+    for (size_t pad : {size_t{1}, size_t{13}, size_t{64}}) {
+      GemmS8Tester()
+          .m(2 * mr() + 1)
+          .n(nr() + 3)
+          .k(2 * kblock() + 5)
+          .a_stride_pad(pad)
+          .c_stride_pad(pad + 2)
+          .residual(out != GemmOut::kS32)
+          .out(out)
+          .seed(seed++)
+          .test(variant());
+    }
+  }
+}
+
+TEST_P(GemmS8Variant, ZeroPoints) {
+  uint32_t seed = 300;
+  for (int za : {-128, -1, 0, 127}) {
+    for (int zo : {-128, -1, 0, 127}) {
+      GemmS8Tester().m(mr() + 1).n(nr() + 1).k(3 * kblock() + 1).a_zero_point(za).out_zero_point(zo).out(GemmOut::kS8)
+          .seed(seed++).test(variant());
+    }
+    GemmS8Tester().m(mr() + 1).n(nr() + 1).k(3 * kblock() + 1).a_zero_point(za).out(GemmOut::kS32).seed(seed++).test(
+        variant());
+    GemmS8Tester().m(mr() + 1).n(nr() + 1).k(3 * kblock() + 1).a_zero_point(za).out(GemmOut::kF32).seed(seed++).test(
+        variant());
+  }
+}
+
+TEST_P(GemmS8Variant, PerRowZeroPointsAndScales) {
+  uint32_t seed = 400;
+  for (int za : {-128, 0, 127}) {  // the packed zero point the rows override
+    for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
+      GemmS8Tester().m(3 * mr() + 2).n(2 * nr() + 5).k(77).per_row(true).a_zero_point(za).out(out).seed(seed++).test(
+          variant());
+    }
+  }
+}
+
+TEST_P(GemmS8Variant, TinyAndHugeScales) {
+  uint32_t seed = 500;
+  const std::pair<float, float> ranges[] = {{1e-12f, 1e-9f}, {1e-6f, 1e-4f}, {1e3f, 1e8f}, {1e20f, 1e30f}, {1e-9f, 1e9f}};
+  for (const auto& [lo, hi] : ranges) {
+    GemmS8Tester().m(mr() + 2).n(nr() + 2).k(61).scales(lo, hi).out(GemmOut::kS8).out_zero_point(3).seed(seed++).test(
+        variant());
+    GemmS8Tester().m(mr() + 2).n(nr() + 2).k(61).scales(lo, hi).residual(true).out(GemmOut::kS8).seed(seed++).test(
+        variant());
+    GemmS8Tester().m(mr() + 2).n(nr() + 2).k(61).scales(lo, hi).out(GemmOut::kF32).seed(seed++).test(variant());
+  }
+}
+
+// Scales that are exact binary fractions with small accumulators make v land exactly on .5, so a
+// round-half-away-from-zero kernel would fail here.
+TEST_P(GemmS8Variant, RoundingTiesToEven) {
+  uint32_t seed = 600;
+  for (float s : {0.5f, 0.25f, 1.5f, 0.125f}) {
+    for (int k : {1, 2, 3}) {
+      GemmS8Tester().m(mr() + 1).n(nr() + 1).k(k).scales(s, s).bias(false).out(GemmOut::kS8).seed(seed++).test(
+          variant());
+      GemmS8Tester().m(mr() + 1).n(nr() + 1).k(k).scales(s, s).residual(true).out(GemmOut::kS8).seed(seed++).test(
+          variant());
+    }
+  }
+}
+
+TEST_P(GemmS8Variant, ClampsResidualAndRelu) {
+  uint32_t seed = 700;
+  const std::pair<int, int> clamps[] = {{-128, 127}, {-20, 30}, {0, 127}, {5, 5}, {-128, -100}};
+  for (const auto& [lo, hi] : clamps) {
+    for (bool residual : {false, true}) {
+      GemmS8Tester().m(mr() + 1).n(nr() + 5).k(40).scales(1e-3f, 1e-1f).qmin(lo).qmax(hi).out_zero_point(lo)
+          .residual(residual).out(GemmOut::kS8).seed(seed++).test(variant());
+    }
+  }
+  for (bool residual : {false, true}) {
+    for (bool relu : {false, true}) {
+      for (bool bias : {false, true}) {
+        GemmS8Tester().m(mr() + 1).n(nr() + 5).k(40).residual(residual).relu(relu).bias(bias).out(GemmOut::kF32)
+            .seed(seed++).test(variant());
+      }
+    }
+  }
+}
+
+TEST_P(GemmS8Variant, ResidualInPlace) {
+  GemmS8Tester().m(2 * mr() + 1).n(2 * nr() + 3).k(50).c_stride_pad(3).residual(true).residual_in_place(true)
+      .out(GemmOut::kS8).seed(800).test(variant());
+}
+
+// Fused multiply-add would round once where the rule rounds twice (requant_ref.h), and -mfma lets
+// GCC contract _mm256_mul_ps + _mm256_add_ps unless -ffp-contract=off. These operands make the
+// difference visible: 5 * 0.3f = 1.5 + 6e-8 exactly, which rounds to 1.5f, so the rule gives
+// -1 + 1.5 = 0.5 (a tie, even -> 0) and 1.5 - 1 = 0.5f, while an FMA gives 0.5 + 1 ulp (-> 1).
+TEST_P(GemmS8Variant, NoFusedMultiplyAdd) {
+  const GemmS8Kernels& v = variant();
+  const int m = v.mr + 1, n = v.nr + 1, k = 1;
+  const float kTenths3 = 0.3f;
+  std::vector<int8_t> w(static_cast<size_t>(n), -1), a(static_cast<size_t>(m) + kGemmS8ReadSlack, 1);
+  std::unique_ptr<uint8_t, decltype(&std::free)> packed(
+      static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, v.packed_size(n, k))), &std::free);
+  v.pack(n, k, w.data(), k, nullptr, 0, packed.get());
+  GemmS8Args g;
+  g.m = m;
+  g.n = n;
+  g.k = k;
+  g.a = a.data();
+  g.lda = k;
+  g.packed_w = packed.get();
+  // s8: acc = -1, scale 1, residual (5 - 0) * 0.3f.
+  std::vector<float> ones(static_cast<size_t>(n), 1.0f);
+  std::vector<int8_t> res(static_cast<size_t>(m) * n, 5), c(static_cast<size_t>(m) * n, 9);
+  GemmS8OutS8 o8;
+  o8.c = c.data();
+  o8.ldc = n;
+  o8.scale = ones.data();
+  o8.residual = res.data();
+  o8.ldr = n;
+  o8.residual_scale = kTenths3;
+  v.s8out(g, o8, 0, m, 0, n);
+  for (int8_t x : c) ASSERT_EQ(x, 0) << "the s8 epilogue fused a multiply-add";
+  // f32: acc = 5 (A = -5 against W = -1), s = 0.3f * 1, bias -1.
+  std::fill(a.begin(), a.begin() + m, static_cast<int8_t>(-5));
+  std::vector<float> bias(static_cast<size_t>(n), -1.0f), y(static_cast<size_t>(m) * n, 9.0f);
+  GemmS8OutF32 of;
+  of.c = y.data();
+  of.ldc = n;
+  of.w_scale = ones.data();
+  of.a_scale = kTenths3;
+  of.bias = bias.data();
+  v.f32out(g, of, 0, m, 0, n);
+  for (float x : y) ASSERT_EQ(x, 0.5f) << "the f32 epilogue fused a multiply-add";
+}
+
+// All 127 (or -128) activations against +-127 weights at the largest K: every int32 sum is at its
+// extreme, 255 * 127 * K with the zero point. A kernel that adds u8 x s8 pairs in saturating int16
+// (vpmaddubsw) fails this immediately; one with an int32 overflow fails at kGemmS8MaxK.
+TEST_P(GemmS8Variant, SaturatingOperandsAtLargeK) {
+  uint32_t seed = 900;
+  struct Case {
+    GemmFill a, w;
+    int za;
+  };
+  const Case cases[] = {{GemmFill::kMax, GemmFill::kMax, -128}, {GemmFill::kMin, GemmFill::kMax, 127},
+                        {GemmFill::kMax, GemmFill::kMin, -128}, {GemmFill::kMin, GemmFill::kMin, 127},
+                        {GemmFill::kMax, GemmFill::kMax, 0},    {GemmFill::kMin, GemmFill::kMin, 0}};
+  for (const Case& c : cases) {
+    for (int k : {4608, kGemmS8MaxK}) {
+      const int m = k == kGemmS8MaxK ? 3 : mr() + 1;
+      GemmS8Tester().m(m).n(nr() + 1).k(k).a_fill(c.a).w_fill(c.w).a_zero_point(c.za).bias(false).out(GemmOut::kS32)
+          .tile(m, nr()).seed(seed++).test(variant());
+    }
+    GemmS8Tester().m(mr() + 1).n(nr() + 1).k(4608).a_fill(c.a).w_fill(c.w).a_zero_point(c.za).scales(1e-7f, 1e-5f)
+        .out(GemmOut::kS8).seed(seed++).test(variant());
+  }
+}
+
+TEST_P(GemmS8Variant, EmptyRectangleWritesNothing) {
+  const GemmS8Kernels& v = variant();
+  const int n = 5, k = 9;
+  std::vector<int8_t> w(static_cast<size_t>(n) * k, 1), a(k + kGemmS8ReadSlack, 1);
+  std::unique_ptr<uint8_t, decltype(&std::free)> packed(
+      static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, v.packed_size(n, k))), &std::free);
+  v.pack(n, k, w.data(), k, nullptr, 0, packed.get());
+  GemmS8Args g;
+  g.m = 1;
+  g.n = n;
+  g.k = k;
+  g.a = a.data();
+  g.lda = k;
+  g.packed_w = packed.get();
+  std::vector<int32_t> c(n, 77);
+  v.s32out(g, GemmS8OutS32{c.data(), static_cast<size_t>(n)}, 0, 0, 0, n);
+  v.s32out(g, GemmS8OutS32{c.data(), static_cast<size_t>(n)}, 0, 1, 3, 3);
+  for (int32_t x : c) EXPECT_EQ(x, 77);
+}
+
+std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
+
+INSTANTIATE_TEST_SUITE_P(Available, GemmS8Variant, ::testing::ValuesIn(variants_under_test()), isa_param_name);
+GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(GemmS8Variant);
+
+// ---- dispatch, detection, override, naming -----------------------------------------------------
+
+TEST(GemmS8Dispatch, DetectedVariantsAreBuiltAndRun) {
+  const CpuFeatures& f = cpu_features();
+  std::cout << "cpu features (" << f.source << "): avx2=" << f.avx2 << " fma=" << f.fma << " avx512f=" << f.avx512f
+            << " avx512bw=" << f.avx512bw << " avx512vl=" << f.avx512vl << " avx512vnni=" << f.avx512vnni
+            << " neon=" << f.neon << " dotprod=" << f.dotprod << "\n"
+            << "gemm_s8 built: " << isa_mask_names(gemm_s8_built_isas())
+            << "; available: " << isa_mask_names(gemm_s8_built_isas() & cpu_isa_mask()) << "\n";
+#if defined(__x86_64__)
+  const Isa simd[] = {Isa::kAvx2, Isa::kAvx512Vnni};
+#elif defined(__aarch64__)
+  const Isa simd[] = {Isa::kNeonDot};
+#else
+  const Isa simd[] = {Isa::kRef};
+#endif
+  // Every SIMD variant of this architecture must be compiled in, and must run when the CPU has it.
+  bool any_simd = false;
+  for (Isa isa : simd) {
+    EXPECT_NE(gemm_s8_built_isas() & isa_bit(isa), 0u) << isa_name(isa) << " kernels are not compiled in";
+    if (!cpu_supports(isa)) continue;
+    any_simd = any_simd || isa != Isa::kRef;
+    const GemmS8Kernels* v = gemm_s8_kernels(isa);
+    ASSERT_NE(v, nullptr) << isa_name(isa) << " is detected but has no table";
+    GemmS8Tester().m(v->mr + 1).n(v->nr + 1).k(33).out(GemmOut::kS8).test(*v);  // asserts it ran
+  }
+#if defined(__x86_64__)
+  if (cpu_features().avx2) {
+    EXPECT_TRUE(any_simd) << "an AVX2 CPU ran no SIMD gemm_s8 variant";
+  }
+#endif
+  EXPECT_NE(gemm_s8_kernels(Isa::kRef), nullptr);
+}
+
+// CI sets ACT_TEST_REQUIRE_ISAS (comma-separated) to the variants its machine must run.
+TEST(GemmS8Dispatch, RequiredVariantsRun) {
+  const char* required = std::getenv("ACT_TEST_REQUIRE_ISAS");
+  if (required == nullptr || required[0] == '\0') GTEST_SKIP() << "ACT_TEST_REQUIRE_ISAS is not set";
+  std::string list(required);
+  size_t start = 0;
+  while (start <= list.size()) {
+    const size_t comma = list.find(',', start);
+    const std::string name = list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    start = comma == std::string::npos ? list.size() + 1 : comma + 1;
+    if (name.empty()) continue;
+    const std::optional<Isa> isa = parse_isa(name);
+    ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA: " << name;
+    const GemmS8Kernels* v = gemm_s8_kernels(*isa);
+    ASSERT_NE(v, nullptr) << name << " is required but not available (built: "
+                          << isa_mask_names(gemm_s8_built_isas()) << ", cpu: " << isa_mask_names(cpu_isa_mask()) << ")";
+    GemmS8Tester().m(v->mr + 1).n(v->nr + 1).k(19).out(GemmOut::kS32).test(*v);
+  }
+}
+
+TEST(GemmS8Dispatch, ChooseIsa) {
+  const IsaMask x86 = isa_bit(Isa::kRef) | isa_bit(Isa::kAvx2) | isa_bit(Isa::kAvx512Vnni);
+  // No override: the best built & detected variant.
+  EXPECT_EQ(choose_isa(nullptr, x86, x86).isa, Isa::kAvx512Vnni);
+  EXPECT_EQ(choose_isa("", x86, isa_bit(Isa::kRef) | isa_bit(Isa::kAvx2)).isa, Isa::kAvx2);
+  EXPECT_EQ(choose_isa(nullptr, x86, isa_bit(Isa::kRef)).isa, Isa::kRef);
+  const IsaMask arm = isa_bit(Isa::kRef) | isa_bit(Isa::kNeonDot);
+  EXPECT_EQ(choose_isa(nullptr, arm, arm).isa, Isa::kNeonDot);
+  // A valid override wins, even when a better one exists.
+  const IsaChoice ref = choose_isa("ref", x86, x86);
+  EXPECT_TRUE(ref.ok());
+  EXPECT_EQ(ref.isa, Isa::kRef);
+  EXPECT_EQ(choose_isa("avx2", x86, x86).isa, Isa::kAvx2);
+  // Unknown, not built, not supported: clear errors, never a silent fallback.
+  const IsaChoice unknown = choose_isa("avx3", x86, x86);
+  EXPECT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.error.find("unknown ISA"), std::string::npos) << unknown.error;
+  EXPECT_NE(unknown.error.find("avx3"), std::string::npos) << unknown.error;
+  const IsaChoice not_built = choose_isa("neondot", x86, x86 | arm);
+  EXPECT_FALSE(not_built.ok());
+  EXPECT_NE(not_built.error.find("this build has no neondot"), std::string::npos) << not_built.error;
+  const IsaChoice not_cpu = choose_isa("avx512vnni", x86, isa_bit(Isa::kRef) | isa_bit(Isa::kAvx2));
+  EXPECT_FALSE(not_cpu.ok());
+  EXPECT_NE(not_cpu.error.find("does not support avx512vnni"), std::string::npos) << not_cpu.error;
+  EXPECT_FALSE(choose_isa("AVX2", x86, x86).ok()) << "names are case-sensitive";
+}
+
+// Sets ACT_ISA for one scope, restoring the previous value.
+class ScopedActIsa {
+ public:
+  explicit ScopedActIsa(const char* value) {
+    const char* old = std::getenv("ACT_ISA");
+    had_ = old != nullptr;
+    if (had_) old_ = old;
+    if (value != nullptr) {
+      setenv("ACT_ISA", value, 1);
+    } else {
+      unsetenv("ACT_ISA");
+    }
+  }
+  ~ScopedActIsa() {
+    if (had_) {
+      setenv("ACT_ISA", old_.c_str(), 1);
+    } else {
+      unsetenv("ACT_ISA");
+    }
+  }
+
+ private:
+  bool had_ = false;
+  std::string old_;
+};
+
+TEST(GemmS8Dispatch, ActIsa) {
+  {
+    // Whatever the run was started with must be valid here.
+    const GemmS8Selection s = gemm_s8_select();
+    EXPECT_TRUE(s.error.empty()) << s.error;
+    ASSERT_NE(s.kernels, nullptr);
+  }
+  {
+    ScopedActIsa env(nullptr);
+    const GemmS8Selection s = gemm_s8_select();
+    ASSERT_NE(s.kernels, nullptr) << s.error;
+    EXPECT_EQ(s.kernels, gemm_s8_kernels(gemm_s8_available_isas().back())) << "not the best available variant";
+  }
+  for (Isa isa : gemm_s8_available_isas()) {
+    ScopedActIsa env(isa_name(isa));
+    const GemmS8Selection s = gemm_s8_select();
+    ASSERT_NE(s.kernels, nullptr) << s.error;
+    EXPECT_EQ(s.kernels->isa, isa);
+  }
+  {
+    ScopedActIsa env("avx3");
+    const GemmS8Selection s = gemm_s8_select();
+    EXPECT_EQ(s.kernels, nullptr);
+    EXPECT_NE(s.error.find("ACT_ISA=avx3"), std::string::npos) << s.error;
+  }
+  for (int i = 0; i < kIsaCount; ++i) {
+    const Isa isa = static_cast<Isa>(i);
+    if (gemm_s8_kernels(isa) != nullptr) continue;
+    ScopedActIsa env(isa_name(isa));
+    const GemmS8Selection s = gemm_s8_select();
+    EXPECT_EQ(s.kernels, nullptr) << isa_name(isa) << " is unavailable but was selected";
+    EXPECT_FALSE(s.error.empty());
+  }
+}
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out(1);
+  for (char c : s) {
+    if (c == sep) {
+      out.emplace_back();
+    } else {
+      out.back() += c;
+    }
+  }
+  return out;
+}
+
+// "<a>x<b>" or "<a>x<b>c<c>" with nothing else; false otherwise.
+bool parse_tile(const std::string& s, bool with_kr, int* a, int* b, int* c) {
+  int used = 0;
+  const int got = with_kr ? std::sscanf(s.c_str(), "%dx%dc%d%n", a, b, c, &used)
+                          : std::sscanf(s.c_str(), "%dx%d%n", a, b, &used);
+  return got == (with_kr ? 3 : 2) && used == static_cast<int>(s.size());
+}
+
+// <family>_<dtypes>_<tile>_<isa> (kernels-and-style.md 2.4), with the tile matching the table.
+// (A hand parser: std::regex trips GCC 12's -Wmaybe-uninitialized under ASan.)
+TEST(GemmS8Dispatch, KernelNamesFollowTheGrammar) {
+  const std::set<std::string> isa_suffixes = {"ref", "neon", "neondot", "neoni8mm", "avx2", "avxvnni", "avx512vnni"};
+  const GemmS8Kernels* tables[] = {gemm_s8_table_ref(), gemm_s8_table_avx2(), gemm_s8_table_avx512vnni(),
+                                   gemm_s8_table_neondot()};
+  int checked = 0;
+  for (const GemmS8Kernels* t : tables) {
+    if (t == nullptr) continue;
+    ++checked;
+    const char* kinds[] = {"s8out", "f32out", "s32out"};
+    const char* names[] = {t->s8out_name, t->f32out_name, t->s32out_name};
+    for (int i = 0; i < 3; ++i) {
+      const std::vector<std::string> part = split(names[i], '_');
+      ASSERT_EQ(part.size(), 5u) << names[i];
+      EXPECT_EQ(part[0], "gemm") << names[i];
+      EXPECT_EQ(part[1], "s8s8") << names[i];
+      EXPECT_EQ(part[2], kinds[i]) << names[i];
+      int mr = 0, nr = 0, kr = 0;
+      ASSERT_TRUE(parse_tile(part[3], true, &mr, &nr, &kr)) << names[i];
+      EXPECT_EQ(mr, t->mr) << names[i];
+      EXPECT_EQ(nr, t->nr) << names[i];
+      EXPECT_EQ(kr, t->kr) << names[i];
+      EXPECT_TRUE(isa_suffixes.count(part[4]) == 1) << names[i];
+      EXPECT_EQ(part[4], isa_name(t->isa)) << names[i];
+    }
+    // pack_w_s8_<nr>x<kr>_goi[_<variant>]
+    const std::vector<std::string> part = split(t->pack_name, '_');
+    ASSERT_TRUE(part.size() == 5u || part.size() == 6u) << t->pack_name;
+    EXPECT_EQ(part[0] + "_" + part[1] + "_" + part[2], "pack_w_s8") << t->pack_name;
+    int nr = 0, kr = 0;
+    ASSERT_TRUE(parse_tile(part[3], false, &nr, &kr, nullptr)) << t->pack_name;
+    EXPECT_EQ(nr, t->nr) << t->pack_name;
+    EXPECT_EQ(kr, t->kr) << t->pack_name;
+    EXPECT_EQ(part[4], "goi") << t->pack_name;
+  }
+  EXPECT_GE(checked, 2) << "expected the reference and at least one SIMD table in this build";
+}
+
+// The packed header and the column sums / folded bias, checked by hand for one small weight.
+TEST(GemmS8Pack, HeaderAndFoldedBias) {
+  const int n = 3, k = 5;
+  const int8_t w[n * k] = {1, 2, 3, 4, 5, -1, -1, -1, -1, -1, 127, -127, 0, 0, 127};
+  const int32_t bias[n] = {10, 20, 30};
+  for (GemmS8Layout layout : {GemmS8Layout::kRef1x1, GemmS8Layout::kAvx2_8x8, GemmS8Layout::kVnni64x4,
+                              GemmS8Layout::kNeon16x4}) {
+    const size_t bytes = gemm_s8_packed_size(layout, n, k);
+    std::unique_ptr<uint8_t, decltype(&std::free)> p(
+        static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+    const int za = -3;
+    switch (layout) {
+      case GemmS8Layout::kRef1x1: pack_w_s8_1x1_goi(n, k, w, k, bias, za, p.get()); break;
+      case GemmS8Layout::kAvx2_8x8: pack_w_s8_8x8_goi_pair4(n, k, w, k, bias, za, p.get()); break;
+      case GemmS8Layout::kVnni64x4: pack_w_s8_64x4_goi_x80(n, k, w, k, bias, za, p.get()); break;
+      case GemmS8Layout::kNeon16x4: pack_w_s8_16x4_goi(n, k, w, k, bias, za, p.get()); break;
+    }
+    GemmS8PackedHeader h;
+    std::memcpy(&h, p.get(), sizeof h);
+    EXPECT_EQ(h.magic, kGemmS8PackedMagic);
+    EXPECT_EQ(h.layout, layout);
+    EXPECT_EQ(h.n, n);
+    EXPECT_EQ(h.k, k);
+    EXPECT_EQ(h.kp % h.kr, 0);
+    EXPECT_EQ(h.panel_bytes % 64, 0u);
+    EXPECT_EQ(bytes, sizeof h + static_cast<size_t>((n + h.nr - 1) / h.nr) * h.panel_bytes);
+    const int32_t sums[n] = {15, -5, 127};
+    for (int c = 0; c < n; ++c) {
+      const uint8_t* panel = p.get() + sizeof h + static_cast<size_t>(c / h.nr) * h.panel_bytes;
+      int32_t kbias, ksum;
+      std::memcpy(&kbias, panel + 4 * (c % h.nr), 4);
+      std::memcpy(&ksum, panel + 4 * (h.nr + c % h.nr), 4);
+      EXPECT_EQ(ksum, sums[c]);
+      EXPECT_EQ(kbias, bias[c] - (za + h.a_shift) * sums[c]);
+    }
+    EXPECT_EQ(h.a_shift, layout == GemmS8Layout::kVnni64x4 ? 128 : 0);
+  }
+}
+
+}  // namespace
+}  // namespace act::kernels::test

@@ -11,6 +11,16 @@ checkpoints="$root/build/test-checkpoints"
 
 "$root/scripts/install_deps.sh"
 
+# The SIMD kernel variants this CPU can run must really run in the tests (a test fails otherwise).
+flags=$(grep -m1 -E '^(flags|Features)' /proc/cpuinfo || true)
+required=()
+[[ " $flags " == *" avx2 "* ]] && required+=(avx2)
+[[ " $flags " == *" avx512_vnni "* && " $flags " == *" avx512bw "* && " $flags " == *" avx512vl "* ]] && required+=(avx512vnni)
+[[ " $flags " == *" asimddp "* ]] && required+=(neondot)
+ACT_TEST_REQUIRE_ISAS=$(IFS=,; echo "${required[*]}")
+export ACT_TEST_REQUIRE_ISAS
+echo "kernel variants required by the tests: ${ACT_TEST_REQUIRE_ISAS:-none}"
+
 echo "== Release build (-Werror) =="
 ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh" -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
 echo "== Release tests =="

@@ -25,6 +25,8 @@ echo "== Release build (-Werror) =="
 ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh" -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
 echo "== Release tests =="
 ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
+echo "== kernel benchmarks (smoke run; the numbers are not judged) =="
+"$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01
 
 if [ "${ACT_SKIP_SANITIZERS:-0}" != "1" ]; then
   echo "== ASan + UBSan build =="

@@ -3,6 +3,7 @@
 #include <new>
 
 #include "engine/src/engine_impl.h"
+#include "kernels/fp32/gemm_f32.h"
 #include "weights/blob_names.h"
 #include "weights/error.h"
 
@@ -41,6 +42,10 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
       config_(ModelConfig::from_json(blob_.config())),
       pool_(options.threads),
       profile_(options.profile) {
+  // A bad ACT_ISA (unknown, or an ISA this CPU lacks) is an error here, never a silent fallback.
+  if (const kernels::GemmF32Selection gemm = kernels::gemm_f32_select(); !gemm.error.empty()) {
+    fail(StatusCode::kInvalidArgument, gemm.error);
+  }
   const std::string precision = blob_.config().value("precision", "");
   if (precision != "fp32") {
     fail(StatusCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32)");

@@ -5,30 +5,18 @@
 #include <cstring>
 #include <limits>
 
-#include <Eigen/Core>
+#include "kernels/fp32/gemm_f32.h"
 
 namespace act::kernels {
 
-namespace {
-using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-using ConstMap = Eigen::Map<const RowMajor, 0, Eigen::OuterStride<>>;
-using Map = Eigen::Map<RowMajor, 0, Eigen::OuterStride<>>;
-}  // namespace
-
 void gemm_f32_nt(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c,
                  size_t ldc) {
-  ConstMap am(a, m, k, Eigen::OuterStride<>(static_cast<Eigen::Index>(lda)));
-  ConstMap bm(b, n, k, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldb)));
-  Map cm(c, m, n, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldc)));
-  cm.noalias() = am * bm.transpose();
+  gemm_f32_active().nt(m, n, k, a, lda, b, ldb, c, ldc);
 }
 
 void gemm_f32_nn(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c,
                  size_t ldc) {
-  ConstMap am(a, m, k, Eigen::OuterStride<>(static_cast<Eigen::Index>(lda)));
-  ConstMap bm(b, k, n, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldb)));
-  Map cm(c, m, n, Eigen::OuterStride<>(static_cast<Eigen::Index>(ldc)));
-  cm.noalias() = am * bm;
+  gemm_f32_active().nn(m, n, k, a, lda, b, ldb, c, ldc);
 }
 
 void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, int count, float* patches) {

@@ -13,7 +13,7 @@
 namespace act::kernels {
 
 /// C[m x n] = A[m x k] * B^T, B stored [n x k] row-major (the PyTorch Linear / OHWI conv layout).
-/// Overwrites C. lda >= k, ldb >= k, ldc >= n.
+/// Overwrites C. lda >= k, ldb >= k, ldc >= n. Runs the process's FP32 GEMM variant (gemm_f32.h).
 void gemm_f32_nt(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c,
                  size_t ldc);
 

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -164,6 +165,23 @@ TEST_F(EngineApiTest, TwoEnginesRunSideBySide) {
   for (int t = 0; t < 2; ++t) {
     EXPECT_TRUE(statuses[t].ok()) << statuses[t].to_string();
     EXPECT_EQ(results[t], reference);
+  }
+}
+
+TEST_F(EngineApiTest, BadIsaOverrideIsAnError) {
+  const char* saved = std::getenv("ACT_ISA");
+  const std::string saved_value = saved ? saved : "";
+  setenv("ACT_ISA", "sse9", 1);
+  auto e = Engine::open(blob_);
+  EXPECT_EQ(e.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(e.status().message().find("sse9"), std::string::npos) << e.status().message();
+  setenv("ACT_ISA", "ref", 1);
+  auto ref = Engine::open(blob_, {.threads = 2});
+  ASSERT_TRUE(ref.ok()) << ref.status().to_string();
+  if (saved) {
+    setenv("ACT_ISA", saved_value.c_str(), 1);
+  } else {
+    unsetenv("ACT_ISA");
   }
 }
 

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "kernels/fp32/fp32_kernels.h"
+#include "kernels/fp32/gemm_f32.h"
 
 namespace act::kernels {
 namespace {
@@ -164,6 +165,43 @@ TEST(Fp32Kernels, LayerNormSoftmaxAndActivations) {
   std::vector<float> r = {-1.0f, 0.0f, 2.0f};
   relu_f32(r.size(), r.data());
   EXPECT_EQ(r, (std::vector<float>{0.0f, 0.0f, 2.0f}));
+}
+
+}  // namespace
+}  // namespace act::kernels
+
+namespace act::kernels {
+namespace {
+
+// Every FP32 GEMM variant this machine can run agrees with the baseline one.
+TEST(GemmF32Variants, AgreeWithTheBaseline) {
+  const GemmF32Kernels* ref = gemm_f32_table_ref();
+  ASSERT_NE(ref, nullptr);
+  int variants = 0;
+  for (Isa isa : {Isa::kAvx2, Isa::kAvx512Vnni}) {
+    const GemmF32Kernels* v = gemm_f32_kernels(isa);
+    if (v == nullptr) continue;
+    ++variants;
+    std::mt19937 rng(11);
+    for (int m : {1, 5, 64, 77}) {
+      for (int n : {1, 17, 128}) {
+        for (int k : {1, 9, 576}) {
+          const auto a = random_vector(static_cast<size_t>(m) * (k + 1), rng), b = random_vector(static_cast<size_t>(n) * k, rng);
+          std::vector<float> c_ref(static_cast<size_t>(m) * n), c(static_cast<size_t>(m) * n);
+          ref->nt(m, n, k, a.data(), k + 1, b.data(), k, c_ref.data(), n);
+          v->nt(m, n, k, a.data(), k + 1, b.data(), k, c.data(), n);
+          for (size_t i = 0; i < c.size(); ++i) ASSERT_NEAR(c[i], c_ref[i], 1e-5 * k) << v->name << " nt " << m << "x" << n << "x" << k;
+          ref->nn(m, n, k, a.data(), k + 1, b.data(), n, c_ref.data(), n);  // B read as [k x n]
+          v->nn(m, n, k, a.data(), k + 1, b.data(), n, c.data(), n);
+          for (size_t i = 0; i < c.size(); ++i) ASSERT_NEAR(c[i], c_ref[i], 1e-5 * k) << v->name << " nn";
+        }
+      }
+    }
+  }
+  // On a CPU with AVX2 the AVX2 build must have been compiled in and tested.
+  if (cpu_supports(Isa::kAvx2)) {
+    EXPECT_GE(variants, 1);
+  }
 }
 
 }  // namespace

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs every build, test and tool dependency of actengine from Debian packages.
 # Idempotent: packages already present are left alone; safe to run again.
+# Then scripts/install_cross_deps.sh adds the aarch64 cross build's packages (skipped with ACT_SKIP_ARM64=1).
 set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
 
 packages=(
   build-essential cmake ninja-build pkg-config git
@@ -18,11 +20,14 @@ done
 
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install_deps: all ${#packages[@]} packages already installed"
-  exit 0
+else
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  echo "install_deps: installing ${missing[*]}"
+  $SUDO apt-get update
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
 fi
 
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-echo "install_deps: installing ${missing[*]}"
-$SUDO apt-get update
-DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
+if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then
+  "$root/scripts/install_cross_deps.sh"
+fi

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs the dependencies, builds actengine and runs every test: the Release build with warnings as
-# errors, then the whole suite again under AddressSanitizer + UndefinedBehaviorSanitizer.
+# errors; the core library's tests cross-compiled for aarch64 and run under qemu-user
+# (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it); then the whole suite again under
+# AddressSanitizer + UndefinedBehaviorSanitizer (ACT_SKIP_SANITIZERS=1 skips it).
 # This is README command (2) and what CI runs (.ci/run).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -8,8 +10,13 @@ cd "$root"
 jobs="${ACT_JOBS:-$(nproc)}"
 # Both build trees share the generated test checkpoints (generating them takes minutes).
 checkpoints="$root/build/test-checkpoints"
+# Wall time of each stage, printed at the end.
+timings=()
+stage_start=$SECONDS
+stage_done() { timings+=("$1 $((SECONDS - stage_start))s"); stage_start=$SECONDS; }
 
 "$root/scripts/install_deps.sh"
+stage_done install
 
 # The SIMD kernel variants this CPU can run must really run in the tests (a test fails otherwise).
 flags=$(grep -m1 -E '^(flags|Features)' /proc/cpuinfo || true)
@@ -23,17 +30,28 @@ echo "kernel variants required by the tests: ${ACT_TEST_REQUIRE_ISAS:-none}"
 
 echo "== Release build (-Werror) =="
 ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh" -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
+stage_done release-build
 echo "== Release tests =="
 ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
+stage_done release-tests
 echo "== kernel benchmarks (smoke run; the numbers are not judged) =="
 "$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01
+stage_done kernel-bench-smoke
+
+if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then
+  ACT_JOBS="$jobs" "$root/scripts/run_arm64_tests.sh"
+  stage_done aarch64-build+qemu-tests
+fi
 
 if [ "${ACT_SKIP_SANITIZERS:-0}" != "1" ]; then
   echo "== ASan + UBSan build =="
   ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DACT_SANITIZE=ON \
     -DACT_BUILD_BENCH=OFF -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
+  stage_done asan-build
   echo "== ASan + UBSan tests =="
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"
+  stage_done asan-tests
 fi
+echo "stage times: ${timings[*]} (total $SECONDS s)"
 echo "all tests passed"

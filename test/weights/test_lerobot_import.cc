@@ -250,6 +250,31 @@ TEST_F(ImportTest, FoldsTheConstantDecoderBlock) {
 namespace act {
 namespace {
 
+// IEEE binary16 bits of a finite float, rounded to nearest even (subnormals included).
+uint16_t f32_to_f16_bits(float value) {
+  uint32_t x;
+  std::memcpy(&x, &value, 4);
+  const uint32_t sign = (x >> 16) & 0x8000u;
+  const int exp = static_cast<int>((x >> 23) & 0xffu) - 127 + 15;
+  uint32_t mant = x & 0x7fffffu;
+  if (exp >= 31) return static_cast<uint16_t>(sign | 0x7c00u);  // overflow: infinity
+  uint32_t half, rem, halfway;
+  if (exp <= 0) {  // subnormal half: value / 2^-24
+    if (exp < -10) return static_cast<uint16_t>(sign);
+    mant |= 0x800000u;
+    const int shift = 14 - exp;
+    half = mant >> shift;
+    rem = mant & ((1u << shift) - 1);
+    halfway = 1u << (shift - 1);
+  } else {
+    half = (static_cast<uint32_t>(exp) << 10) | (mant >> 13);
+    rem = mant & 0x1fffu;
+    halfway = 0x1000u;
+  }
+  if (rem > halfway || (rem == halfway && (half & 1u))) ++half;  // a carry into the exponent is right
+  return static_cast<uint16_t>(sign | half);
+}
+
 // Half-precision checkpoints: importing F16 / BF16 weights must give exactly what importing the same
 // (rounded) values stored as F32 gives.
 TEST(ImportHalfPrecision, F16AndBF16WeightsImportLikeTheirF32Values) {
@@ -269,8 +294,7 @@ TEST(ImportHalfPrecision, F16AndBF16WeightsImportLikeTheirF32Values) {
       std::vector<uint16_t> bits(v.size());
       for (size_t i = 0; i < v.size(); ++i) {
         if (half == DType::kF16) {
-          const _Float16 h = static_cast<_Float16>(v[i]);
-          std::memcpy(&bits[i], &h, 2);
+          bits[i] = f32_to_f16_bits(v[i]);
         } else {
           uint32_t u;
           std::memcpy(&u, &v[i], 4);

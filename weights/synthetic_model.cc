@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <random>
-#include <regex>
 
 #include "weights/error.h"
 
@@ -35,21 +34,29 @@ class Random {
   std::mt19937 engine_;
 };
 
+// "WxH" with 1-5 digits each.
+bool parse_size(const std::string& s, int* width, int* height) {
+  const size_t x = s.find('x');
+  auto digits = [](const std::string& part) {
+    return !part.empty() && part.size() <= 5 && part.find_first_not_of("0123456789") == std::string::npos;
+  };
+  if (x == std::string::npos || !digits(s.substr(0, x)) || !digits(s.substr(x + 1))) return false;
+  *width = std::stoi(s.substr(0, x));
+  *height = std::stoi(s.substr(x + 1));
+  return true;
+}
+
 size_t count(const std::vector<int64_t>& shape) { return static_cast<size_t>(shape_elements(shape)); }
 
 }  // namespace
 
 nlohmann::ordered_json synthetic_config(const std::string& name) {
   int height = 480, width = 640, state = 6, action = 6;
-  std::smatch m;
-  const std::regex size_pattern("([0-9]{1,5})x([0-9]{1,5})");
   if (name == "default") {
   } else if (name == "rover") {
     height = 360;
     state = action = 2;
-  } else if (std::regex_match(name, m, size_pattern)) {
-    width = std::stoi(m[1]);
-    height = std::stoi(m[2]);
+  } else if (parse_size(name, &width, &height)) {
     if (width < 32 || height < 32 || width > 4096 || height > 4096) {
       fail(StatusCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
     }

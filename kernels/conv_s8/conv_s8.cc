@@ -1,0 +1,64 @@
+#include "kernels/conv_s8/conv_s8.h"
+
+#include <algorithm>
+
+namespace act::kernels {
+
+namespace {
+
+constexpr int kTileQuantum = 12;  // lcm of the gemm_s8 MRs (1, 2, 4, 6)
+constexpr size_t kTargetScratchBytes = 256 * 1024;
+
+// The A operand of a tile: patches in scratch, or the input itself. Returns rows' pointer and lda.
+GemmS8Args tile_args(const ConvS8& conv, const int8_t* input, int pixel_begin, int count, int8_t* scratch) {
+  const Conv2dShape& s = conv.shape;
+  GemmS8Args args;
+  args.m = count;
+  args.n = s.out_c;
+  args.k = s.patch_size();
+  args.packed_w = conv.packed_w;
+  if (conv.direct()) {
+    args.a = input + static_cast<size_t>(pixel_begin) * s.in_c;
+    args.lda = static_cast<size_t>(s.in_c);
+  } else {
+    args.lda = static_cast<size_t>(args.k);
+    im2col_nhwc_s8(s, input, conv.input_zero_point, pixel_begin, count, scratch, args.lda);
+    args.a = scratch;
+  }
+  return args;
+}
+
+}  // namespace
+
+int conv_s8_tile_pixels(const Conv2dShape& s) {
+  const size_t per_pixel = static_cast<size_t>(s.patch_size());
+  const int fit = static_cast<int>(kTargetScratchBytes / per_pixel) / kTileQuantum * kTileQuantum;
+  return std::clamp(fit, kTileQuantum, 16 * kTileQuantum);
+}
+
+size_t conv_s8_scratch_bytes(const Conv2dShape& s, int tile_pixels) {
+  const ConvS8 probe{s, nullptr, nullptr, 0};
+  if (probe.direct()) return 0;
+  return static_cast<size_t>(tile_pixels) * static_cast<size_t>(s.patch_size()) + kGemmS8ReadSlack;
+}
+
+void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
+                   int8_t* scratch) {
+  const GemmS8Args args = tile_args(conv, input, pixel_begin, count, scratch);
+  GemmS8OutS8 tile = out;
+  tile.c = out.c + static_cast<size_t>(pixel_begin) * out.ldc;
+  if (out.residual) tile.residual = out.residual + static_cast<size_t>(pixel_begin) * out.ldr;
+  conv.kernels->s8out(args, tile, 0, count, 0, args.n);
+}
+
+void conv_s8_f32out(const ConvS8& conv, const int8_t* input, const GemmS8OutF32& out, int pixel_begin, int count,
+                    int8_t* scratch) {
+  const GemmS8Args args = tile_args(conv, input, pixel_begin, count, scratch);
+  GemmS8OutF32 tile = out;
+  tile.c = out.c + static_cast<size_t>(pixel_begin) * out.ldc;
+  if (out.residual) tile.residual = out.residual + static_cast<size_t>(pixel_begin) * out.ldr;
+  if (out.a_row_scale) tile.a_row_scale = out.a_row_scale + pixel_begin;
+  conv.kernels->f32out(args, tile, 0, count, 0, args.n);
+}
+
+}  // namespace act::kernels

@@ -1,0 +1,43 @@
+// INT8 NHWC convolution as tiled im2col + gemm_s8: each call computes a tile of output pixels,
+// gathering only that tile's patches into caller-provided scratch (1x1 stride-1 convolutions read
+// the input in place). The gemm_s8 epilogue does the rest: bias, per-channel requantization (or
+// dequantization), residual, ReLU.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "kernels/conv_s8/im2col_s8.h"
+#include "kernels/gemm_s8/gemm_s8.h"
+
+namespace act::kernels {
+
+struct ConvS8 {
+  Conv2dShape shape;
+  const GemmS8Kernels* kernels = nullptr;
+  /// OHWI weights [out_c x patch_size] packed by kernels->pack with the input zero point folded in.
+  const void* packed_w = nullptr;
+  int8_t input_zero_point = 0;  ///< also the padding value
+  /// True when the conv reads its input in place (1x1, stride 1, no padding).
+  bool direct() const {
+    return shape.kernel_h == 1 && shape.kernel_w == 1 && shape.stride == 1 && shape.pad == 0;
+  }
+};
+
+/// Output pixels per tile for this conv: a multiple of every variant's MR (12) that keeps the
+/// patch buffer near 256 KB (L2-resident while the weights stream past it).
+int conv_s8_tile_pixels(const Conv2dShape& s);
+/// Bytes of scratch conv_s8_* needs for tiles of `tile_pixels` pixels (0 when direct), including
+/// the kernels' read slack.
+size_t conv_s8_scratch_bytes(const Conv2dShape& s, int tile_pixels);
+
+/// Output pixels [pixel_begin, pixel_begin + count), s8 out. `out.c` and `out.residual` address
+/// the whole output / residual ([out_h * out_w x out_c]). The input must be followed by
+/// kGemmS8ReadSlack addressable bytes.
+void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
+                   int8_t* scratch);
+/// The same with f32 out (dequantized, + bias, residual, ReLU). `a_scale` is the input scale.
+void conv_s8_f32out(const ConvS8& conv, const int8_t* input, const GemmS8OutF32& out, int pixel_begin, int count,
+                    int8_t* scratch);
+
+}  // namespace act::kernels

@@ -1,0 +1,43 @@
+// Float <-> int8 conversions around the INT8 kernels: static (per tensor) quantization, dynamic
+// per-row (per-token) quantization of transformer activations, dequantization, and the range
+// reduction that calibration and dynamic quantization need. Raw pointers, no allocation, no threads.
+//
+// Affine int8: real = scale * (q - zero_point), q in [-128, 127], zero_point in [-128, 127].
+// Quantization rule (every variant gives these bits):
+//   v = x * inv_scale            (one float multiply; inv_scale = 1 / scale computed by the caller)
+//   v = v + float(zero_point)
+//   v = clamp(v, -128, 127)      (as floats; a NaN becomes -128)
+//   q = round_half_to_even(v)
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace act::kernels {
+
+struct QuantS8 {
+  float scale = 1.0f;      ///< > 0
+  int32_t zero_point = 0;  ///< in [-128, 127]
+};
+
+/// Asymmetric parameters that cover [min(lo, 0), max(hi, 0)] (0 is always exactly representable,
+/// so zero padding stays exact). A degenerate range gives scale 1, zero point 0. `lo`, `hi` finite.
+QuantS8 choose_quant_s8(float lo, float hi);
+
+/// y[i] = quantize(x[i]) by the rule above.
+void quantize_f32_s8(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y);
+
+/// y[i] = scale * (float(q[i]) - float(zero_point)).
+void dequantize_s8_f32(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y);
+
+/// Smallest and largest value of x[0..n) (n >= 1; NaNs are ignored, all-NaN gives +inf/-inf).
+void minmax_f32(size_t n, const float* x, float* lo, float* hi);
+
+/// Dynamic per-row quantization: for each of `rows` rows of `cols` values, the parameters
+/// choose_quant_s8(row min, row max) and the row quantized with them. row_scale[r] and
+/// row_zero_point[r] receive the parameters (what the gemm_s8 f32-out epilogue and per-row zero
+/// points take).
+void quantize_rows_dynamic_f32_s8(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                  float* row_scale, int32_t* row_zero_point);
+
+}  // namespace act::kernels

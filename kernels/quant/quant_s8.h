@@ -22,6 +22,9 @@ struct QuantS8 {
 
 /// Asymmetric parameters that cover [min(lo, 0), max(hi, 0)] (0 is always exactly representable,
 /// so zero padding stays exact). A degenerate range gives scale 1, zero point 0. `lo`, `hi` finite.
+/// The scale is always finite and at least FLT_MIN, so 1 / scale is finite too (a span wider than
+/// FLT_MAX is computed without overflowing; one so narrow that the inverse would overflow is
+/// widened to FLT_MIN).
 QuantS8 choose_quant_s8(float lo, float hi);
 
 /// y[i] = quantize(x[i]) by the rule above.

@@ -1,0 +1,47 @@
+// Channel max of int8 taps on AVX-512 BW (the kAvx512Vnni variant): 64 channels per zmm; the ragged
+// end uses masked loads and stores (masked-off bytes are neither read nor written).
+// Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
+#include "kernels/pool_s8/maxpool_s8_variants.h"
+
+#if defined(__x86_64__)
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"  // GCC 12 _mm512_undefined_*()
+#include <immintrin.h>
+#pragma GCC diagnostic pop
+
+// The same GCC 12 header idiom (`__m512 __Y = __Y;` as the pass-through of unmasked min/max,
+// extract, reduce) is also reported at the call sites it is inlined into, as -Wuninitialized.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+
+namespace act::kernels {
+
+namespace {
+
+void max_taps_s8_avx512vnni(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
+  for (int c = 0; c < channels; c += 64) {
+    const int left = channels - c;
+    const __mmask64 k = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
+    __m512i m = _mm512_maskz_loadu_epi8(k, taps[0] + c);
+    for (int t = 1; t < ntaps; ++t) m = _mm512_max_epi8(m, _mm512_maskz_loadu_epi8(k, taps[t] + c));
+    _mm512_mask_storeu_epi8(dst + c, k, m);
+  }
+}
+
+}  // namespace
+
+const MaxPoolS8Kernels* maxpool_s8_table_avx512vnni() {
+  static constexpr MaxPoolS8Kernels kTable = {Isa::kAvx512Vnni, "max_taps_s8_avx512vnni", max_taps_s8_avx512vnni};
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else  // not x86-64
+
+namespace act::kernels {
+const MaxPoolS8Kernels* maxpool_s8_table_avx512vnni() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

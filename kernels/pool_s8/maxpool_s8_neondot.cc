@@ -1,0 +1,48 @@
+// Channel max of int8 taps on AArch64 NEON (the kNeonDot variant): 16 channels per q register
+// (smax), then 8, then scalar.
+// Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
+#include "kernels/pool_s8/maxpool_s8_variants.h"
+
+#if defined(__aarch64__)
+
+#include <arm_neon.h>
+
+namespace act::kernels {
+
+namespace {
+
+void max_taps_s8_neondot(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
+  int c = 0;
+  for (; c + 16 <= channels; c += 16) {
+    int8x16_t m = vld1q_s8(taps[0] + c);
+    for (int t = 1; t < ntaps; ++t) m = vmaxq_s8(m, vld1q_s8(taps[t] + c));
+    vst1q_s8(dst + c, m);
+  }
+  for (; c + 8 <= channels; c += 8) {
+    int8x8_t m = vld1_s8(taps[0] + c);
+    for (int t = 1; t < ntaps; ++t) m = vmax_s8(m, vld1_s8(taps[t] + c));
+    vst1_s8(dst + c, m);
+  }
+  for (; c < channels; ++c) {
+    int8_t m = taps[0][c];
+    for (int t = 1; t < ntaps; ++t) m = taps[t][c] > m ? taps[t][c] : m;
+    dst[c] = m;
+  }
+}
+
+}  // namespace
+
+const MaxPoolS8Kernels* maxpool_s8_table_neondot() {
+  static constexpr MaxPoolS8Kernels kTable = {Isa::kNeonDot, "max_taps_s8_neondot", max_taps_s8_neondot};
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else  // not AArch64
+
+namespace act::kernels {
+const MaxPoolS8Kernels* maxpool_s8_table_neondot() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

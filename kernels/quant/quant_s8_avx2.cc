@@ -1,0 +1,123 @@
+// quant on AVX2: 32 floats per step (4 ymm), packed to bytes with signed saturation. Ragged tails go
+// through a 32-element stack buffer and the same vector code, so there is one code path per op.
+// Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
+#include "kernels/quant/quant_s8_variants.h"
+
+#if defined(__x86_64__)
+
+#include <immintrin.h>
+
+#include <cstring>
+
+namespace act::kernels {
+
+namespace {
+
+constexpr size_t kStep = 32;
+
+// The quantization rule on 8 floats: x * inv + z, clamped (NaN -> lo: maxps returns its second
+// operand when either is NaN), rounded half to even (cvtps2dq in the default MXCSR mode).
+__m256i quantize8(const float* x, __m256 inv, __m256 z, __m256 lo, __m256 hi) {
+  __m256 v = _mm256_mul_ps(_mm256_loadu_ps(x), inv);
+  v = _mm256_add_ps(v, z);
+  v = _mm256_max_ps(v, lo);
+  v = _mm256_min_ps(v, hi);
+  return _mm256_cvtps_epi32(v);
+}
+
+void quantize32(const float* x, __m256 inv, __m256 z, __m256 lo, __m256 hi, int8_t* y) {
+  const __m256i q0 = quantize8(x, inv, z, lo, hi), q1 = quantize8(x + 8, inv, z, lo, hi);
+  const __m256i q2 = quantize8(x + 16, inv, z, lo, hi), q3 = quantize8(x + 24, inv, z, lo, hi);
+  // packs works within 128-bit lanes: bytes come out as dwords [0 2 4 6 1 3 5 7]; permute back.
+  const __m256i b = _mm256_packs_epi16(_mm256_packs_epi32(q0, q1), _mm256_packs_epi32(q2, q3));
+  const __m256i order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(y), _mm256_permutevar8x32_epi32(b, order));
+}
+
+void quantize_f32_s8_avx2(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
+  const __m256 inv = _mm256_set1_ps(inv_scale), z = _mm256_set1_ps(static_cast<float>(zero_point));
+  const __m256 lo = _mm256_set1_ps(-128.0f), hi = _mm256_set1_ps(127.0f);
+  size_t i = 0;
+  for (; i + kStep <= n; i += kStep) quantize32(x + i, inv, z, lo, hi, y + i);
+  if (i < n) {
+    float xt[kStep] = {};
+    int8_t yt[kStep];
+    std::memcpy(xt, x + i, (n - i) * sizeof(float));
+    quantize32(xt, inv, z, lo, hi, yt);
+    std::memcpy(y + i, yt, n - i);
+  }
+}
+
+void dequantize16(const int8_t* q, __m256 z, __m256 scale, float* y) {
+  const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(q));
+  const __m256 f0 = _mm256_cvtepi32_ps(_mm256_cvtepi8_epi32(b));
+  const __m256 f1 = _mm256_cvtepi32_ps(_mm256_cvtepi8_epi32(_mm_srli_si128(b, 8)));
+  _mm256_storeu_ps(y, _mm256_mul_ps(_mm256_sub_ps(f0, z), scale));
+  _mm256_storeu_ps(y + 8, _mm256_mul_ps(_mm256_sub_ps(f1, z), scale));
+}
+
+void dequantize_s8_f32_avx2(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
+  const __m256 z = _mm256_set1_ps(static_cast<float>(zero_point)), s = _mm256_set1_ps(scale);
+  size_t i = 0;
+  for (; i + 16 <= n; i += 16) dequantize16(q + i, z, s, y + i);
+  if (i < n) {
+    int8_t qt[16] = {};
+    float yt[16];
+    std::memcpy(qt, q + i, n - i);
+    dequantize16(qt, z, s, yt);
+    std::memcpy(y + i, yt, (n - i) * sizeof(float));
+  }
+}
+
+// minps(x, acc) returns acc when x is NaN, so NaNs are skipped like the reference's compare; the
+// tail is padded with NaN for the same reason.
+void minmax_f32_avx2(size_t n, const float* x, float* lo, float* hi) {
+  __m256 mn0 = _mm256_set1_ps(__builtin_inff()), mn1 = mn0;
+  __m256 mx0 = _mm256_set1_ps(-__builtin_inff()), mx1 = mx0;
+  size_t i = 0;
+  for (; i + 16 <= n; i += 16) {
+    const __m256 a = _mm256_loadu_ps(x + i), b = _mm256_loadu_ps(x + i + 8);
+    mn0 = _mm256_min_ps(a, mn0);
+    mx0 = _mm256_max_ps(a, mx0);
+    mn1 = _mm256_min_ps(b, mn1);
+    mx1 = _mm256_max_ps(b, mx1);
+  }
+  if (i < n) {
+    float t[16];
+    for (float& v : t) v = __builtin_nanf("");
+    std::memcpy(t, x + i, (n - i) * sizeof(float));
+    const __m256 a = _mm256_loadu_ps(t), b = _mm256_loadu_ps(t + 8);
+    mn0 = _mm256_min_ps(a, mn0);
+    mx0 = _mm256_max_ps(a, mx0);
+    mn1 = _mm256_min_ps(b, mn1);
+    mx1 = _mm256_max_ps(b, mx1);
+  }
+  __m256 mn = _mm256_min_ps(mn0, mn1), mx = _mm256_max_ps(mx0, mx1);  // no NaN left in accumulators
+  __m128 m4 = _mm_min_ps(_mm256_castps256_ps128(mn), _mm256_extractf128_ps(mn, 1));
+  __m128 x4 = _mm_max_ps(_mm256_castps256_ps128(mx), _mm256_extractf128_ps(mx, 1));
+  m4 = _mm_min_ps(m4, _mm_movehl_ps(m4, m4));
+  x4 = _mm_max_ps(x4, _mm_movehl_ps(x4, x4));
+  m4 = _mm_min_ss(m4, _mm_shuffle_ps(m4, m4, 1));
+  x4 = _mm_max_ss(x4, _mm_shuffle_ps(x4, x4, 1));
+  *lo = _mm_cvtss_f32(m4);
+  *hi = _mm_cvtss_f32(x4);
+}
+
+}  // namespace
+
+const QuantS8Kernels* quant_s8_table_avx2() {
+  static constexpr QuantS8Kernels kTable = {Isa::kAvx2,         "quantize_f32_s8_avx2", "dequantize_s8_f32_avx2",
+                                            "minmax_f32_avx2",  quantize_f32_s8_avx2,   dequantize_s8_f32_avx2,
+                                            minmax_f32_avx2};
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else  // not x86-64
+
+namespace act::kernels {
+const QuantS8Kernels* quant_s8_table_avx2() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

@@ -1,0 +1,98 @@
+// quant on AVX-512 (F/BW; the kAvx512Vnni variant): 16 floats per vector, narrowed with
+// vpmovsdb; ragged tails use masked loads and stores (masked-off lanes never fault).
+// Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
+#include "kernels/quant/quant_s8_variants.h"
+
+#if defined(__x86_64__)
+
+// GCC 12's _mm512_undefined_*() trip -Wmaybe-uninitialized at -O3 (see gemm_s8_avx512vnni.cc).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+#pragma GCC diagnostic pop
+
+// The same GCC 12 header idiom (`__m512 __Y = __Y;` as the pass-through of unmasked min/max,
+// extract, reduce) is also reported at the call sites it is inlined into, as -Wuninitialized.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+
+namespace act::kernels {
+
+namespace {
+
+__mmask16 tail_mask(size_t left) { return left >= 16 ? __mmask16(0xffff) : __mmask16((1u << left) - 1u); }
+
+// The rule on 16 floats (maxps(v, lo) maps NaN to lo; cvtps2dq rounds half to even).
+__m128i quantize16(__m512 x, __m512 inv, __m512 z, __m512 lo, __m512 hi) {
+  __m512 v = _mm512_mul_ps(x, inv);
+  v = _mm512_add_ps(v, z);
+  v = _mm512_max_ps(v, lo);
+  v = _mm512_min_ps(v, hi);
+  return _mm512_cvtsepi32_epi8(_mm512_cvtps_epi32(v));
+}
+
+void quantize_f32_s8_avx512vnni(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
+  const __m512 inv = _mm512_set1_ps(inv_scale), z = _mm512_set1_ps(static_cast<float>(zero_point));
+  const __m512 lo = _mm512_set1_ps(-128.0f), hi = _mm512_set1_ps(127.0f);
+  size_t i = 0;
+  for (; i + 32 <= n; i += 32) {
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(y + i), quantize16(_mm512_loadu_ps(x + i), inv, z, lo, hi));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(y + i + 16), quantize16(_mm512_loadu_ps(x + i + 16), inv, z, lo, hi));
+  }
+  for (; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    _mm_mask_storeu_epi8(y + i, m, quantize16(_mm512_maskz_loadu_ps(m, x + i), inv, z, lo, hi));
+  }
+}
+
+void dequantize_s8_f32_avx512vnni(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
+  const __m512 z = _mm512_set1_ps(static_cast<float>(zero_point)), s = _mm512_set1_ps(scale);
+  for (size_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 f = _mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_maskz_loadu_epi8(m, q + i)));
+    _mm512_mask_storeu_ps(y + i, m, _mm512_mul_ps(_mm512_sub_ps(f, z), s));
+  }
+}
+
+// minps(x, acc) returns acc when x is NaN: NaNs are skipped like the reference's compare. Tail
+// lanes keep the accumulator (mask_min).
+void minmax_f32_avx512vnni(size_t n, const float* x, float* lo, float* hi) {
+  __m512 mn0 = _mm512_set1_ps(__builtin_inff()), mn1 = mn0;
+  __m512 mx0 = _mm512_set1_ps(-__builtin_inff()), mx1 = mx0;
+  size_t i = 0;
+  for (; i + 32 <= n; i += 32) {
+    const __m512 a = _mm512_loadu_ps(x + i), b = _mm512_loadu_ps(x + i + 16);
+    mn0 = _mm512_min_ps(a, mn0);
+    mx0 = _mm512_max_ps(a, mx0);
+    mn1 = _mm512_min_ps(b, mn1);
+    mx1 = _mm512_max_ps(b, mx1);
+  }
+  for (; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 a = _mm512_maskz_loadu_ps(m, x + i);
+    mn0 = _mm512_mask_min_ps(mn0, m, a, mn0);
+    mx0 = _mm512_mask_max_ps(mx0, m, a, mx0);
+  }
+  *lo = _mm512_reduce_min_ps(_mm512_min_ps(mn0, mn1));  // no NaN left in the accumulators
+  *hi = _mm512_reduce_max_ps(_mm512_max_ps(mx0, mx1));
+}
+
+}  // namespace
+
+const QuantS8Kernels* quant_s8_table_avx512vnni() {
+  static constexpr QuantS8Kernels kTable = {
+      Isa::kAvx512Vnni,           "quantize_f32_s8_avx512vnni", "dequantize_s8_f32_avx512vnni",
+      "minmax_f32_avx512vnni",    quantize_f32_s8_avx512vnni,   dequantize_s8_f32_avx512vnni,
+      minmax_f32_avx512vnni};
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else  // not x86-64
+
+namespace act::kernels {
+const QuantS8Kernels* quant_s8_table_avx512vnni() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

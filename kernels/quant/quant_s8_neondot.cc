@@ -1,0 +1,110 @@
+// quant on AArch64 NEON (the kNeonDot variant; nothing here needs dotprod). 16 floats per step:
+// fmaxnm/fminnm clamp (NaN -> -128, like the reference), fcvtns rounds half to even, sqxtn narrows.
+// Ragged tails go through a stack buffer and the same vector code.
+// Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
+#include "kernels/quant/quant_s8_variants.h"
+
+#if defined(__aarch64__)
+
+#include <arm_neon.h>
+
+#include <cstring>
+
+namespace act::kernels {
+
+namespace {
+
+int32x4_t quantize4(const float* x, float32x4_t inv, float32x4_t z, float32x4_t lo, float32x4_t hi) {
+  float32x4_t v = vmulq_f32(vld1q_f32(x), inv);
+  v = vaddq_f32(v, z);
+  v = vmaxnmq_f32(v, lo);  // fmaxnm returns the number when the other operand is a NaN
+  v = vminnmq_f32(v, hi);
+  return vcvtnq_s32_f32(v);
+}
+
+void quantize16(const float* x, float32x4_t inv, float32x4_t z, float32x4_t lo, float32x4_t hi, int8_t* y) {
+  const int16x8_t a = vcombine_s16(vqmovn_s32(quantize4(x, inv, z, lo, hi)), vqmovn_s32(quantize4(x + 4, inv, z, lo, hi)));
+  const int16x8_t b =
+      vcombine_s16(vqmovn_s32(quantize4(x + 8, inv, z, lo, hi)), vqmovn_s32(quantize4(x + 12, inv, z, lo, hi)));
+  vst1q_s8(y, vcombine_s8(vqmovn_s16(a), vqmovn_s16(b)));
+}
+
+void quantize_f32_s8_neondot(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
+  const float32x4_t inv = vdupq_n_f32(inv_scale), z = vdupq_n_f32(static_cast<float>(zero_point));
+  const float32x4_t lo = vdupq_n_f32(-128.0f), hi = vdupq_n_f32(127.0f);
+  size_t i = 0;
+  for (; i + 16 <= n; i += 16) quantize16(x + i, inv, z, lo, hi, y + i);
+  if (i < n) {
+    float xt[16] = {};
+    int8_t yt[16];
+    std::memcpy(xt, x + i, (n - i) * sizeof(float));
+    quantize16(xt, inv, z, lo, hi, yt);
+    std::memcpy(y + i, yt, n - i);
+  }
+}
+
+void dequantize16(const int8_t* q, float32x4_t z, float32x4_t s, float* y) {
+  const int8x16_t b = vld1q_s8(q);
+  const int16x8_t h0 = vmovl_s8(vget_low_s8(b)), h1 = vmovl_s8(vget_high_s8(b));
+  const int32x4_t w[4] = {vmovl_s16(vget_low_s16(h0)), vmovl_s16(vget_high_s16(h0)), vmovl_s16(vget_low_s16(h1)),
+                          vmovl_s16(vget_high_s16(h1))};
+  for (int j = 0; j < 4; ++j) vst1q_f32(y + 4 * j, vmulq_f32(vsubq_f32(vcvtq_f32_s32(w[j]), z), s));
+}
+
+void dequantize_s8_f32_neondot(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
+  const float32x4_t z = vdupq_n_f32(static_cast<float>(zero_point)), s = vdupq_n_f32(scale);
+  size_t i = 0;
+  for (; i + 16 <= n; i += 16) dequantize16(q + i, z, s, y + i);
+  if (i < n) {
+    int8_t qt[16] = {};
+    float yt[16];
+    std::memcpy(qt, q + i, n - i);
+    dequantize16(qt, z, s, yt);
+    std::memcpy(y + i, yt, (n - i) * sizeof(float));
+  }
+}
+
+// fminnm / fmaxnm ignore a NaN operand, as the reference's compare does; the tail is NaN-padded.
+void minmax_f32_neondot(size_t n, const float* x, float* lo, float* hi) {
+  float32x4_t mn0 = vdupq_n_f32(__builtin_inff()), mn1 = mn0;
+  float32x4_t mx0 = vdupq_n_f32(-__builtin_inff()), mx1 = mx0;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const float32x4_t a = vld1q_f32(x + i), b = vld1q_f32(x + i + 4);
+    mn0 = vminnmq_f32(mn0, a);
+    mx0 = vmaxnmq_f32(mx0, a);
+    mn1 = vminnmq_f32(mn1, b);
+    mx1 = vmaxnmq_f32(mx1, b);
+  }
+  if (i < n) {
+    float t[8];
+    for (float& v : t) v = __builtin_nanf("");
+    std::memcpy(t, x + i, (n - i) * sizeof(float));
+    const float32x4_t a = vld1q_f32(t), b = vld1q_f32(t + 4);
+    mn0 = vminnmq_f32(mn0, a);
+    mx0 = vmaxnmq_f32(mx0, a);
+    mn1 = vminnmq_f32(mn1, b);
+    mx1 = vmaxnmq_f32(mx1, b);
+  }
+  *lo = vminnmvq_f32(vminnmq_f32(mn0, mn1));
+  *hi = vmaxnmvq_f32(vmaxnmq_f32(mx0, mx1));
+}
+
+}  // namespace
+
+const QuantS8Kernels* quant_s8_table_neondot() {
+  static constexpr QuantS8Kernels kTable = {Isa::kNeonDot,         "quantize_f32_s8_neondot", "dequantize_s8_f32_neondot",
+                                            "minmax_f32_neondot",  quantize_f32_s8_neondot,   dequantize_s8_f32_neondot,
+                                            minmax_f32_neondot};
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else  // not AArch64
+
+namespace act::kernels {
+const QuantS8Kernels* quant_s8_table_neondot() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

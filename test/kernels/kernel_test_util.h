@@ -1,0 +1,59 @@
+// Small helpers shared by the kernel tests.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "kernels/common/isa.h"
+
+namespace act::kernels::test {
+
+/// Distance between two floats in units in the last place (0 when equal, +0 and -0 included); a
+/// large value when exactly one is NaN, 0 when both are.
+inline int64_t ulp_distance(float a, float b) {
+  if (std::isnan(a) || std::isnan(b)) return std::isnan(a) && std::isnan(b) ? 0 : INT64_MAX;
+  if (a == b) return 0;
+  int32_t ia, ib;
+  std::memcpy(&ia, &a, 4);
+  std::memcpy(&ib, &b, 4);
+  // Map the sign-magnitude bit patterns onto a monotonic integer line.
+  const int64_t la = ia < 0 ? -static_cast<int64_t>(ia & 0x7fffffff) : ia;
+  const int64_t lb = ib < 0 ? -static_cast<int64_t>(ib & 0x7fffffff) : ib;
+  return la > lb ? la - lb : lb - la;
+}
+
+/// The variants a family's tests run: ACT_ISA's alone when it is set (none when the family cannot
+/// honour it: the gemm_s8 ActIsa test reports the bad value), else every available one.
+inline std::vector<Isa> isas_under_test(const std::vector<Isa>& available, IsaMask built) {
+  const char* forced = std::getenv("ACT_ISA");
+  if (forced == nullptr || forced[0] == '\0') return available;
+  const IsaChoice c = choose_isa_from_env(built);
+  if (!c.ok()) return {};
+  return {c.isa};
+}
+
+/// ACT_TEST_REQUIRE_ISAS (comma-separated, set by CI to the variants its machine must run); an
+/// unknown name is returned as nullopt so that the caller fails on it.
+inline std::vector<std::optional<Isa>> required_isas() {
+  std::vector<std::optional<Isa>> out;
+  const char* env = std::getenv("ACT_TEST_REQUIRE_ISAS");
+  if (env == nullptr) return out;
+  std::string name;
+  for (const char* p = env;; ++p) {
+    if (*p == ',' || *p == '\0') {
+      if (!name.empty()) out.push_back(parse_isa(name));
+      name.clear();
+      if (*p == '\0') break;
+    } else {
+      name += *p;
+    }
+  }
+  return out;
+}
+
+}  // namespace act::kernels::test

@@ -51,5 +51,10 @@ void softmax_rows_f32(int rows, int cols, float* x, size_t ldx);
 void relu_f32(size_t n, float* x);
 /// Exact (erf) GELU, as torch.nn.functional.gelu with approximate="none".
 void gelu_f32(size_t n, float* x);
+/// y[i] = a[i] + b[i]; y may be a or b.
+void add_f32(size_t n, const float* a, const float* b, float* y);
+
+// LayerNorm, softmax, ReLU, GELU and add run the SIMD variant chosen once per process
+// (elementwise_f32.h states each variant's agreement with the scalar reference).
 
 }  // namespace act::kernels

@@ -1,0 +1,38 @@
+// The float element-wise kernels on AVX-512 (F/BW; the kAvx512Vnni variant): elementwise_f32_xsimd.inc instantiated for xsimd's
+// xsimd::avx512f. Rules for ISA files (kernels/gemm_s8/README.md): internal linkage only.
+#include "kernels/fp32/elementwise_f32.h"
+
+#if defined(__x86_64__)
+
+// GCC 12's AVX-512 headers initialise their pass-through operands with themselves
+// (`__m512 __Y = __Y;`), reported as (maybe-)uninitialized wherever xsimd's wrappers inline them.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <xsimd/xsimd.hpp>
+
+namespace act::kernels {
+
+#include "kernels/fp32/elementwise_f32_xsimd.inc"
+
+namespace {
+using Arch = xsimd::avx512f;
+}  // namespace
+
+const ElementwiseF32Kernels* elementwise_f32_table_avx512vnni() {
+  static constexpr ElementwiseF32Kernels kTable = {
+      Isa::kAvx512Vnni,
+      "layernorm_rows_f32_avx512vnni", "softmax_rows_f32_avx512vnni", "relu_f32_avx512vnni", "gelu_f32_avx512vnni", "add_f32_avx512vnni",
+      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
+  };
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else
+
+namespace act::kernels {
+const ElementwiseF32Kernels* elementwise_f32_table_avx512vnni() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

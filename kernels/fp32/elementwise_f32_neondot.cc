@@ -1,0 +1,37 @@
+// The float element-wise kernels on AArch64 NEON (the kNeonDot variant): elementwise_f32_xsimd.inc instantiated for xsimd's
+// xsimd::neon64. Rules for ISA files (kernels/gemm_s8/README.md): internal linkage only.
+// (xsimd 8.1's NEON wrappers, e.g. xsimd::kernel::wrap::vreinterpretq_*, are plain inline functions
+// and so weak symbols here; harmless: no other file includes xsimd on AArch64, and they use only
+// baseline NEON, never the dotprod this file is compiled for.)
+#include "kernels/fp32/elementwise_f32.h"
+
+#if defined(__aarch64__)
+
+#include <xsimd/xsimd.hpp>
+
+namespace act::kernels {
+
+#include "kernels/fp32/elementwise_f32_xsimd.inc"
+
+namespace {
+using Arch = xsimd::neon64;
+}  // namespace
+
+const ElementwiseF32Kernels* elementwise_f32_table_neondot() {
+  static constexpr ElementwiseF32Kernels kTable = {
+      Isa::kNeonDot,
+      "layernorm_rows_f32_neondot", "softmax_rows_f32_neondot", "relu_f32_neondot", "gelu_f32_neondot", "add_f32_neondot",
+      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
+  };
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else
+
+namespace act::kernels {
+const ElementwiseF32Kernels* elementwise_f32_table_neondot() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

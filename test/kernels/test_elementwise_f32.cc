@@ -1,0 +1,164 @@
+// The float element-wise variants (xsimd per ISA) against the scalar reference, with the bounds
+// stated in kernels/fp32/elementwise_f32.h: relu and add bit-exact; layernorm, softmax and GELU
+// within a stated tolerance. Sizes cover every vector width and ragged tail, rows are strided.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "kernels/fp32/elementwise_f32.h"
+#include "kernels/fp32/fp32_kernels.h"
+#include "test/kernels/kernel_test_util.h"
+
+namespace act::kernels {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+std::vector<float> random_floats(size_t n, std::mt19937& rng, float lo, float hi) {
+  std::uniform_real_distribution<float> d(lo, hi);
+  std::vector<float> v(n);
+  for (auto& x : v) x = d(rng);
+  return v;
+}
+
+std::vector<int> col_sizes() {
+  std::vector<int> s;
+  for (int n = 1; n <= 40; ++n) s.push_back(n);
+  for (int n : {63, 64, 65, 302, 512, 515}) s.push_back(n);
+  return s;
+}
+
+class ElementwiseF32Variant : public ::testing::TestWithParam<Isa> {
+ protected:
+  const ElementwiseF32Kernels& v() const { return *elementwise_f32_kernels(GetParam()); }
+  const ElementwiseF32Kernels& ref() const { return *elementwise_f32_table_ref(); }
+};
+
+TEST_P(ElementwiseF32Variant, ReluAndAddAreBitExact) {
+  std::mt19937 rng(41);
+  for (int n : col_sizes()) {
+    std::vector<float> x = random_floats(n + 3, rng, -2.0f, 2.0f);
+    x[0] = -0.0f;
+    if (n > 2) x[2] = kNaN;
+    std::vector<float> a = x, b = x;
+    ref().relu(n, a.data());
+    v().relu(n, b.data());
+    ASSERT_EQ(std::memcmp(a.data(), b.data(), b.size() * 4), 0) << v().relu_name << " n=" << n;
+    const std::vector<float> y = random_floats(n, rng, -1e3f, 1e3f);
+    std::vector<float> sa(n + 2, 7.0f), sb(n + 2, 7.0f);
+    ref().add(n, x.data(), y.data(), sa.data());
+    v().add(n, x.data(), y.data(), sb.data());
+    ASSERT_EQ(std::memcmp(sa.data(), sb.data(), sb.size() * 4), 0) << v().add_name << " n=" << n;
+  }
+  // In place.
+  std::vector<float> p = random_floats(37, rng, -1.0f, 1.0f), q = p;
+  ref().add(37, p.data(), p.data(), p.data());
+  v().add(37, q.data(), q.data(), q.data());
+  EXPECT_EQ(p, q);
+}
+
+TEST_P(ElementwiseF32Variant, LayerNormWithinTolerance) {
+  std::mt19937 rng(42);
+  for (int cols : col_sizes()) {
+    const int rows = 3;
+    const size_t ldx = cols + 5, ldy = cols + 2;
+    // Rows with a large common offset test the two-pass variance.
+    for (float offset : {0.0f, 50.0f}) {
+      std::vector<float> x = random_floats(rows * ldx, rng, -3.0f + offset, 5.0f + offset);
+      const std::vector<float> g = random_floats(cols, rng, -1.0f, 1.0f), b = random_floats(cols, rng, -1.0f, 1.0f);
+      std::vector<float> ya(rows * ldy, 9.0f), yb(rows * ldy, 9.0f);
+      ref().layernorm_rows(rows, cols, x.data(), ldx, g.data(), b.data(), 1e-5f, ya.data(), ldy);
+      v().layernorm_rows(rows, cols, x.data(), ldx, g.data(), b.data(), 1e-5f, yb.data(), ldy);
+      for (int r = 0; r < rows; ++r) {
+        // Rounding x - mean in float costs ulp(mean) / std in y: the bound scales with |mean| / std.
+        double mean = 0, var = 0;
+        for (int c = 0; c < cols; ++c) mean += x[r * ldx + c];
+        mean /= cols;
+        for (int c = 0; c < cols; ++c) var += (x[r * ldx + c] - mean) * (x[r * ldx + c] - mean);
+        const double cond = 1.0 + std::fabs(mean) / std::sqrt(var / cols + 1e-5);
+        for (int c = 0; c < cols; ++c) {
+          const float want = ya[r * ldy + c], got = yb[r * ldy + c];
+          ASSERT_LE(std::fabs(want - got), 1e-6 * cond * (std::fabs(want) + 1.0))
+              << v().layernorm_name << " cols=" << cols << " offset " << offset << " row " << r << " col " << c;
+        }
+      }
+      for (int r = 0; r < rows; ++r) {
+        for (size_t c = cols; c < ldy; ++c) ASSERT_EQ(yb[r * ldy + c], 9.0f) << "wrote into the row gap";
+      }
+    }
+  }
+}
+
+TEST_P(ElementwiseF32Variant, SoftmaxWithinTolerance) {
+  std::mt19937 rng(43);
+  for (int cols : col_sizes()) {
+    const int rows = 4;
+    const size_t ld = cols + 3;
+    std::vector<float> x = random_floats(rows * ld, rng, -12.0f, 12.0f);
+    x[0] = 80.0f;  // large logits must not overflow
+    x[ld] = -80.0f;
+    std::vector<float> a = x, b = x;
+    ref().softmax_rows(rows, cols, a.data(), ld);
+    v().softmax_rows(rows, cols, b.data(), ld);
+    for (size_t i = 0; i < a.size(); ++i) {
+      ASSERT_LE(std::fabs(a[i] - b[i]), std::max(2e-6f * a[i], 1e-9f))
+          << v().softmax_name << " cols=" << cols << " at " << i << ": " << a[i] << " vs " << b[i];
+    }
+  }
+}
+
+TEST_P(ElementwiseF32Variant, GeluWithinTolerance) {
+  std::mt19937 rng(44);
+  for (int n : col_sizes()) {
+    std::vector<float> x = random_floats(n, rng, -6.0f, 6.0f);
+    if (n > 3) {
+      x[1] = 0.0f;
+      x[2] = -10.0f;
+      x[3] = 10.0f;
+    }
+    std::vector<float> a = x, b = x;
+    ref().gelu(n, a.data());
+    v().gelu(n, b.data());
+    for (int i = 0; i < n; ++i) {
+      ASSERT_TRUE(test::ulp_distance(a[i], b[i]) <= 4 || std::fabs(a[i] - b[i]) <= 1e-7f)
+          << v().gelu_name << " x=" << x[i] << ": " << a[i] << " vs " << b[i];
+    }
+  }
+}
+
+std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
+
+INSTANTIATE_TEST_SUITE_P(Available, ElementwiseF32Variant,
+                         ::testing::ValuesIn(test::isas_under_test(elementwise_f32_available_isas(),
+                                                                   elementwise_f32_built_isas())),
+                         isa_param_name);
+GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(ElementwiseF32Variant);
+
+TEST(ElementwiseF32Dispatch, RequiredVariantsAreTheirOwnAndActiveIsTheChoice) {
+  const ElementwiseF32Kernels& ref = *elementwise_f32_table_ref();
+  for (const std::optional<Isa>& isa : test::required_isas()) {
+    ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA";
+    const ElementwiseF32Kernels* v = elementwise_f32_kernels(*isa);
+    ASSERT_NE(v, nullptr) << isa_name(*isa) << " element-wise kernels are required but not available";
+    EXPECT_EQ(v->isa, *isa);
+    EXPECT_NE(v->layernorm_rows, ref.layernorm_rows);
+    EXPECT_NE(v->softmax_rows, ref.softmax_rows);
+    EXPECT_NE(v->gelu, ref.gelu);
+  }
+  const IsaChoice choice = choose_isa_from_env(elementwise_f32_built_isas());
+  if (choice.ok()) {
+    EXPECT_EQ(elementwise_f32_active().isa, choice.isa);
+  }
+  std::vector<float> a = {1.0f, 2.0f, 3.0f}, b = {0.5f, -2.0f, 4.0f}, y(3);
+  add_f32(3, a.data(), b.data(), y.data());
+  EXPECT_EQ(y, (std::vector<float>{1.5f, 0.0f, 7.0f}));
+}
+
+}  // namespace
+}  // namespace act::kernels

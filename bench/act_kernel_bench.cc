@@ -1,9 +1,19 @@
-// act_kernel_bench: Google Benchmark microbenchmarks of the INT8 kernels, single thread.
+// act_kernel_bench: Google Benchmark microbenchmarks of the kernels over ACT's real shapes.
 //   - peak/<instruction>: register-only loops of the multiply-accumulate instruction of each ISA,
 //     this core's measured peak in GMAC/s;
-//   - gemm_s8/<isa>/<shape>: the GEMM over ACT's real shapes (bench/shapes/act_gemm_s8.txt, or the
-//     file named by ACT_BENCH_SHAPES), counters GMAC/s (M*N*K per second, 1 MAC = 2 ops) and
-//     pct_peak (against that ISA's sustained probe rate, measured once at start-up).
+//   - gemm_s8/<isa>/<shape>/threads:T: the GEMM over ACT's shapes (bench/shapes/act_gemm_s8.txt, or
+//     the file named by ACT_BENCH_SHAPES);
+//   - conv_s8/<isa>/<HxW>/<layer>/threads:T: every distinct ResNet18 convolution of a 480x640 and a
+//     360x640 camera through conv_s8_s8out (tiled im2col + gemm_s8, ReLU fused), shapes derived
+//     from the image size;
+//   - attention_f32/<isa>/<tokens>/threads:T: 8 heads of QK^T (gemm_f32_nt), softmax, PV
+//     (gemm_f32_nn), head dim 64, at 302 and 242 tokens;
+//   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
+//     LayerNorm, softmax (bytes/s).
+// Counters: GMAC/s (M*N*K per second, 1 MAC = 2 ops), pct_peak (against that ISA's sustained
+// int8 probe rate, measured once at start-up; int8 kernels only) and, for T > 1, speedup_vs_1t
+// (the same benchmark's best single-thread time / this one's). Threads split the output into tiles
+// over a persistent pool (graph/thread_pool.h); the kernels themselves never start threads.
 // Wall-clock time throughout. On a shared machine use --benchmark_repetitions=N and read the "max"
 // aggregate of GMAC/s (the "min" of time): the least disturbed repetition.
 // Every variant the CPU can run is benchmarked; --benchmark_filter=avx512vnni picks one. The
@@ -24,7 +34,14 @@
 #include <vector>
 
 #include "bench/peak_probe.h"
+#include "graph/thread_pool.h"
+#include "kernels/conv_s8/conv_s8.h"
+#include "kernels/fp32/elementwise_f32.h"
+#include "kernels/fp32/fp32_kernels.h"
+#include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/pool_s8/maxpool_s8_variants.h"
+#include "kernels/quant/quant_s8_variants.h"
 
 namespace act::bench {
 namespace {
@@ -113,7 +130,70 @@ struct Aligned {
   void operator()(void* p) const { std::free(p); }
 };
 
-void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double peak_gmacs) {
+// One persistent pool per thread count, shared by every benchmark.
+ThreadPool& pool(int threads) {
+  static std::map<int, std::unique_ptr<ThreadPool>> pools;
+  auto& p = pools[threads];
+  if (!p) p = std::make_unique<ThreadPool>(threads);
+  return *p;
+}
+
+// Best single-thread seconds per iteration of each benchmark (keyed without the thread count), for
+// the speedup counter of the multi-thread runs, which are registered after the single-thread one.
+std::map<std::string, double>& single_thread_seconds() {
+  static std::map<std::string, double> m;
+  return m;
+}
+
+// Times the benchmark loop, sets GMAC/s (and pct_peak when peak_gmacs > 0), and records or compares
+// the single-thread time.
+template <class Body>
+void run_timed(benchmark::State& state, const std::string& key, int threads, double macs_per_iter, double peak_gmacs,
+               Body body) {
+  double seconds = 0.0;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    body();
+    benchmark::ClobberMemory();
+    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  const double iters = static_cast<double>(state.iterations());
+  const double macs = macs_per_iter * iters;
+  if (macs > 0) {
+    state.counters["GMAC/s"] = benchmark::Counter(macs * 1e-9, benchmark::Counter::kIsRate);
+    if (peak_gmacs > 0) {
+      state.counters["pct_peak"] = benchmark::Counter(macs * 1e-9 / peak_gmacs * 100.0, benchmark::Counter::kIsRate);
+    }
+  }
+  const double per_iter = seconds / iters;
+  auto& t1 = single_thread_seconds();
+  if (threads == 1) {
+    if (t1.count(key) == 0 || per_iter < t1[key]) t1[key] = per_iter;
+  } else if (t1.count(key) != 0) {
+    state.counters["speedup_vs_1t"] = t1[key] / per_iter;
+  }
+}
+
+// Splits [0, m) x [0, n) into tiles for `threads` threads: rows in multiples of mr when there are
+// enough of them for >= 5 tiles per thread (XNNPACK's rule), else columns in multiples of nr.
+struct Tiling {
+  int tile_m, tile_n, tiles_m, tiles_n;
+  size_t count() const { return static_cast<size_t>(tiles_m) * tiles_n; }
+};
+Tiling tiling(int m, int n, int mr, int nr, int threads) {
+  const int want = 5 * threads;
+  if (threads == 1) return {m, n, 1, 1};
+  if (m >= want * mr) {
+    const int tm = (m / want + mr - 1) / mr * mr;
+    return {tm, n, (m + tm - 1) / tm, 1};
+  }
+  const int tn = std::max(nr, (n / want + nr - 1) / nr * nr);
+  const int tm = m >= 2 * mr * 8 ? (m / 2 + mr - 1) / mr * mr : m;  // few columns: split rows in two too
+  return {tm, tn, (m + tm - 1) / tm, (n + tn - 1) / tn};
+}
+
+void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double peak_gmacs, int threads,
+             std::string key) {
   std::mt19937 rng(42);
   std::uniform_int_distribution<int> byte(-128, 127), weight(-127, 127);
   const size_t lda = static_cast<size_t>(s.k);
@@ -156,21 +236,204 @@ void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double pe
     o8.scale = scale.data();
     o8.qmin = 0;  // ReLU, as most ResNet convolutions
   }
-  for (auto _ : state) {
-    if (s.f32_out) {
-      v->f32out(g, of, 0, s.m, 0, s.n);
-    } else {
-      v->s8out(g, o8, 0, s.m, 0, s.n);
-    }
-    benchmark::ClobberMemory();
-  }
-  const double macs = static_cast<double>(s.macs()) * static_cast<double>(state.iterations());
-  state.counters["GMAC/s"] = benchmark::Counter(macs * 1e-9, benchmark::Counter::kIsRate);
-  if (peak_gmacs > 0) {
-    state.counters["pct_peak"] = benchmark::Counter(macs * 1e-9 / peak_gmacs * 100.0, benchmark::Counter::kIsRate);
-  }
+  const Tiling t = tiling(s.m, s.n, v->mr, v->nr, threads);
+  ThreadPool& tp = pool(threads);
+  run_timed(state, key, threads, static_cast<double>(s.macs()), peak_gmacs, [&] {
+    tp.parallel_for(t.count(), [&](size_t task, int) {
+      const int m0 = static_cast<int>(task / t.tiles_n) * t.tile_m, n0 = static_cast<int>(task % t.tiles_n) * t.tile_n;
+      const int m1 = std::min(s.m, m0 + t.tile_m), n1 = std::min(s.n, n0 + t.tile_n);
+      if (s.f32_out) {
+        v->f32out(g, of, m0, m1, n0, n1);
+      } else {
+        v->s8out(g, o8, m0, m1, n0, n1);
+      }
+    });
+  });
   state.SetLabel(std::string(s.f32_out ? v->f32out_name : v->s8out_name) + " M=" + std::to_string(s.m) +
                  " N=" + std::to_string(s.n) + " K=" + std::to_string(s.k));
+}
+
+// ---- convolutions -----------------------------------------------------------------------------
+
+struct ConvBench {
+  std::string name;
+  kernels::Conv2dShape shape;
+  uint64_t macs() const {
+    return static_cast<uint64_t>(shape.out_h) * shape.out_w * shape.out_c * static_cast<uint64_t>(shape.patch_size());
+  }
+};
+
+kernels::Conv2dShape conv_shape(int h, int w, int cin, int cout, int kernel, int stride) {
+  kernels::Conv2dShape s;
+  s.in_h = h;
+  s.in_w = w;
+  s.in_c = cin;
+  s.out_c = cout;
+  s.kernel_h = s.kernel_w = kernel;
+  s.stride = stride;
+  s.pad = kernel / 2;
+  s.out_h = kernels::Conv2dShape::out_dim(h, kernel, stride, s.pad, 1);
+  s.out_w = kernels::Conv2dShape::out_dim(w, kernel, stride, s.pad, 1);
+  return s;
+}
+
+// Every distinct convolution of ResNet18 (torchvision's BasicBlock layout) on an h x w image.
+std::vector<ConvBench> resnet18_convs(int h, int w) {
+  std::vector<ConvBench> out;
+  const kernels::Conv2dShape stem = conv_shape(h, w, 3, 64, 7, 2);
+  out.push_back({"conv1_7x7s2", stem});
+  // 3x3/2 max-pool, pad 1.
+  int fh = kernels::Conv2dShape::out_dim(stem.out_h, 3, 2, 1, 1), fw = kernels::Conv2dShape::out_dim(stem.out_w, 3, 2, 1, 1);
+  out.push_back({"layer1_3x3", conv_shape(fh, fw, 64, 64, 3, 1)});
+  int c = 64;
+  for (int layer = 2; layer <= 4; ++layer) {
+    const std::string l = "layer" + std::to_string(layer);
+    const kernels::Conv2dShape first = conv_shape(fh, fw, c, 2 * c, 3, 2);
+    out.push_back({l + "_3x3s2", first});
+    out.push_back({l + "_1x1s2ds", conv_shape(fh, fw, c, 2 * c, 1, 2)});
+    fh = first.out_h;
+    fw = first.out_w;
+    c *= 2;
+    out.push_back({l + "_3x3", conv_shape(fh, fw, c, c, 3, 1)});
+  }
+  return out;
+}
+
+void bm_conv(benchmark::State& state, const GemmS8Kernels* v, ConvBench cb, double peak_gmacs, int threads,
+             std::string key) {
+  const kernels::Conv2dShape& s = cb.shape;
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> byte(-128, 127), weight(-127, 127);
+  std::vector<int8_t> x(static_cast<size_t>(s.in_h) * s.in_w * s.in_c + kernels::kGemmS8ReadSlack);
+  for (auto& b : x) b = static_cast<int8_t>(byte(rng));
+  const int k = s.patch_size();
+  std::vector<int8_t> w(static_cast<size_t>(s.out_c) * k);
+  for (auto& b : w) b = static_cast<int8_t>(weight(rng));
+  std::vector<int32_t> bias(static_cast<size_t>(s.out_c), 1000);
+  std::unique_ptr<uint8_t, Aligned> packed(
+      static_cast<uint8_t*>(std::aligned_alloc(kernels::kGemmS8PackedAlign, v->packed_size(s.out_c, k))));
+  v->pack(s.out_c, k, w.data(), static_cast<size_t>(k), bias.data(), -5, packed.get());
+  const kernels::ConvS8 conv{s, v, packed.get(), -5};
+  const int pixels = s.out_h * s.out_w;
+  const int tile = kernels::conv_s8_tile_pixels(s);
+  const int tiles = (pixels + tile - 1) / tile;
+  std::vector<std::vector<int8_t>> scratch(static_cast<size_t>(threads),
+                                           std::vector<int8_t>(kernels::conv_s8_scratch_bytes(s, tile)));
+  std::vector<int8_t> y(static_cast<size_t>(pixels) * s.out_c);
+  std::vector<float> scale(static_cast<size_t>(s.out_c), 1e-3f);
+  kernels::GemmS8OutS8 o;
+  o.c = y.data();
+  o.ldc = static_cast<size_t>(s.out_c);
+  o.scale = scale.data();
+  o.out_zero_point = -128;
+  o.qmin = -128;  // ReLU at the output zero point
+  ThreadPool& tp = pool(threads);
+  run_timed(state, key, threads, static_cast<double>(cb.macs()), peak_gmacs, [&] {
+    tp.parallel_for(static_cast<size_t>(tiles), [&](size_t t, int thread) {
+      const int p0 = static_cast<int>(t) * tile;
+      kernels::conv_s8_s8out(conv, x.data(), o, p0, std::min(tile, pixels - p0), scratch[thread].data());
+    });
+  });
+  state.SetLabel(std::string(v->s8out_name) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
+                 std::to_string(s.in_c) + " -> " + std::to_string(s.out_h) + "x" + std::to_string(s.out_w) + "x" +
+                 std::to_string(s.out_c) + " k" + std::to_string(s.kernel_h) + "/" + std::to_string(s.stride) +
+                 " tile " + std::to_string(tile));
+}
+
+// ---- attention (f32) ---------------------------------------------------------------------------
+
+constexpr int kHeads = 8, kHeadDim = 64;
+
+// QK^T, softmax, PV for 8 heads of T tokens; Q, K, V as [T x 512] with head h in columns
+// [64h, 64h + 64) (the layout of the fused QKV projection). Threads split the heads.
+void bm_attention(benchmark::State& state, const kernels::GemmF32Kernels* g, const kernels::ElementwiseF32Kernels* e,
+                  int tokens, int threads, std::string key) {
+  const int d = kHeads * kHeadDim;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> q(static_cast<size_t>(tokens) * d), kmat(q.size()), vmat(q.size()), out(q.size());
+  for (auto* m : {&q, &kmat, &vmat})
+    for (auto& x : *m) x = u(rng);
+  std::vector<std::vector<float>> scores(static_cast<size_t>(kHeads), std::vector<float>(static_cast<size_t>(tokens) * tokens));
+  ThreadPool& tp = pool(threads);
+  const double macs = 2.0 * kHeads * tokens * static_cast<double>(tokens) * kHeadDim;
+  run_timed(state, key, threads, macs, 0.0, [&] {
+    tp.parallel_for(kHeads, [&](size_t h, int) {
+      const size_t off = h * kHeadDim;
+      float* sc = scores[h].data();
+      g->nt(tokens, tokens, kHeadDim, q.data() + off, d, kmat.data() + off, d, sc, tokens);
+      e->softmax_rows(tokens, tokens, sc, tokens);
+      g->nn(tokens, kHeadDim, tokens, sc, tokens, vmat.data() + off, d, out.data() + off, d);
+    });
+  });
+  state.SetLabel(std::string(g->name) + " + " + e->softmax_name + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
+}
+
+// ---- element-wise ops around the GEMMs (single thread, bytes/s of input + output) ---------------
+
+void bm_quant_rows(benchmark::State& state, const kernels::QuantS8Kernels* k, int rows, int cols) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-3.0f, 5.0f);
+  std::vector<float> x(static_cast<size_t>(rows) * cols);
+  for (auto& v : x) v = u(rng);
+  std::vector<int8_t> y(x.size());
+  std::vector<float> sc(static_cast<size_t>(rows));
+  std::vector<int32_t> zp(static_cast<size_t>(rows));
+  for (auto _ : state) {
+    kernels::quantize_rows_dynamic_f32_s8_with(*k, rows, cols, x.data(), cols, y.data(), cols, sc.data(), zp.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size()) * 5);
+  state.SetLabel(std::string("minmax + ") + k->quantize_name);
+}
+
+void bm_dequant(benchmark::State& state, const kernels::QuantS8Kernels* k, size_t n) {
+  std::vector<int8_t> q(n, 3);
+  std::vector<float> y(n);
+  for (auto _ : state) {
+    k->dequantize(n, q.data(), 0.01f, -4, y.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(n) * 5);
+  state.SetLabel(k->dequantize_name);
+}
+
+void bm_maxpool(benchmark::State& state, const kernels::MaxPoolS8Kernels* k, int h, int w) {
+  const int c = 64, oh = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1), ow = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
+  std::vector<int8_t> x(static_cast<size_t>(h) * w * c, 1), y(static_cast<size_t>(oh) * ow * c);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<int8_t>(i * 7);
+  for (auto _ : state) {
+    kernels::maxpool_nhwc_s8_with(*k, h, w, c, 3, 2, 1, ow, x.data(), y.data(), 0, oh);
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size() + y.size()));
+  state.SetLabel(std::string(k->max_taps_name) + " 3x3/2 " + std::to_string(h) + "x" + std::to_string(w) + "x64");
+}
+
+void bm_layernorm(benchmark::State& state, const kernels::ElementwiseF32Kernels* e, int rows, int cols) {
+  std::vector<float> x(static_cast<size_t>(rows) * cols, 0.5f), y(x.size()), g(static_cast<size_t>(cols), 1.0f),
+      b(static_cast<size_t>(cols), 0.0f);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<float>(i % 97) * 0.01f;
+  for (auto _ : state) {
+    e->layernorm_rows(rows, cols, x.data(), cols, g.data(), b.data(), 1e-5f, y.data(), cols);
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size()) * 8);
+  state.SetLabel(e->layernorm_name);
+}
+
+void bm_softmax(benchmark::State& state, const kernels::ElementwiseF32Kernels* e, int rows, int cols) {
+  std::vector<float> x0(static_cast<size_t>(rows) * cols), x(x0.size());
+  for (size_t i = 0; i < x0.size(); ++i) x0[i] = static_cast<float>(i % 101) * 0.05f;
+  for (auto _ : state) {
+    state.PauseTiming();
+    x = x0;
+    state.ResumeTiming();
+    e->softmax_rows(rows, cols, x.data(), cols);
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size()) * 8);
+  state.SetLabel(e->softmax_name);
 }
 
 std::string cpu_model() {
@@ -210,20 +473,71 @@ int main(int argc, char** argv) {
   for (const bench::Shape& s : shapes) {
     if (s.macs() < smallest->macs()) smallest = &s;
   }
+  const int max_threads = std::min(2, ThreadPool::hardware_threads());
+  auto reg = [](benchmark::internal::Benchmark* b) {
+    return b->Unit(benchmark::kMillisecond)
+        ->UseRealTime()
+        ->ComputeStatistics("max", bench::stat_max)
+        ->ComputeStatistics("min", bench::stat_min);
+  };
   for (kernels::Isa isa : kernels::gemm_s8_available_isas()) {
     const kernels::GemmS8Kernels* v = kernels::gemm_s8_kernels(isa);
+    const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (const bench::Shape& s : shapes) {
       if (isa == kernels::Isa::kRef && &s != smallest) continue;
-      const std::string name = std::string("gemm_s8/") + kernels::isa_name(isa) + "/" + s.name;
-      benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm, v, s, peak.count(isa) ? peak[isa] : 0.0)
-          ->Unit(benchmark::kMillisecond)
-          ->UseRealTime()
-          ->ComputeStatistics("max", bench::stat_max)
-          ->ComputeStatistics("min", bench::stat_min);
+      const std::string key = std::string("gemm_s8/") + kernels::isa_name(isa) + "/" + s.name;
+      for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : max_threads); ++t) {
+        const std::string name = key + "/threads:" + std::to_string(t);
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm, v, s, pk, t, key));
+      }
     }
   }
+  // Convolutions: the SIMD variants only (the reference's GEMM is checked by the tests).
+  for (kernels::Isa isa : kernels::gemm_s8_available_isas()) {
+    if (isa == kernels::Isa::kRef) continue;
+    const kernels::GemmS8Kernels* v = kernels::gemm_s8_kernels(isa);
+    const double pk = peak.count(isa) ? peak[isa] : 0.0;
+    for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
+      for (const bench::ConvBench& cb : bench::resnet18_convs(h, w)) {
+        const std::string key = std::string("conv_s8/") + kernels::isa_name(isa) + "/" + std::to_string(h) + "x" +
+                                std::to_string(w) + "/" + cb.name;
+        for (int t = 1; t <= max_threads; ++t) {
+          const std::string name = key + "/threads:" + std::to_string(t);
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv, v, cb, pk, t, key));
+        }
+      }
+    }
+  }
+  for (kernels::Isa isa : kernels::elementwise_f32_available_isas()) {
+    const kernels::GemmF32Kernels* g = kernels::gemm_f32_kernels(isa);
+    if (g == nullptr) g = kernels::gemm_f32_table_ref();  // AArch64: the baseline Eigen is NEON already
+    const kernels::ElementwiseF32Kernels* e = kernels::elementwise_f32_kernels(isa);
+    for (int tokens : {302, 242}) {
+      const std::string key = std::string("attention_f32/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
+      for (int t = 1; t <= max_threads; ++t) {
+        const std::string name = key + "/threads:" + std::to_string(t);
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, g, e, tokens, t, key));
+      }
+    }
+    const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);
+    reg(benchmark::RegisterBenchmark((ew + "/layernorm/302x512").c_str(), bench::bm_layernorm, e, 302, 512));
+    reg(benchmark::RegisterBenchmark((ew + "/softmax/2416x302").c_str(), bench::bm_softmax, e, 8 * 302, 302));
+  }
+  for (kernels::Isa isa : kernels::quant_s8_available_isas()) {
+    const kernels::QuantS8Kernels* k = kernels::quant_s8_kernels(isa);
+    const std::string qn = std::string("quant/") + kernels::isa_name(isa);
+    for (auto [rows, cols] : {std::pair{302, 512}, std::pair{302, 3200}}) {
+      const std::string name = qn + "/rows_dynamic/" + std::to_string(rows) + "x" + std::to_string(cols);
+      reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_quant_rows, k, rows, cols));
+    }
+    reg(benchmark::RegisterBenchmark((qn + "/dequantize/154624").c_str(), bench::bm_dequant, k, size_t{302 * 512}));
+  }
+  for (kernels::Isa isa : kernels::maxpool_s8_available_isas()) {
+    const std::string name = std::string("pool/") + kernels::isa_name(isa) + "/maxpool_3x3s2/240x320x64";
+    reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_maxpool, kernels::maxpool_s8_kernels(isa), 240, 320));
+  }
   benchmark::AddCustomContext("cpu_model", bench::cpu_model());
-  benchmark::AddCustomContext("threads", "1");
+  benchmark::AddCustomContext("threads", "1.." + std::to_string(max_threads) + " (see /threads:T)");
   benchmark::AddCustomContext("gemm_s8_variants",
                               kernels::isa_mask_names(kernels::gemm_s8_built_isas() & kernels::cpu_isa_mask()));
   benchmark::RunSpecifiedBenchmarks();

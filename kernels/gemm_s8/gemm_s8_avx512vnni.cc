@@ -7,10 +7,12 @@
 // byte; the packer folds the extra 128 * sum_k W[n][k] into kbias (XNNPACK's qs8-to-qu8 packing).
 //
 // Tile: 6 rows x 64 columns (4 zmm) x k-groups of 4. One k-group step = 4 weight loads, 6
-// broadcast+XOR, 24 vpdpbusd; 24 accumulators + 4 weights + A + the 0x80 constant = 30 of the 32
-// zmm registers. Why 64 columns: the XOR competes with vpdpbusd for the same ports (measured: one
-// XOR per 4 vpdpbusd costs ~20% of the peak), so each XORed A group should feed as many columns as
-// the registers allow.
+// broadcasts, 24 vpdpbusd; 24 accumulators + 4 weights + A = 29 of the 32 zmm registers.
+// The XOR is hoisted out of the k loop: a per-XOR vpxord competes with vpdpbusd for the same ports
+// (one per 4 vpdpbusd caps the loop near 80% of the probe), so each row tile's A rows are flipped
+// once into a stack buffer (64 bytes per vpxord) and reused by every panel of the weight block.
+// K beyond the buffer (kFlipMaxK), or a block of one panel, falls back to flipping each broadcast
+// in the loop.
 //
 // Rules for ISA files (see README.md): only intrinsics and internal-linkage code here.
 #include "kernels/gemm_s8/gemm_s8_variants.h"
@@ -46,10 +48,28 @@ __mmask16 vec_mask(int j, int lo, int hi) {
   return static_cast<__mmask16>(((1u << b) - 1u) & ~((1u << a) - 1u));
 }
 
-// out[r][j] = kbias + sum over k-groups. The accumulators are a local array (copied out once) so
-// that GCC keeps them in registers; an out-parameter array would be stored every iteration.
+constexpr int kFlipMaxK = 8192;  // 6 x 8 KB of flipped rows on the stack (ACT's largest K is 4608)
+
+// Copies R rows of A, kp bytes each (the kernel's usual over-read: kp - k <= 3 < kGemmS8ReadSlack),
+// XORed with 0x80 into buf (row stride kFlipMaxK). Masked loads read nothing past kp.
 template <int R>
-inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kgroups, __m512i (&out)[R][kVecs]) {
+void flip_rows(const int8_t* a, size_t lda, int kp, uint8_t (*buf)[kFlipMaxK]) {
+  const __m512i flip = _mm512_set1_epi8(static_cast<char>(0x80));
+  for (int r = 0; r < R; ++r) {
+    const int8_t* src = a + static_cast<size_t>(r) * lda;
+    for (int k = 0; k < kp; k += 64) {
+      const int left = kp - k;
+      const __mmask64 m = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
+      _mm512_mask_storeu_epi8(buf[r] + k, m, _mm512_xor_si512(_mm512_maskz_loadu_epi8(m, src + k), flip));
+    }
+  }
+}
+
+// out[r][j] = kbias + sum over k-groups. kFlipped: `a` already holds A XOR 0x80 (u8), else each
+// broadcast is flipped here. The accumulators are a local array (copied out once) so that GCC keeps
+// them in registers; an out-parameter array would be stored every iteration.
+template <int R, bool kFlipped>
+inline void accumulate(const uint8_t* a, size_t lda, const uint8_t* panel, int kgroups, __m512i (&out)[R][kVecs]) {
   const int8_t* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
   __m512i acc[R][kVecs];
 #pragma GCC unroll 4
@@ -69,7 +89,8 @@ inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kg
     for (int r = 0; r < R; ++r) {
       int32_t quad;
       std::memcpy(&quad, a + static_cast<size_t>(r) * lda + static_cast<size_t>(g) * kKR, 4);
-      const __m512i av = _mm512_xor_si512(_mm512_set1_epi32(quad), flip);  // A + 128 as u8
+      __m512i av = _mm512_set1_epi32(quad);
+      if (!kFlipped) av = _mm512_xor_si512(av, flip);  // A + 128 as u8
       acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], av, w0);
       acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], av, w1);
       acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], av, w2);
@@ -159,11 +180,17 @@ struct EpiS32 {
   }
 };
 
+// One R x 64 micro-tile. `a` points at the tile's first A row: the flipped copy (row stride
+// kFlipMaxK) when `flipped`, else the caller's rows (stride g.lda).
 template <int R, class Epi>
-void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
-          Epi& epi) {
+void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* a, bool flipped, const uint8_t* panel,
+          int m, int n, int lo, int hi, Epi& epi) {
   __m512i acc[R][kVecs];
-  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp / kKR, acc);
+  if (flipped) {
+    accumulate<R, true>(a, kFlipMaxK, panel, h.kp / kKR, acc);
+  } else {
+    accumulate<R, false>(a, g.lda, panel, h.kp / kKR, acc);
+  }
   if (g.a_row_zero_point != nullptr) {
     // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
     for (int j = 0; j < kVecs; ++j) {
@@ -176,6 +203,28 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel
   }
   epi.begin_panel(n, lo, hi);
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
+}
+
+// The rows [m, m + R) against panels [pb, pe).
+template <int R, class Epi>
+void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int pb, int pe, int n0,
+              int n1, Epi& epi, uint32_t& paths) {
+  alignas(64) uint8_t buf[R][kFlipMaxK];
+  // Flipping pays when the copy serves several panels; for one panel (N <= 64: conv1, layer1) it
+  // measured slower than the in-loop XOR (the broadcasts wait on the just-written masked stores).
+  const bool flipped = h.kp <= kFlipMaxK && pe - pb >= 2;
+  const uint8_t* a = reinterpret_cast<const uint8_t*>(g.a + static_cast<size_t>(m) * g.lda);
+  if (flipped) {
+    flip_rows<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, h.kp, buf);
+    a = buf[0];
+  }
+  for (int p = pb; p < pe; ++p) {
+    const int n = p * kNR;
+    const int lo = n0 > n ? n0 - n : 0;
+    const int hi = n1 - n < kNR ? n1 - n : kNR;
+    if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
+    tile<R>(g, h, a, flipped, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi);
+  }
 }
 
 template <class Epi>
@@ -199,20 +248,13 @@ void run(const GemmS8Args& g, size_t ldc, Epi& epi, int m0, int m1, int n0, int 
     for (int m = m0; m < m1; m += kMR) {
       const int rows = m1 - m < kMR ? m1 - m : kMR;
       paths |= rows == kMR ? kPathFullTile : kPathRowTail;
-      for (int p = pb; p < pe; ++p) {
-        const int n = p * kNR;
-        const int lo = n0 > n ? n0 - n : 0;
-        const int hi = n1 - n < kNR ? n1 - n : kNR;
-        if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
-        const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-        switch (rows) {
-          case 6: tile<6>(g, h, panel, m, n, lo, hi, epi); break;
-          case 5: tile<5>(g, h, panel, m, n, lo, hi, epi); break;
-          case 4: tile<4>(g, h, panel, m, n, lo, hi, epi); break;
-          case 3: tile<3>(g, h, panel, m, n, lo, hi, epi); break;
-          case 2: tile<2>(g, h, panel, m, n, lo, hi, epi); break;
-          default: tile<1>(g, h, panel, m, n, lo, hi, epi); break;
-        }
+      switch (rows) {
+        case 6: row_tile<6>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+        case 5: row_tile<5>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+        case 4: row_tile<4>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+        case 3: row_tile<3>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+        case 2: row_tile<2>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+        default: row_tile<1>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
       }
     }
   }

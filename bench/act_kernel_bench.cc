@@ -10,8 +10,10 @@
 //     (gemm_f32_nn), head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
 //     LayerNorm, softmax (bytes/s).
-// Counters: GMAC/s (M*N*K per second, 1 MAC = 2 ops), pct_peak (against that ISA's sustained
-// int8 probe rate, measured once at start-up; int8 kernels only) and, for T > 1, speedup_vs_1t
+// Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
+// sustained int8 probe rate, measured once at start-up by thread CPU time; int8 kernels only),
+// at T = 1 also GMAC/s_cpu and pct_peak_cpu (by the thread's CPU time: what to read on a shared,
+// loaded machine, where wall time includes time spent descheduled) and, for T > 1, speedup_vs_1t
 // (the same benchmark's best single-thread time / this one's). Threads split the output into tiles
 // over a persistent pool (graph/thread_pool.h); the kernels themselves never start threads.
 // Wall-clock time throughout. On a shared machine use --benchmark_repetitions=N and read the "max"
@@ -24,6 +26,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -94,15 +97,23 @@ constexpr Probe kProbes[] = {
     {"sdot", Isa::kNeonDot, peak_sdot, true},
 };
 
-// Sustained GMAC/s of a probe: a ~20 ms warm-up (wide-vector instructions lower the clock after a
+// Sustained GMAC/s of a probe (by thread CPU time): a ~20 ms warm-up (wide-vector instructions lower the clock after a
 // few tens of microseconds on many x86 cores, so a short burst would overstate the peak), then the
 // best of 10 runs of ~2 ms, so that a run descheduled by other work on a shared machine does not
 // lower the peak the kernels are compared against.
+// This thread's CPU time: unlike the wall clock it does not count time the thread spent
+// descheduled, which on a shared machine would make a loaded core look slow.
+double thread_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
 double measure_peak(const Probe& p) {
   auto run = [&](uint64_t iters) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const double t0 = thread_cpu_seconds();
     const uint64_t macs = p.fn(iters);
-    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double s = thread_cpu_seconds() - t0;
     return static_cast<double>(macs) / s * 1e-9;
   };
   const double macs_per_iteration = static_cast<double>(p.fn(1));  // the probes need iterations >= 1
@@ -150,11 +161,13 @@ std::map<std::string, double>& single_thread_seconds() {
 template <class Body>
 void run_timed(benchmark::State& state, const std::string& key, int threads, double macs_per_iter, double peak_gmacs,
                Body body) {
-  double seconds = 0.0;
+  double seconds = 0.0, cpu_seconds = 0.0;
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
+    const double c0 = thread_cpu_seconds();
     body();
     benchmark::ClobberMemory();
+    cpu_seconds += thread_cpu_seconds() - c0;
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   const double iters = static_cast<double>(state.iterations());
@@ -163,6 +176,12 @@ void run_timed(benchmark::State& state, const std::string& key, int threads, dou
     state.counters["GMAC/s"] = benchmark::Counter(macs * 1e-9, benchmark::Counter::kIsRate);
     if (peak_gmacs > 0) {
       state.counters["pct_peak"] = benchmark::Counter(macs * 1e-9 / peak_gmacs * 100.0, benchmark::Counter::kIsRate);
+    }
+    // Single thread on a shared machine: the rate by this thread's CPU time, robust to being
+    // descheduled (the probe is measured the same way).
+    if (threads == 1 && cpu_seconds > 0) {
+      state.counters["GMAC/s_cpu"] = macs * 1e-9 / cpu_seconds;
+      if (peak_gmacs > 0) state.counters["pct_peak_cpu"] = macs * 1e-9 / cpu_seconds / peak_gmacs * 100.0;
     }
   }
   const double per_iter = seconds / iters;

@@ -12,11 +12,25 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
     const int oy = pixel / s.out_w;
     const int ox = pixel % s.out_w;
     int8_t* dst = patches + static_cast<size_t>(i) * ld;
+    const int ix0 = ox * s.stride - s.pad;
+    // Without dilation a kernel row inside the image is kernel_w consecutive NHWC pixels: one copy
+    // (the 7x7 stem with 3 channels would otherwise copy 3 bytes at a time).
+    const bool row_inside = s.dilation == 1 && ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
     for (int ky = 0; ky < s.kernel_h; ++ky) {
       const int iy = oy * s.stride - s.pad + ky * s.dilation;
+      if (row_inside || iy < 0 || iy >= s.in_h) {
+        const size_t bytes = run * static_cast<size_t>(s.kernel_w);
+        if (iy < 0 || iy >= s.in_h) {
+          std::memset(dst, pad_value, bytes);
+        } else {
+          std::memcpy(dst, input + (static_cast<size_t>(iy) * s.in_w + ix0) * run, bytes);
+        }
+        dst += bytes;
+        continue;
+      }
       for (int kx = 0; kx < s.kernel_w; ++kx, dst += run) {
         const int ix = ox * s.stride - s.pad + kx * s.dilation;
-        if (iy < 0 || iy >= s.in_h || ix < 0 || ix >= s.in_w) {
+        if (ix < 0 || ix >= s.in_w) {  // rows outside the image were handled above
           std::memset(dst, pad_value, run);
         } else {
           std::memcpy(dst, input + (static_cast<size_t>(iy) * s.in_w + ix) * run, run);

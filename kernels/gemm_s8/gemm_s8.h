@@ -41,7 +41,7 @@ inline constexpr size_t kGemmS8PackedAlign = 64;
 enum class GemmS8Layout : uint32_t {
   kRef1x1 = 1,    ///< nr=1, kr=1: one column per panel, K bytes in order
   kAvx2_8x8 = 2,  ///< nr=8, kr=8: columns paired (j, j+4) for the vpmaddwd reduction
-  kVnni64x4 = 3,  ///< nr=64, kr=4: 64 columns x 4 bytes per k-group, +128 activation shift folded in
+  kVnni64x4 = 3,  ///< nr=64, kr=4: 64 columns x 4 bytes per k-group, weights stored + 128 (u8)
   kNeon16x4 = 4,  ///< nr=16, kr=4: 16 columns x 4 bytes per k-group
 };
 
@@ -50,15 +50,16 @@ inline constexpr uint32_t kGemmS8PackedMagic = 0x38534741u;  // "AGS8"
 /// The first 64 bytes of every packed buffer. Panel p (columns [p*nr, p*nr + nr)) starts at
 /// byte 64 + p * panel_bytes and holds int32 kbias[nr], int32 ksum[nr], then kp*nr weight bytes:
 ///   ksum[n]  = sum_k W[n][k]
-///   kbias[n] = bias_i32[n] - (a_zero_point + a_shift) * ksum[n]
-/// Columns past N are zero everywhere, and so are the weights of k in [K, kp).
+///   kbias[n] = bias_i32[n] - a_zero_point * ksum[n]
+/// Columns past N are zero everywhere, and so are the weight bytes of k in [K, kp). (kVnni64x4
+/// stores W XOR 0x80 = W + 128 as u8 for the real weights; its kernel subtracts 128 * row sums of A.)
 struct GemmS8PackedHeader {
   uint32_t magic;
   GemmS8Layout layout;
   int32_t n, k;
   int32_t nr, kr, kp;    ///< panel width, k-group, K rounded up to kr
   int32_t a_zero_point;  ///< the per-tensor activation zero point folded into kbias
-  int32_t a_shift;       ///< 128 when the kernel feeds A XOR 0x80 (= A + 128) to vpdpbusd, else 0
+  int32_t a_shift;       ///< a shift folded into kbias with a_zero_point; 0 in every current layout
   int32_t reserved0;
   uint64_t panel_bytes;  ///< panel size, a multiple of 64
   uint8_t reserved[16];

@@ -2,17 +2,18 @@
 // targets only; elsewhere this file is just the has_built stub.
 //
 // vpdpbusd multiplies 4 unsigned bytes by 4 signed bytes per int32 lane and adds the 4 products to
-// the accumulator without intermediate saturation (64 MACs per zmm instruction). Activations are
-// signed, so each 4-byte A group is broadcast and XORed with 0x80, which is A + 128 as an unsigned
-// byte; the packer folds the extra 128 * sum_k W[n][k] into kbias (XNNPACK's qs8-to-qu8 packing).
+// the accumulator without intermediate saturation (64 MACs per zmm instruction). The weights take
+// the unsigned side: the packer stores W XOR 0x80 = W + 128 as u8 (padding stays 0), and A, signed,
+// is broadcast from memory straight into vpdpbusd. Then
+//   sum_k (W + 128) A = sum_k W A + 128 rowsum(A),
+// so each row tile starts its accumulators at kbias - 128 * rowsum(A[m]), the row sums taken 64
+// bytes per vpdpbusd against a vector of ones (K / 64 instructions per row, not K / 4). No XOR in
+// the k loop: an XOR per broadcast competed with vpdpbusd for the same ports (about 20% of the
+// peak), and flipping A into a buffer instead stalled on store forwarding when N <= 64.
 //
 // Tile: 6 rows x 64 columns (4 zmm) x k-groups of 4. One k-group step = 4 weight loads, 6
-// broadcasts, 24 vpdpbusd; 24 accumulators + 4 weights + A = 29 of the 32 zmm registers.
-// The XOR is hoisted out of the k loop: a per-XOR vpxord competes with vpdpbusd for the same ports
-// (one per 4 vpdpbusd caps the loop near 80% of the probe), so each row tile's A rows are flipped
-// once into a stack buffer (64 bytes per vpxord) and reused by every panel of the weight block.
-// K beyond the buffer (kFlipMaxK), or a block of one panel, falls back to flipping each broadcast
-// in the loop.
+// broadcasts (folded into vpdpbusd as {1to16} memory operands), 24 vpdpbusd; 24 accumulators + 4
+// weights = 28 of the 32 zmm registers.
 //
 // Rules for ISA files (see README.md): only intrinsics and internal-linkage code here.
 #include "kernels/gemm_s8/gemm_s8_variants.h"
@@ -48,39 +49,39 @@ __mmask16 vec_mask(int j, int lo, int hi) {
   return static_cast<__mmask16>(((1u << b) - 1u) & ~((1u << a) - 1u));
 }
 
-constexpr int kFlipMaxK = 8192;  // 6 x 8 KB of flipped rows on the stack (ACT's largest K is 4608)
-
-// Copies R rows of A, kp bytes each (the kernel's usual over-read: kp - k <= 3 < kGemmS8ReadSlack),
-// XORed with 0x80 into buf (row stride kFlipMaxK). Masked loads read nothing past kp.
+// 128 * sum_k A[r][k] for the R rows of a tile (exactly K bytes each: masked loads read nothing
+// past the row, and padding weights are 0 so A's slack bytes never count).
 template <int R>
-void flip_rows(const int8_t* a, size_t lda, int kp, uint8_t (*buf)[kFlipMaxK]) {
-  const __m512i flip = _mm512_set1_epi8(static_cast<char>(0x80));
+void row_corrections(const int8_t* a, size_t lda, int k, int32_t (&corr)[R]) {
+  const __m512i ones = _mm512_set1_epi8(1);
   for (int r = 0; r < R; ++r) {
     const int8_t* src = a + static_cast<size_t>(r) * lda;
-    for (int k = 0; k < kp; k += 64) {
-      const int left = kp - k;
+    __m512i sum = _mm512_setzero_si512();
+    for (int i = 0; i < k; i += 64) {
+      const int left = k - i;
       const __mmask64 m = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
-      _mm512_mask_storeu_epi8(buf[r] + k, m, _mm512_xor_si512(_mm512_maskz_loadu_epi8(m, src + k), flip));
+      sum = _mm512_dpbusd_epi32(sum, ones, _mm512_maskz_loadu_epi8(m, src + i));
     }
+    corr[r] = static_cast<int32_t>(128u * static_cast<uint32_t>(_mm512_reduce_add_epi32(sum)));
   }
 }
 
-// out[r][j] = kbias + sum over k-groups. kFlipped: `a` already holds A XOR 0x80 (u8), else each
-// broadcast is flipped here. The accumulators are a local array (copied out once) so that GCC keeps
-// them in registers; an out-parameter array would be stored every iteration.
-template <int R, bool kFlipped>
-inline void accumulate(const uint8_t* a, size_t lda, const uint8_t* panel, int kgroups, __m512i (&out)[R][kVecs]) {
-  const int8_t* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
+// out[r][j] = kbias - corr[r] + sum over k-groups of (W + 128) x A. The accumulators are a local
+// array (copied out once) so that GCC keeps them in registers; an out-parameter array would be
+// stored every iteration.
+template <int R>
+inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kgroups, const int32_t (&corr)[R],
+                       __m512i (&out)[R][kVecs]) {
+  const uint8_t* w = panel + 8 * kNR;
   __m512i acc[R][kVecs];
 #pragma GCC unroll 4
   for (int j = 0; j < kVecs; ++j) {
     const __m512i kbias = _mm512_loadu_si512(panel + 64 * j);
 #pragma GCC unroll 6
-    for (int r = 0; r < R; ++r) acc[r][j] = kbias;
+    for (int r = 0; r < R; ++r) acc[r][j] = _mm512_sub_epi32(kbias, _mm512_set1_epi32(corr[r]));
   }
-  const __m512i flip = _mm512_set1_epi8(static_cast<char>(0x80));
   for (int g = 0; g < kgroups; ++g) {
-    const int8_t* wg = w + static_cast<size_t>(g) * (kNR * kKR);
+    const uint8_t* wg = w + static_cast<size_t>(g) * (kNR * kKR);
     const __m512i w0 = _mm512_loadu_si512(wg);
     const __m512i w1 = _mm512_loadu_si512(wg + 64);
     const __m512i w2 = _mm512_loadu_si512(wg + 128);
@@ -89,12 +90,11 @@ inline void accumulate(const uint8_t* a, size_t lda, const uint8_t* panel, int k
     for (int r = 0; r < R; ++r) {
       int32_t quad;
       std::memcpy(&quad, a + static_cast<size_t>(r) * lda + static_cast<size_t>(g) * kKR, 4);
-      __m512i av = _mm512_set1_epi32(quad);
-      if (!kFlipped) av = _mm512_xor_si512(av, flip);  // A + 128 as u8
-      acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], av, w0);
-      acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], av, w1);
-      acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], av, w2);
-      acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], av, w3);
+      const __m512i av = _mm512_set1_epi32(quad);
+      acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], w0, av);
+      acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], w1, av);
+      acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], w2, av);
+      acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], w3, av);
     }
   }
 #pragma GCC unroll 6
@@ -180,17 +180,12 @@ struct EpiS32 {
   }
 };
 
-// One R x 64 micro-tile. `a` points at the tile's first A row: the flipped copy (row stride
-// kFlipMaxK) when `flipped`, else the caller's rows (stride g.lda).
+// One R x 64 micro-tile starting at row m.
 template <int R, class Epi>
-void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* a, bool flipped, const uint8_t* panel,
-          int m, int n, int lo, int hi, Epi& epi) {
+void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr)[R], const uint8_t* panel, int m,
+          int n, int lo, int hi, Epi& epi) {
   __m512i acc[R][kVecs];
-  if (flipped) {
-    accumulate<R, true>(a, kFlipMaxK, panel, h.kp / kKR, acc);
-  } else {
-    accumulate<R, false>(a, g.lda, panel, h.kp / kKR, acc);
-  }
+  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp / kKR, corr, acc);
   if (g.a_row_zero_point != nullptr) {
     // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
     for (int j = 0; j < kVecs; ++j) {
@@ -205,25 +200,18 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* a, bo
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
 }
 
-// The rows [m, m + R) against panels [pb, pe).
+// The rows [m, m + R) against panels [pb, pe): the row sums once, then every panel.
 template <int R, class Epi>
 void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int pb, int pe, int n0,
               int n1, Epi& epi, uint32_t& paths) {
-  alignas(64) uint8_t buf[R][kFlipMaxK];
-  // Flipping pays when the copy serves several panels; for one panel (N <= 64: conv1, layer1) it
-  // measured slower than the in-loop XOR (the broadcasts wait on the just-written masked stores).
-  const bool flipped = h.kp <= kFlipMaxK && pe - pb >= 2;
-  const uint8_t* a = reinterpret_cast<const uint8_t*>(g.a + static_cast<size_t>(m) * g.lda);
-  if (flipped) {
-    flip_rows<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, h.kp, buf);
-    a = buf[0];
-  }
+  int32_t corr[R];
+  row_corrections<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, g.k, corr);
   for (int p = pb; p < pe; ++p) {
     const int n = p * kNR;
     const int lo = n0 > n ? n0 - n : 0;
     const int hi = n1 - n < kNR ? n1 - n : kNR;
     if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
-    tile<R>(g, h, a, flipped, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi);
+    tile<R>(g, h, corr, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi);
   }
 }
 

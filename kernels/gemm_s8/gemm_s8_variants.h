@@ -35,7 +35,7 @@ void pack_w_s8_1x1_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t*
 /// AVX2 kernel's horizontal adds end in natural column order.
 void pack_w_s8_8x8_goi_pair4(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                              void* packed);
-/// nr=64, kr=4; kbias also subtracts 128 * ksum because the kernel computes (A XOR 0x80) x W.
+/// nr=64, kr=4; weights stored as W XOR 0x80 (W + 128, the unsigned side of vpdpbusd), padding 0.
 void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                             void* packed);
 /// nr=16, kr=4.
@@ -70,7 +70,7 @@ void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS32& out
 #endif
 
 // ---- AVX-512 VNNI (gemm_s8_avx512vnni.cc, x86-64 only; -mavx512f/bw/vl/vnni) ----------------
-// 6x64c4: vpdpbusd on (A XOR 0x80) as u8 x W as s8, the +128 compensation folded into kbias.
+// 6x64c4: vpdpbusd on (W + 128) as u8 x A as s8; each row tile subtracts 128 * rowsum(A).
 // Packed by pack_w_s8_64x4_goi_x80. Needs cpu_supports(Isa::kAvx512Vnni).
 
 bool gemm_s8_has_built_avx512vnni();

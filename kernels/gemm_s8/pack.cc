@@ -1,5 +1,5 @@
 // The weight packers of every gemm_s8 variant. One generic routine; each named packer fixes the
-// layout (panel width nr, k-group kr, column order, activation shift). Plain C++ on purpose: it
+// layout (panel width nr, k-group kr, column order, weight shift). Plain C++ on purpose: it
 // runs once at load, on every architecture.
 #include <cstring>
 
@@ -13,15 +13,15 @@ namespace {
 struct LayoutDesc {
   GemmS8Layout layout;
   int nr, kr;
-  int a_shift;  // 128 when the kernel feeds A + 128 (XOR 0x80) to an unsigned x signed product
-  bool pair4;   // AVX2: store columns 0,4,1,5,2,6,3,7 inside each k-group
+  bool pair4;      // AVX2: store columns 0,4,1,5,2,6,3,7 inside each k-group
+  bool w_plus128;  // VNNI: store W XOR 0x80 (W + 128 as u8) for the unsigned side of vpdpbusd
 };
 
 constexpr LayoutDesc kLayouts[] = {
-    {GemmS8Layout::kRef1x1, 1, 1, 0, false},
-    {GemmS8Layout::kAvx2_8x8, 8, 8, 0, true},
-    {GemmS8Layout::kVnni64x4, 64, 4, 128, false},
-    {GemmS8Layout::kNeon16x4, 16, 4, 0, false},
+    {GemmS8Layout::kRef1x1, 1, 1, false, false},
+    {GemmS8Layout::kAvx2_8x8, 8, 8, true, false},
+    {GemmS8Layout::kVnni64x4, 64, 4, false, true},
+    {GemmS8Layout::kNeon16x4, 16, 4, false, false},
 };
 
 const LayoutDesc& desc_of(GemmS8Layout layout) {
@@ -58,7 +58,7 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
   h.kr = d.kr;
   h.kp = kp;
   h.a_zero_point = a_zero_point;
-  h.a_shift = d.a_shift;
+  h.a_shift = 0;
   h.panel_bytes = pbytes;
   std::memcpy(base, &h, sizeof h);
 
@@ -74,10 +74,12 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
       for (int kk = 0; kk < k; ++kk) {
         ACT_DCHECK(wrow[kk] != -128, "gemm_s8 weights must lie in [-127, 127]");
         sum += wrow[kk];
-        data[(static_cast<size_t>(kk / d.kr) * d.nr + slot) * d.kr + kk % d.kr] = wrow[kk];
+        // Padding (k >= K, columns past N) stays 0 in every layout, so over-read A bytes meet 0.
+        const int8_t v = d.w_plus128 ? static_cast<int8_t>(wrow[kk] ^ 0x80) : wrow[kk];
+        data[(static_cast<size_t>(kk / d.kr) * d.nr + slot) * d.kr + kk % d.kr] = v;
       }
       // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
-      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - (int64_t{a_zero_point} + d.a_shift) * sum;
+      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sum;
       const auto ksum32 = static_cast<int32_t>(sum);
       const auto kbias32 = static_cast<int32_t>(kbias);
       std::memcpy(panel + 4 * static_cast<size_t>(c), &kbias32, 4);

@@ -512,7 +512,17 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
       EXPECT_EQ(ksum, sums[c]);
       EXPECT_EQ(kbias, bias[c] - (za + h.a_shift) * sums[c]);
     }
-    EXPECT_EQ(h.a_shift, layout == GemmS8Layout::kVnni64x4 ? 128 : 0);
+    EXPECT_EQ(h.a_shift, 0);
+    // Weight bytes: W itself, or W XOR 0x80 (W + 128 as u8) for the VNNI layout; k-padding 0.
+    if (layout == GemmS8Layout::kVnni64x4) {
+      const int8_t* wp = reinterpret_cast<const int8_t*>(p.get() + sizeof h + 8 * h.nr);
+      for (int c = 0; c < n; ++c) {
+        for (int kk = 0; kk < h.kp; ++kk) {
+          const int8_t want = kk < k ? static_cast<int8_t>(w[c * k + kk] ^ 0x80) : int8_t{0};
+          EXPECT_EQ(wp[(kk / 4 * h.nr + c) * 4 + kk % 4], want) << "column " << c << " k " << kk;
+        }
+      }
+    }
   }
 }
 

@@ -5,7 +5,9 @@
 #include <filesystem>
 #include <iostream>
 
+#include "apps/convert/int8_conversion.h"
 #include "weights/error.h"
+#include "weights/file_util.h"
 #include "weights/lerobot_import.h"
 
 namespace {
@@ -37,22 +39,63 @@ std::string millions(double n) {
 int main(int argc, char** argv) {
   CLI::App app{"act_convert: convert a LeRobot ACT checkpoint folder (current or legacy layout) into an .actb blob "
                "that libactengine runs."};
-  std::string checkpoint, output, precision = "fp32";
+  std::string checkpoint, output, precision = "fp32", mode = "static", method = "mse", report_path;
   bool quiet = false;
+  act::Int8Options int8;
+  double target_mse = 0, max_mse = 0;
+  size_t holdout = 0;
   app.add_option("checkpoint", checkpoint, "LeRobot checkpoint folder (config.json + model.safetensors [+ processor files])")
       ->required();
   app.add_option("-o,--output", output, "output .actb file (written atomically)")->required();
-  app.add_option("--precision", precision, "weight precision of the blob")->check(CLI::IsMember({"fp32", "int8"}));
+  app.add_option("--precision", precision, "weight precision of the blob (default fp32)")->check(CLI::IsMember({"fp32", "int8"}));
+  auto* int8_group = app.add_option_group("INT8", "with --precision int8");
+  int8_group->add_option("--mode", mode,
+                         "dynamic: activations quantized at run time, no calibration; static (default): calibrated "
+                         "backbone, int8 from layer to layer; mixed: static, keeping in float the fewest layers that "
+                         "meet --target-mse")
+      ->check(CLI::IsMember({"dynamic", "static", "mixed"}));
+  int8_group->add_option("--calib", int8.calib_sources,
+                         "calibration frames: a folder of images, a video, a LeRobot dataset folder, an act_drive "
+                         "--record folder or an observation .safetensors file (repeatable)");
+  int8_group->add_option("--calib-samples", int8.calib_samples, "frames used for calibration (default 64)")->check(CLI::Range(1, 100000));
+  int8_group->add_option("--holdout", holdout, "frames kept out of calibration for the accuracy report (default: a fifth, 1..16)");
+  int8_group->add_option("--calib-method", method, "activation range choice: minmax, percentile or mse (default)")
+      ->check(CLI::IsMember({"minmax", "percentile", "mse"}));
+  int8_group->add_option("--percentile", int8.percentile, "percentile for --calib-method percentile (default 99.99)")
+      ->check(CLI::Range(50.0, 100.0));
+  int8_group->add_option("--target-mse", target_mse, "mixed: held-out action MSE to meet, normalised units");
+  int8_group->add_option("--max-mse", max_mse, "fail, writing nothing, when the held-out action MSE (normalised) is above this");
+  int8_group->add_option("--report", report_path, "also write the accuracy report as JSON to this file");
+  int8_group->add_option("--threads", int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, 256));
   app.add_flag("-q,--quiet", quiet, "print nothing but errors");
   CLI11_PARSE(app, argc, argv);
 
   try {
-    if (precision != "fp32") {
-      act::fail(act::StatusCode::kUnimplemented, "--precision " + precision + " is not available yet in this build; use fp32");
+    if (precision == "fp32" && (!int8.calib_sources.empty() || app.count("--mode") || app.count("--max-mse") || app.count("--report"))) {
+      act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --max-mse and --report need --precision int8");
     }
     if (!quiet) std::cerr << "reading " << checkpoint << " ...\n";
     const act::ImportedModel model = act::import_lerobot_checkpoint(checkpoint);
-    const size_t bytes = act::write_fp32_blob(model, output);
+    size_t bytes = 0;
+    if (precision == "int8") {
+      int8.mode = mode == "dynamic" ? act::QuantMode::kDynamic : mode == "mixed" ? act::QuantMode::kMixed : act::QuantMode::kStatic;
+      int8.method = act::parse_calibration_method(method);
+      if (app.count("--holdout")) int8.holdout = holdout;
+      if (app.count("--target-mse")) int8.target_mse = target_mse;
+      if (app.count("--max-mse")) int8.max_mse = max_mse;
+      int8.progress = !quiet;
+      const act::Int8Result r = act::convert_to_int8(model, output, int8);
+      bytes = r.bytes;
+      if (!report_path.empty()) {
+        const std::string text = r.report.dump(2) + "\n";
+        act::detail::AtomicFileWriter file(report_path);
+        file.write(text.data(), text.size());
+        file.commit();
+      }
+      if (!quiet) std::cout << r.text;
+    } else {
+      bytes = act::write_fp32_blob(model, output);
+    }
     if (!quiet) {
       const act::ModelConfig& c = model.config;
       const auto macs = c.macs();

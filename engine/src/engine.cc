@@ -47,8 +47,8 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
     fail(StatusCode::kInvalidArgument, gemm.error);
   }
   const std::string precision = blob_.config().value("precision", "");
-  if (precision != "fp32") {
-    fail(StatusCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32)");
+  if (precision != "fp32" && precision != "int8") {
+    fail(StatusCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32, int8)");
   }
   network_ = std::make_unique<graph::ActNetwork>(config_, blob_);
   network_->plan(pool_.threads(), keep_intermediates);
@@ -77,6 +77,7 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
   info_.temporal_ensembling = config_.temporal_ensemble_coeff.has_value();
   info_.temporal_ensemble_coeff = config_.temporal_ensemble_coeff.value_or(0.0);
   info_.precision = precision;
+  if (precision == "int8") info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
   info_.summary = config_.summary();
 }
 

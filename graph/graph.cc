@@ -124,10 +124,13 @@ void Graph::run(ThreadPool& pool, StageTimes* times) {
     for (const auto& op : ops_) op->run(ctx);
     return;
   }
-  for (const auto& op : ops_) {
+  const bool per_op = times->op_seconds.size() == ops_.size();
+  for (size_t i = 0; i < ops_.size(); ++i) {
     const auto start = std::chrono::steady_clock::now();
-    op->run(ctx);
-    (*times)[op->stage] += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ops_[i]->run(ctx);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    (*times)[ops_[i]->stage] += seconds;
+    if (per_op) times->op_seconds[i] += seconds;
   }
 }
 

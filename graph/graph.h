@@ -79,6 +79,8 @@ inline constexpr int kStageCount = 4;
 /// Accumulated wall time per stage (seconds), filled by Graph::run when profiling.
 struct StageTimes {
   double seconds[kStageCount] = {};
+  /// When non-empty (sized to the op count by the caller), each op's wall time is added here too.
+  std::vector<double> op_seconds;
   double& operator[](Stage s) { return seconds[static_cast<int>(s)]; }
   double operator[](Stage s) const { return seconds[static_cast<int>(s)]; }
 };

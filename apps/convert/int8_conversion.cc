@@ -327,7 +327,7 @@ class Converter {
       r["sensitivity"] = nlohmann::json::array();
       for (const auto& [name, mse] : sensitivity) r["sensitivity"].push_back({{"layer", name}, {"mse_alone_int8", mse}});
     }
-    r["layers"] = layer_sqnr(blob);
+    r["layers"] = opt_.layer_report ? layer_sqnr(blob) : nlohmann::json::array();
     return r;
   }
 

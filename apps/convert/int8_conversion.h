@@ -27,6 +27,7 @@ struct Int8Options {
   std::optional<double> max_mse;       ///< fail, writing nothing, above this held-out MSE
   int threads = 0;
   bool progress = true;                ///< progress lines on stderr
+  bool layer_report = true;            ///< per-layer SQNR in the report (one more pass over 4 frames)
   uint64_t seed = 1;
 };
 

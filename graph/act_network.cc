@@ -40,6 +40,34 @@ const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::ve
   return t;
 }
 
+const float* ActNetwork::bias_table(const std::string& table, int rows, int width, const std::string& weight_name,
+                                    int pos_cols) {
+  if (blob_.find(table) != nullptr) {
+    return weight(table, {rows, width});
+  }
+  // Rebuild: table[r][c] = bias[c] + (c < pos_cols ? W[c] . pos[r] : 0), with the weights the
+  // layer runs with (dequantized when int8).
+  const int D = config_.dim_model;
+  const float* bias = weight(bn::bias_vector(table), {width});
+  const float* pos = weight(bn::kEncoderPos, {rows, D});
+  std::vector<float> w(static_cast<size_t>(pos_cols) * D);
+  if (const ActbTensor* q8 = int8_weight(weight_name, {width, D})) {
+    const auto* q = reinterpret_cast<const int8_t*>(q8->data);
+    for (size_t i = 0; i < w.size(); ++i) w[i] = static_cast<float>(q[i]) * q8->quant.scales[i / static_cast<size_t>(D)];
+  } else {
+    const float* f = weight(weight_name, {width, D});
+    std::copy(f, f + w.size(), w.begin());
+  }
+  std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
+  kernels::gemm_f32_nt(rows, pos_cols, D, pos, static_cast<size_t>(D), w.data(), static_cast<size_t>(D), out.data(),
+                       static_cast<size_t>(width));
+  for (int r = 0; r < rows; ++r) {
+    float* row = out.data() + static_cast<size_t>(r) * width;
+    for (int c = 0; c < width; ++c) row[c] = c < pos_cols ? row[c] + bias[c] : bias[c];
+  }
+  return out.data();
+}
+
 ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
   if (!t.s8) return t;
   if (auto it = converted_.find(t.id); it != converted_.end() && !it->second.s8) return it->second;
@@ -267,7 +295,7 @@ ValueId ActNetwork::self_attention_block(const std::string& p, int rows, ValueId
   const ValueId attn_in = config_.pre_norm ? layernorm(p + ".norm1", rows, x, w + "norm1") : x;
   // One GEMM for q, k and v; the positions' share of q and k is in the per-token bias table.
   const ValueId qkv = linear(p + ".qkv", rows, D, 3 * D, MatrixRef::of(attn_in, d), w + "in_proj.weight",
-                             MatrixRef::of_constant(weight(w + "in_proj.bias", {rows, 3 * D}), 3 * d));
+                             MatrixRef::of_constant(bias_table(w + "in_proj.bias", rows, 3 * D, w + "in_proj.weight", 2 * D), 3 * d));
   const ValueId a = attention(p + ".attn", rows, rows, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
                               MatrixRef::of(qkv, 3 * d, 2 * d));
   const ValueId out = linear(p + ".attn_out", rows, D, D, MatrixRef::of(a, d), w + "out_proj.weight",
@@ -310,7 +338,7 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
   }
   // Cross-attention over the encoder memory: keys carry the encoder positions (folded into the bias table).
   const ValueId kv = linear(p + ".cross_kv", N, D, 2 * D, MatrixRef::of(memory, d), w + "cross_kv_proj.weight",
-                            MatrixRef::of_constant(weight(w + "cross_kv_proj.bias", {N, 2 * D}), 2 * d));
+                            MatrixRef::of_constant(bias_table(w + "cross_kv_proj.bias", N, 2 * D, w + "cross_kv_proj.weight", D), 2 * d));
   const ValueId c = attention(p + ".cross_attn", T, N, cross_q, MatrixRef::of(kv, 2 * d, 0), MatrixRef::of(kv, 2 * d, d));
   ValueId y2 = linear(p + ".cross_out", T, D, D, MatrixRef::of(c, d), w + "cross_out_proj.weight",
                       MatrixRef::of_constant(weight(w + "cross_out_proj.bias", {D}), 0), y1);

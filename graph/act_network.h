@@ -7,6 +7,7 @@
 // quantized. Quantize/dequantize ops are inserted where a value crosses between the two.
 #pragma once
 
+#include <list>
 #include <map>
 #include <string>
 #include <vector>
@@ -50,6 +51,8 @@ class ActNetwork {
   const float* weight(const std::string& name, const std::vector<int64_t>& shape) const;
   /// The tensor, checked against the shape, when it is int8 (per-channel scales along axis 0); else null.
   const ActbTensor* int8_weight(const std::string& name, const std::vector<int64_t>& shape) const;
+  /// A per-token bias table: from the blob, or rebuilt from its bias vector (blob_names.h).
+  const float* bias_table(const std::string& table, int rows, int width, const std::string& weight_name, int pos_cols);
   Tensor as_f32(const Tensor& t);
   /// Static int8 (quantizing a float value with the parameters calibrated for it).
   Tensor as_s8(const Tensor& t);
@@ -76,6 +79,7 @@ class ActNetwork {
   QuantConfig quant_;
   const kernels::GemmS8Kernels* gemm_s8_ = nullptr;
   std::map<ValueId, Tensor> converted_;  // float <-> int8 conversions already in the graph
+  std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
   Graph graph_;
   std::vector<ValueId> camera_inputs_;
   ValueId state_input_ = kNoValue;

@@ -743,6 +743,7 @@ class Importer {
       const std::string src = p + "encoder.layers." + std::to_string(l) + ".";
       Attn a = take_attn(w, src + "self_attn", D);
       add(bn::enc(l, "in_proj.bias"), {N, 3 * D}, bias_table(pos, N, D, a.in_w, a.in_b, 3 * D, 2 * D));
+      add(bn::bias_vector(bn::enc(l, "in_proj.bias")), {3 * D}, a.in_b);
       add(bn::enc(l, "in_proj.weight"), {3 * D, D}, std::move(a.in_w));
       add(bn::enc(l, "out_proj.weight"), {D, D}, std::move(a.out_w));
       add(bn::enc(l, "out_proj.bias"), {D}, std::move(a.out_b));
@@ -792,6 +793,7 @@ class Importer {
       const Mat kv_w(cross.in_w.begin() + static_cast<ptrdiff_t>(D) * D, cross.in_w.end());
       const Mat kv_b(cross.in_b.begin() + D, cross.in_b.end());
       add(bn::dec(l, "cross_kv_proj.bias"), {N, 2 * D}, bias_table(pos, N, D, kv_w, kv_b, 2 * D, D));
+      add(bn::bias_vector(bn::dec(l, "cross_kv_proj.bias")), {2 * D}, kv_b);
       add(bn::dec(l, "cross_kv_proj.weight"), {2 * D, D}, kv_w);
       add(bn::dec(l, "cross_out_proj.weight"), {D, D}, std::move(cross.out_w));
       add(bn::dec(l, "cross_out_proj.bias"), {D}, std::move(cross.out_b));

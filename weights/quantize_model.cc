@@ -60,9 +60,16 @@ size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, con
   config["precision"] = "int8";
   config["quantization"] = quant.to_json();
   writer.set_config(config);
+  // Tables with a bias vector behind them are rebuilt at load (blob_names.h: bias_vector).
+  std::set<std::string> rebuilt_tables;
+  for (const auto& t : model.tensors) {
+    const std::string suffix = bn::bias_vector("");
+    if (ends_with(t.name, suffix)) rebuilt_tables.insert(t.name.substr(0, t.name.size() - suffix.size()));
+  }
   std::vector<int8_t> q;
   std::vector<float> scales;
   for (const auto& t : model.tensors) {
+    if (rebuilt_tables.count(t.name)) continue;
     if (!quantize.count(t.name) || keep_float.count(t.name)) {
       writer.add_f32(t.name, t.shape, t.values);
       continue;

@@ -9,6 +9,7 @@
 #include "weights/error.h"
 #include "weights/file_util.h"
 #include "weights/lerobot_import.h"
+#include "weights/signal_cleanup.h"
 
 namespace {
 
@@ -70,6 +71,7 @@ int main(int argc, char** argv) {
   app.add_flag("-q,--quiet", quiet, "print nothing but errors");
   CLI11_PARSE(app, argc, argv);
 
+  act::install_signal_cleanup();  // a killed conversion leaves no partial blob or scratch folder
   try {
     if (precision == "fp32" && (!int8.calib_sources.empty() || app.count("--mode") || app.count("--max-mse") || app.count("--report"))) {
       act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --max-mse and --report need --precision int8");

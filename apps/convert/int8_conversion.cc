@@ -15,6 +15,7 @@
 #include "engine/src/engine_impl.h"
 #include "weights/error.h"
 #include "weights/quantize_model.h"
+#include "weights/signal_cleanup.h"
 
 namespace act {
 
@@ -34,6 +35,8 @@ class ScratchDir {
     if (!fs::create_directory(path_, ec)) {
       fail(StatusCode::kIoError, "cannot create a scratch folder " + path_.string() + ": " + ec.message());
     }
+    remove_on_signal_.emplace_back(std::make_unique<SignalCleanup>(path_.string(), true));
+    for (const char* f : kFiles) remove_on_signal_.emplace_back(std::make_unique<SignalCleanup>(file(f)));
   }
   ~ScratchDir() {
     std::error_code ec;
@@ -41,10 +44,13 @@ class ScratchDir {
   }
   ScratchDir(const ScratchDir&) = delete;
   ScratchDir& operator=(const ScratchDir&) = delete;
+  /// The files the conversion writes in the folder (all of them, for the signal cleanup).
+  static constexpr const char* kFiles[] = {"fp32.actb", "int8.actb", "probe.actb"};
   std::string file(const std::string& name) const { return (path_ / name).string(); }
 
  private:
   fs::path path_;
+  std::vector<std::unique_ptr<SignalCleanup>> remove_on_signal_;
 };
 
 class Progress {

@@ -203,6 +203,20 @@ TEST(ActConvertInt8, MixedKeepsTheFewestFloatLayersThatMeetTheTarget) {
   EXPECT_GT(fs::file_size(dir + "/x.actb"), fs::file_size(dir + "/s.actb"));
 }
 
+TEST(ActConvertInt8, InterruptedConversionLeavesNothing) {
+  const std::string src = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  for (const char* signal : {"INT", "TERM"}) {
+    const std::string dir = test::scratch_dir();
+    // Mixed mode runs long enough (sensitivity analysis) to be interrupted in the middle.
+    const CommandResult r = run_command("timeout -s " + std::string(signal) + " 2 " + ACT_CONVERT_BIN + " " + q(src) + " -o " +
+                                        q(dir + "/k.actb") + " --precision int8 --mode mixed --target-mse 1e-12 --calib " + q(src));
+    EXPECT_EQ(r.exit_code, 124) << signal << ": " << r.output;  // timeout's code: the conversion was still running
+    EXPECT_FALSE(fs::exists(dir + "/k.actb")) << signal;
+    EXPECT_TRUE(leftovers(dir).empty()) << signal << ": " << testing::PrintToString(leftovers(dir));
+  }
+}
+
 TEST(ActConvertInt8, Fp32WithInt8FlagsIsAUsageError) {
   const std::string src = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(src);

@@ -1,10 +1,13 @@
-// act_convert: LeRobot ACT checkpoint folder -> .actb blob.
+// act_convert: LeRobot ACT checkpoint folder or PyTorch .pth state dict -> .actb blob [+ robot package].
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 
+#include "apps/deploy_package.h"
+#include "apps/pytorch_options.h"
+#include "weights/config_inference.h"
 #include "weights/error.h"
 #include "weights/lerobot_import.h"
 
@@ -35,13 +38,21 @@ std::string millions(double n) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"act_convert: convert a LeRobot ACT checkpoint folder (current or legacy layout) into an .actb blob "
-               "that libactengine runs."};
-  std::string checkpoint, output, precision = "fp32";
-  bool quiet = false;
-  app.add_option("checkpoint", checkpoint, "LeRobot checkpoint folder (config.json + model.safetensors [+ processor files])")
+  CLI::App app{"act_convert: convert a LeRobot ACT checkpoint folder (current or legacy layout), or a PyTorch .pth "
+               "state dict, into an .actb blob that libactengine runs."};
+  std::string checkpoint, output, precision = "fp32", package;
+  bool quiet = false, explain = false;
+  act::ConfigSources pth_sources;
+  app.add_option("checkpoint", checkpoint,
+                 "LeRobot checkpoint folder (config.json + model.safetensors [+ processor files]), or a torch.save "
+                 ".pth/.pt file holding the policy's state dict")
       ->required();
-  app.add_option("-o,--output", output, "output .actb file (written atomically)")->required();
+  app.add_option("-o,--output", output, "output .actb file (written atomically)");
+  app.add_option("--package", package, "write a folder for the robot: the blob (" + std::string(act::kPackageBlobName) +
+                 "), a drive calibration template and a README");
+  app.add_flag("--explain", explain, "print every config value and where it comes from (for a .pth: which tensor, file "
+               "or flag), and what cannot be known; converts too if -o or --package is given");
+  act::add_pytorch_options(app, pth_sources);
   app.add_option("--precision", precision, "weight precision of the blob")->check(CLI::IsMember({"fp32", "int8"}));
   app.add_flag("-q,--quiet", quiet, "print nothing but errors");
   CLI11_PARSE(app, argc, argv);
@@ -50,13 +61,38 @@ int main(int argc, char** argv) {
     if (precision != "fp32") {
       act::fail(act::StatusCode::kUnimplemented, "--precision " + precision + " is not available yet in this build; use fp32");
     }
+    if (!package.empty()) {
+      if (!output.empty()) act::fail(act::StatusCode::kInvalidArgument, "give either -o or --package (which writes " +
+                                     std::string(act::kPackageBlobName) + " into the folder)");
+      output = (std::filesystem::path(package) / act::kPackageBlobName).string();
+    }
+    if (output.empty() && !explain) act::fail(act::StatusCode::kInvalidArgument, "--output (or --package, or --explain) is required");
     if (!quiet) std::cerr << "reading " << checkpoint << " ...\n";
-    const act::ImportedModel model = act::import_lerobot_checkpoint(checkpoint);
+    act::ImportedModel model;
+    std::string source_kind;
+    if (std::filesystem::is_directory(checkpoint)) {
+      if (act::any_pytorch_option(app)) {
+        act::fail(act::StatusCode::kInvalidArgument, "the .pth options (--config, --stats, ...) do not apply to a LeRobot "
+                  "checkpoint folder: its config.json and statistics are in the folder");
+      }
+      if (explain) std::cout << "checkpoint   " << checkpoint << ": a LeRobot checkpoint folder; every value comes from its config.json\n";
+      if (output.empty()) return 0;
+      model = act::import_lerobot_checkpoint(checkpoint);
+      source_kind = model.layout + " LeRobot layout";
+    } else {
+      const act::PyTorchConversion plan = act::plan_pytorch_conversion(checkpoint, pth_sources);
+      if (explain) act::print_explanation(std::cout, plan);
+      if (explain && output.empty()) return plan.missing.empty() ? 0 : 1;
+      model = act::import_pytorch_conversion(plan);
+      source_kind = "PyTorch " + plan.checkpoint.format + " .pth, " + plan.checkpoint.location + ", statistics from " +
+                    plan.statistics_source;
+    }
     const size_t bytes = act::write_fp32_blob(model, output);
+    if (!package.empty()) act::write_deploy_package(package, model.config, checkpoint);
     if (!quiet) {
       const act::ModelConfig& c = model.config;
       const auto macs = c.macs();
-      std::cout << "checkpoint   " << checkpoint << " (" << model.layout << " LeRobot layout)\n"
+      std::cout << "checkpoint   " << checkpoint << " (" << source_kind << ")\n"
                 << "model        " << c.summary() << "\n"
                 << "tokens       " << c.n_tokens() << " encoder, " << c.chunk_size << " decoder; n_action_steps "
                 << c.n_action_steps;
@@ -70,6 +106,7 @@ int main(int argc, char** argv) {
                 << "compute      " << gmac(macs.total()) << " GMAC per inference (backbone " << gmac(macs.backbone)
                 << ", encoder " << gmac(macs.encoder) << ", decoder " << gmac(macs.decoder) << ")\n"
                 << "wrote        " << output << " (" << human_bytes(static_cast<double>(bytes)) << ")\n";
+      if (!package.empty()) std::cout << "package      " << package << " (blob, drive_calibration.json, README.md)\n";
       for (const auto& note : model.notes) std::cout << "note: " << note << "\n";
     }
     return 0;

@@ -271,6 +271,7 @@ PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::st
     }
     std::vector<uint8_t> data = materialize(where, t, storage->second);  // checks that the dtype is supported
     out.state_dict.add(k->text, *t.storage_type.dtype, t.size, std::move(data));
+    out.saved_order.push_back(k->text);
   }
   return out;
 }

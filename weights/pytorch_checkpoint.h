@@ -20,6 +20,7 @@ struct PyTorchCheckpoint {
   std::string format;             ///< "zip" or "legacy"
   std::string location;           ///< where the state dict was: "the saved object", "entry 'model_state_dict'"
   std::vector<std::string> other_entries;  ///< the wrapping dict's other entries, described ("epoch: int 12")
+  std::vector<std::string> saved_order;    ///< tensor names in the order they were saved (module registration order)
 };
 
 /// True when `path` is a regular file that starts like either torch.save format.

@@ -100,6 +100,15 @@ def main() -> int:
     save(wrapped(tiny, key="state_dict"), out / "tiny_wrapped_proto4.pth", protocol=4)
     half = collections.OrderedDict((k, v.half()) for k, v in tiny.items())
     save(half, out / "tiny_f16.pth")
+    # The same half-precision weights as a LeRobot folder, the reference for tiny_f16.pth.
+    folder = out / "act-tiny-f16"
+    folder.mkdir(exist_ok=True)
+    for f in (SHARED / "fixtures" / "act-tiny").iterdir():
+        if f.suffix == ".json" or (f.suffix == ".safetensors" and f.name.startswith("policy_")):
+            (folder / f.name).write_bytes(f.read_bytes())
+    sys.path.insert(0, str(SHARED / "tools" / "act_reference"))
+    from act_harness import stio  # noqa: E402
+    stio.save_file({k: v.numpy() for k, v in half.items()}, folder / "model.safetensors")
     # act-tiny-legacy (statistics are buffers in the state dict).
     save(legacy, out / "tinylegacy_plain.pth")
     save(wrapped(without_model_prefix(legacy)), out / "tinylegacy_wrapped_noprefix_legacyformat.pth", legacy=True)
@@ -135,8 +144,6 @@ def main() -> int:
     for k, v in views.items():
         v = v.detach()
         expected[k] = v.contiguous() if v.dtype == torch.int64 else v.float().contiguous()
-    sys.path.insert(0, str(SHARED / "tools" / "act_reference"))
-    from act_harness import stio  # noqa: E402
     stio.save_file({k: v.numpy() for k, v in expected.items()}, out / "views_expected.safetensors")
 
     # Malicious pickles in torch's containers. Loading any of them with pickle would touch PWNED.

@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
     if (!package.empty()) {
       if (!output.empty()) act::fail(act::StatusCode::kInvalidArgument, "give either -o or --package (which writes " +
                                      std::string(act::kPackageBlobName) + " into the folder)");
-      output = (std::filesystem::path(package) / act::kPackageBlobName).string();
+      output = act::prepare_package_dir(package);
     }
     if (output.empty() && !explain) act::fail(act::StatusCode::kInvalidArgument, "--output (or --package, or --explain) is required");
     if (!quiet) std::cerr << "reading " << checkpoint << " ...\n";

@@ -75,10 +75,14 @@ std::string readme(const ModelConfig& m, const std::string& source) {
 
 }  // namespace
 
-void write_deploy_package(const std::string& dir, const ModelConfig& model, const std::string& source) {
+std::string prepare_package_dir(const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) fail(StatusCode::kIoError, "cannot create package folder " + dir + ": " + ec.message());
+  return (fs::path(dir) / kPackageBlobName).string();
+}
+
+void write_deploy_package(const std::string& dir, const ModelConfig& model, const std::string& source) {
   const fs::path calibration = fs::path(dir) / "drive_calibration.json";
   if (!fs::exists(calibration)) write_text(calibration, calibration_template(model));
   write_text(fs::path(dir) / "README.md", readme(model, source));

@@ -147,7 +147,8 @@ class Parser {
   }
 
   // ---- values
-  static MutableRef make(Kind kind) {
+  MutableRef make(Kind kind) {
+    if (++values_ > limits_.max_values) error("more than " + std::to_string(limits_.max_values) + " values");
     auto v = std::make_shared<PickleValue>();
     v->kind = kind;
     return v;
@@ -554,6 +555,7 @@ class Parser {
   const PickleLimits& limits_;
   size_t pos_ = 0;
   size_t op_pos_ = 0;
+  size_t values_ = 0;
   std::vector<MutableRef> stack_;
   std::vector<size_t> marks_;  // stack sizes at each MARK
   std::unordered_map<uint64_t, MutableRef> memo_;

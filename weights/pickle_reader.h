@@ -76,6 +76,7 @@ struct PickleLimits {
   size_t max_memo = 1u << 24;     ///< memo entries
   size_t max_stack = 1u << 24;    ///< values on the stack plus marks
   size_t max_tensor_dims = 16;
+  size_t max_values = 1u << 20;   ///< values created (bounds memory: a state dict needs ~20 per tensor)
 };
 
 /// Parses one pickle that must end with STOP. `origin` names it in messages (e.g. "model.pth: data.pkl").

@@ -182,15 +182,6 @@ PickleRef read_zip(const std::string& path, std::span<const uint8_t> file, std::
 
 }  // namespace
 
-bool looks_like_pytorch_checkpoint(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) return false;
-  const FileMapping file = FileMapping::open(path);
-  const std::span<const uint8_t> bytes(file.data(), file.size());
-  return ZipArchive::looks_like_zip(bytes) ||
-         (bytes.size() >= sizeof kLegacyStart && std::memcmp(bytes.data(), kLegacyStart, sizeof kLegacyStart) == 0);
-}
-
 PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::string& state_dict_key) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) fail(StatusCode::kNotFound, "PyTorch checkpoint not found: " + path);

@@ -23,9 +23,6 @@ struct PyTorchCheckpoint {
   std::vector<std::string> saved_order;    ///< tensor names in the order they were saved (module registration order)
 };
 
-/// True when `path` is a regular file that starts like either torch.save format.
-bool looks_like_pytorch_checkpoint(const std::string& path);
-
 /// Reads the state dict of a torch.save file. `state_dict_key` picks the wrapping dict's entry when
 /// the file holds several dicts of tensors (by default a lone one, else "model_state_dict",
 /// "state_dict" or "model"). Throws act::Error naming the file and the problem: kNotFound,

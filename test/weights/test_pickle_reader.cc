@@ -127,6 +127,14 @@ TEST(PickleReader, BoundsTheMemo) {
   EXPECT_EQ(parse(kProto2 + "Nq\x00q\x01q\x01q\x00."s, small)->kind, Kind::kNone);
 }
 
+TEST(PickleReader, BoundsTheNumberOfValues) {
+  PickleLimits small;
+  small.max_values = 100;
+  std::string many = kProto2 + "]";
+  for (int i = 0; i < 200; ++i) many += "Na";  // [None, None, ...]
+  expect_error(many + ".", StatusCode::kDataLoss, "more than 100 values", small);
+}
+
 TEST(PickleReader, BoundsTheNestingDepth) {
   std::string deep = kProto2 + "N";
   for (int i = 0; i < 100000; ++i) deep += "\x85";  // ((((None,),),),...)

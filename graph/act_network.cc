@@ -210,16 +210,10 @@ ValueId ActNetwork::backbone(size_t camera) {
   const int pooled_h = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1);
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   const std::string pool_name = p + "backbone.maxpool";
-  if (x.s8) {  // max commutes with quantization: same parameters, exact
-    const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, DataType::kS8);
-    graph_.value(pooled).quant = x.q;
-    add(std::make_unique<MaxPoolS8Op>(h, w, 64, 3, 2, 1, x.id, pooled), pool_name);
-    x = Tensor{pooled, true, x.q, kNoValue};
-  } else {
-    const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64});
-    add(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.id, pooled), pool_name);
-    x = Tensor{pooled, false, {}, kNoValue};
-  }
+  const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, x.s8 ? DataType::kS8 : DataType::kF32);
+  if (x.s8) graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
+  add(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.s8, x.id, pooled), pool_name);
+  x.id = pooled;
   h = pooled_h;
   w = pooled_w;
 

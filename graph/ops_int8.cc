@@ -5,7 +5,6 @@
 #include <cstdlib>
 #include <limits>
 
-#include "kernels/pool_s8/maxpool_s8.h"
 #include "weights/error.h"
 
 namespace act::graph {
@@ -194,26 +193,6 @@ void ConvS8Op::run(const RunContext& ctx) const {
       kernels::conv_s8_f32out(conv, x, out, p0, count, ctx.scratch_s8(thread));
     });
   }
-}
-
-// ----------------------------------------------------------------------------------- MaxPoolS8
-
-MaxPoolS8Op::MaxPoolS8Op(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output)
-    : in_h_(in_h), in_w_(in_w), channels_(channels), kernel_(kernel), stride_(stride), pad_(pad),
-      out_h_(kernels::Conv2dShape::out_dim(in_h, kernel, stride, pad, 1)),
-      out_w_(kernels::Conv2dShape::out_dim(in_w, kernel, stride, pad, 1)) {
-  inputs = {input};
-  outputs = {output};
-}
-
-void MaxPoolS8Op::run(const RunContext& ctx) const {
-  const int8_t* x = ctx.data_s8(inputs[0]);
-  int8_t* y = ctx.data_s8(outputs[0]);
-  constexpr int kRows = 4;
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(out_h_), kRows), [&](size_t task, int) {
-    const int r0 = static_cast<int>(task) * kRows;
-    kernels::maxpool_nhwc_s8(in_h_, in_w_, channels_, kernel_, stride_, pad_, out_w_, x, y, r0, std::min(out_h_, r0 + kRows));
-  });
 }
 
 // ------------------------------------------------------------------------------------ LinearS8

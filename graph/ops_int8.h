@@ -99,16 +99,6 @@ class ConvS8Op : public Op {
   std::vector<float> requant_scale_;  // s8 out: s_in * s_w[n] / s_out
 };
 
-class MaxPoolS8Op : public Op {
- public:
-  MaxPoolS8Op(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output);
-  const char* type() const override { return "maxpool_s8"; }
-  void run(const RunContext& ctx) const override;
-
- private:
-  int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
-};
-
 /// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x quantized per row at run time
 /// (dynamic per-token quantization) into int8 values the op owns. The bias is a vector (ld 0) or a
 /// per-row table (then there must be no residual: the table takes the residual's place in the

@@ -2,9 +2,13 @@
 // glance. Without --model it builds LeRobot's default ACT in-process (deterministic synthetic weights),
 // so a new user sees numbers with nothing to download.
 #include <CLI/CLI.hpp>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
+#include <memory>
+#include <optional>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +18,7 @@
 
 #include "actengine/engine.h"
 #include "apps/bench_support.h"
+#include "apps/convert/int8_conversion.h"
 #include "apps/observation_file.h"
 #include "weights/actb.h"
 #include "weights/error.h"
@@ -35,6 +40,7 @@ struct Options {
   double max_secs = 150.0;
   std::string json_path, csv_path, input_path;
   bool compare = false;
+  std::string compare_with;
   uint32_t seed = 1;
 };
 
@@ -73,36 +79,111 @@ SyntheticInput make_input(const act::ModelInfo& info) {
   return in;
 }
 
-int run(const Options& opt) {
-  if (opt.precision != "fp32") {
-    act::fail(act::StatusCode::kUnimplemented, "--precision " + opt.precision + " is not available in this build yet (fp32)");
+// A temporary blob removed when the benchmark ends (the engine's mapping stays valid after unlink).
+struct TempBlob {
+  std::string path;
+  explicit TempBlob(const std::string& tag)
+      : path((fs::temp_directory_path() / ("act_bench_" + std::to_string(::getpid()) + "_" + tag + ".actb")).string()) {}
+  ~TempBlob() {
+    std::error_code ec;
+    fs::remove(path, ec);
   }
-  if (opt.compare) act::fail(act::StatusCode::kUnimplemented, "--compare needs the INT8 path, not available in this build yet");
+};
 
+// The built-in model written as FP32 and (when asked) INT8 static blobs. INT8 is calibrated on a few
+// synthetic frames: enough for speed; act_convert with real frames is what gives accuracy.
+struct BuiltinBlobs {
+  TempBlob fp32{"fp32"}, int8{"int8"};
+  bool has_int8 = false;
+  std::string int8_note;
+};
+
+void build_builtin(const Options& opt, bool want_int8, BuiltinBlobs& out) {
+  const act::ImportedModel model = act::make_synthetic_model(opt.config, opt.seed);
+  act::write_fp32_blob(model, out.fp32.path);
+  if (!want_int8) return;
+  const act::ActbFile fp32 = act::ActbFile::open(out.fp32.path);
+  const act::CalibSet frames = act::synthetic_calibration_frames(model.config, fp32, 5, opt.seed);
+  act::Int8Options int8;
+  int8.mode = act::QuantMode::kStatic;
+  int8.holdout = 1;
+  int8.threads = opt.threads;
+  int8.layer_report = false;
+  int8.progress = false;
+  std::fprintf(stderr, "act_bench: quantizing the built-in model to INT8 (static, calibrated on 4 synthetic frames) ...\n");
+  // In a child process, so that the calibration's FP32 run and its buffers do not count in this
+  // process's peak RSS. The child reports the held-out error through a pipe.
+  int fds[2];
+  if (::pipe(fds) != 0) act::fail(act::StatusCode::kIoError, "pipe() failed");
+  const pid_t child = ::fork();
+  if (child < 0) act::fail(act::StatusCode::kIoError, "fork() failed");
+  if (child == 0) {
+    ::close(fds[0]);
+    int code = 0;
+    try {
+      const act::Int8Result r = act::convert_to_int8(model, out.int8.path, int8, &frames);
+      const std::string mse = std::to_string(r.report["action_error"]["mse"].get<double>());
+      code = ::write(fds[1], mse.data(), mse.size()) == static_cast<ssize_t>(mse.size()) ? 0 : 1;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "act_bench: error: INT8 conversion failed: %s\n", e.what());
+      code = 1;
+    }
+    ::_exit(code);
+  }
+  ::close(fds[1]);
+  std::string mse;
+  char buf[64];
+  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) mse.append(buf, static_cast<size_t>(n));
+  ::close(fds[0]);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::StatusCode::kInternal, "INT8 conversion of the built-in model failed");
+  out.has_int8 = true;
+  out.int8_note = "INT8 static, mse calibration on 4 synthetic frames (held-out action MSE " + mse + ")";
+}
+
+std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
+  auto engine_or = act::Engine::open(path, {.threads = threads, .profile = true});
+  if (!engine_or.ok()) act::fail(engine_or.status().code(), engine_or.status().message());
+  return std::move(*engine_or);
+}
+
+int run(const Options& opt) {
+  if (opt.compare && !opt.model.empty() && opt.compare_with.empty()) {
+    act::fail(act::StatusCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
+  }
   // The model: a blob, or a built-in synthetic one written to a temporary blob.
-  std::string blob_path = opt.model, model_label = opt.model;
+  std::string blob_path = opt.model, model_label = opt.model, other_path = opt.compare_with;
   double build_ms = 0;
-  std::string temp_blob;
+  BuiltinBlobs builtin;
   if (blob_path.empty()) {
     const auto start = Clock::now();
-    const act::ImportedModel model = act::make_synthetic_model(opt.config, opt.seed);
-    temp_blob = (fs::temp_directory_path() / ("act_bench_" + std::to_string(::getpid()) + ".actb")).string();
-    act::write_fp32_blob(model, temp_blob);
-    blob_path = temp_blob;
+    const bool int8 = opt.precision == "int8";
+    build_builtin(opt, int8 || opt.compare, builtin);
+    blob_path = int8 ? builtin.int8.path : builtin.fp32.path;
+    if (opt.compare) other_path = int8 ? builtin.fp32.path : builtin.int8.path;
     build_ms = ms_since(start);
     model_label = "built-in \"" + opt.config + "\" (synthetic weights, seed " + std::to_string(opt.seed) + ")";
+  } else if (opt.precision != "fp32") {
+    act::fail(act::StatusCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
   }
   const act::ActbFile blob_file = act::ActbFile::open(blob_path);
   const act::ModelConfig config = act::ModelConfig::from_json(blob_file.config());
   const size_t weight_bytes = blob_file.file_size();
 
   const auto load_start = Clock::now();
-  auto engine_or = act::Engine::open(blob_path, {.threads = opt.threads, .profile = true});
+  std::unique_ptr<act::Engine> engine_ptr = open_engine(blob_path, opt.threads);
   const double load_ms = ms_since(load_start);
-  if (!temp_blob.empty()) fs::remove(temp_blob);  // the mapping stays valid
-  if (!engine_or.ok()) act::fail(engine_or.status().code(), engine_or.status().message());
-  act::Engine& engine = **engine_or;
+  act::Engine& engine = *engine_ptr;
   const act::ModelInfo& info = engine.model_info();
+  std::unique_ptr<act::Engine> other;
+  if (!other_path.empty()) {
+    other = open_engine(other_path, opt.threads);
+    if (other->model_info().chunk_values() != info.chunk_values() || other->model_info().summary != info.summary) {
+      act::fail(act::StatusCode::kInvalidArgument, "--compare-with " + other_path + " is not the same model (" +
+                other->model_info().summary + " vs " + info.summary + ")");
+    }
+  }
 
   // Inputs: real observations, or a synthetic one.
   std::optional<act::ObservationBatch> batch;
@@ -116,22 +197,37 @@ int run(const Options& opt) {
     return batch ? batch->at(static_cast<size_t>(i) % batch->size()) : synthetic.obs;
   };
 
-  std::vector<float> chunk(info.chunk_values());
-  auto infer = [&](int i) {
-    const act::Status s = engine.infer(observation(i), chunk);
+  std::vector<float> chunk(info.chunk_values()), other_chunk(info.chunk_values());
+  auto infer = [&](act::Engine& e, int i, std::vector<float>& out) {
+    const act::Status s = e.infer_normalized(observation(i), out);
     if (!s.ok()) act::fail(s.code(), s.message());
   };
   const auto first_start = Clock::now();
-  infer(0);
+  infer(engine, 0, chunk);
   const double first_ms = ms_since(first_start);
-  for (int i = 0; i < opt.warmup_runs; ++i) infer(i);
+  for (int i = 0; i < opt.warmup_runs; ++i) {
+    infer(engine, i, chunk);
+    if (other) infer(*other, i, other_chunk);
+  }
 
   const bool progress = ::isatty(STDERR_FILENO);
-  std::vector<act::InferenceTimings> runs;
+  std::vector<act::InferenceTimings> runs, other_runs;
+  double err_sq = 0, err_max = 0;
+  size_t err_count = 0;
   const auto bench_start = Clock::now();
   for (int i = 0; i < opt.num_runs; ++i) {
-    infer(i);
+    infer(engine, i, chunk);
     runs.push_back(engine.last_timings());
+    if (other) {  // interleaved run by run, so both see the same machine conditions
+      infer(*other, i, other_chunk);
+      other_runs.push_back(other->last_timings());
+      for (size_t k = 0; k < chunk.size(); ++k) {
+        const double d = static_cast<double>(chunk[k]) - other_chunk[k];
+        err_sq += d * d;
+        err_max = std::max(err_max, std::fabs(d));
+      }
+      err_count += chunk.size();
+    }
     if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt.num_runs, runs.back().total_ms);
     if (ms_since(bench_start) > opt.max_secs * 1e3) break;
   }
@@ -155,6 +251,12 @@ int run(const Options& opt) {
   const auto macs = config.macs();
   const double gmac = macs.total() / 1e9;
   const double gmacs_per_s = gmac / (total.mean / 1e3);
+  std::optional<act::LatencySummary> other_total;
+  if (other) {
+    std::vector<double> samples;
+    for (const auto& r : other_runs) samples.push_back(r.total_ms);
+    other_total = act::summarize(samples);
+  }
   const act::MachineInfo machine = act::read_machine_info();
   const size_t rss = act::peak_rss_bytes();
 
@@ -163,8 +265,9 @@ int run(const Options& opt) {
   std::printf("model        %s\n             %s\n", model_label.c_str(), config.summary().c_str());
   std::printf("compute      %.3f GMAC per inference (backbone %.3f, projections %.3f, encoder %.3f, decoder %.3f, head %.4f)\n",
               gmac, macs.backbone / 1e9, macs.projections / 1e9, macs.encoder / 1e9, macs.decoder / 1e9, macs.head / 1e9);
-  std::printf("engine       %s, weights %.1f MB, GEMM fp32 (Eigen), %d threads\n", info.precision.c_str(),
-              static_cast<double>(weight_bytes) / 1e6, engine.threads());
+  std::printf("engine       %s, weights %.1f MB, %d threads\nkernels      %s\n", info.precision.c_str(),
+              static_cast<double>(weight_bytes) / 1e6, engine.threads(), info.kernels.c_str());
+  if (!builtin.int8_note.empty()) std::printf("int8         %s\n", builtin.int8_note.c_str());
   std::printf("machine      %s\n", machine.one_line().c_str());
   if (build_ms > 0) std::printf("build        %.0f ms (synthetic weights, import, blob)\n", build_ms);
   std::printf("init         load + plan %.1f ms, first inference %.1f ms\n", load_ms, first_ms);
@@ -177,6 +280,19 @@ int run(const Options& opt) {
   }
   std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total.mean, gmacs_per_s);
   std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss) / 1e6);
+  nlohmann::ordered_json compare_json;
+  if (other) {
+    const act::ModelInfo& oi = other->model_info();
+    const double ratio = other_total->mean / total.mean;
+    const double rmse = std::sqrt(err_sq / static_cast<double>(std::max<size_t>(err_count, 1)));
+    std::printf("\ncompare      %s: mean %.2f ms, p50 %.2f ms (interleaved with the runs above)\n", oi.precision.c_str(),
+                other_total->mean, other_total->p50);
+    std::printf("             %s is %.2fx the speed of %s\n", info.precision.c_str(), ratio, oi.precision.c_str());
+    std::printf("             action difference (normalised units): MSE %.3g, RMS %.3g, max |diff| %.3g\n", rmse * rmse, rmse,
+                err_max);
+    compare_json = {{"other_precision", oi.precision}, {"other_latency_ms", other_total->to_json()},
+                    {"speed_ratio", ratio}, {"action_mse", rmse * rmse}, {"action_max_abs", err_max}};
+  }
 
   if (!opt.json_path.empty()) {
     nlohmann::ordered_json j;
@@ -193,7 +309,8 @@ int run(const Options& opt) {
                             {"encoder", macs.encoder / 1e9},
                             {"decoder", macs.decoder / 1e9},
                             {"head", macs.head / 1e9}}}};
-    j["engine"] = {{"threads", engine.threads()}, {"gemm", "fp32 eigen"}};
+    j["engine"] = {{"threads", engine.threads()}, {"kernels", info.kernels}};
+    if (other) j["compare"] = compare_json;
     j["machine"] = machine.to_json();
     j["init"] = {{"build_ms", build_ms}, {"load_ms", load_ms}, {"first_inference_ms", first_ms}};
     j["runs"] = {{"warmup", opt.warmup_runs}, {"timed", runs.size()}, {"seconds", bench_ms / 1e3}};
@@ -237,7 +354,10 @@ int main(int argc, char** argv) {
   app.add_option("--json", opt.json_path, "write every number (and machine info) as JSON");
   app.add_option("--csv", opt.csv_path, "write per-run stage times as CSV");
   app.add_option("--input", opt.input_path, "benchmark on observations from a safetensors file (act_eval's format)");
-  app.add_flag("--compare", opt.compare, "FP32 and INT8 of the same model, interleaved, with speed ratio and action error");
+  app.add_flag("--compare", opt.compare,
+               "FP32 and INT8 of the same model, interleaved run by run: speed ratio and action difference "
+               "(built-in models; with --model also give --compare-with)");
+  app.add_option("--compare-with", opt.compare_with, "with --model and --compare: the same model in the other precision");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {

@@ -1,5 +1,7 @@
 #include "graph/act_network.h"
 
+#include <cmath>
+
 #include "weights/blob_names.h"
 #include "weights/error.h"
 
@@ -21,6 +23,143 @@ const float* ActNetwork::weight(const std::string& name, const std::vector<int64
   return t->f32();
 }
 
+const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::vector<int64_t>& shape) const {
+  const ActbTensor* t = blob_.find(name);
+  if (!t || t->dtype != DType::kI8) return nullptr;
+  if (t->shape != shape) {
+    fail(StatusCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+         ", the model config implies " + shape_string(shape));
+  }
+  if (!int8_) fail(StatusCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" in a blob whose precision is not int8");
+  if (t->quant.scales.size() != static_cast<size_t>(shape[0]) || t->quant.axis != 0) {
+    fail(StatusCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" needs one scale per output channel");
+  }
+  for (float s : t->quant.scales) {
+    if (!(s > 0.0f) || !std::isfinite(s)) fail(StatusCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" has a bad scale");
+  }
+  return t;
+}
+
+const float* ActNetwork::bias_table(const std::string& table, int rows, int width, const std::string& weight_name,
+                                    int pos_cols) {
+  if (blob_.find(table) != nullptr) {
+    return weight(table, {rows, width});
+  }
+  // Rebuild: table[r][c] = bias[c] + (c < pos_cols ? W[c] . pos[r] : 0), with the weights the
+  // layer runs with (dequantized when int8).
+  const int D = config_.dim_model;
+  const float* bias = weight(bn::bias_vector(table), {width});
+  const float* pos = weight(bn::kEncoderPos, {rows, D});
+  std::vector<float> w(static_cast<size_t>(pos_cols) * D);
+  if (const ActbTensor* q8 = int8_weight(weight_name, {width, D})) {
+    const auto* q = reinterpret_cast<const int8_t*>(q8->data);
+    for (size_t i = 0; i < w.size(); ++i) w[i] = static_cast<float>(q[i]) * q8->quant.scales[i / static_cast<size_t>(D)];
+  } else {
+    const float* f = weight(weight_name, {width, D});
+    std::copy(f, f + w.size(), w.begin());
+  }
+  std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
+  kernels::gemm_f32_nt(rows, pos_cols, D, pos, static_cast<size_t>(D), w.data(), static_cast<size_t>(D), out.data(),
+                       static_cast<size_t>(width));
+  for (int r = 0; r < rows; ++r) {
+    float* row = out.data() + static_cast<size_t>(r) * width;
+    for (int c = 0; c < width; ++c) row[c] = c < pos_cols ? row[c] + bias[c] : bias[c];
+  }
+  return out.data();
+}
+
+ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
+  if (!t.s8) return t;
+  if (auto it = converted_.find(t.id); it != converted_.end() && !it->second.s8) return it->second;
+  check(t.params == kNoValue, StatusCode::kInternal, "dequantizing a dynamically quantized value");
+  const Value& v = graph_.value(t.id);
+  const std::string name = v.name + ".f32";
+  const ValueId y = graph_.add_value(name, v.shape);
+  add(std::make_unique<DequantizeOp>(v.elements, t.q, t.id, y), name);
+  return converted_[t.id] = Tensor{y, false, {}, kNoValue};
+}
+
+ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
+  if (t.s8) return t;
+  if (auto it = converted_.find(t.id); it != converted_.end() && it->second.s8 && it->second.params == kNoValue) return it->second;
+  const Value& v = graph_.value(t.id);
+  const ActivationQuant& a = quant_.activation(v.name);
+  const kernels::QuantS8 q{a.scale, a.zero_point};
+  const std::string name = v.name + ".s8";
+  const ValueId y = graph_.add_value(name, v.shape, DataType::kS8);
+  graph_.value(y).quant = q;
+  add(std::make_unique<QuantizeOp>(v.elements, q, t.id, y), name);
+  return converted_[t.id] = Tensor{y, true, q, kNoValue};
+}
+
+ActNetwork::Tensor ActNetwork::as_dynamic_s8(const Tensor& t) {
+  check(!t.s8, StatusCode::kInternal, "dynamic quantization of an int8 value");
+  if (auto it = converted_.find(t.id); it != converted_.end() && it->second.params != kNoValue) return it->second;
+  const Value& v = graph_.value(t.id);
+  const std::string name = v.name + ".s8dyn";
+  const ValueId y = graph_.add_value(name, v.shape, DataType::kS8);
+  const ValueId params = graph_.add_value(name + ".params", {2});
+  add(std::make_unique<QuantizeOp>(v.elements, t.id, y, params), name);
+  return converted_[t.id] = Tensor{y, true, {}, params};
+}
+
+ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, int& w, bool relu, const Tensor* residual,
+                                    const std::string& name) {
+  kernels::Conv2dShape s;
+  s.in_h = h;
+  s.in_w = w;
+  s.in_c = c.in_c;
+  s.kernel_h = s.kernel_w = c.kernel;
+  s.stride = c.stride;
+  s.pad = c.pad;
+  s.dilation = c.dilation;
+  s.out_h = kernels::Conv2dShape::out_dim(h, c.kernel, c.stride, c.pad, c.dilation);
+  s.out_w = kernels::Conv2dShape::out_dim(w, c.kernel, c.stride, c.pad, c.dilation);
+  s.out_c = c.out_c;
+  h = s.out_h;
+  w = s.out_w;
+  const std::vector<int64_t> w_shape = {c.out_c, c.kernel, c.kernel, c.in_c};
+  const std::vector<int64_t> y_shape = {s.out_h, s.out_w, s.out_c};
+  const float* bias = weight(bn::conv_bias(c.name), {c.out_c});
+  const ActbTensor* q8 = int8_weight(bn::conv_weight(c.name), w_shape);
+  if (q8 == nullptr) {
+    const Tensor xf = as_f32(x);
+    const ValueId res = residual ? as_f32(*residual).id : kNoValue;
+    const ValueId y = graph_.add_value(name, y_shape);
+    add(std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name);
+    return Tensor{y, false, {}, kNoValue};
+  }
+  ConvS8Spec spec;
+  spec.shape = s;
+  spec.weight = reinterpret_cast<const int8_t*>(q8->data);
+  spec.w_scale = q8->quant.scales.data();
+  spec.bias = bias;
+  spec.relu = relu;
+  if (!quant_.static_activations()) {
+    // Dynamic: quantize the float input at run time, float out (bias, residual, ReLU in float).
+    const Tensor xq = as_dynamic_s8(as_f32(x));
+    spec.input_params = xq.params;
+    spec.s8_out = false;
+    if (residual) spec.residual = as_f32(*residual).id;
+    const ValueId y = graph_.add_value(name, y_shape);
+    add(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name);
+    return Tensor{y, false, {}, kNoValue};
+  }
+  const Tensor xq = as_s8(x);
+  spec.input_q = xq.q;
+  const ActivationQuant& oq = quant_.activation(name);
+  spec.output_q = {oq.scale, oq.zero_point};
+  if (residual) {
+    const Tensor r = as_s8(*residual);
+    spec.residual = r.id;
+    spec.residual_q = r.q;
+  }
+  const ValueId y = graph_.add_value(name, y_shape, DataType::kS8);
+  graph_.value(y).quant = spec.output_q;
+  add(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name);
+  return Tensor{y, true, spec.output_q, kNoValue};
+}
+
 void ActNetwork::add(std::unique_ptr<Op> op, const std::string& name) {
   op->name = name;
   op->stage = stage_;
@@ -30,6 +169,15 @@ void ActNetwork::add(std::unique_ptr<Op> op, const std::string& name) {
 ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                            MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
   const ValueId y = graph_.add_value(out_name, {rows, out});
+  if (const ActbTensor* q8 = int8_weight(weight_name, {out, in})) {
+    const ValueId qx = graph_.add_value(out_name + ".x_s8", {rows, in}, DataType::kS8);
+    const ValueId row_scale = graph_.add_value(out_name + ".x_scale", {rows});
+    const ValueId row_zero_point = graph_.add_value(out_name + ".x_zero_point", {rows}, DataType::kS32);
+    add(std::make_unique<LinearS8Op>(*gemm_s8_, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
+                                     q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale, row_zero_point),
+        out_name);
+    return y;
+  }
   auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
   add(std::move(op), out_name);
   return y;
@@ -58,35 +206,14 @@ ValueId ActNetwork::backbone(size_t camera) {
   camera_inputs_.push_back(image);
 
   int h = cam.height, w = cam.width;
-  // One folded conv: returns its output value and updates h, w.
-  auto conv = [&](const ConvSpec& c, ValueId x, int& ch, int& cw, bool relu, ValueId residual, const std::string& name) {
-    kernels::Conv2dShape s;
-    s.in_h = ch;
-    s.in_w = cw;
-    s.in_c = c.in_c;
-    s.kernel_h = s.kernel_w = c.kernel;
-    s.stride = c.stride;
-    s.pad = c.pad;
-    s.dilation = c.dilation;
-    s.out_h = kernels::Conv2dShape::out_dim(ch, c.kernel, c.stride, c.pad, c.dilation);
-    s.out_w = kernels::Conv2dShape::out_dim(cw, c.kernel, c.stride, c.pad, c.dilation);
-    s.out_c = c.out_c;
-    const ValueId y = graph_.add_value(name, {s.out_h, s.out_w, s.out_c});
-    auto op = std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), {c.out_c, c.kernel, c.kernel, c.in_c}),
-                                         weight(bn::conv_bias(c.name), {c.out_c}), relu, x, residual, y);
-    add(std::move(op), name);
-    ch = s.out_h;
-    cw = s.out_w;
-    return y;
-  };
-
-  ValueId x = conv(config_.stem(), image, h, w, true, kNoValue, p + "backbone.stem");
+  Tensor x = conv(config_.stem(), Tensor{image, false, {}, kNoValue}, h, w, true, nullptr, p + "backbone.stem");
   const int pooled_h = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1);
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
-  const ValueId pooled = graph_.add_value(p + "backbone.maxpool", {pooled_h, pooled_w, 64});
-  auto pool = std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x, pooled);
-  add(std::move(pool), p + "backbone.maxpool");
-  x = pooled;
+  const std::string pool_name = p + "backbone.maxpool";
+  const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, x.s8 ? DataType::kS8 : DataType::kF32);
+  if (x.s8) graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
+  add(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.s8, x.id, pooled), pool_name);
+  x.id = pooled;
   h = pooled_h;
   w = pooled_w;
 
@@ -96,16 +223,16 @@ ValueId ActNetwork::backbone(size_t camera) {
       const BlockSpec& block = stages[s][b];
       const std::string bp = p + "backbone.layer" + std::to_string(s + 1) + "." + std::to_string(b) + ".";
       int sh = h, sw = w;
-      ValueId shortcut = x;
-      if (block.has_downsample) shortcut = conv(block.downsample, x, sh, sw, false, kNoValue, bp + "downsample");
-      ValueId y = x;
+      Tensor shortcut = x;
+      if (block.has_downsample) shortcut = conv(block.downsample, x, sh, sw, false, nullptr, bp + "downsample");
+      Tensor y = x;
       int bh = h, bw = w;
       for (size_t i = 0; i < block.convs.size(); ++i) {
         const bool last = i + 1 == block.convs.size();
         const std::string name = last && b + 1 == stages[s].size() ? p + "backbone.layer" + std::to_string(s + 1)
                                                                     : bp + "conv" + std::to_string(i + 1);
         // The last conv of a block adds the shortcut, then ReLU (fused).
-        y = conv(block.convs[i], y, bh, bw, true, last ? shortcut : kNoValue, name);
+        y = conv(block.convs[i], y, bh, bw, true, last ? &shortcut : nullptr, name);
       }
       x = y;
       h = bh;
@@ -114,8 +241,26 @@ ValueId ActNetwork::backbone(size_t camera) {
   }
   // 1x1 input projection with bias: the NHWC feature map is already [h*w tokens, C] row-major.
   const int C = config_.feature_channels(), D = config_.dim_model;
-  return linear(p + "img_feat_proj", h * w, C, D, MatrixRef::of(x, static_cast<size_t>(C)), bn::kImgProjWeight,
-                MatrixRef::of_constant(weight(bn::kImgProjBias, {D}), 0));
+  const std::string proj_name = p + "img_feat_proj";
+  const float* proj_bias = weight(bn::kImgProjBias, {D});
+  if (const ActbTensor* q8 = int8_weight(bn::kImgProjWeight, {D, C}); q8 != nullptr && x.s8) {
+    // Static int8 features: the projection is a 1x1 int8 conv with a float output.
+    ConvS8Spec spec;
+    spec.shape.in_h = spec.shape.out_h = h;
+    spec.shape.in_w = spec.shape.out_w = w;
+    spec.shape.in_c = C;
+    spec.shape.out_c = D;
+    spec.weight = reinterpret_cast<const int8_t*>(q8->data);
+    spec.w_scale = q8->quant.scales.data();
+    spec.bias = proj_bias;
+    spec.input_q = x.q;
+    spec.s8_out = false;
+    const ValueId y = graph_.add_value(proj_name, {h * w, D});
+    add(std::make_unique<ConvS8Op>(*gemm_s8_, spec, x.id, y), proj_name);
+    return y;
+  }
+  return linear(proj_name, h * w, C, D, MatrixRef::of(as_f32(x).id, static_cast<size_t>(C)), bn::kImgProjWeight,
+                MatrixRef::of_constant(proj_bias, 0));
 }
 
 ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name) {
@@ -144,7 +289,7 @@ ValueId ActNetwork::self_attention_block(const std::string& p, int rows, ValueId
   const ValueId attn_in = config_.pre_norm ? layernorm(p + ".norm1", rows, x, w + "norm1") : x;
   // One GEMM for q, k and v; the positions' share of q and k is in the per-token bias table.
   const ValueId qkv = linear(p + ".qkv", rows, D, 3 * D, MatrixRef::of(attn_in, d), w + "in_proj.weight",
-                             MatrixRef::of_constant(weight(w + "in_proj.bias", {rows, 3 * D}), 3 * d));
+                             MatrixRef::of_constant(bias_table(w + "in_proj.bias", rows, 3 * D, w + "in_proj.weight", 2 * D), 3 * d));
   const ValueId a = attention(p + ".attn", rows, rows, MatrixRef::of(qkv, 3 * d, 0), MatrixRef::of(qkv, 3 * d, d),
                               MatrixRef::of(qkv, 3 * d, 2 * d));
   const ValueId out = linear(p + ".attn_out", rows, D, D, MatrixRef::of(a, d), w + "out_proj.weight",
@@ -187,7 +332,7 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
   }
   // Cross-attention over the encoder memory: keys carry the encoder positions (folded into the bias table).
   const ValueId kv = linear(p + ".cross_kv", N, D, 2 * D, MatrixRef::of(memory, d), w + "cross_kv_proj.weight",
-                            MatrixRef::of_constant(weight(w + "cross_kv_proj.bias", {N, 2 * D}), 2 * d));
+                            MatrixRef::of_constant(bias_table(w + "cross_kv_proj.bias", N, 2 * D, w + "cross_kv_proj.weight", D), 2 * d));
   const ValueId c = attention(p + ".cross_attn", T, N, cross_q, MatrixRef::of(kv, 2 * d, 0), MatrixRef::of(kv, 2 * d, d));
   ValueId y2 = linear(p + ".cross_out", T, D, D, MatrixRef::of(c, d), w + "cross_out_proj.weight",
                       MatrixRef::of_constant(weight(w + "cross_out_proj.bias", {D}), 0), y1);
@@ -199,6 +344,14 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
 }
 
 ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob) : config_(config), blob_(blob) {
+  int8_ = blob_.config().value("precision", "") == "int8";
+  if (int8_) {
+    if (!blob_.config().contains("quantization")) fail(StatusCode::kDataLoss, blob_.path() + ": int8 blob without a quantization section");
+    quant_ = QuantConfig::from_json(blob_.config()["quantization"]);
+    const kernels::GemmS8Selection selection = kernels::gemm_s8_select();
+    if (selection.kernels == nullptr) fail(StatusCode::kInvalidArgument, selection.error);
+    gemm_s8_ = selection.kernels;
+  }
   const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;
   const size_t d = static_cast<size_t>(D);
 

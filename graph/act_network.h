@@ -1,15 +1,23 @@
-// The ACT network (spec §4) built as a graph of FP32 ops from a ModelConfig and the tensors of an
-// .actb blob. Inputs are normalised: one NHWC float image per camera, the state vectors. Output: the
+// The ACT network (spec §4) built as a graph of ops from a ModelConfig and the tensors of an .actb
+// blob. Inputs are normalised: one NHWC float image per camera, the state vectors. Output: the
 // normalised action chunk [chunk_size, action_dim]. Weight pointers point into the blob's mapping.
+//
+// Each layer runs in the precision of its weights in the blob: FP32 ops for float tensors, INT8
+// ops (ops_int8.h) for int8 ones, with the blob's QuantConfig saying how activations are
+// quantized. Quantize/dequantize ops are inserted where a value crosses between the two.
 #pragma once
 
+#include <list>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
+#include "graph/ops_int8.h"
 #include "weights/actb.h"
 #include "weights/model_config.h"
+#include "weights/quant_config.h"
 
 namespace act::graph {
 
@@ -29,9 +37,28 @@ class ActNetwork {
 
   Graph& graph() { return graph_; }
   const ModelConfig& config() const { return config_; }
+  /// The INT8 kernels in use (null for an FP32 blob).
+  const kernels::GemmS8Kernels* gemm_s8() const { return gemm_s8_; }
 
  private:
+  /// A backbone value as the builder tracks it: float, or int8 with static or run-time parameters.
+  struct Tensor {
+    ValueId id = kNoValue;
+    bool s8 = false;
+    kernels::QuantS8 q;             ///< static parameters of an int8 value
+    ValueId params = kNoValue;      ///< run-time parameters of an int8 value (dynamic mode)
+  };
   const float* weight(const std::string& name, const std::vector<int64_t>& shape) const;
+  /// The tensor, checked against the shape, when it is int8 (per-channel scales along axis 0); else null.
+  const ActbTensor* int8_weight(const std::string& name, const std::vector<int64_t>& shape) const;
+  /// A per-token bias table: from the blob, or rebuilt from its bias vector (blob_names.h).
+  const float* bias_table(const std::string& table, int rows, int width, const std::string& weight_name, int pos_cols);
+  Tensor as_f32(const Tensor& t);
+  /// Static int8 (quantizing a float value with the parameters calibrated for it).
+  Tensor as_s8(const Tensor& t);
+  /// Dynamically quantized int8 (symmetric, per tensor, computed at run time).
+  Tensor as_dynamic_s8(const Tensor& t);
+  Tensor conv(const ConvSpec& c, const Tensor& x, int& h, int& w, bool relu, const Tensor* residual, const std::string& name);
   /// Appends an op to the graph, named and tagged with the stage being built.
   void add(std::unique_ptr<Op> op, const std::string& name);
   ValueId backbone(size_t camera);
@@ -48,6 +75,11 @@ class ActNetwork {
 
   ModelConfig config_;
   const ActbFile& blob_;
+  bool int8_ = false;
+  QuantConfig quant_;
+  const kernels::GemmS8Kernels* gemm_s8_ = nullptr;
+  std::map<ValueId, Tensor> converted_;  // float <-> int8 conversions already in the graph
+  std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
   Graph graph_;
   std::vector<ValueId> camera_inputs_;
   ValueId state_input_ = kNoValue;

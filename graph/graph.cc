@@ -4,6 +4,7 @@
 #include <chrono>
 #include <map>
 
+#include "kernels/gemm_s8/gemm_s8.h"
 #include "weights/error.h"
 
 namespace act::graph {
@@ -11,11 +12,17 @@ namespace act::graph {
 namespace {
 constexpr size_t kAlignFloats = 16;  // 64 bytes
 size_t align_up(size_t n) { return (n + kAlignFloats - 1) / kAlignFloats * kAlignFloats; }
+// Arena units (4 bytes) a value occupies.
+size_t value_units(const Value& v) {
+  if (v.dtype != DataType::kS8) return v.elements;
+  return (v.elements + kernels::kGemmS8ReadSlack + 3) / 4;
+}
 }  // namespace
 
-ValueId Graph::add_value(std::string name, std::vector<int64_t> shape) {
+ValueId Graph::add_value(std::string name, std::vector<int64_t> shape, DataType dtype) {
   Value v;
   v.name = std::move(name);
+  v.dtype = dtype;
   v.elements = 1;
   for (int64_t d : shape) v.elements *= static_cast<size_t>(d);
   v.shape = std::move(shape);
@@ -36,6 +43,19 @@ ValueId Graph::find(const std::string& name) const {
     if (values_[i].name == name) return static_cast<ValueId>(i);
   }
   return kNoValue;
+}
+
+std::vector<float> Graph::read_f32(ValueId id) {
+  const Value& v = value(id);
+  std::vector<float> out;
+  if (v.dtype == DataType::kF32) {
+    const float* p = data(id);
+    out.assign(p, p + v.elements);
+  } else if (v.dtype == DataType::kS8 && v.quant) {
+    out.resize(v.elements);
+    kernels::dequantize_s8_f32(v.elements, data_s8(id), v.quant->scale, v.quant->zero_point, out.data());
+  }
+  return out;
 }
 
 double Graph::total_macs() const {
@@ -61,7 +81,7 @@ void Graph::plan(int threads, bool keep_all_values) {
   // whose lifetime intersects its own.
   std::vector<size_t> order(values_.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return values_[a].elements > values_[b].elements; });
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return value_units(values_[a]) > value_units(values_[b]); });
   struct Placed {
     size_t begin, end;
     int first, last;
@@ -73,7 +93,7 @@ void Graph::plan(int threads, bool keep_all_values) {
     const bool whole_run = v.pinned || keep_all_values;
     const int first = whole_run ? -1 : v.first_use;
     const int last = whole_run ? end : v.last_use;
-    const size_t size = align_up(std::max<size_t>(v.elements, 1));
+    const size_t size = align_up(std::max<size_t>(value_units(v), 1));
     std::vector<std::pair<size_t, size_t>> busy;
     for (const auto& p : placed) {
       if (p.first <= last && first <= p.last) busy.emplace_back(p.begin, p.end);
@@ -104,10 +124,13 @@ void Graph::run(ThreadPool& pool, StageTimes* times) {
     for (const auto& op : ops_) op->run(ctx);
     return;
   }
-  for (const auto& op : ops_) {
+  const bool per_op = times->op_seconds.size() == ops_.size();
+  for (size_t i = 0; i < ops_.size(); ++i) {
     const auto start = std::chrono::steady_clock::now();
-    op->run(ctx);
-    (*times)[op->stage] += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ops_[i]->run(ctx);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    (*times)[ops_[i]->stage] += seconds;
+    if (per_op) times->op_seconds[i] += seconds;
   }
 }
 

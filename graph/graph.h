@@ -1,6 +1,6 @@
 // The network as a list of typed ops over planned buffers.
 //
-// Values are float tensors that live in one arena. plan() gives every value an arena offset from its
+// Values are tensors (float32, int8 or int32) that live in one arena. plan() gives every value an arena offset from its
 // lifetime (first writer .. last reader), reusing memory of values that are dead, and sizes the
 // per-thread scratch the ops asked for; after plan() nothing is allocated again, however many times
 // run() is called. With keep_all_values every value gets its own memory, so tests can read every
@@ -10,21 +10,29 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "graph/thread_pool.h"
+#include "kernels/quant/quant_s8.h"
 
 namespace act::graph {
 
 using ValueId = int;
 inline constexpr ValueId kNoValue = -1;
 
+enum class DataType { kF32, kS8, kS32 };
+
 struct Value {
   std::string name;
   std::vector<int64_t> shape;
+  DataType dtype = DataType::kF32;
+  /// int8 values with static quantization: their scale and zero point (for dequantizing them in
+  /// reports and tests; the ops hold their own copies).
+  std::optional<kernels::QuantS8> quant;
   size_t elements = 0;
-  size_t offset = 0;   ///< in floats, into the arena (valid after plan())
+  size_t offset = 0;   ///< in floats (4-byte units), into the arena (valid after plan())
   int first_use = -1;  ///< op index that writes it (-1: a graph input)
   int last_use = -1;   ///< last op index that reads it
   bool pinned = false; ///< inputs and outputs: alive for the whole run
@@ -36,8 +44,11 @@ class RunContext {
   RunContext(float* arena, const std::vector<Value>& values, ThreadPool& pool, float* scratch, size_t scratch_per_thread)
       : arena_(arena), values_(values), pool_(pool), scratch_(scratch), scratch_per_thread_(scratch_per_thread) {}
   float* data(ValueId id) const { return arena_ + values_[static_cast<size_t>(id)].offset; }
+  int8_t* data_s8(ValueId id) const { return reinterpret_cast<int8_t*>(data(id)); }
+  int32_t* data_s32(ValueId id) const { return reinterpret_cast<int32_t*>(data(id)); }
   ThreadPool& pool() const { return pool_; }
   float* scratch(int thread) const { return scratch_ + static_cast<size_t>(thread) * scratch_per_thread_; }
+  int8_t* scratch_s8(int thread) const { return reinterpret_cast<int8_t*>(scratch(thread)); }
 
  private:
   float* arena_;
@@ -68,6 +79,8 @@ inline constexpr int kStageCount = 4;
 /// Accumulated wall time per stage (seconds), filled by Graph::run when profiling.
 struct StageTimes {
   double seconds[kStageCount] = {};
+  /// When non-empty (sized to the op count by the caller), each op's wall time is added here too.
+  std::vector<double> op_seconds;
   double& operator[](Stage s) { return seconds[static_cast<int>(s)]; }
   double operator[](Stage s) const { return seconds[static_cast<int>(s)]; }
 };
@@ -77,7 +90,7 @@ class Op {
   virtual ~Op() = default;
   virtual const char* type() const = 0;
   virtual void run(const RunContext& ctx) const = 0;
-  /// Floats of scratch each thread needs while this op runs.
+  /// Floats (4-byte units) of scratch each thread needs while this op runs.
   virtual size_t scratch_per_thread() const { return 0; }
   /// Multiply-accumulates of one run (for profiling and the benchmark's GMAC/s).
   virtual double macs() const { return 0.0; }
@@ -90,7 +103,8 @@ class Op {
 
 class Graph {
  public:
-  ValueId add_value(std::string name, std::vector<int64_t> shape);
+  /// int8 values get kGemmS8ReadSlack addressable bytes after their last element (kernels over-read).
+  ValueId add_value(std::string name, std::vector<int64_t> shape, DataType dtype = DataType::kF32);
   /// A value the caller writes before run() (pinned).
   ValueId add_input(std::string name, std::vector<int64_t> shape);
   /// Keeps a value alive to the end of the run so the caller can read it.
@@ -108,7 +122,13 @@ class Graph {
   void run(ThreadPool& pool, StageTimes* times = nullptr);
 
   float* data(ValueId id) { return arena_.data() + values_[static_cast<size_t>(id)].offset; }
+  int8_t* data_s8(ValueId id) { return reinterpret_cast<int8_t*>(data(id)); }
+  Value& value(ValueId id) { return values_[static_cast<size_t>(id)]; }
+  /// The value as floats: a copy of an f32 value, or an int8 value dequantized with its static
+  /// parameters (empty when it has none, or for int32 values).
+  std::vector<float> read_f32(ValueId id);
   const Value& value(ValueId id) const { return values_[static_cast<size_t>(id)]; }
+  size_t value_count() const { return values_.size(); }
   /// The value of that name, or kNoValue.
   ValueId find(const std::string& name) const;
   const std::vector<std::unique_ptr<Op>>& ops() const { return ops_; }

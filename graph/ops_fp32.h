@@ -32,14 +32,17 @@ class Conv2dOp : public Op {
   ValueId residual_;
 };
 
+/// 2-D max-pool over NHWC, float32 or int8 (max commutes with the monotonic quantization: an int8
+/// output keeps the input's parameters, exactly).
 class MaxPoolOp : public Op {
  public:
-  MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output);
-  const char* type() const override { return "maxpool_f32"; }
+  MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, bool s8, ValueId input, ValueId output);
+  const char* type() const override { return s8_ ? "maxpool_s8" : "maxpool_f32"; }
   void run(const RunContext& ctx) const override;
 
  private:
   int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
+  bool s8_;
 };
 
 /// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in]; bias is a vector (ld 0) or a

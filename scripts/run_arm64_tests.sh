@@ -6,6 +6,9 @@
 # Called by scripts/run_tests.sh (CI), which skips it with ACT_SKIP_ARM64=1. Extra arguments go to
 # CMake's configure step.
 #
+# Then the arm64 Debian package from the same tree (the apps are built too, not their tests): built
+# with CPack, unpacked, and its act_bench run under qemu (`--help`), so the package CI ships starts.
+#
 # Which tests: all of act_tests except the few end-to-end tests listed below, which repeat
 # whole-model inference many times or run the full-size model: under emulation each takes minutes,
 # and the native Release and sanitizer stages run them anyway. Everything else runs, so new kernel
@@ -31,7 +34,7 @@ exclude="^($(IFS='|'; echo "${slow_tests[*]}"))\$"
 "$root/scripts/install_cross_deps.sh"
 
 echo "== aarch64 cross build (core library + act_tests, -Werror) =="
-configure=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_CORE_ONLY=ON)
+configure=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_CORE_ONLY=ON -DACT_PACKAGE_APPS=ON)
 if [ -n "${ACT_SHARED_DIR:-}" ]; then configure+=(-DACT_SHARED_DIR="$ACT_SHARED_DIR"); fi
 ACT_BUILD_DIR="$build" "$root/scripts/build.sh" "${configure[@]}" "$@"
 
@@ -59,3 +62,16 @@ else
   ctest_args+=(-E "$exclude")
 fi
 ctest "${ctest_args[@]}"
+
+echo "== arm64 Debian package =="
+(cd "$build" && cpack -G DEB >/dev/null)
+deb="$(ls "$build"/actengine_*_arm64.deb)"
+dpkg-deb -f "$deb" Package Version Architecture Depends
+unpacked="$build/package-check"
+rm -rf "$unpacked"
+dpkg-deb -x "$deb" "$unpacked"
+# The dynamic loader and libraries come from the multiarch arm64 runtime, as for the tests.
+read -r -a qemu <<<"$emulator"
+help="$("${qemu[@]}" "$unpacked/usr/bin/act_bench" --help)"
+echo "${help%%$'\n'*}"
+echo "arm64 package OK: $deb"

@@ -44,6 +44,11 @@ inline std::string dec(int layer, const std::string& leaf) {
 //            named as in the encoder), cross_q_proj.weight [D, D], cross_q_proj.bias [T, D]
 //   every decoder layer: cross_kv_proj.weight [2D, D], cross_kv_proj.bias [N_tok, 2D],
 //            cross_out_proj.*, linear1.*, linear2.*, norm1..3.*
+// The plain bias vector behind a per-token bias table that folds in the encoder positions (encoder
+// in_proj, every decoder cross_kv_proj). INT8 blobs store it instead of the table, which the graph
+// rebuilds at load from encoder.pos and the (quantized) weights: a table is N_tok x width floats.
+inline std::string bias_vector(const std::string& table) { return table + "_vector"; }
+
 inline const char* kEncoderNormWeight = "encoder.norm.weight";  // pre-norm only
 inline const char* kEncoderNormBias = "encoder.norm.bias";
 inline const char* kDecoderNormWeight = "decoder.norm.weight";

@@ -33,7 +33,7 @@ std::string clip(std::string s, size_t max_len = 300) {
 }  // namespace
 
 AtomicFileWriter::AtomicFileWriter(std::string path)
-    : path_(std::move(path)), temp_path_(path_ + ".tmp." + std::to_string(::getpid())) {
+    : path_(std::move(path)), temp_path_(path_ + ".tmp." + std::to_string(::getpid())), remove_on_signal_(temp_path_) {
   // O_TRUNC rather than O_EXCL: a stale temp file left by a crashed process with the same pid (common
   // in containers) must not block writing forever. O_NOFOLLOW: never write through a planted symlink.
   do {

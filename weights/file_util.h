@@ -9,6 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "weights/signal_cleanup.h"
+
 namespace act::detail {
 
 /// Writes a file atomically: data goes to "<path>.tmp.<pid>" in the same folder, and commit() fsyncs
@@ -33,6 +35,7 @@ class AtomicFileWriter {
  private:
   std::string path_;
   std::string temp_path_;
+  SignalCleanup remove_on_signal_;  // the temporary file goes if the process is killed
   int fd_ = -1;
   size_t written_ = 0;
   bool committed_ = false;

@@ -453,6 +453,8 @@ class Importer {
   /// `dir` is the checkpoint folder for the current layout's processor files; empty for a legacy
   /// state dict held in memory.
   Importer(fs::path dir, std::string layout) : dir_(std::move(dir)) { out_.layout = std::move(layout); }
+  /// Current-layout normalisation with the statistics in `stats` instead of processor files.
+  explicit Importer(const TensorSet& stats) : external_stats_(&stats) { out_.layout = "current"; }
 
   /// The config is parsed and validated before `open_weights` is called, so a config problem is
   /// reported as such even when the weights are missing too.
@@ -536,6 +538,13 @@ class Importer {
         return std::nullopt;
       };
       in_where = out_where = weights_file.origin();
+    } else if (external_stats_) {
+      in_lookup = out_lookup = [this](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
+        const SafetensorsTensor* t = external_stats_->find(key + "." + stat);
+        if (!t) return std::nullopt;
+        return t->to_f32();
+      };
+      in_where = out_where = external_stats_->origin();
     } else {
       auto step = [&](const std::string& pipeline_file, const std::string& registry_name, float& eps,
                       std::map<std::string, LeRobotMode>& modes, std::optional<SafetensorsFile>& state,
@@ -605,7 +614,7 @@ class Importer {
       const size_t n = static_cast<size_t>(f.type == "VISUAL" ? 3 : f.shape[0]);
       auto stats = read_stats(in_lookup, f.key, mode, n, in_where);
       if (!stats) {
-        if (legacy) fail(StatusCode::kNotFound, in_where + ": no normalisation statistics for \"" + f.key + "\"");
+        if (legacy || external_stats_) fail(StatusCode::kNotFound, in_where + ": no normalisation statistics for \"" + f.key + "\"");
         // Current layout: LeRobot passes a feature without statistics through unchanged.
         out_.notes.push_back("no statistics for \"" + f.key + "\" in " + in_where + ": it is not normalised (as LeRobot does)");
         m.input_norm.emplace_back(f.key, NormMode::kIdentity);
@@ -622,7 +631,7 @@ class Importer {
     if (action_mode != LeRobotMode::kIdentity) {
       action_stats = read_stats(out_lookup, "action", action_mode, static_cast<size_t>(m.action_dim), out_where);
       if (!action_stats) {
-        if (legacy) fail(StatusCode::kNotFound, out_where + ": no un-normalisation statistics for \"action\"");
+        if (legacy || external_stats_) fail(StatusCode::kNotFound, out_where + ": no un-normalisation statistics for \"action\"");
         out_.notes.push_back("no statistics for \"action\" in " + out_where + ": actions are not un-normalised (as LeRobot does)");
       }
     }
@@ -743,6 +752,7 @@ class Importer {
       const std::string src = p + "encoder.layers." + std::to_string(l) + ".";
       Attn a = take_attn(w, src + "self_attn", D);
       add(bn::enc(l, "in_proj.bias"), {N, 3 * D}, bias_table(pos, N, D, a.in_w, a.in_b, 3 * D, 2 * D));
+      add(bn::bias_vector(bn::enc(l, "in_proj.bias")), {3 * D}, a.in_b);
       add(bn::enc(l, "in_proj.weight"), {3 * D, D}, std::move(a.in_w));
       add(bn::enc(l, "out_proj.weight"), {D, D}, std::move(a.out_w));
       add(bn::enc(l, "out_proj.bias"), {D}, std::move(a.out_b));
@@ -792,6 +802,7 @@ class Importer {
       const Mat kv_w(cross.in_w.begin() + static_cast<ptrdiff_t>(D) * D, cross.in_w.end());
       const Mat kv_b(cross.in_b.begin() + D, cross.in_b.end());
       add(bn::dec(l, "cross_kv_proj.bias"), {N, 2 * D}, bias_table(pos, N, D, kv_w, kv_b, 2 * D, D));
+      add(bn::bias_vector(bn::dec(l, "cross_kv_proj.bias")), {2 * D}, kv_b);
       add(bn::dec(l, "cross_kv_proj.weight"), {2 * D, D}, kv_w);
       add(bn::dec(l, "cross_out_proj.weight"), {D, D}, std::move(cross.out_w));
       add(bn::dec(l, "cross_out_proj.bias"), {D}, std::move(cross.out_b));
@@ -810,6 +821,7 @@ class Importer {
   }
 
   fs::path dir_;
+  const TensorSet* external_stats_ = nullptr;
   ImportedModel out_;
 };
 
@@ -842,6 +854,11 @@ ModelConfig lerobot_model_config(const nlohmann::ordered_json& config, const std
 
 ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict) {
   return Importer({}, "legacy").run(config, state_dict.origin() + " config", [&]() -> const TensorSet& { return state_dict; });
+}
+
+ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict,
+                                        const TensorSet& stats) {
+  return Importer(stats).run(config, state_dict.origin() + " config", [&]() -> const TensorSet& { return state_dict; });
 }
 
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path) {

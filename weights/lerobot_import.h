@@ -50,6 +50,14 @@ ModelConfig lerobot_model_config(const nlohmann::ordered_json& config, const std
 /// state dict (normalisation buffers included). The built-in synthetic models take this path.
 ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict);
 
+/// Imports a state dict without normalisation buffers (a current LeRobot policy's state_dict(), e.g.
+/// from a .pth) with the statistics kept outside it: `stats` holds "<feature>.<stat>" tensors as in
+/// LeRobot's processor state files (and meta/stats.json), applied as the current layout applies them
+/// (eps 1e-8). Unlike a checkpoint folder, a normalised feature without statistics is an error
+/// (kNotFound): the statistics were given explicitly, so a gap is a mistake, not a LeRobot default.
+ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict,
+                                        const TensorSet& stats);
+
 /// Writes the imported model as an FP32 .actb blob (atomically). Returns the file size in bytes.
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path);
 

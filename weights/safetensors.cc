@@ -222,6 +222,43 @@ void OwnedTensorSet::add_f32(const std::string& name, std::vector<int64_t> shape
   index_.emplace(name, std::move(t));
 }
 
+void OwnedTensorSet::add(const std::string& name, DType dtype, std::vector<int64_t> shape, std::vector<uint8_t> bytes) {
+  if (index_.count(name)) fail(StatusCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
+  uint64_t expected = 0;
+  if (!detail::checked_mul(shape_elements(shape), dtype_size(dtype), &expected) || expected != bytes.size()) {
+    fail(StatusCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(bytes.size()) +
+         " bytes for " + dtype_name(dtype) + " shape " + shape_string(shape));
+  }
+  std::vector<uint8_t>& stored = byte_storage_[name] = std::move(bytes);
+  SafetensorsTensor t;
+  t.name = name;
+  t.dtype = dtype;
+  t.shape = std::move(shape);
+  t.data = stored.data();
+  t.nbytes = stored.size();
+  index_.emplace(name, std::move(t));
+}
+
+void OwnedTensorSet::rename(const std::function<std::string(const std::string&)>& new_name) {
+  // Moving a vector keeps its buffer, so the views stay valid.
+  std::map<std::string, SafetensorsTensor> index;
+  std::map<std::string, std::vector<float>> storage;
+  std::map<std::string, std::vector<uint8_t>> byte_storage;
+  for (auto& [old_name, t] : index_) {
+    std::string name = new_name(old_name);
+    if (index.count(name)) {
+      fail(StatusCode::kInvalidArgument, origin_ + ": renaming '" + old_name + "' to '" + name + "' collides with another tensor");
+    }
+    if (auto it = storage_.find(old_name); it != storage_.end()) storage[name] = std::move(it->second);
+    if (auto it = byte_storage_.find(old_name); it != byte_storage_.end()) byte_storage[name] = std::move(it->second);
+    t.name = name;
+    index.emplace(std::move(name), std::move(t));
+  }
+  index_ = std::move(index);
+  storage_ = std::move(storage);
+  byte_storage_ = std::move(byte_storage);
+}
+
 void write_safetensors(const std::string& path, const std::vector<SafetensorsWriteTensor>& tensors,
                        const std::map<std::string, std::string>& metadata) {
   // ordered_json keeps the header in data order, which makes files easy to inspect.

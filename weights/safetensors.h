@@ -4,6 +4,7 @@
 // data area, ordered, non-overlapping, and end - begin == elements * dtype size.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -56,8 +57,8 @@ class SafetensorsFile : public TensorSet {
   std::map<std::string, std::string> metadata_;
 };
 
-/// Float32 tensors owned in memory (e.g. a synthetic model's state dict). Movable (the storage moves
-/// with its buffers, so the views stay valid) but not copyable.
+/// Tensors owned in memory (e.g. a synthetic model's state dict, or one read from a PyTorch .pth).
+/// Movable (the storage moves with its buffers, so the views stay valid) but not copyable.
 class OwnedTensorSet : public TensorSet {
  public:
   explicit OwnedTensorSet(std::string origin) { origin_ = std::move(origin); }
@@ -67,9 +68,14 @@ class OwnedTensorSet : public TensorSet {
   OwnedTensorSet& operator=(OwnedTensorSet&&) = default;
   /// Throws kInvalidArgument on a duplicate name or a size that does not match the shape.
   void add_f32(const std::string& name, std::vector<int64_t> shape, std::vector<float> values);
+  /// Any dtype: `bytes` holds the elements, little-endian, C order. Same checks as add_f32.
+  void add(const std::string& name, DType dtype, std::vector<int64_t> shape, std::vector<uint8_t> bytes);
+  /// Renames every tensor to new_name(old name); throws kInvalidArgument if two names collide.
+  void rename(const std::function<std::string(const std::string&)>& new_name);
 
  private:
   std::map<std::string, std::vector<float>> storage_;
+  std::map<std::string, std::vector<uint8_t>> byte_storage_;
 };
 
 /// A tensor to write (used by tests and by act_eval --output).

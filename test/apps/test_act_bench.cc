@@ -85,6 +85,39 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   EXPECT_NEAR(max_total, lat["total"]["max"].get<double>(), 1e-3);
 }
 
+TEST(ActBench, BuiltInInt8AndCompare) {
+  const std::string dir = test::scratch_dir();
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 --precision int8 --compare -n 3 -w 0 -t 1 --json " +
+                             q(dir + "/c.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("the speed of fp32"), std::string::npos) << r.output;
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/c.json"));
+  EXPECT_EQ(j["model"]["precision"], "int8 static");
+  EXPECT_NE(j["engine"]["kernels"].get<std::string>().find("gemm_s8"), std::string::npos);
+  const auto& c = j["compare"];
+  EXPECT_EQ(c["other_precision"], "fp32");
+  expect_consistent_summary(c["other_latency_ms"], 3, "fp32 total");
+  const double ratio = c["other_latency_ms"]["mean"].get<double>() / j["latency_ms"]["total"]["mean"].get<double>();
+  EXPECT_NEAR(c["speed_ratio"].get<double>(), ratio, 1e-9 * ratio);
+  // INT8 and FP32 of the same model agree closely, but not exactly (else nothing was quantized).
+  EXPECT_GT(c["action_max_abs"].get<double>(), 0.0);
+  EXPECT_LE(c["action_mse"].get<double>(), 1e-3);
+  EXPECT_LE(c["action_max_abs"].get<double>(), 0.1);
+}
+
+TEST(ActBench, CompareWithABlobNeedsTheOtherPrecision) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = test::scratch_dir();
+  write_fp32_blob(import_lerobot_checkpoint(fixture), dir + "/tiny.actb");
+  auto r = run_command(std::string(ACT_BENCH_BIN) + " -m " + q(dir + "/tiny.actb") + " --compare -n 1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--compare-with"), std::string::npos) << r.output;
+  r = run_command(std::string(ACT_BENCH_BIN) + " -m " + q(dir + "/tiny.actb") + " --precision int8 -n 1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("built-in"), std::string::npos) << r.output;
+}
+
 TEST(ActBench, BlobWithRealObservations) {
   const std::string fixture = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);

@@ -62,7 +62,8 @@ struct ModelInfo {
   int n_action_steps = 0;
   bool temporal_ensembling = false;
   double temporal_ensemble_coeff = 0.0;
-  std::string precision;  ///< "fp32"
+  std::string precision;  ///< "fp32", "int8 static", "int8 dynamic" or "int8 mixed"
+  std::string kernels;    ///< the kernel variants in use, e.g. "gemm_s8 avx512vnni 6x64c4, gemm_f32 eigen avx512vnni"
   std::string summary;    ///< one line: backbone, dims, layers, cameras
   size_t chunk_values() const { return static_cast<size_t>(chunk_size) * action_dim; }
 };

@@ -1,0 +1,361 @@
+#include "apps/convert/calib_frames.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "apps/image_preprocess.h"
+#include "apps/observation_file.h"
+#include "weights/blob_names.h"
+#include "weights/error.h"
+
+namespace act {
+
+namespace fs = std::filesystem;
+namespace bn = blob_names;
+
+namespace {
+
+const std::set<std::string> kImageExtensions = {".png", ".jpg", ".jpeg", ".bmp"};
+const std::set<std::string> kVideoExtensions = {".mp4", ".avi", ".mkv", ".mov", ".webm"};
+
+std::string lower_extension(const fs::path& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return e;
+}
+
+std::vector<fs::path> files_with(const fs::path& dir, const std::set<std::string>& extensions) {
+  std::vector<fs::path> out;
+  for (const auto& entry : fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied)) {
+    if (entry.is_regular_file() && extensions.count(lower_extension(entry.path()))) out.push_back(entry.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// `count` indices spread evenly over [0, n).
+std::vector<size_t> spread(size_t n, size_t count) {
+  std::vector<size_t> idx;
+  if (n == 0 || count == 0) return idx;
+  count = std::min(count, n);
+  for (size_t i = 0; i < count; ++i) idx.push_back(i * n / count);
+  return idx;
+}
+
+// Samples raw state vectors from the normalisation statistics (the inverse of the engine's
+// normalisation applied to N(0, 1) for MEAN_STD and U(-1, 1) for MIN_MAX).
+class StateSampler {
+ public:
+  StateSampler(const ModelConfig& config, const ActbFile& blob, uint64_t seed) : config_(config), blob_(blob), rng_(seed) {}
+
+  std::vector<float> sample(const std::string& key, int dim) {
+    std::vector<float> v(static_cast<size_t>(dim));
+    const NormMode mode = config_.input_norm_mode(key);
+    std::normal_distribution<float> normal(0.0f, 1.0f);
+    std::uniform_real_distribution<float> uniform(-1.0f, 1.0f);
+    const ActbTensor* sub = blob_.find(bn::norm_sub(key));
+    const ActbTensor* div = blob_.find(bn::norm_div(key));
+    for (size_t i = 0; i < v.size(); ++i) {
+      switch (mode) {
+        case NormMode::kIdentity: v[i] = normal(rng_); break;
+        case NormMode::kMeanStd: v[i] = sub->f32()[i] + div->f32()[i] * normal(rng_); break;
+        case NormMode::kMinMax: v[i] = sub->f32()[i] + div->f32()[i] * (uniform(rng_) + 1.0f) * 0.5f; break;
+      }
+    }
+    return v;
+  }
+
+ private:
+  const ModelConfig& config_;
+  const ActbFile& blob_;
+  std::mt19937_64 rng_;
+};
+
+class Loader {
+ public:
+  Loader(const ModelConfig& config, const ModelInfo& info, const ActbFile& blob, uint64_t seed)
+      : config_(config), info_(info), blob_(blob), states_(config, blob, seed) {}
+
+  CalibSet take() { return std::move(set_); }
+
+  void add_source(const std::string& source, size_t max_frames) {
+    const fs::path p(source);
+    if (!fs::exists(p)) fail(StatusCode::kNotFound, "calibration source not found: " + source);
+    if (fs::is_directory(p)) {
+      if (fs::exists(p / "meta" / "info.json") && fs::is_directory(p / "videos")) return add_lerobot_dataset(p, max_frames);
+      if (fs::exists(p / "log.jsonl")) return add_recording(p, max_frames);
+      return add_image_folder(p, max_frames);
+    }
+    const std::string ext = lower_extension(p);
+    if (ext == ".safetensors") return add_observation_file(p, max_frames);
+    if (kVideoExtensions.count(ext)) return add_video(p, max_frames);
+    if (kImageExtensions.count(ext)) return add_images({p}, max_frames, p.string());
+    fail(StatusCode::kInvalidArgument, "calibration source " + source +
+         " is not a folder, a video (mp4, avi, mkv, mov, webm), an image or an observation .safetensors file");
+  }
+
+ private:
+  void note(const std::string& n) {
+    if (std::find(set_.notes.begin(), set_.notes.end(), n) == set_.notes.end()) set_.notes.push_back(n);
+  }
+
+  // A frame whose cameras all see `image`, with sampled states.
+  void add_frame_all_cameras(const cv::Mat& image, const std::string& origin, const std::vector<float>* state = nullptr) {
+    CalibFrame f;
+    for (const auto& cam : config_.cameras) {
+      f.images.emplace_back();
+      frame_to_model_rgb(image, cam.height, cam.width, f.images.back());
+    }
+    if (config_.cameras.size() > 1) note("single-view source: every camera was given the same frame");
+    fill_states(f, state);
+    f.origin = origin;
+    set_.frames.push_back(std::move(f));
+  }
+
+  void fill_states(CalibFrame& f, const std::vector<float>* state) {
+    if (config_.state_dim > 0) {
+      if (state && state->size() == static_cast<size_t>(config_.state_dim)) {
+        f.state = *state;
+      } else {
+        f.state = states_.sample(config_.state_key, config_.state_dim);
+        note("robot states were sampled from the checkpoint's normalisation statistics (the source has none)");
+      }
+    }
+    if (config_.env_state_dim > 0) {
+      f.env_state = states_.sample(config_.env_state_key, config_.env_state_dim);
+      note("environment states were sampled from the checkpoint's normalisation statistics");
+    }
+  }
+
+  void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
+    if (files.empty()) fail(StatusCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
+    for (size_t i : spread(files.size(), max_frames)) {
+      const cv::Mat image = cv::imread(files[i].string(), cv::IMREAD_COLOR);
+      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode image " + files[i].string());
+      add_frame_all_cameras(image, files[i].string());
+    }
+  }
+
+  void add_image_folder(const fs::path& dir, size_t max_frames) {
+    add_images(files_with(dir, kImageExtensions), max_frames, dir.string());
+  }
+
+  // Opens a video; throws naming it when OpenCV cannot.
+  static cv::VideoCapture open_video(const fs::path& p) {
+    cv::VideoCapture cap(p.string());
+    if (!cap.isOpened()) fail(StatusCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
+    return cap;
+  }
+
+  // Decodes frames at the given indices (ascending) of one video.
+  static std::vector<cv::Mat> video_frames(const fs::path& p, const std::vector<size_t>& wanted) {
+    cv::VideoCapture cap = open_video(p);
+    std::vector<cv::Mat> out;
+    size_t index = 0, next = 0;
+    cv::Mat frame;
+    while (next < wanted.size() && cap.read(frame)) {
+      if (index == wanted[next]) {
+        out.push_back(frame.clone());
+        ++next;
+      }
+      ++index;
+    }
+    return out;
+  }
+
+  static size_t video_length(const fs::path& p) {
+    cv::VideoCapture cap = open_video(p);
+    const double n = cap.get(cv::CAP_PROP_FRAME_COUNT);
+    if (n >= 1) return static_cast<size_t>(n);
+    size_t count = 0;  // the container does not say: count by decoding
+    cv::Mat frame;
+    while (cap.read(frame)) ++count;
+    return count;
+  }
+
+  void add_video(const fs::path& p, size_t max_frames) {
+    const size_t n = video_length(p);
+    if (n == 0) fail(StatusCode::kDataLoss, "video " + p.string() + " has no frames");
+    const std::vector<size_t> wanted = spread(n, max_frames);
+    const std::vector<cv::Mat> frames = video_frames(p, wanted);
+    if (frames.empty()) fail(StatusCode::kDataLoss, "could not decode any frame of " + p.string());
+    for (size_t i = 0; i < frames.size(); ++i) add_frame_all_cameras(frames[i], p.string() + "#" + std::to_string(wanted[i]));
+  }
+
+  // LeRobot dataset: videos/**/<camera key>/**.mp4, one file per episode (or chunk file) per camera.
+  void add_lerobot_dataset(const fs::path& dir, size_t max_frames) {
+    std::vector<std::vector<fs::path>> per_camera;
+    for (const auto& cam : config_.cameras) {
+      std::vector<fs::path> files;
+      for (const auto& f : files_with(dir / "videos", kVideoExtensions)) {
+        for (const auto& part : f) {
+          if (part.string() == cam.key) {
+            files.push_back(f);
+            break;
+          }
+        }
+      }
+      if (files.empty()) {
+        fail(StatusCode::kNotFound, "LeRobot dataset " + dir.string() + " has no videos for camera \"" + cam.key + "\"");
+      }
+      if (!per_camera.empty() && files.size() != per_camera[0].size()) {
+        fail(StatusCode::kDataLoss, "LeRobot dataset " + dir.string() + ": cameras have different numbers of video files");
+      }
+      per_camera.push_back(std::move(files));
+    }
+    const size_t n_files = per_camera[0].size();
+    const size_t per_file = std::max<size_t>(1, (max_frames + n_files - 1) / n_files);
+    size_t added = 0;
+    for (size_t f = 0; f < n_files && added < max_frames; ++f) {
+      const std::vector<size_t> wanted = spread(video_length(per_camera[0][f]), per_file);
+      std::vector<std::vector<cv::Mat>> frames;
+      for (const auto& files : per_camera) frames.push_back(video_frames(files[f], wanted));
+      for (size_t i = 0; i < wanted.size(); ++i) {
+        CalibFrame frame;
+        bool complete = true;
+        for (size_t c = 0; c < config_.cameras.size(); ++c) {
+          if (i >= frames[c].size()) {
+            complete = false;
+            break;
+          }
+          frame.images.emplace_back();
+          frame_to_model_rgb(frames[c][i], config_.cameras[c].height, config_.cameras[c].width, frame.images.back());
+        }
+        if (!complete) break;
+        fill_states(frame, nullptr);
+        frame.origin = per_camera[0][f].string() + "#" + std::to_string(wanted[i]);
+        set_.frames.push_back(std::move(frame));
+        ++added;
+      }
+    }
+    note("LeRobot dataset: frames decoded from its videos; states are not read from its parquet files");
+  }
+
+  // act_drive --record folder: log.jsonl lines {"frame": "<path relative to the folder>", "state": [...]}.
+  void add_recording(const fs::path& dir, size_t max_frames) {
+    std::ifstream in(dir / "log.jsonl");
+    std::vector<std::pair<fs::path, std::vector<float>>> entries;
+    std::string line;
+    size_t line_no = 0;
+    while (std::getline(in, line)) {
+      ++line_no;
+      if (line.empty()) continue;
+      try {
+        const auto j = nlohmann::json::parse(line);
+        if (!j.contains("frame")) continue;
+        std::vector<float> state;
+        if (j.contains("state") && j["state"].is_array()) state = j["state"].get<std::vector<float>>();
+        entries.emplace_back(dir / j["frame"].get<std::string>(), std::move(state));
+      } catch (const nlohmann::json::exception& e) {
+        // A recording cut off by a crash may end in a partial line: skip it, say so.
+        note((dir / "log.jsonl").string() + ": skipped unreadable line " + std::to_string(line_no));
+      }
+    }
+    if (entries.empty()) return add_image_folder(dir, max_frames);
+    for (size_t i : spread(entries.size(), max_frames)) {
+      const cv::Mat image = cv::imread(entries[i].first.string(), cv::IMREAD_COLOR);
+      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
+      add_frame_all_cameras(image, entries[i].first.string(), &entries[i].second);
+    }
+  }
+
+  void add_observation_file(const fs::path& p, size_t max_frames) {
+    const ObservationBatch batch = ObservationBatch::read(p.string(), info_);
+    for (size_t i : spread(batch.size(), max_frames)) {
+      const Observation obs = batch.at(i);
+      CalibFrame f;
+      for (size_t c = 0; c < obs.images.size(); ++c) {
+        const ImageView& v = obs.images[c];
+        std::vector<uint8_t> rgb(static_cast<size_t>(v.height) * v.width * 3);
+        if (v.format == ImageView::Format::kRgbU8Hwc) {
+          const auto* src = static_cast<const uint8_t*>(v.data);
+          const size_t stride = v.row_stride ? v.row_stride : static_cast<size_t>(v.width) * 3;
+          for (int y = 0; y < v.height; ++y) std::copy_n(src + y * stride, v.width * 3, rgb.data() + static_cast<size_t>(y) * v.width * 3);
+        } else {
+          const auto* src = static_cast<const float*>(v.data);
+          const size_t plane = static_cast<size_t>(v.height) * v.width;
+          for (size_t px = 0; px < plane; ++px) {
+            for (size_t ch = 0; ch < 3; ++ch) {
+              rgb[px * 3 + ch] = static_cast<uint8_t>(std::clamp(std::nearbyint(src[ch * plane + px] * 255.0f), 0.0f, 255.0f));
+            }
+          }
+        }
+        f.images.push_back(std::move(rgb));
+      }
+      f.state.assign(obs.state.begin(), obs.state.end());
+      f.env_state.assign(obs.env_state.begin(), obs.env_state.end());
+      f.origin = p.string() + "#" + std::to_string(i);
+      set_.frames.push_back(std::move(f));
+    }
+  }
+
+ private:
+  const ModelConfig& config_;
+  const ModelInfo& info_;
+  const ActbFile& blob_;
+  StateSampler states_;
+  CalibSet set_;
+};
+
+}  // namespace
+
+Observation CalibSet::observation(const CalibFrame& frame, const ModelConfig& config) {
+  Observation obs;
+  for (size_t c = 0; c < config.cameras.size(); ++c) {
+    obs.images.push_back(ImageView::rgb_u8(frame.images[c].data(), config.cameras[c].height, config.cameras[c].width));
+  }
+  obs.state = frame.state;
+  obs.env_state = frame.env_state;
+  return obs;
+}
+
+CalibSet load_calibration_frames(const std::vector<std::string>& sources, const ModelConfig& config, const ModelInfo& info,
+                                 const ActbFile& blob, size_t max_frames, uint64_t seed) {
+  if (sources.empty()) fail(StatusCode::kInvalidArgument, "no calibration sources given");
+  Loader loader(config, info, blob, seed);
+  // Every source contributes its share of the frames.
+  const size_t share = std::max<size_t>(1, (max_frames + sources.size() - 1) / sources.size());
+  for (const auto& s : sources) loader.add_source(s, share);
+  CalibSet set = loader.take();
+  if (set.frames.size() > max_frames) set.frames.resize(max_frames);
+  if (!config.cameras.empty()) {
+    set.preprocessing = model_preprocessing_description(config.cameras[0].height, config.cameras[0].width);
+  }
+  return set;
+}
+
+CalibSet synthetic_calibration_frames(const ModelConfig& config, const ActbFile& blob, size_t count, uint64_t seed) {
+  CalibSet set;
+  StateSampler states(config, blob, seed);
+  cv::RNG rng(seed);
+  for (size_t i = 0; i < count; ++i) {
+    CalibFrame f;
+    for (const auto& cam : config.cameras) {
+      // Smooth noise: a coarse random grid upsampled, like the low-frequency content of real frames.
+      cv::Mat coarse(std::max(2, cam.height / 16), std::max(2, cam.width / 16), CV_8UC3);
+      rng.fill(coarse, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(256));
+      cv::Mat full;
+      cv::resize(coarse, full, cv::Size(cam.width, cam.height), 0, 0, cv::INTER_LINEAR);
+      f.images.emplace_back(full.data, full.data + full.total() * 3);
+    }
+    if (config.state_dim > 0) f.state = states.sample(config.state_key, config.state_dim);
+    if (config.env_state_dim > 0) f.env_state = states.sample(config.env_state_key, config.env_state_dim);
+    f.origin = "synthetic#" + std::to_string(i);
+    set.frames.push_back(std::move(f));
+  }
+  set.notes.push_back("synthetic frames (smooth random noise, states sampled from the statistics): accuracy is only indicative");
+  set.preprocessing = "synthetic RGB uint8 at the model's input size";
+  return set;
+}
+
+}  // namespace act

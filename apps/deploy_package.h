@@ -1,0 +1,22 @@
+// `act_convert --package DIR`: everything the robot needs beside the installed actengine .deb.
+#pragma once
+
+#include <string>
+
+#include "weights/model_config.h"
+
+namespace act {
+
+/// The blob's file name inside a package folder.
+inline constexpr const char* kPackageBlobName = "model.actb";
+
+/// Creates the package folder if needed and returns the blob's path in it. Throws act::Error(kIoError).
+std::string prepare_package_dir(const std::string& dir);
+
+/// Writes DIR/drive_calibration.json (a template for this model's actions and cameras) and
+/// DIR/README.md (how to install and run on the Raspberry Pi); the blob DIR/model.actb is written
+/// by the caller. `source` names the converted checkpoint. Existing calibration files are kept (they
+/// hold a robot's measured values); the README is rewritten. Throws act::Error(kIoError).
+void write_deploy_package(const std::string& dir, const ModelConfig& model, const std::string& source);
+
+}  // namespace act

@@ -1,0 +1,25 @@
+// act_convert's options for PyTorch .pth input (config sources) and its --explain report.
+#pragma once
+
+#include <iosfwd>
+#include <string>
+
+#include "weights/config_inference.h"
+
+namespace CLI {
+class App;
+}
+
+namespace act {
+
+/// Registers --config, --stats, --image-size, --n-action-steps, --n-heads, --activation, --camera,
+/// --assume-lerobot-defaults, --no-normalization and --state-dict-key, filling `sources`.
+void add_pytorch_options(CLI::App& app, ConfigSources& sources);
+
+/// True when any of those options was given (they only apply to a .pth input).
+bool any_pytorch_option(const CLI::App& app);
+
+/// What was read, every config value with its source, and what cannot be known.
+void print_explanation(std::ostream& out, const PyTorchConversion& plan);
+
+}  // namespace act

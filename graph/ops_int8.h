@@ -1,0 +1,124 @@
+// The INT8 ops of the ACT graph, over the kernels in kernels/gemm_s8, conv_s8, pool_s8 and quant.
+// Weights are int8 (symmetric, per output channel) and packed once, here, at graph build time for
+// the gemm_s8 variant in use.
+//
+// Two ways to quantize activations:
+//   static   the scale and zero point of every backbone value come from calibration (in the blob);
+//            the backbone stays int8 from conv to conv, requantization fused into each conv.
+//   dynamic  the parameters are computed at run time from the data: per tensor (symmetric) for
+//            conv inputs, per row (per token, asymmetric) for the transformer's linears.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "graph/graph.h"
+#include "graph/ops_fp32.h"
+#include "kernels/conv_s8/conv_s8.h"
+#include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/quant/quant_s8.h"
+
+namespace act::graph {
+
+/// Weights packed for one gemm_s8 variant, 64-byte aligned, owned by the op that uses them.
+class PackedWeights {
+ public:
+  /// Packs w [n x k] (int8) with an optional int32 bias and the activation zero point folded in.
+  PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
+                int32_t a_zero_point);
+  const void* data() const { return buffer_.get(); }
+
+ private:
+  struct Free {
+    void operator()(void* p) const;
+  };
+  std::unique_ptr<void, Free> buffer_;
+};
+
+/// float -> int8 per tensor. Static: with fixed parameters. Dynamic: symmetric (zero point 0,
+/// scale max|x| / 127) computed from the data at each run and written to `params` ([2] floats:
+/// scale, zero point) for the consumer.
+class QuantizeOp : public Op {
+ public:
+  QuantizeOp(size_t elements, kernels::QuantS8 q, ValueId input, ValueId output);                 // static
+  QuantizeOp(size_t elements, ValueId input, ValueId output, ValueId params);                     // dynamic
+  const char* type() const override { return "quantize_f32_s8"; }
+  void run(const RunContext& ctx) const override;
+  size_t scratch_per_thread() const override { return 16; }
+
+ private:
+  size_t elements_;
+  kernels::QuantS8 q_;
+  bool dynamic_;
+};
+
+/// int8 -> float per tensor.
+class DequantizeOp : public Op {
+ public:
+  DequantizeOp(size_t elements, kernels::QuantS8 q, ValueId input, ValueId output);
+  const char* type() const override { return "dequantize_s8_f32"; }
+  void run(const RunContext& ctx) const override;
+
+ private:
+  size_t elements_;
+  kernels::QuantS8 q_;
+};
+
+/// What a ConvS8Op reads and writes.
+struct ConvS8Spec {
+  kernels::Conv2dShape shape;
+  const int8_t* weight = nullptr;  ///< OHWI [out_c, kh, kw, in_c]
+  const float* w_scale = nullptr;  ///< [out_c]
+  const float* bias = nullptr;     ///< [out_c] float (BatchNorm folded)
+  /// Input parameters: static, or (when input_params is a value) dynamic from a QuantizeOp.
+  kernels::QuantS8 input_q;
+  ValueId input_params = kNoValue;
+  /// Output: int8 with static parameters (requantized), or float (dequantized).
+  bool s8_out = true;
+  kernels::QuantS8 output_q;
+  bool relu = false;
+  /// Optional residual added before the ReLU: int8 (s8 out, with residual_q) or float (f32 out).
+  ValueId residual = kNoValue;
+  kernels::QuantS8 residual_q;
+};
+
+/// NHWC int8 convolution, BatchNorm folded, tiles of output pixels over the pool.
+class ConvS8Op : public Op {
+ public:
+  ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec, ValueId input, ValueId output);
+  const char* type() const override { return spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32"; }
+  void run(const RunContext& ctx) const override;
+  size_t scratch_per_thread() const override;
+  double macs() const override;
+
+ private:
+  const kernels::GemmS8Kernels& kernels_;
+  ConvS8Spec spec_;
+  int tile_pixels_;
+  PackedWeights packed_;
+  std::vector<float> requant_scale_;  // s8 out: s_in * s_w[n] / s_out
+};
+
+/// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x quantized per row at run time
+/// (dynamic per-token quantization) into int8 values the op owns. The bias is a vector (ld 0) or a
+/// per-row table (then there must be no residual: the table takes the residual's place in the
+/// kernel's epilogue).
+class LinearS8Op : public Op {
+ public:
+  LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const int8_t* weight,
+             const float* w_scale, MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output,
+             ValueId quantized_x, ValueId row_scale, ValueId row_zero_point);
+  const char* type() const override { return "linear_s8_dyn"; }
+  void run(const RunContext& ctx) const override;
+  double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
+
+ private:
+  const kernels::GemmS8Kernels& kernels_;
+  int rows_, in_, out_;
+  MatrixRef x_, bias_, residual_;
+  const float* w_scale_;
+  Epilogue epilogue_;
+  PackedWeights packed_;
+};
+
+}  // namespace act::graph

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Builds the Debian packages: actengine_<version>_amd64.deb (native) and actengine_<version>_arm64.deb
+# (cross-compiled with Debian's aarch64 toolchain against the arm64 multiarch libraries, for the
+# Raspberry Pi 5), Release, no tests or benchmarks, into build-packages/. Install on the Pi with
+#   sudo apt install ./actengine_<version>_arm64.deb
+# ACT_PACKAGE_ARCHS="arm64" (or "amd64") builds only one. Extra arguments go to CMake's configure step.
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+out="${ACT_PACKAGE_DIR:-$root/build-packages}"
+jobs="${ACT_JOBS:-$(nproc)}"
+archs="${ACT_PACKAGE_ARCHS:-amd64 arm64}"
+
+"$root/scripts/install_deps.sh"
+mkdir -p "$out"
+for arch in $archs; do
+  build="$out/build-$arch"
+  configure=(-G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON -DACT_BUILD_TESTS=OFF -DACT_BUILD_BENCH=OFF)
+  case "$arch" in
+    amd64) ;;
+    arm64) configure+=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake") ;;
+    *) echo "build_packages: unknown architecture '$arch' (amd64, arm64)" >&2; exit 2 ;;
+  esac
+  echo "== actengine package for $arch =="
+  cmake -S "$root" -B "$build" "${configure[@]}" "$@"
+  cmake --build "$build" -j "$jobs"
+  (cd "$build" && cpack -G DEB)
+  cp "$build"/actengine_*_"$arch".deb "$out/"
+done
+ls -l "$out"/actengine_*.deb

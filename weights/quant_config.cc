@@ -1,0 +1,64 @@
+#include "weights/quant_config.h"
+
+#include <cmath>
+
+#include "weights/error.h"
+
+namespace act {
+
+const char* quant_mode_name(QuantMode mode) {
+  switch (mode) {
+    case QuantMode::kDynamic: return "dynamic";
+    case QuantMode::kStatic: return "static";
+    case QuantMode::kMixed: return "mixed";
+  }
+  return "?";
+}
+
+const ActivationQuant& QuantConfig::activation(const std::string& value_name) const {
+  const auto it = activations.find(value_name);
+  if (it == activations.end()) {
+    fail(StatusCode::kDataLoss, "the blob has no quantization parameters for activation \"" + value_name + "\"");
+  }
+  return it->second;
+}
+
+nlohmann::json QuantConfig::to_json() const {
+  nlohmann::json j;
+  j["mode"] = quant_mode_name(mode);
+  j["calibration"] = calibration;
+  j["activations"] = nlohmann::json::object();
+  for (const auto& [name, q] : activations) j["activations"][name] = {q.scale, q.zero_point};
+  j["float_layers"] = float_layers;
+  return j;
+}
+
+QuantConfig QuantConfig::from_json(const nlohmann::json& j) {
+  QuantConfig c;
+  try {
+    const std::string mode = j.at("mode").get<std::string>();
+    if (mode == "dynamic") {
+      c.mode = QuantMode::kDynamic;
+    } else if (mode == "static") {
+      c.mode = QuantMode::kStatic;
+    } else if (mode == "mixed") {
+      c.mode = QuantMode::kMixed;
+    } else {
+      fail(StatusCode::kDataLoss, "unknown quantization mode \"" + mode + "\"");
+    }
+    c.calibration = j.value("calibration", "");
+    for (const auto& [name, v] : j.at("activations").items()) {
+      ActivationQuant q{v.at(0).get<float>(), v.at(1).get<int32_t>()};
+      if (!(q.scale > 0.0f) || !std::isfinite(q.scale) || q.zero_point < -128 || q.zero_point > 127) {
+        fail(StatusCode::kDataLoss, "bad quantization parameters for activation \"" + name + "\"");
+      }
+      c.activations[name] = q;
+    }
+    c.float_layers = j.at("float_layers").get<std::vector<std::string>>();
+  } catch (const nlohmann::json::exception& e) {
+    fail(StatusCode::kDataLoss, std::string("malformed quantization section: ") + e.what());
+  }
+  return c;
+}
+
+}  // namespace act

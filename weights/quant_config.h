@@ -1,0 +1,46 @@
+// How an INT8 blob was quantized: the "quantization" object of the blob's config. Written by
+// act_convert, read by the graph builder.
+//
+//   {"mode": "dynamic" | "static" | "mixed",
+//    "calibration": "minmax" | "percentile" | "mse" | "",       (static and mixed)
+//    "activations": {"<value name>": [scale, zero_point], ...},  (static and mixed)
+//    "float_layers": ["<weight name>", ...]}                     (layers kept in FP32)
+//
+// Which layers are int8 is also visible in the tensors themselves (dtype I8 with per-channel
+// scales); float_layers records the converter's choice for reports.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace act {
+
+struct ActivationQuant {
+  float scale = 1.0f;
+  int32_t zero_point = 0;
+};
+
+enum class QuantMode { kDynamic, kStatic, kMixed };
+const char* quant_mode_name(QuantMode mode);
+
+struct QuantConfig {
+  QuantMode mode = QuantMode::kDynamic;
+  std::string calibration;
+  std::map<std::string, ActivationQuant> activations;
+  std::vector<std::string> float_layers;
+
+  /// True when activations between int8 backbone layers stay int8 (static and mixed).
+  bool static_activations() const { return mode != QuantMode::kDynamic; }
+  /// The parameters of a value; throws kDataLoss naming it when the blob has none.
+  const ActivationQuant& activation(const std::string& value_name) const;
+
+  nlohmann::json to_json() const;
+  /// Throws act::Error(kDataLoss) on a malformed object (bad mode, non-positive scale, ...).
+  static QuantConfig from_json(const nlohmann::json& j);
+};
+
+}  // namespace act

@@ -188,7 +188,7 @@ AttentionOp::AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, Matrix
 }
 
 namespace {
-constexpr int kAttentionTileRows = 32;  // queries per task
+constexpr int kAttentionTileRows = 128;  // queries per task: K and V are packed once per task, so few big tiles
 }
 
 size_t AttentionOp::scratch_per_thread() const {

@@ -15,6 +15,7 @@ constexpr size_t kElementwiseChunk = 1 << 16;  // elements per quantize/dequanti
 constexpr int kLinearTileRows = 120;           // a multiple of every gemm_s8 MR
 constexpr int kLinearTileCols = 256;           // a multiple of every gemm_s8 NR
 constexpr int kQuantizeTileRows = 32;
+constexpr size_t kChannelBlock = 64;           // a multiple of every gemm_s8 NR
 
 size_t ceil_div(size_t a, size_t b) { return (a + b - 1) / b; }
 
@@ -154,10 +155,23 @@ void ConvS8Op::run(const RunContext& ctx) const {
   const int8_t* x = ctx.data_s8(inputs[0]);
   const int pixels = spec_.shape.out_h * spec_.shape.out_w;
   const size_t n = static_cast<size_t>(spec_.shape.out_c);
-  const size_t tasks = ceil_div(static_cast<size_t>(pixels), static_cast<size_t>(tile_pixels_));
+  // Few pixel tiles (the deep layers): split the output channels too, in blocks of 64, so every
+  // thread gets work without each one streaming all the weights.
+  const size_t pixel_tiles = ceil_div(static_cast<size_t>(pixels), static_cast<size_t>(tile_pixels_));
+  const size_t wanted = 4 * static_cast<size_t>(ctx.pool().threads());
+  const size_t channel_blocks =
+      pixel_tiles >= wanted ? 1 : std::min(ceil_div(wanted, pixel_tiles), ceil_div(n, kChannelBlock));
+  const size_t channels_per_block = ceil_div(ceil_div(n, channel_blocks), kChannelBlock) * kChannelBlock;
+  const size_t tasks = pixel_tiles * channel_blocks;
+  struct Tile {
+    int p0, count;
+    kernels::ConvChannels channels;
+  };
   const auto tile = [&](size_t task) {
-    const int p0 = static_cast<int>(task) * tile_pixels_;
-    return std::pair{p0, std::min(tile_pixels_, pixels - p0)};
+    const int p0 = static_cast<int>(task / channel_blocks) * tile_pixels_;
+    const size_t c0 = (task % channel_blocks) * channels_per_block;
+    const int c1 = static_cast<int>(std::min(n, c0 + channels_per_block));
+    return Tile{p0, std::min(tile_pixels_, pixels - p0), {static_cast<int>(std::min(c0, n)), c1}};
   };
   if (spec_.s8_out) {
     kernels::GemmS8OutS8 out;
@@ -173,8 +187,8 @@ void ConvS8Op::run(const RunContext& ctx) const {
       out.residual_scale = spec_.residual_q.scale / spec_.output_q.scale;
     }
     ctx.pool().parallel_for(tasks, [&](size_t task, int thread) {
-      const auto [p0, count] = tile(task);
-      kernels::conv_s8_s8out(conv, x, out, p0, count, ctx.scratch_s8(thread));
+      const Tile t = tile(task);
+      if (t.channels.begin < t.channels.end) kernels::conv_s8_s8out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
     });
   } else {
     kernels::GemmS8OutF32 out;
@@ -189,8 +203,8 @@ void ConvS8Op::run(const RunContext& ctx) const {
     }
     out.relu = spec_.relu;
     ctx.pool().parallel_for(tasks, [&](size_t task, int thread) {
-      const auto [p0, count] = tile(task);
-      kernels::conv_s8_f32out(conv, x, out, p0, count, ctx.scratch_s8(thread));
+      const Tile t = tile(task);
+      if (t.channels.begin < t.channels.end) kernels::conv_s8_f32out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
     });
   }
 }

@@ -43,22 +43,22 @@ size_t conv_s8_scratch_bytes(const Conv2dShape& s, int tile_pixels) {
 }
 
 void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
-                   int8_t* scratch) {
+                   int8_t* scratch, ConvChannels channels) {
   const GemmS8Args args = tile_args(conv, input, pixel_begin, count, scratch);
   GemmS8OutS8 tile = out;
   tile.c = out.c + static_cast<size_t>(pixel_begin) * out.ldc;
   if (out.residual) tile.residual = out.residual + static_cast<size_t>(pixel_begin) * out.ldr;
-  conv.kernels->s8out(args, tile, 0, count, 0, args.n);
+  conv.kernels->s8out(args, tile, 0, count, channels.begin, channels.end < 0 ? args.n : channels.end);
 }
 
 void conv_s8_f32out(const ConvS8& conv, const int8_t* input, const GemmS8OutF32& out, int pixel_begin, int count,
-                    int8_t* scratch) {
+                    int8_t* scratch, ConvChannels channels) {
   const GemmS8Args args = tile_args(conv, input, pixel_begin, count, scratch);
   GemmS8OutF32 tile = out;
   tile.c = out.c + static_cast<size_t>(pixel_begin) * out.ldc;
   if (out.residual) tile.residual = out.residual + static_cast<size_t>(pixel_begin) * out.ldr;
   if (out.a_row_scale) tile.a_row_scale = out.a_row_scale + pixel_begin;
-  conv.kernels->f32out(args, tile, 0, count, 0, args.n);
+  conv.kernels->f32out(args, tile, 0, count, channels.begin, channels.end < 0 ? args.n : channels.end);
 }
 
 }  // namespace act::kernels

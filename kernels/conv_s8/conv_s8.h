@@ -31,13 +31,21 @@ int conv_s8_tile_pixels(const Conv2dShape& s);
 /// the kernels' read slack.
 size_t conv_s8_scratch_bytes(const Conv2dShape& s, int tile_pixels);
 
-/// Output pixels [pixel_begin, pixel_begin + count), s8 out. `out.c` and `out.residual` address
+/// A range of output channels [begin, end) (end < 0: to the last). Splitting channels lets several
+/// threads share a conv with few output pixels (layer4: 300 at 480x640) without each streaming all
+/// its weights; `begin` should be a multiple of the variant's NR (64 suits every variant).
+struct ConvChannels {
+  int begin = 0;
+  int end = -1;
+};
+
+/// Output pixels [pixel_begin, pixel_begin + count), channels `channels`, s8 out. `out.c` and `out.residual` address
 /// the whole output / residual ([out_h * out_w x out_c]). The input must be followed by
 /// kGemmS8ReadSlack addressable bytes.
 void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
-                   int8_t* scratch);
+                   int8_t* scratch, ConvChannels channels = {});
 /// The same with f32 out (dequantized, + bias, residual, ReLU). `a_scale` is the input scale.
 void conv_s8_f32out(const ConvS8& conv, const int8_t* input, const GemmS8OutF32& out, int pixel_begin, int count,
-                    int8_t* scratch);
+                    int8_t* scratch, ConvChannels channels = {});
 
 }  // namespace act::kernels

@@ -115,8 +115,10 @@ Problem make_problem(const ConvCase& c, int zp, std::mt19937& rng) {
   return p;
 }
 
-// Runs conv_s8_s8out tile by tile (tiles of `tile` pixels, or the conv's own tile size when 0).
-std::vector<int8_t> run_s8(const GemmS8Kernels& v, const Problem& p, const GemmS8OutS8& out_template, int tile) {
+// Runs conv_s8_s8out tile by tile (tiles of `tile` pixels, or the conv's own tile size when 0), and
+// in blocks of `channel_block` output channels (all at once when 0).
+std::vector<int8_t> run_s8(const GemmS8Kernels& v, const Problem& p, const GemmS8OutS8& out_template, int tile,
+                           int channel_block = 0) {
   const Conv2dShape& s = p.s;
   std::unique_ptr<uint8_t, FreeDeleter> packed(
       static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, v.packed_size(s.out_c, s.patch_size()))));
@@ -133,8 +135,12 @@ std::vector<int8_t> run_s8(const GemmS8Kernels& v, const Problem& p, const GemmS
   GemmS8OutS8 out = out_template;
   out.c = y.data();
   out.ldc = static_cast<size_t>(s.out_c);
+  const int block = channel_block == 0 ? s.out_c : channel_block;
   for (int p0 = 0; p0 < pixels; p0 += tile) {
-    conv_s8_s8out(conv, p.x.data(), out, p0, std::min(tile, pixels - p0), scratch.data());
+    for (int c0 = 0; c0 < s.out_c; c0 += block) {
+      conv_s8_s8out(conv, p.x.data(), out, p0, std::min(tile, pixels - p0), scratch.data(),
+                    ConvChannels{c0, std::min(s.out_c, c0 + block)});
+    }
   }
   return y;
 }
@@ -173,11 +179,13 @@ TEST(ConvS8, EqualsDirectIntegerConvolutionForEveryVariant) {
         for (Isa isa : gemm_s8_available_isas()) {
           const GemmS8Kernels& v = *gemm_s8_kernels(isa);
           // The conv's own tiles, and ragged ones (1 pixel; 7 = not a multiple of any MR).
-          for (int tile : {0, 1, 7}) {
-            const std::vector<int8_t> y = run_s8(v, p, o, tile);
+          // Channel blocks of 16 (ragged against 64-wide panels) and 64, as threads split deep layers.
+          for (const auto& [tile, block] : {std::pair{0, 0}, {1, 0}, {7, 0}, {0, 16}, {7, 64}}) {
+            const std::vector<int8_t> y = run_s8(v, p, o, tile, block);
             for (size_t i = 0; i < y.size(); ++i) {
               ASSERT_EQ(y[i], want[i]) << c.name << " zp=" << zp << " residual=" << residual << " " << isa_name(isa)
-                                       << " tile=" << tile << " pixel " << i / out_c << " channel " << i % out_c;
+                                       << " tile=" << tile << " channel block=" << block << " pixel " << i / out_c
+                                       << " channel " << i % out_c;
             }
           }
         }

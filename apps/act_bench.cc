@@ -19,6 +19,9 @@
 #include "actengine/engine.h"
 #include "apps/bench_support.h"
 #include "apps/convert/int8_conversion.h"
+#include "kernels/fp32/gemm_f32.h"
+#include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/peak/peak_probe.h"
 #include "apps/observation_file.h"
 #include "weights/actb.h"
 #include "weights/error.h"
@@ -258,6 +261,15 @@ int run(const Options& opt) {
     other_total = act::summarize(samples);
   }
   const act::MachineInfo machine = act::read_machine_info();
+  // This core's peak for the engine's main kernels (int8 dot products, or float FMAs), measured now
+  // by the same register-only probe as act_kernel_bench; the achieved rate is compared with it
+  // times the threads.
+  const bool int8 = info.precision.rfind("int8", 0) == 0;
+  const act::kernels::Isa isa = int8 ? act::kernels::gemm_s8_select().kernels->isa : act::kernels::gemm_f32_select().kernels->isa;
+  const act::kernels::PeakProbe* probe =
+      act::kernels::isa_peak_probe(isa, int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
+  const double peak_gmacs = probe ? act::kernels::measure_peak_gmacs(*probe) : 0.0;
+  const double pct_peak = peak_gmacs > 0 ? 100.0 * gmacs_per_s / (peak_gmacs * engine.threads()) : 0.0;
   const size_t rss = act::peak_rss_bytes();
 
   // Report.
@@ -279,6 +291,12 @@ int run(const Options& opt) {
                 s.p95, s.p99, s.max);
   }
   std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total.mean, gmacs_per_s);
+  if (probe != nullptr && peak_gmacs > 0) {
+    std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads\n", pct_peak,
+                int8 ? "INT8" : "FP32", peak_gmacs, probe->name, engine.threads());
+  } else {
+    std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(isa));
+  }
   std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss) / 1e6);
   nlohmann::ordered_json compare_json;
   if (other) {
@@ -317,6 +335,10 @@ int run(const Options& opt) {
     j["latency_ms"] = stage_json;
     j["throughput_per_s"] = 1e3 / total.mean;
     j["achieved_gmac_per_s"] = gmacs_per_s;
+    j["peak"] = {{"kind", int8 ? "int8" : "fp32"},
+                 {"probe", probe ? probe->name : ""},
+                 {"gmac_per_s_per_core", peak_gmacs},
+                 {"percent_of_peak", pct_peak}};
     j["peak_rss_bytes"] = rss;
     std::ofstream(opt.json_path) << j.dump(2) << "\n";
   }

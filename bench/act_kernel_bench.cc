@@ -36,7 +36,7 @@
 #include <string>
 #include <vector>
 
-#include "bench/peak_probe.h"
+#include "kernels/peak/peak_probe.h"
 #include "graph/thread_pool.h"
 #include "kernels/conv_s8/conv_s8.h"
 #include "kernels/fp32/elementwise_f32.h"
@@ -83,55 +83,14 @@ std::vector<Shape> read_shapes(const std::string& path) {
   return shapes;
 }
 
-struct Probe {
-  const char* name;
-  Isa isa;
-  uint64_t (*fn)(uint64_t);
-  bool is_isa_peak;  // the one "% of peak" refers to
-};
-
-constexpr Probe kProbes[] = {
-    {"vpdpbusd_zmm", Isa::kAvx512Vnni, peak_vpdpbusd_zmm, true},
-    {"vpmaddwd_ymm", Isa::kAvx2, peak_vpmaddwd_ymm, true},
-    {"vpmaddwd+vpaddd_ymm", Isa::kAvx2, peak_vpmaddwd_vpaddd_ymm, false},
-    {"sdot", Isa::kNeonDot, peak_sdot, true},
-};
-
-// Sustained GMAC/s of a probe (by thread CPU time): a ~20 ms warm-up (wide-vector instructions lower the clock after a
-// few tens of microseconds on many x86 cores, so a short burst would overstate the peak), then the
-// best of 10 runs of ~2 ms, so that a run descheduled by other work on a shared machine does not
-// lower the peak the kernels are compared against.
-// This thread's CPU time: unlike the wall clock it does not count time the thread spent
-// descheduled, which on a shared machine would make a loaded core look slow.
-double thread_cpu_seconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
-double measure_peak(const Probe& p) {
-  auto run = [&](uint64_t iters) {
-    const double t0 = thread_cpu_seconds();
-    const uint64_t macs = p.fn(iters);
-    const double s = thread_cpu_seconds() - t0;
-    return static_cast<double>(macs) / s * 1e-9;
-  };
-  const double macs_per_iteration = static_cast<double>(p.fn(1));  // the probes need iterations >= 1
-  const double warm = run(1u << 14);  // GMAC/s of a short run, to size the timed runs
-  const auto iters_for = [&](double seconds) {
-    return static_cast<uint64_t>(seconds * warm * 1e9 / macs_per_iteration) + 1;
-  };
-  run(iters_for(0.02));
-  double best = 0.0;
-  for (int rep = 0; rep < 10; ++rep) best = std::max(best, run(iters_for(0.002)));
-  return best;
-}
+using kernels::PeakProbe;
+using kernels::thread_cpu_seconds;
 
 // Best repetition (largest GMAC/s, smallest time) for --benchmark_repetitions runs.
 double stat_max(const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); }
 double stat_min(const std::vector<double>& v) { return v.empty() ? 0.0 : *std::min_element(v.begin(), v.end()); }
 
-void bm_probe(benchmark::State& state, const Probe* p) {
+void bm_probe(benchmark::State& state, const PeakProbe* p) {
   uint64_t macs = 0;
   for (auto _ : state) macs += p->fn(1u << 16);
   state.counters["GMAC/s"] = benchmark::Counter(static_cast<double>(macs) * 1e-9, benchmark::Counter::kIsRate);
@@ -477,14 +436,15 @@ int main(int argc, char** argv) {
   const std::vector<bench::Shape> shapes = bench::read_shapes(shapes_env != nullptr ? shapes_env : ACT_BENCH_SHAPES_FILE);
 
   std::map<kernels::Isa, double> peak;
-  for (const bench::Probe& p : bench::kProbes) {
+  for (int i = 0; i < kernels::kPeakProbeCount; ++i) {
+    const kernels::PeakProbe& p = kernels::kPeakProbes[i];
     if (!kernels::cpu_supports(p.isa) || p.fn(1) == 0) continue;
     benchmark::RegisterBenchmark((std::string("peak/") + p.name).c_str(), bench::bm_probe, &p)
         ->UseRealTime()
         ->ComputeStatistics("max", bench::stat_max)
         ->ComputeStatistics("min", bench::stat_min);
-    if (p.is_isa_peak) {
-      peak[p.isa] = bench::measure_peak(p);
+    if (p.is_isa_peak && p.kind == kernels::PeakKind::kInt8) {
+      peak[p.isa] = kernels::measure_peak_gmacs(p);
       benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps", std::to_string(peak[p.isa]));
     }
   }

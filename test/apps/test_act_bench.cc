@@ -66,6 +66,12 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   EXPECT_NEAR(j["throughput_per_s"].get<double>(), 1.0 / mean_s, 1e-9 / mean_s);
   EXPECT_NEAR(j["achieved_gmac_per_s"].get<double>(), expected_gmac / mean_s, 1e-6 * expected_gmac / mean_s);
   EXPECT_GT(j["peak_rss_bytes"].get<double>(), 0.0);
+  // % of peak is the achieved rate over the probe's per-core peak times the threads.
+  if (j["peak"]["gmac_per_s_per_core"].get<double>() > 0) {
+    const double want = 100.0 * j["achieved_gmac_per_s"].get<double>() / (j["peak"]["gmac_per_s_per_core"].get<double>() * 1);
+    EXPECT_NEAR(j["peak"]["percent_of_peak"].get<double>(), want, 1e-6 * want);
+    EXPECT_EQ(j["peak"]["kind"], "fp32");
+  }
   EXPECT_FALSE(j["machine"]["cpu_model"].get<std::string>().empty());
   EXPECT_GE(j["machine"]["online_cores"].get<int>(), 1);
   EXPECT_GE(j["init"]["first_inference_ms"].get<double>(), 0.0);

@@ -1,8 +1,8 @@
 // vpmaddwd throughput probes (AVX2). Inline assembly so that the loop is exactly the instructions
 // measured.
-#include "bench/peak_probe.h"
+#include "kernels/peak/peak_probe.h"
 
-namespace act::bench {
+namespace act::kernels {
 
 #if defined(__x86_64__)
 uint64_t peak_vpmaddwd_ymm(uint64_t iterations) {
@@ -63,9 +63,35 @@ uint64_t peak_vpmaddwd_vpaddd_ymm(uint64_t iterations) {
         "xmm13", "xmm14", "xmm15", "cc");
   return iterations * 8 * 16;
 }
+uint64_t peak_vfmadd_f32_ymm(uint64_t iterations) {
+  uint64_t n = iterations;
+  __asm__ volatile(
+      "vxorps %%ymm14, %%ymm14, %%ymm14\n\tvxorps %%ymm15, %%ymm15, %%ymm15\n\t"
+      "1:\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm0\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm1\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm2\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm3\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm4\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm5\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm6\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm7\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm8\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm9\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm10\n\t"
+      "vfmadd231ps %%ymm14, %%ymm15, %%ymm11\n\t"
+      "dec %0\n\t"
+      "jnz 1b\n\t"
+      "vzeroupper\n\t"
+      : "+r"(n)
+      :
+      : "xmm0", "xmm1", "xmm2", "xmm3", "xmm4", "xmm5", "xmm6", "xmm7", "xmm8", "xmm9", "xmm10", "xmm11", "xmm14", "xmm15", "cc");
+  return iterations * 12 * 8;
+}
 #else
+uint64_t peak_vfmadd_f32_ymm(uint64_t) { return 0; }
 uint64_t peak_vpmaddwd_ymm(uint64_t) { return 0; }
 uint64_t peak_vpmaddwd_vpaddd_ymm(uint64_t) { return 0; }
 #endif
 
-}  // namespace act::bench
+}  // namespace act::kernels

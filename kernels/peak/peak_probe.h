@@ -1,0 +1,54 @@
+// Register-only throughput probes of the multiply-accumulate instructions the kernels are built on:
+// tight loops of independent instructions with no memory traffic, giving this core's measured peak
+// to compare kernels (act_kernel_bench) and whole inferences (act_bench) against. Each raw probe
+// returns the MACs performed (0 when not built for this target); `iterations` >= 1.
+#pragma once
+
+#include <cstdint>
+
+#include "kernels/common/isa.h"
+
+namespace act::kernels {
+
+/// 16 independent vpdpbusd zmm chains per iteration (64 int8 MACs each). AVX-512 VNNI.
+uint64_t peak_vpdpbusd_zmm(uint64_t iterations);
+/// 12 independent vpmaddwd ymm chains per iteration (16 int16 MACs each). AVX2.
+uint64_t peak_vpmaddwd_ymm(uint64_t iterations);
+/// 8 vpmaddwd + vpaddd accumulate pairs per iteration: the AVX2 kernel's actual idiom.
+uint64_t peak_vpmaddwd_vpaddd_ymm(uint64_t iterations);
+/// 16 independent sdot (by element) chains per iteration (16 MACs each). AArch64 dotprod.
+uint64_t peak_sdot(uint64_t iterations);
+/// 12 independent float FMA chains: vfmadd231ps ymm (8 MACs) / zmm (16 MACs).
+uint64_t peak_vfmadd_f32_ymm(uint64_t iterations);
+uint64_t peak_vfmadd_f32_zmm(uint64_t iterations);
+/// 16 independent fmla .4s chains (4 float MACs each). AArch64.
+uint64_t peak_fmla_f32(uint64_t iterations);
+
+enum class PeakKind { kInt8, kFp32 };
+
+struct PeakProbe {
+  const char* name;  ///< the instruction, e.g. "vpdpbusd_zmm"
+  Isa isa;           ///< the kernel variant it bounds
+  PeakKind kind;
+  uint64_t (*fn)(uint64_t);
+  bool is_isa_peak;  ///< the probe "% of peak" refers to for (isa, kind)
+};
+
+/// Every probe this library has, built for this target or not.
+extern const PeakProbe kPeakProbes[];
+extern const int kPeakProbeCount;
+
+/// The probe "% of peak" refers to for kernels of `isa` and `kind` (null when there is none, e.g.
+/// the scalar reference).
+const PeakProbe* isa_peak_probe(Isa isa, PeakKind kind);
+
+/// CPU time of the calling thread (seconds): unlike the wall clock, it does not count time the thread
+/// spent descheduled, which on a shared machine would make a loaded core look slow.
+double thread_cpu_seconds();
+
+/// Sustained GMAC/s of a probe on this core, by thread CPU time (so that time descheduled on a
+/// shared machine does not count): a ~20 ms warm-up (wide vectors lower the clock on many x86
+/// cores), then the best of 10 runs of ~2 ms. 0 when the probe is not built or the CPU lacks it.
+double measure_peak_gmacs(const PeakProbe& probe);
+
+}  // namespace act::kernels

@@ -550,38 +550,16 @@ class Importer {
                       std::map<std::string, LeRobotMode>& modes, std::optional<SafetensorsFile>& state,
                       std::string& where) {
         const fs::path path = dir_ / pipeline_file;
-        const OrderedJson pipeline = read_json_file(path);
-        if (!pipeline.is_object() || !pipeline.contains("steps") || !pipeline["steps"].is_array()) {
-          fail(StatusCode::kDataLoss, path.string() + ": expected {\"steps\": [...]}");
+        const ProcessorStep parsed = parse_processor_step(read_json_file(path), registry_name, path.string());
+        if (parsed.eps) eps = *parsed.eps;
+        if (parsed.norm_map) {
+          modes.clear();  // the step's own map is what LeRobot runs
+          for (const auto& [type, mode] : *parsed.norm_map) modes[type] = parse_mode(mode, path.string());
         }
-        for (const auto& s : pipeline["steps"]) {
-          if (!s.is_object() || s.value("registry_name", "") != registry_name) continue;
-          const auto& config = s.contains("config") ? s["config"] : OrderedJson::object();
-          if (config.contains("eps")) {
-            if (!config["eps"].is_number()) fail(StatusCode::kDataLoss, path.string() + ": eps must be a number");
-            eps = config["eps"].get<float>();
-          }
-          if (config.contains("norm_map") && config["norm_map"].is_object()) {
-            modes.clear();  // the step's own map is what LeRobot runs
-            for (const auto& [type, mode] : config["norm_map"].items()) {
-              if (!mode.is_string()) fail(StatusCode::kDataLoss, path.string() + ": norm_map values must be strings");
-              modes[type] = parse_mode(mode.get<std::string>(), path.string());
-            }
-          }
-          if (!s.contains("state_file") || !s["state_file"].is_string()) {
-            fail(StatusCode::kDataLoss, path.string() + ": step " + registry_name + " has no state_file");
-          }
-          const std::string state_name = s["state_file"].get<std::string>();
-          if (state_name.find('/') != std::string::npos || state_name.find("..") != std::string::npos) {
-            fail(StatusCode::kDataLoss, path.string() + ": state_file must be a file name in the checkpoint folder");
-          }
-          const fs::path state_path = dir_ / state_name;
-          if (!fs::exists(state_path)) fail(StatusCode::kNotFound, "missing normalisation statistics " + state_path.string());
-          state.emplace(SafetensorsFile::open(state_path.string()));
-          where = state_path.string();
-          return;
-        }
-        fail(StatusCode::kNotFound, path.string() + ": no \"" + registry_name + "\" step; cannot tell how to normalise");
+        const fs::path state_path = dir_ / parsed.state_file;
+        if (!fs::exists(state_path)) fail(StatusCode::kNotFound, "missing normalisation statistics " + state_path.string());
+        state.emplace(SafetensorsFile::open(state_path.string()));
+        where = state_path.string();
       };
       if (!fs::exists(dir_ / "policy_postprocessor.json")) {
         fail(StatusCode::kNotFound, (dir_ / "policy_postprocessor.json").string() + " is missing (current-layout checkpoint)");
@@ -826,6 +804,44 @@ class Importer {
 };
 
 }  // namespace
+
+ProcessorStep parse_processor_step(const nlohmann::ordered_json& pipeline, const std::string& registry_name,
+                                   const std::string& where) {
+  if (!pipeline.is_object() || !pipeline.contains("steps") || !pipeline["steps"].is_array()) {
+    fail(StatusCode::kDataLoss, where + ": expected {\"steps\": [...]}");
+  }
+  for (const auto& s : pipeline["steps"]) {
+    if (!s.is_object() || !s.contains("registry_name") || s["registry_name"] != registry_name) continue;
+    ProcessorStep step;
+    const auto config = s.contains("config") ? s["config"] : OrderedJson::object();
+    if (config.is_object() && config.contains("eps")) {
+      const auto& eps = config["eps"];
+      // Read as double: a value outside float's range must be an error, not an overflowing cast.
+      const double value = eps.is_number() ? eps.get<double>() : -1.0;
+      if (!(value >= 0.0 && value <= std::numeric_limits<float>::max())) {
+        fail(StatusCode::kDataLoss, where + ": eps must be a finite non-negative number");
+      }
+      step.eps = static_cast<float>(value);
+    }
+    if (config.is_object() && config.contains("norm_map") && config["norm_map"].is_object()) {
+      step.norm_map.emplace();
+      for (const auto& [type, mode] : config["norm_map"].items()) {
+        if (!mode.is_string()) fail(StatusCode::kDataLoss, where + ": norm_map values must be strings");
+        (*step.norm_map)[type] = mode.get<std::string>();
+      }
+    }
+    if (!s.contains("state_file") || !s["state_file"].is_string()) {
+      fail(StatusCode::kDataLoss, where + ": step " + registry_name + " has no state_file");
+    }
+    step.state_file = s["state_file"].get<std::string>();
+    if (step.state_file.empty() || step.state_file.find('/') != std::string::npos ||
+        step.state_file.find("..") != std::string::npos) {
+      fail(StatusCode::kDataLoss, where + ": state_file must be a file name in the checkpoint folder");
+    }
+    return step;
+  }
+  fail(StatusCode::kNotFound, where + ": no \"" + registry_name + "\" step; cannot tell how to normalise");
+}
 
 ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir) {
   const fs::path dir(checkpoint_dir);

@@ -7,6 +7,8 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -57,6 +59,18 @@ ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, co
 /// (kNotFound): the statistics were given explicitly, so a gap is a mistake, not a LeRobot default.
 ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, const TensorSet& state_dict,
                                         const TensorSet& stats);
+
+/// The normalisation step `registry_name` ("normalizer_processor" / "unnormalizer_processor") of a
+/// current-layout processor pipeline file (policy_preprocessor.json / policy_postprocessor.json).
+struct ProcessorStep {
+  std::optional<float> eps;
+  std::optional<std::map<std::string, std::string>> norm_map;  ///< feature type -> mode name, as written
+  std::string state_file;  ///< a plain file name in the checkpoint folder
+};
+/// Parses that step out of the pipeline's JSON. Throws act::Error naming `where`: kDataLoss
+/// (malformed), kNotFound (no such step).
+ProcessorStep parse_processor_step(const nlohmann::ordered_json& pipeline, const std::string& registry_name,
+                                   const std::string& where);
 
 /// Writes the imported model as an FP32 .actb blob (atomically). Returns the file size in bytes.
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path);

@@ -1,0 +1,19 @@
+// libFuzzer target: the .actb blob loader. The checksum is skipped for most inputs (the first byte
+// decides) so that mutations reach the header and tensor-directory checks behind it.
+#include "test/fuzz/fuzz_input_file.h"
+#include "weights/actb.h"
+#include "weights/error.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  static act::fuzz::InputFile input;
+  const bool verify_checksum = size > 0 && data[0] % 8 == 0;
+  try {
+    const act::ActbFile blob = act::ActbFile::open(input.write(data, size), verify_checksum);
+    for (const act::ActbTensor& t : blob.tensors()) {
+      act::fuzz::touch(t.data, t.nbytes);
+      if (t.dtype == act::DType::kF32) (void)t.f32();
+    }
+  } catch (const act::Error&) {
+  }
+  return 0;
+}

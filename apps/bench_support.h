@@ -33,5 +33,7 @@ MachineInfo read_machine_info();
 
 /// Peak resident set size of this process, in bytes.
 size_t peak_rss_bytes();
+/// Current resident set size of this process, in bytes (from /proc/self/statm; 0 if unreadable).
+size_t current_rss_bytes();
 
 }  // namespace act

@@ -24,11 +24,13 @@ for target in "${targets[@]}"; do
   corpus="$build/corpus/$target"
   mkdir -p "$corpus"
   log="$build/$target.log"
+  dict=()
+  [ -f "$root/test/fuzz/$target.dict" ] && dict=(-dict="$root/test/fuzz/$target.dict")
   echo "== $target: ${seconds}s =="
   # New inputs go to the scratch corpus (first folder); the seeds are read from the second.
   if ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
      "$build/test/fuzz/$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
-       -print_final_stats=1 -artifact_prefix="$build/findings/$target-" \
+       -print_final_stats=1 "${dict[@]}" -artifact_prefix="$build/findings/$target-" \
        "$corpus" "$root/test/fuzz/corpus/$target" >"$log" 2>&1; then
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
     summary+=("$target: $execs executions in ${seconds}s")

@@ -109,29 +109,17 @@ std::string parse_quant(const nlohmann::json& j, QuantParams* q) {
   if (axis == j.end()) return "'quant' needs an 'axis'";
   q->scales.reserve(scales->size());
   for (const auto& s : *scales) {
-    if (!s.is_number()) return "quant scales must be numbers";
-    // Range-check before narrowing: converting an out-of-range double to float is undefined.
-    const auto d = s.get<double>();
-    if (!(std::fabs(d) <= static_cast<double>(std::numeric_limits<float>::max()))) {
-      return "quant scale " + std::to_string(d) + " is out of float range";
-    }
-    q->scales.push_back(static_cast<float>(d));
+    float scale = 0.0f;
+    if (!detail::json_to_f32(s, &scale)) return "quant scales must be numbers in float range";
+    q->scales.push_back(scale);
   }
   q->zero_points.reserve(zps->size());
   for (const auto& z : *zps) {
-    int64_t v = 0;
-    if (!detail::json_to_i64(z, &v) || v < std::numeric_limits<int32_t>::min() ||
-        v > std::numeric_limits<int32_t>::max()) {
-      return "quant zero_points must be 32-bit integers";
-    }
-    q->zero_points.push_back(static_cast<int32_t>(v));
+    int32_t v = 0;
+    if (!detail::json_to_i32(z, &v)) return "quant zero_points must be 32-bit integers";
+    q->zero_points.push_back(v);
   }
-  int64_t a = 0;
-  if (!detail::json_to_i64(*axis, &a) || a < std::numeric_limits<int32_t>::min() ||
-      a > std::numeric_limits<int32_t>::max()) {
-    return "quant axis must be a 32-bit integer";
-  }
-  q->axis = static_cast<int32_t>(a);
+  if (!detail::json_to_i32(*axis, &q->axis)) return "quant axis must be a 32-bit integer";
   return "";
 }
 

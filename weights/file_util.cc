@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -193,6 +194,23 @@ bool json_to_u64(const nlohmann::json& j, uint64_t* out) {
     return true;
   }
   return false;
+}
+
+bool json_to_i32(const nlohmann::json& j, int32_t* out) {
+  int64_t v = 0;
+  if (!json_to_i64(j, &v) || v < std::numeric_limits<int32_t>::min() || v > std::numeric_limits<int32_t>::max()) {
+    return false;
+  }
+  *out = static_cast<int32_t>(v);
+  return true;
+}
+
+bool json_to_f32(const nlohmann::json& j, float* out) {
+  if (!j.is_number()) return false;
+  const auto d = j.get<double>();
+  if (!(std::fabs(d) <= static_cast<double>(std::numeric_limits<float>::max()))) return false;
+  *out = static_cast<float>(d);
+  return true;
 }
 
 bool json_to_shape(const nlohmann::json& j, std::vector<int64_t>* shape, std::string* why) {

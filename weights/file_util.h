@@ -70,6 +70,11 @@ std::string dump_json(const Json& j, const std::string& what) {
 /// Floats are rejected even when integral (2.0): the writers never produce them.
 bool json_to_i64(const nlohmann::json& j, int64_t* out);
 bool json_to_u64(const nlohmann::json& j, uint64_t* out);
+/// JSON integer within int32's range -> int32; false otherwise (narrowing a float or a larger integer
+/// is undefined or silently wraps, so outside data is range-checked here first).
+bool json_to_i32(const nlohmann::json& j, int32_t* out);
+/// JSON number within float's range -> float; false otherwise.
+bool json_to_f32(const nlohmann::json& j, float* out);
 
 /// A shape: array of integers >= 0. On failure returns false and sets *why.
 bool json_to_shape(const nlohmann::json& j, std::vector<int64_t>* shape, std::string* why);

@@ -114,11 +114,24 @@ std::vector<Feature> read_features(const ConfigReader& cfg, const std::string& f
   const auto& obj = cfg.at(field);
   if (!obj.is_object()) fail(StatusCode::kDataLoss, cfg.file() + ": \"" + field + "\" must be an object");
   for (const auto& [key, value] : obj.items()) {  // ordered_json keeps the file's key order
-    try {
-      out.push_back({key, value.at("type").get<std::string>(), value.at("shape").get<std::vector<int64_t>>()});
-    } catch (const nlohmann::json::exception&) {
-      fail(StatusCode::kDataLoss, cfg.file() + ": feature \"" + key + "\" needs a string \"type\" and an integer \"shape\"");
+    const std::string& name = key;  // (clang 14 cannot capture a structured binding)
+    const auto malformed = [&] {
+      fail(StatusCode::kDataLoss, cfg.file() + ": feature \"" + name + "\" needs a string \"type\" and an integer \"shape\"");
+    };
+    if (!value.is_object() || !value.contains("type") || !value["type"].is_string() || !value.contains("shape") ||
+        !value["shape"].is_array()) {
+      malformed();
     }
+    Feature feature{key, value["type"].get<std::string>(), {}};
+    for (const auto& d : value["shape"]) {
+      // Checked before converting: a float (1e300) converted to an integer is undefined behaviour, and
+      // the dimensions are used as int.
+      if (!d.is_number_integer() || d.get<int64_t>() < 0 || d.get<int64_t>() > std::numeric_limits<int>::max()) {
+        malformed();
+      }
+      feature.shape.push_back(d.get<int64_t>());
+    }
+    out.push_back(std::move(feature));
   }
   return out;
 }

@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "weights/error.h"
+#include "weights/file_util.h"
 
 namespace act {
 
@@ -245,30 +246,48 @@ nlohmann::json ModelConfig::to_json() const {
   return j;
 }
 
+namespace {
+
+// The blob's integers are range-checked before narrowing (a float or a too-large integer made int is
+// undefined or wraps silently).
+int int_field(const nlohmann::json& j, const std::string& key) {
+  int32_t v = 0;
+  if (!detail::json_to_i32(j.at(key), &v)) {
+    fail(StatusCode::kDataLoss, "malformed model config in blob: \"" + key + "\" must be a 32-bit integer");
+  }
+  return v;
+}
+
+}  // namespace
+
 ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
   ModelConfig c;
   try {
     c.backbone = j.at("backbone").get<std::string>();
-    c.backbone_blocks = j.at("backbone_blocks").get<std::vector<int>>();
+    for (const auto& blocks : j.at("backbone_blocks")) {
+      int32_t v = 0;
+      if (!detail::json_to_i32(blocks, &v)) fail(StatusCode::kDataLoss, "malformed model config in blob: bad backbone_blocks");
+      c.backbone_blocks.push_back(v);
+    }
     c.bottleneck = j.at("bottleneck").get<bool>();
     c.dilate_layer4 = j.at("dilate_layer4").get<bool>();
     for (const auto& cam : j.at("cameras")) {
-      c.cameras.push_back({cam.at("key").get<std::string>(), cam.at("height").get<int>(), cam.at("width").get<int>()});
+      c.cameras.push_back({cam.at("key").get<std::string>(), int_field(cam, "height"), int_field(cam, "width")});
     }
     c.state_key = j.at("state_key").get<std::string>();
-    c.state_dim = j.at("state_dim").get<int>();
+    c.state_dim = int_field(j, "state_dim");
     c.env_state_key = j.at("env_state_key").get<std::string>();
-    c.env_state_dim = j.at("env_state_dim").get<int>();
-    c.action_dim = j.at("action_dim").get<int>();
-    c.dim_model = j.at("dim_model").get<int>();
-    c.n_heads = j.at("n_heads").get<int>();
-    c.dim_feedforward = j.at("dim_feedforward").get<int>();
+    c.env_state_dim = int_field(j, "env_state_dim");
+    c.action_dim = int_field(j, "action_dim");
+    c.dim_model = int_field(j, "dim_model");
+    c.n_heads = int_field(j, "n_heads");
+    c.dim_feedforward = int_field(j, "dim_feedforward");
     c.activation = activation_from_string(j.at("activation").get<std::string>());
-    c.n_encoder_layers = j.at("n_encoder_layers").get<int>();
-    c.n_decoder_layers = j.at("n_decoder_layers").get<int>();
+    c.n_encoder_layers = int_field(j, "n_encoder_layers");
+    c.n_decoder_layers = int_field(j, "n_decoder_layers");
     c.pre_norm = j.at("pre_norm").get<bool>();
-    c.chunk_size = j.at("chunk_size").get<int>();
-    c.n_action_steps = j.at("n_action_steps").get<int>();
+    c.chunk_size = int_field(j, "chunk_size");
+    c.n_action_steps = int_field(j, "n_action_steps");
     if (!j.at("temporal_ensemble_coeff").is_null()) c.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
     for (const auto& e : j.at("input_norm")) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
     c.action_norm = norm_from_json(j.at("action_norm"));

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "weights/error.h"
+#include "weights/file_util.h"
 
 namespace act {
 
@@ -48,8 +49,9 @@ QuantConfig QuantConfig::from_json(const nlohmann::json& j) {
     }
     c.calibration = j.value("calibration", "");
     for (const auto& [name, v] : j.at("activations").items()) {
-      ActivationQuant q{v.at(0).get<float>(), v.at(1).get<int32_t>()};
-      if (!(q.scale > 0.0f) || !std::isfinite(q.scale) || q.zero_point < -128 || q.zero_point > 127) {
+      ActivationQuant q{};
+      if (!detail::json_to_f32(v.at(0), &q.scale) || !detail::json_to_i32(v.at(1), &q.zero_point) ||
+          !(q.scale > 0.0f) || q.zero_point < -128 || q.zero_point > 127) {
         fail(StatusCode::kDataLoss, "bad quantization parameters for activation \"" + name + "\"");
       }
       c.activations[name] = q;

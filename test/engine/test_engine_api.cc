@@ -1,5 +1,5 @@
 // The public API: bad observations and blobs are clear errors; results do not depend on threads,
-// memory planning or which Engine runs them; two Engines run side by side.
+// memory planning or which Engine runs them; Engines run side by side and can change threads.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -165,6 +165,41 @@ TEST_F(EngineApiTest, TwoEnginesRunSideBySide) {
   for (int t = 0; t < 2; ++t) {
     EXPECT_TRUE(statuses[t].ok()) << statuses[t].to_string();
     EXPECT_EQ(results[t], reference);
+  }
+}
+
+TEST_F(EngineApiTest, OneEngineHandedFromThreadToThread) {
+  // One Engine, never used by two threads at once but by several in turn (as act_drive hands it
+  // from its loader thread to its control loop): same answers, and nothing for TSan to report.
+  auto reference = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), reference).ok());
+  for (int turn = 0; turn < 3; ++turn) {
+    auto result = chunk();
+    Status status;
+    std::thread([&] { status = engine_->infer(observation(), result); }).join();
+    EXPECT_TRUE(status.ok()) << status.to_string();
+    EXPECT_EQ(result, reference) << "turn " << turn;
+  }
+}
+
+TEST_F(EngineApiTest, EnginesOpenAndRunConcurrently) {
+  // Opening touches process-wide state (CPU detection, kernel dispatch): several at once must be safe.
+  auto reference = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), reference).ok());
+  constexpr int kEngines = 3;
+  std::vector<std::vector<float>> results(kEngines, chunk());
+  std::vector<Status> statuses(kEngines);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kEngines; ++t) {
+    threads.emplace_back([&, t] {
+      auto e = Engine::open(blob_, {.threads = 1 + t % 2});
+      statuses[t] = e.ok() ? (*e)->infer(observation(), results[t]) : e.status();
+    });
+  }
+  for (auto& th : threads) th.join();
+  for (int t = 0; t < kEngines; ++t) {
+    EXPECT_TRUE(statuses[t].ok()) << statuses[t].to_string();
+    EXPECT_EQ(results[t], reference) << "engine " << t;
   }
 }
 

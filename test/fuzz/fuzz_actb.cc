@@ -1,8 +1,11 @@
-// libFuzzer target: the .actb blob loader. The checksum is skipped for most inputs (the first byte
-// decides) so that mutations reach the header and tensor-directory checks behind it.
+// libFuzzer target: the .actb blob loader and the parsers of the blob's JSON config (model and
+// quantization sections), as Engine::open runs them. The checksum is skipped for most inputs (the
+// first byte decides) so that mutations reach the header and tensor-directory checks behind it.
 #include "test/fuzz/fuzz_input_file.h"
 #include "weights/actb.h"
 #include "weights/error.h"
+#include "weights/model_config.h"
+#include "weights/quant_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static act::fuzz::InputFile input;
@@ -13,7 +16,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       act::fuzz::touch(t.data, t.nbytes);
       if (t.dtype == act::DType::kF32) (void)t.f32();
     }
-  } catch (const act::Error&) {
+    // Each section on its own, so that a bad model section does not hide the quantization one.
+    try {
+      (void)act::ModelConfig::from_json(blob.config());
+    } catch (const act::Error&) {
+    }
+    if (blob.config().contains("quantization")) (void)act::QuantConfig::from_json(blob.config()["quantization"]);
+  } catch (const act::Error&) {  // a clear error is the expected outcome for bad input
   }
   return 0;
 }

@@ -1,19 +1,22 @@
 // Writes the generated part of the seed corpora (test/fuzz/corpus/): small valid inputs made by the
 // project's own writers, so that the fuzzers start from files the parsers accept.
-//   make_fuzz_seeds CORPUS_DIR
+//   make_fuzz_seeds CORPUS_DIR LEROBOT_CONFIG_JSON   (the act-tiny fixture's config.json)
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <vector>
 
 #include "test/fuzz/fuzz_models.h"
 #include "weights/actb.h"
+#include "weights/lerobot_import.h"
+#include "weights/quant_config.h"
 #include "weights/safetensors.h"
 
 namespace fs = std::filesystem;
 
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: %s CORPUS_DIR\n", argv[0]);
+  if (argc != 3) {
+    std::fprintf(stderr, "usage: %s CORPUS_DIR LEROBOT_CONFIG_JSON\n", argv[0]);
     return 2;
   }
   const fs::path corpus = argv[1];
@@ -32,9 +35,20 @@ int main(int argc, char** argv) {
                           {"bytes", act::DType::kU8, {1, 4}, u8.data(), u8.size()}},
                          {{"format", "pt"}});
 
-  // .actb: a float tensor and an int8 per-channel quantized one.
+  // .actb: the fixture's model config with a quantization section, a float tensor and an int8
+  // per-channel quantized one.
+  std::ifstream config_file(argv[2]);
+  const act::ModelConfig model_config =
+      act::lerobot_model_config(nlohmann::ordered_json::parse(config_file), argv[2]);
+  act::QuantConfig quant;
+  quant.mode = act::QuantMode::kStatic;
+  quant.calibration = "mse";
+  quant.activations["backbone.conv1"] = {0.05f, -3};
+  quant.float_layers = {"backbone.layer4.1.conv2"};
+  nlohmann::json blob_config = model_config.to_json();
+  blob_config["quantization"] = quant.to_json();
   act::ActbWriter blob;
-  blob.set_config({{"dim_model", 4}, {"cameras", {"observation.images.front"}}});
+  blob.set_config(blob_config);
   blob.add_f32("encoder.bias", {2, 3}, f32);
   const std::vector<int8_t> i8 = {1, -2, 3, -4, 5, -6};
   blob.add_tensor("encoder.weight", act::DType::kI8, {2, 3}, i8.data(), i8.size(),

@@ -6,6 +6,8 @@
 #include <cstring>
 #include <fstream>
 
+#include <nlohmann/json.hpp>
+
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
 #include "weights/error.h"
@@ -145,6 +147,40 @@ TEST_F(ImportTest, WeightsThatDoNotMatchTheConfig) {
   expect_error(patched(R"({"vision_backbone": "resnet34"})"), StatusCode::kNotFound, "layer1.2");
   // Pre-norm needs the encoder's final norm.
   expect_error(patched(R"({"pre_norm": true})"), StatusCode::kNotFound, "model.encoder.norm.weight");
+}
+
+TEST_F(ImportTest, StateDictWithAnExtraOrAMissingKey) {
+  // The legacy fixture's weights as a state dict in memory (as a .pth gives them), one key added or
+  // dropped: the extra key is named as unaccounted for, the missing one as not found.
+  std::ifstream config_file(legacy_ + "/config.json");
+  const auto config = nlohmann::ordered_json::parse(config_file);
+  const SafetensorsFile weights = SafetensorsFile::open(legacy_ + "/model.safetensors");
+  const auto state_dict = [&](const std::string& skip, bool add_extra) {
+    OwnedTensorSet set("state dict");
+    for (const auto& name : weights.names()) {
+      if (name == skip) continue;
+      const SafetensorsTensor& t = weights.get(name);
+      set.add(name, t.dtype, t.shape, std::vector<uint8_t>(t.data, t.data + t.nbytes));
+    }
+    if (add_extra) set.add_f32("model.extra_head.weight", {2}, {1.0f, 2.0f});
+    return set;
+  };
+  ASSERT_NO_THROW(import_lerobot_state_dict(config, state_dict("", false)));
+  const auto error_of = [&](const OwnedTensorSet& set) {
+    try {
+      import_lerobot_state_dict(config, set);
+    } catch (const Error& e) {
+      return e;
+    }
+    return Error(StatusCode::kOk, "");
+  };
+  const Error extra = error_of(state_dict("", true));
+  EXPECT_EQ(extra.code(), StatusCode::kInvalidArgument) << extra.what();
+  EXPECT_NE(std::string(extra.what()).find("tensors the config does not account for: \"model.extra_head.weight\""),
+            std::string::npos) << extra.what();
+  const Error missing = error_of(state_dict("model.action_head.weight", false));
+  EXPECT_EQ(missing.code(), StatusCode::kNotFound) << missing.what();
+  EXPECT_NE(std::string(missing.what()).find("model.action_head.weight"), std::string::npos) << missing.what();
 }
 
 TEST_F(ImportTest, MissingOrCorruptFiles) {

@@ -33,7 +33,9 @@ const Case kCases[] = {
     // MSE target holds, the worst single value is measured at 0.053.
     {"multicam-prenorm-gelu", QuantMode::kStatic, 1e-3, 0.06},
     {"minmax-legacy-env", QuantMode::kStatic, 1e-3, 0.05},
-    {"quantiles-identity", QuantMode::kStatic, 1e-3, 0.05},
+    // Its worst single value sits at the limit: 0.048 with the AVX-512 float kernels, 0.053 with
+    // AVX2's (calibration runs the float path, which rounds differently per ISA).
+    {"quantiles-identity", QuantMode::kStatic, 1e-3, 0.06},
     {"resnet34-novae", QuantMode::kStatic, 5e-3, 0.2},
     {"resnet50-dilation", QuantMode::kStatic, 5e-3, 0.2},
 };

@@ -5,6 +5,7 @@
 
 #include <filesystem>
 
+#include "apps/convert/calib_frames.h"
 #include "apps/convert/int8_conversion.h"
 #include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
@@ -51,6 +52,7 @@ TEST_P(GeneratedInt8Test, Int8StaysNearFp32) {
   Int8Options opt;
   opt.mode = c.mode;
   opt.calib_sources = {test::fixture_dir("act-tiny"), test::fixture_dir("act-tiny-legacy"), dir + "/reference.safetensors"};
+  opt.frame_loader = load_calibration_frames;
   opt.calib_samples = 8;
   opt.holdout = 3;
   opt.threads = 2;

@@ -110,7 +110,8 @@ std::string parse_quant(const nlohmann::json& j, QuantParams* q) {
   q->scales.reserve(scales->size());
   for (const auto& s : *scales) {
     float scale = 0.0f;
-    if (!detail::json_to_f32(s, &scale)) return "quant scales must be numbers in float range";
+    if (!s.is_number()) return "quant scales must be numbers";
+    if (!detail::json_to_f32(s, &scale)) return "quant scale " + std::to_string(s.get<double>()) + " is out of float range";
     q->scales.push_back(scale);
   }
   q->zero_points.reserve(zps->size());

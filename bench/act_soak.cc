@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "engine threads")->check(CLI::PositiveNumber);
   app.add_option("--tolerance-kb", tolerance_kb, "allowed RSS growth after warm-up")->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // each sample shows at once, also when logged to a file
 
   auto engine_or = act::Engine::open(model, {.threads = threads});
   if (!engine_or.ok()) {
@@ -83,7 +84,6 @@ int main(int argc, char** argv) {
       rss_last = act::current_rss_bytes();
       rss_max = std::max(rss_max, rss_last);
       std::printf("run %8ld  RSS %.2f MB\n", i + 1, mb(rss_last));
-      std::fflush(stdout);
     }
   }
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -2,7 +2,9 @@
 # Installs the dependencies, builds actengine and runs every test: the Release build with warnings as
 # errors; the core library's tests cross-compiled for aarch64 and run under qemu-user
 # (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it); then the whole suite again under
-# AddressSanitizer + UndefinedBehaviorSanitizer (ACT_SKIP_SANITIZERS=1 skips it).
+# AddressSanitizer + UndefinedBehaviorSanitizer (ACT_SKIP_SANITIZERS=1 skips it); the threaded tests
+# under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it); and each parser's libFuzzer
+# target for ACT_FUZZ_SECONDS (default here 15; scripts/run_fuzz.sh; ACT_SKIP_FUZZ=1 skips it).
 # This is README command (2) and what CI runs (.ci/run).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -52,6 +54,17 @@ if [ "${ACT_SKIP_SANITIZERS:-0}" != "1" ]; then
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"
   stage_done asan-tests
+fi
+if [ "${ACT_SKIP_TSAN:-0}" != "1" ]; then
+  echo "== ThreadSanitizer: threaded tests =="
+  ACT_JOBS="$jobs" "$root/scripts/run_tsan.sh"
+  stage_done tsan-build+tests
+fi
+
+if [ "${ACT_SKIP_FUZZ:-0}" != "1" ]; then
+  echo "== libFuzzer: every parser of outside data =="
+  ACT_JOBS="$jobs" ACT_FUZZ_SECONDS="${ACT_FUZZ_SECONDS:-15}" "$root/scripts/run_fuzz.sh"
+  stage_done fuzz-build+runs
 fi
 echo "stage times: ${timings[*]} (total $SECONDS s)"
 echo "all tests passed"

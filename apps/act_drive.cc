@@ -3,11 +3,14 @@
 #include <CLI/CLI.hpp>
 
 #include <csignal>
+#include <cstdlib>
 #include <cstdio>
 #include <iostream>
 #include <memory>
 #include <optional>
 #include <sstream>
+
+#include <opencv2/core/utils/logger.hpp>
 
 #include "apps/drive/calibrate.h"
 #include "apps/drive/calibration.h"
@@ -233,6 +236,9 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   install_signal_handlers();
+  // act_drive names camera problems itself; OpenCV's backend chatter (GStreamer probing a file...)
+  // only confuses. OPENCV_LOG_LEVEL still overrides.
+  if (!std::getenv("OPENCV_LOG_LEVEL")) cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
   try {
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);

@@ -24,8 +24,11 @@ bool is_index(const std::string& s) {
 void open_capture(cv::VideoCapture& video, const CameraOptions& options, bool is_file) {
   if (is_index(options.source)) {
     video.open(std::stoi(options.source), cv::CAP_ANY);
+  } else if (options.source.rfind("/dev/", 0) == 0) {
+    video.open(options.source, cv::CAP_V4L2);
   } else {
-    video.open(options.source, cv::CAP_ANY);
+    // Files and URLs: FFmpeg first (it handles both), then whatever else this OpenCV has.
+    if (!video.open(options.source, cv::CAP_FFMPEG)) video.open(options.source, cv::CAP_ANY);
   }
   if (!video.isOpened() || is_file) return;
   // Only the newest frame matters: keep the driver's queue short where it has one.

@@ -47,7 +47,7 @@ std::vector<float> safe_raw_action(const Calibration& calibration, int action_di
 
 std::string DriveSummary::to_string() const {
   std::ostringstream s;
-  char line[256];
+  char line[1024];
   std::snprintf(line, sizeof line,
                 "act_drive: %s after %.1f s: %llu ticks (%llu driving, %llu safe), %llu overrun ticks in %llu overruns, "
                 "%llu inferences, %llu inference errors, %llu stale-frame ticks, %llu ticks with the link down\n",

@@ -9,6 +9,9 @@
 namespace act::drive {
 namespace {
 
+// Fault episodes kept for the summary (a flapping camera must not grow memory for hours).
+constexpr size_t kMaxFaultEvents = 1000;
+
 double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
@@ -164,7 +167,7 @@ DriveSummary ControlLoop::run(const std::atomic<bool>& stop) {
       executing = false;
       if (fault.rfind("stale frame", 0) == 0) ++summary.stale_frames;
       if (fault != previous_fault) {
-        summary.faults.push_back({now, fault});
+        if (summary.faults.size() < kMaxFaultEvents) summary.faults.push_back({now, fault});
         log_ << "act_drive: warning: holding the safe action: " << fault << "\n";
       }
       source = "safe:fault";
@@ -216,9 +219,11 @@ DriveSummary ControlLoop::run(const std::atomic<bool>& stop) {
     // Keep the next chunk coming while this one executes.
     if (fault.empty() && !inference_.busy() &&
         scheduler.wants_inference(tick, static_cast<int>(std::ceil(latency_ticks)))) {
-      inference_.request(options_.state_source == ControlOptions::StateSource::kLastAction
-                             ? std::vector<float>(last_action.begin(), last_action.begin() + info.state_dim)
-                             : std::vector<float>(static_cast<size_t>(info.state_dim), 0.0f));
+      std::vector<float> state(static_cast<size_t>(info.state_dim), 0.0f);
+      if (options_.state_source == ControlOptions::StateSource::kLastAction) {
+        std::copy_n(last_action.begin(), std::min(state.size(), last_action.size()), state.begin());
+      }
+      inference_.request(std::move(state));
     }
 
     if (options_.stats_every_s > 0 && now - last_stats >= std::chrono::duration<double>(options_.stats_every_s)) {

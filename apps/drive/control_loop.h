@@ -29,7 +29,8 @@ struct ControlOptions {
   double duration_s = 0;
   /// Inference failures in a row (errors, non-finite actions) that end the run.
   int max_consecutive_inference_errors = 30;
-  /// What the model gets as observation.state: the last raw action executed, or zeros.
+  /// What the model gets as observation.state: the last raw action executed (its first state_dim
+  /// values, zero-padded), or zeros.
   enum class StateSource { kLastAction, kZeros } state_source = StateSource::kLastAction;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
 };
@@ -48,7 +49,7 @@ struct DriveSummary {
   uint64_t inferences = 0, inference_errors = 0, stale_frames = 0, link_down_ticks = 0;
   double elapsed_s = 0;
   LatencySummary capture_age_ms, preprocess_ms, infer_ms, serial_write_ms, jitter_ms;
-  std::vector<FaultEvent> faults;
+  std::vector<FaultEvent> faults;  ///< the first 1000
   std::string link_summary;
   /// Several lines, for the exit report.
   std::string to_string() const;

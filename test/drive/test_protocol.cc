@@ -37,6 +37,13 @@ TEST(RoverProtocol, FormatsAndParsesEveryMessageType) {
   }
 }
 
+TEST(RoverProtocol, ReadmeExamplesAreExact) {
+  EXPECT_EQ(format({'H', 0, {0, 0, 0}}), "$H*FF\n");
+  EXPECT_EQ(format({'R', 2, {1, 250, 0}}), "$R,1,250*F2\n");
+  EXPECT_EQ(format({'C', 3, {17, 1500, 1650}}), "$C,17,1500,1650*8B\n");
+  EXPECT_EQ(format({'A', 1, {17, 0, 0}}), "$A,17*5D\n");
+}
+
 TEST(RoverProtocol, KnownLineAndCrc) {
   // CRC-8/SMBUS (poly 0x07, init 0) check value of "123456789" is 0xF4.
   EXPECT_EQ(rover_crc8("123456789", 9), 0xF4);

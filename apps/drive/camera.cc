@@ -4,7 +4,6 @@
 #include <cctype>
 #include <filesystem>
 
-#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "weights/error.h"
@@ -119,19 +118,6 @@ void Camera::run() {
     for (int i = 0; i < 10 && !stop_.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
     if (!stop_.load()) open_capture(video, options_, false);
   }
-}
-
-void to_model_input(const cv::Mat& bgr, int height, int width, std::vector<uint8_t>& rgb) {
-  rgb.resize(static_cast<size_t>(height) * width * 3);
-  cv::Mat out(height, width, CV_8UC3, rgb.data());
-  if (bgr.rows == height && bgr.cols == width) {
-    cv::cvtColor(bgr, out, cv::COLOR_BGR2RGB);
-    return;
-  }
-  const bool shrinking = width < bgr.cols || height < bgr.rows;
-  cv::Mat resized;
-  cv::resize(bgr, resized, cv::Size(width, height), 0, 0, shrinking ? cv::INTER_AREA : cv::INTER_LINEAR);
-  cv::cvtColor(resized, out, cv::COLOR_BGR2RGB);
 }
 
 }  // namespace act::drive

@@ -1,6 +1,6 @@
-// Frames for act_drive: an OpenCV capture thread that keeps only the newest frame, and the one
-// function that turns a camera frame into the model's input (also used for --record, so recorded
-// frames are byte for byte what the model saw).
+// Frames for act_drive: an OpenCV capture thread that keeps only the newest frame. Frames become
+// model inputs through act::frame_to_model_rgb (apps/image_preprocess.h), the conversion
+// act_convert's INT8 calibration uses too.
 #pragma once
 
 #include <atomic>
@@ -79,11 +79,5 @@ class Camera : public FrameSource {
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };
-
-/// A camera frame -> the model's input: RGB uint8, height x width x 3, packed. Resizes with area
-/// averaging when shrinking and bilinear interpolation when enlarging (OpenCV INTER_AREA /
-/// INTER_LINEAR), after converting BGR to RGB. act_convert's calibration must prepare images the
-/// same way (--record saves exactly these bytes).
-void to_model_input(const cv::Mat& bgr, int height, int width, std::vector<uint8_t>& rgb);
 
 }  // namespace act::drive

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "apps/image_preprocess.h"
 #include "weights/error.h"
 
 namespace act::drive {
@@ -132,7 +133,12 @@ void InferenceWorker::run(ModelFactory factory) {
       state = std::move(*pending_state_);
       pending_state_.reset();
     }
-    InferenceResult result = infer_once(*model, std::move(state));
+    InferenceResult result;
+    try {
+      result = infer_once(*model, std::move(state));
+    } catch (const std::exception& e) {  // a frame the preprocessing cannot take, out of memory...
+      result.error = std::string("inference failed: ") + e.what();
+    }
     std::lock_guard lock(mutex_);
     result_ = std::move(result);
   }
@@ -152,7 +158,7 @@ InferenceResult InferenceWorker::infer_once(ChunkModel& model, std::vector<float
   result.frame_age_ms = ms_between(frame->captured, start);
 
   const CameraInfo& camera = info_.cameras.front();
-  to_model_input(frame->bgr, camera.height, camera.width, result.model_input);
+  frame_to_model_rgb(frame->bgr, camera.height, camera.width, result.model_input);
   const auto preprocessed = Clock::now();
   result.preprocess_ms = ms_between(start, preprocessed);
 

@@ -24,6 +24,7 @@ std::FILE* open_table(const fs::path& path) {
   return f;
 }
 
+// count values as ",v0,v1...", empty for missing ones.
 void write_values(std::FILE* f, const std::vector<float>& values, size_t count) {
   for (size_t i = 0; i < count; ++i) {
     if (i < values.size()) {
@@ -49,15 +50,11 @@ Recorder::Recorder(const std::string& dir, int state_dim, int action_dim, const 
     out << meta.dump(2) << "\n";
     if (!out) fail(StatusCode::kIoError, "--record: cannot write " + dir + "/meta.json");
   }
-  observations_ = open_table(fs::path(dir) / "observations.csv");
+  log_ = open_table(fs::path(dir) / "log.jsonl");
   ticks_ = open_table(fs::path(dir) / "ticks.csv");
-  std::fprintf(observations_, "tick,time_s,frame_index,frame_age_ms,image");
-  for (int i = 0; i < state_dim_; ++i) std::fprintf(observations_, ",observation.state.%d", i);
-  std::fprintf(observations_, "\n");
   std::fprintf(ticks_, "tick,time_s,jitter_ms,source");
   for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",action.%d", i);
   std::fprintf(ticks_, ",steering_us,throttle_us,sent\n");
-  std::fflush(observations_);
   std::fflush(ticks_);
   thread_ = std::thread([this] { run(); });
 }
@@ -99,7 +96,7 @@ void Recorder::close() {
   }
   wake_.notify_one();
   if (thread_.joinable()) thread_.join();
-  for (std::FILE** f : {&observations_, &ticks_}) {
+  for (std::FILE** f : {&log_, &ticks_}) {
     if (*f) std::fclose(*f);
     *f = nullptr;
   }
@@ -123,7 +120,7 @@ void Recorder::run() {
       }
     }
     // Flushed per batch: a kill loses at most the rows of the last few milliseconds.
-    std::fflush(observations_);
+    std::fflush(log_);
     std::fflush(ticks_);
     if (closing) return;
   }
@@ -139,10 +136,14 @@ void Recorder::write(const ObservationRecord& record) {
   cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);  // imwrite takes BGR; the PNG holds the RGB image
   std::error_code ec;
   if (cv::imwrite(temp_path.string(), bgr)) fs::rename(temp_path, final_path, ec);
-  std::fprintf(observations_, "%lld,%.6f,%llu,%.3f,%s", static_cast<long long>(record.tick), record.time_s,
-               static_cast<unsigned long long>(record.frame_index), record.frame_age_ms, name);
-  write_values(observations_, record.state, static_cast<size_t>(state_dim_));
-  std::fputc('\n', observations_);
+  const nlohmann::ordered_json line = {{"frame", name},
+                                       {"state", record.state},
+                                       {"tick", record.tick},
+                                       {"time_s", record.time_s},
+                                       {"frame_index", record.frame_index},
+                                       {"frame_age_ms", record.frame_age_ms}};
+  std::fputs(line.dump().c_str(), log_);
+  std::fputc('\n', log_);
 }
 
 void Recorder::write(const TickRecord& record) {

@@ -2,7 +2,9 @@
 //
 //   DIR/meta.json         model, camera, control rate, calibration, column meanings
 //   DIR/frames/NNNNNN.png the model's input image of each inference (RGB, the model's size)
-//   DIR/observations.csv  one row per inference: its frame, capture time, the state it saw
+//   DIR/log.jsonl         one line per inference: {"frame": "frames/NNNNNN.png", "state": [...],
+//                         "tick", "time_s", "frame_index", "frame_age_ms"} (what act_convert
+//                         --calib reads from a recording)
 //   DIR/ticks.csv         one row per control tick: the action, where it came from, the PWM sent
 //
 // A writer thread does the file work so the control loop never waits on the disk. Rows are flushed
@@ -69,7 +71,7 @@ class Recorder {
 
   std::string dir_;
   int state_dim_, action_dim_;
-  std::FILE* observations_ = nullptr;
+  std::FILE* log_ = nullptr;
   std::FILE* ticks_ = nullptr;
   uint64_t observations_written_ = 0;  // writer thread only
   mutable std::mutex mutex_;

@@ -121,6 +121,11 @@ TEST(ActDriveCli, DryRunDrivesTheRealModelUntilTheVideoEnds) {
   EXPECT_EQ(frame.cols, 128);
   EXPECT_EQ(frame.rows, 96);
   EXPECT_NE(read_text(dir + "/rec/meta.json").find("\"image_width\": 128"), std::string::npos);
+  // The recording is INT8 calibration input as it is.
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                   q(dir + "/int8.actb") + " --precision int8 --calib " + q(dir + "/rec") + " --threads 1");
+  EXPECT_EQ(convert.exit_code, 0) << convert.output;
+  EXPECT_TRUE(fs::exists(dir + "/int8.actb")) << convert.output;
 }
 
 TEST(ActDriveCli, SigtermSendsNeutralAndExitsCleanly) {

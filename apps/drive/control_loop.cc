@@ -33,6 +33,10 @@ std::string format_stage(const char* name, const LatencySummary& s) {
   return line;
 }
 
+// A fault without its changing details ("stale frame (240 ms old)" -> "stale frame"): one warning
+// per episode, not per tick.
+std::string fault_kind(const std::string& fault) { return fault.substr(0, fault.find(" (")); }
+
 // Raises the estimate at once and lowers it slowly: a slow inference must not be forgotten quickly.
 double track_latency(double estimate, double sample) { return sample > estimate ? sample : 0.9 * estimate + 0.1 * sample; }
 
@@ -52,10 +56,11 @@ std::string DriveSummary::to_string() const {
   std::ostringstream s;
   char line[1024];
   std::snprintf(line, sizeof line,
-                "act_drive: %s after %.1f s: %llu ticks (%llu driving, %llu safe), %llu overrun ticks in %llu overruns, "
+                "act_drive: %s after %.1f s: %llu ticks (%llu driving, %llu safe, %llu missed), %llu overrun ticks in %llu overruns, "
                 "%llu inferences, %llu inference errors, %llu stale-frame ticks, %llu ticks with the link down\n",
                 end_reason.c_str(), elapsed_s, static_cast<unsigned long long>(ticks),
                 static_cast<unsigned long long>(driving_ticks), static_cast<unsigned long long>(safe_ticks),
+                static_cast<unsigned long long>(missed_ticks),
                 static_cast<unsigned long long>(overrun_ticks), static_cast<unsigned long long>(overrun_events),
                 static_cast<unsigned long long>(inferences), static_cast<unsigned long long>(inference_errors),
                 static_cast<unsigned long long>(stale_frames), static_cast<unsigned long long>(link_down_ticks));
@@ -103,9 +108,16 @@ DriveSummary ControlLoop::run(const std::atomic<bool>& stop) {
 
   link_.send(safe, start);  // neutral on start
   for (int64_t tick = 0;; ++tick) {
-    const auto scheduled = start + period * tick;
+    auto scheduled = start + period * tick;
     std::this_thread::sleep_until(scheduled);
     const auto now = Clock::now();
+    if (now - scheduled >= period) {
+      // Woke up a whole period late (a stalled machine): skip the missed ticks instead of bursting.
+      const int64_t behind = (now - scheduled) / period;
+      tick += behind;
+      summary.missed_ticks += static_cast<uint64_t>(behind);
+      scheduled = start + period * tick;
+    }
     jitter.add(ms_between(scheduled, now));
     if (stop.load()) {
       summary.end_reason = "stopped by a signal";
@@ -166,7 +178,7 @@ DriveSummary ControlLoop::run(const std::atomic<bool>& stop) {
       scheduler.clear();
       executing = false;
       if (fault.rfind("stale frame", 0) == 0) ++summary.stale_frames;
-      if (fault != previous_fault) {
+      if (fault_kind(fault) != fault_kind(previous_fault)) {
         if (summary.faults.size() < kMaxFaultEvents) summary.faults.push_back({now, fault});
         log_ << "act_drive: warning: holding the safe action: " << fault << "\n";
       }

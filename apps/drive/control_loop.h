@@ -45,6 +45,7 @@ struct DriveSummary {
   int exit_code = 0;
   std::string end_reason;
   uint64_t ticks = 0, driving_ticks = 0, safe_ticks = 0;
+  uint64_t missed_ticks = 0;  ///< ticks skipped because the loop woke up a whole period late
   uint64_t overrun_ticks = 0, overrun_events = 0;  ///< the chunk ran out before the next was ready
   uint64_t inferences = 0, inference_errors = 0, stale_frames = 0, link_down_ticks = 0;
   double elapsed_s = 0;

@@ -169,6 +169,12 @@ SerialLink::~SerialLink() {
 }
 
 void SerialLink::connect() {
+  // Failures here are reported by the exception below, not as "reconnecting" warnings.
+  connecting_ = true;
+  struct Done {
+    bool& flag;
+    ~Done() { flag = false; }
+  } done{connecting_};
   const auto start = Clock::now();
   port_.open(options_.path, options_.baud);  // throws with the reason
   opened_at_ = start;
@@ -210,7 +216,7 @@ void SerialLink::fail_link(const std::string& why, Clock::time_point now) {
   g_emergency_fd.store(-1);
   ++errors_;
   last_error_ = why;
-  log_ << "act_drive: warning: serial " << options_.path << ": " << why << "; reconnecting every "
+  if (!connecting_) log_ << "act_drive: warning: serial " << options_.path << ": " << why << "; reconnecting every "
        << options_.reconnect_interval.count() << " ms (the board goes to failsafe by itself)\n";
   port_.close();
   state_ = State::kDisconnected;

@@ -105,6 +105,7 @@ class SerialLink : public ActuatorLink {
   std::ostream& log_;
   SerialPort port_;
   State state_ = State::kDisconnected;
+  bool connecting_ = false;  // inside connect(): errors end in its exception
   RoverLineReader reader_{};
   Clock::time_point opened_at_{}, last_hello_{}, next_attempt_{};
   uint16_t next_seq_ = 0;

@@ -222,8 +222,8 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0, 99));
   app.add_option("--inference-priority", opt.inference_priority, "SCHED_FIFO priority of the inference threads (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 99));
-  app.add_option("--control-cpus", opt.control_cpus, "pin the control thread to these CPUs")->delimiter(',');
-  app.add_option("--inference-cpus", opt.inference_cpus, "pin the inference threads to these CPUs")->delimiter(',');
+  app.add_option("--control-cpus", opt.control_cpus, "pin the control thread to these CPUs (comma-separated, e.g. 3)")->delimiter(',');
+  app.add_option("--inference-cpus", opt.inference_cpus, "pin the inference threads to these CPUs (comma-separated, e.g. 0,1,2)")->delimiter(',');
   app.add_option("--stats-every", opt.stats_every, "print latency statistics every S seconds (0 = only at exit)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--duration", opt.duration, "stop after S seconds (0 = run until Ctrl-C or the video ends)")

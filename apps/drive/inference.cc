@@ -222,8 +222,9 @@ bool ChunkScheduler::action_at(int64_t tick, std::span<float> action) const {
 
 bool ChunkScheduler::wants_inference(int64_t tick, int latency_ticks) const {
   if (ensembling_ || chunks_.empty()) return true;  // ensembling infers as often as it can, like LeRobot every step
+  // Two ticks of margin absorb jitter in the inference time (a busy machine).
   const int64_t remaining = chunks_.back().observation_tick + n_action_steps_ - tick;
-  return remaining <= latency_ticks + 1;
+  return remaining <= latency_ticks + 2;
 }
 
 }  // namespace act::drive

@@ -115,7 +115,8 @@ class ChunkScheduler {
   void add(std::vector<float> chunk, int64_t observation_tick);
   /// Writes the action for `tick`; false when no chunk covers it (the queue ran out).
   bool action_at(int64_t tick, std::span<float> action) const;
-  /// True when a new inference should start now, given the inference latency in ticks.
+  /// True when a new inference should start now, given the inference latency in ticks: when the
+  /// current chunk has no more than latency + 2 rows left (ensembling: always).
   bool wants_inference(int64_t tick, int latency_ticks) const;
   bool empty() const { return chunks_.empty(); }
   /// Forgets every chunk (after a fault).

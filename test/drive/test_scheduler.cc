@@ -36,9 +36,9 @@ TEST(ChunkScheduler, QueueSkipsTheRowsThatWentByDuringInference) {
   ASSERT_TRUE(s.action_at(8, {&a, 1}));
   EXPECT_EQ(a, 105);  // the last of n_action_steps = 6 rows
   EXPECT_FALSE(s.action_at(9, {&a, 1}));  // ran out: row 6 is beyond n_action_steps
-  // Next inference: when the rows left are no more than the latency (+1 tick margin).
-  EXPECT_FALSE(s.wants_inference(5, 2));  // 4 rows left
-  EXPECT_TRUE(s.wants_inference(6, 2));   // 3 rows left
+  // Next inference: when the rows left are no more than the latency + 2 ticks of margin.
+  EXPECT_FALSE(s.wants_inference(4, 2));  // 5 rows left
+  EXPECT_TRUE(s.wants_inference(5, 2));   // 4 rows left
   // A newer chunk replaces the old one at once.
   s.add(ramp(200, 10), 7);
   ASSERT_TRUE(s.action_at(8, {&a, 1}));

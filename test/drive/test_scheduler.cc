@@ -4,6 +4,8 @@
 #include <cmath>
 
 #include "apps/drive/inference.h"
+#include "support/act_test_util.h"
+#include "support/test_paths.h"
 
 namespace act::drive {
 namespace {
@@ -67,6 +69,60 @@ TEST(ChunkScheduler, EnsemblingWeightsTheOldestFirst) {
   EXPECT_NEAR(a, 30, 1e-5);
   EXPECT_FALSE(s.action_at(13, {&a, 1}));
 }
+
+}  // namespace
+}  // namespace act::drive
+
+// With no inference latency (each chunk's observation tick is the tick it arrives in), the scheduler
+// must pick exactly what the engine's Policy (LeRobot's select_action, checked against LeRobot in
+// test/engine) returns, for both the n_action_steps queue and temporal ensembling.
+namespace act::drive {
+namespace {
+
+class SchedulerVsPolicy : public ::testing::TestWithParam<bool> {};
+
+TEST_P(SchedulerVsPolicy, ZeroLatencyMatchesPolicySelectAction) {
+  const std::string fixture = act::test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const bool ensembling = GetParam();
+  const std::string scratch = act::test::scratch_dir();
+  const std::string checkpoint = scratch + "/ckpt";
+  act::test::patch_checkpoint(fixture, checkpoint,
+                              ensembling ? R"({"temporal_ensemble_coeff": 0.01, "n_action_steps": 1})"
+                                         : R"({"n_action_steps": 4})");
+  const std::string blob = act::test::convert_checkpoint(checkpoint, scratch);
+  auto policy_engine = Engine::open(blob, {.threads = 1});
+  auto chunk_engine = Engine::open(blob, {.threads = 1});
+  ASSERT_TRUE(policy_engine.ok() && chunk_engine.ok());
+  const ModelInfo& model = (*chunk_engine)->model_info();
+  ASSERT_EQ(model.temporal_ensembling, ensembling);
+  Policy policy(**policy_engine);
+  ChunkScheduler scheduler(model);
+
+  const auto& camera = model.cameras.front();
+  std::vector<uint8_t> image(static_cast<size_t>(camera.height) * camera.width * 3);
+  std::vector<float> state(static_cast<size_t>(model.state_dim));
+  std::vector<float> chunk(model.chunk_values()), expected(static_cast<size_t>(model.action_dim)),
+      ours(static_cast<size_t>(model.action_dim));
+  for (int64_t tick = 0; tick < 14; ++tick) {
+    // A different observation every tick.
+    for (size_t i = 0; i < image.size(); ++i) image[i] = static_cast<uint8_t>((i * 7 + static_cast<size_t>(tick) * 31) % 251);
+    for (size_t i = 0; i < state.size(); ++i) state[i] = 0.1f * static_cast<float>(tick) - 0.3f * static_cast<float>(i);
+    Observation obs;
+    obs.images = {ImageView::rgb_u8(image.data(), camera.height, camera.width)};
+    obs.state = state;
+    if (scheduler.wants_inference(tick, /*latency_ticks=*/-2)) {  // -2 cancels the margin: LeRobot's timing
+      ASSERT_TRUE((*chunk_engine)->infer(obs, chunk).ok());
+      scheduler.add(chunk, tick);
+    }
+    ASSERT_TRUE(policy.select_action(obs, expected).ok());
+    ASSERT_TRUE(scheduler.action_at(tick, ours));
+    EXPECT_TRUE(act::test::all_close("tick " + std::to_string(tick), ours.data(), expected.data(), ours.size(), 1e-5));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Modes, SchedulerVsPolicy, ::testing::Values(false, true),
+                         [](const auto& p) { return p.param ? "TemporalEnsembling" : "Queue"; });
 
 }  // namespace
 }  // namespace act::drive

@@ -91,6 +91,9 @@ static void handle_line() {
 }
 
 void setup() {
+  failsafe_steering_us = ROVER_PWM_NEUTRAL_US;
+  failsafe_throttle_us = ROVER_PWM_NEUTRAL_US;
+  in_failsafe = true;
   // Neutral before the outputs are enabled: an ESC must see neutral at power-up to arm safely.
   TCCR1A = 0;
   TCCR1B = 0;

@@ -1,6 +1,7 @@
 #include "apps/drive/calibrate.h"
 
 #include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -73,7 +74,8 @@ class CommandKeeper {
 int run_calibration(const CalibrateOptions& options, const std::atomic<bool>& stop, std::istream& in, std::ostream& out,
                     std::ostream& log) {
   const std::string output = options.output_path.empty() ? "calibration.json" : options.output_path;
-  Calibration calibration;
+  // Start from the file being edited, so one channel can be re-measured without losing the other.
+  Calibration calibration = std::filesystem::exists(output) ? Calibration::load(output) : Calibration{};
   if (options.serial.empty()) {
     out << calibration.to_json().dump(2) << "\n";
     log << kTemplateNotes;

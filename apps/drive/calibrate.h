@@ -12,7 +12,7 @@ namespace act::drive {
 struct CalibrateOptions {
   std::string serial;       ///< empty: print a template instead of talking to the board
   int baud = 115200;
-  std::string output_path;  ///< where "save" writes (default calibration.json)
+  std::string output_path;  ///< the file edited: its values are the start, "save" writes it (default calibration.json)
 };
 
 /// Reads commands from `in` (one per line, "help" lists them) until "quit", end of input or `stop`.

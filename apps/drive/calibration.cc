@@ -27,7 +27,7 @@ constexpr EndpointNames kThrottleNames{"reverse_us", "neutral_us", "forward_us"}
 void reject_unknown_keys(const nlohmann::json& object, const std::set<std::string>& known, const std::string& source,
                          const std::string& where) {
   for (const auto& [key, value] : object.items()) {
-    if (!known.count(key)) bad(source, "unknown field '" + where + key + "'");
+    if (!known.count(key) && key.rfind('_', 0) != 0) bad(source, "unknown field '" + where + key + "'");
   }
 }
 

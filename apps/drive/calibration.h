@@ -38,7 +38,9 @@ struct Calibration {
   double max_forward = 1.0;  ///< throttle cap, a fraction of full forward (0..1)
   double max_reverse = 1.0;  ///< throttle cap, a fraction of full reverse (0..1)
 
-  /// Parses and validates; throws act::Error naming `source` and the offending field.
+  /// Parses and validates; throws act::Error naming `source` and the offending field. Fields whose
+  /// name starts with '_' are comments; any other unknown field is an error (a typo must not fall
+  /// back to a default silently).
   static Calibration from_json(const nlohmann::json& json, const std::string& source);
   /// Reads a calibration file; throws act::Error (missing file, bad JSON, bad field).
   static Calibration load(const std::string& path);

@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/arduino/act_rover/rover_protocol.h"
+#include "apps/drive/calibration.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 #include "support/command.h"
@@ -175,9 +176,25 @@ TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {
   EXPECT_NE(check.output.find("cannot open camera"), std::string::npos) << check.output;
 }
 
+TEST(ActDriveCli, ThePackagesCalibrationTemplateIsAValidCalibrationFile) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) +
+                                   " --package " + q(dir + "/pkg") + " -q");
+  ASSERT_EQ(convert.exit_code, 0) << convert.output;
+  const Calibration calibration = Calibration::load(dir + "/pkg/drive_calibration.json");
+  EXPECT_EQ(calibration.max_forward, 0.3);
+  const std::string text = read_text(dir + "/pkg/drive_calibration.json");
+  EXPECT_NE(text.find("act_drive --calibrate"), std::string::npos) << text;
+  EXPECT_NE(text.find("--camera-size 128x96"), std::string::npos) << text;
+}
+
 TEST(ActDriveCli, CalibrateInteractivelyWritesTheEndpoints) {
   const std::string dir = act::test::scratch_dir();
   FakeArduino board;
+  // An existing file is the starting point: what is not re-measured is kept.
+  std::ofstream(dir + "/cal.json") << R"({"steering": {"left_us": 1100, "center_us": 1490, "right_us": 1900, "invert": true},
+                                          "throttle": {"reverse_us": 1300, "neutral_us": 1510, "forward_us": 1800}})";
   std::ofstream(dir + "/input.txt") << "s 1200\nleft\ns 1850\nright\nt 1650\nforward\nt 1380\nreverse\nsave\nquit\n";
   const auto r = run_command(kDrive + " --calibrate --serial " + q(board.port_path()) + " -c " + q(dir + "/cal.json") + " < " +
                              q(dir + "/input.txt"));
@@ -188,9 +205,12 @@ TEST(ActDriveCli, CalibrateInteractivelyWritesTheEndpoints) {
   EXPECT_EQ(cal["steering"]["right_us"], 1850);
   EXPECT_EQ(cal["throttle"]["forward_us"], 1650);
   EXPECT_EQ(cal["throttle"]["reverse_us"], 1380);
+  EXPECT_EQ(cal["steering"]["center_us"], 1490);
+  EXPECT_EQ(cal["steering"]["invert"], true);
+  EXPECT_EQ(cal["throttle"]["neutral_us"], 1510);
   const auto commands = board.commands();
   ASSERT_FALSE(commands.empty());
-  EXPECT_EQ(commands.back().throttle_us, 1500);  // neutral on the way out
+  EXPECT_EQ(commands.back().throttle_us, 1510);  // neutral on the way out
   EXPECT_TRUE(board.bad_lines().empty());
 }
 

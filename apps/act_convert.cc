@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "apps/convert/calib_frames.h"
 #include "apps/convert/int8_conversion.h"
 #include "apps/deploy_package.h"
 #include "apps/pytorch_options.h"
@@ -121,6 +122,7 @@ int main(int argc, char** argv) {
       if (app.count("--target-mse")) int8.target_mse = target_mse;
       if (app.count("--max-mse")) int8.max_mse = max_mse;
       int8.progress = !quiet;
+      int8.frame_loader = act::load_calibration_frames;
       const act::Int8Result r = act::convert_to_int8(model, output, int8);
       bytes = r.bytes;
       if (!report_path.empty()) {

@@ -34,7 +34,7 @@ exclude="^($(IFS='|'; echo "${slow_tests[*]}"))\$"
 "$root/scripts/install_cross_deps.sh"
 
 echo "== aarch64 cross build (core library + act_tests, -Werror) =="
-configure=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_CORE_ONLY=ON -DACT_PACKAGE_APPS=ON)
+configure=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_CORE_ONLY=ON -DACT_PACKAGE_APPS=ON -DACT_WITH_OPENCV=OFF)
 if [ -n "${ACT_SHARED_DIR:-}" ]; then configure+=(-DACT_SHARED_DIR="$ACT_SHARED_DIR"); fi
 ACT_BUILD_DIR="$build" "$root/scripts/build.sh" "${configure[@]}" "$@"
 

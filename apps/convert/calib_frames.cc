@@ -52,35 +52,6 @@ std::vector<size_t> spread(size_t n, size_t count) {
   return idx;
 }
 
-// Samples raw state vectors from the normalisation statistics (the inverse of the engine's
-// normalisation applied to N(0, 1) for MEAN_STD and U(-1, 1) for MIN_MAX).
-class StateSampler {
- public:
-  StateSampler(const ModelConfig& config, const ActbFile& blob, uint64_t seed) : config_(config), blob_(blob), rng_(seed) {}
-
-  std::vector<float> sample(const std::string& key, int dim) {
-    std::vector<float> v(static_cast<size_t>(dim));
-    const NormMode mode = config_.input_norm_mode(key);
-    std::normal_distribution<float> normal(0.0f, 1.0f);
-    std::uniform_real_distribution<float> uniform(-1.0f, 1.0f);
-    const ActbTensor* sub = blob_.find(bn::norm_sub(key));
-    const ActbTensor* div = blob_.find(bn::norm_div(key));
-    for (size_t i = 0; i < v.size(); ++i) {
-      switch (mode) {
-        case NormMode::kIdentity: v[i] = normal(rng_); break;
-        case NormMode::kMeanStd: v[i] = sub->f32()[i] + div->f32()[i] * normal(rng_); break;
-        case NormMode::kMinMax: v[i] = sub->f32()[i] + div->f32()[i] * (uniform(rng_) + 1.0f) * 0.5f; break;
-      }
-    }
-    return v;
-  }
-
- private:
-  const ModelConfig& config_;
-  const ActbFile& blob_;
-  std::mt19937_64 rng_;
-};
-
 class Loader {
  public:
   Loader(const ModelConfig& config, const ModelInfo& info, const ActbFile& blob, uint64_t seed)
@@ -309,16 +280,6 @@ class Loader {
 
 }  // namespace
 
-Observation CalibSet::observation(const CalibFrame& frame, const ModelConfig& config) {
-  Observation obs;
-  for (size_t c = 0; c < config.cameras.size(); ++c) {
-    obs.images.push_back(ImageView::rgb_u8(frame.images[c].data(), config.cameras[c].height, config.cameras[c].width));
-  }
-  obs.state = frame.state;
-  obs.env_state = frame.env_state;
-  return obs;
-}
-
 CalibSet load_calibration_frames(const std::vector<std::string>& sources, const ModelConfig& config, const ModelInfo& info,
                                  const ActbFile& blob, size_t max_frames, uint64_t seed) {
   if (sources.empty()) fail(StatusCode::kInvalidArgument, "no calibration sources given");
@@ -331,30 +292,6 @@ CalibSet load_calibration_frames(const std::vector<std::string>& sources, const 
   if (!config.cameras.empty()) {
     set.preprocessing = model_preprocessing_description(config.cameras[0].height, config.cameras[0].width);
   }
-  return set;
-}
-
-CalibSet synthetic_calibration_frames(const ModelConfig& config, const ActbFile& blob, size_t count, uint64_t seed) {
-  CalibSet set;
-  StateSampler states(config, blob, seed);
-  cv::RNG rng(seed);
-  for (size_t i = 0; i < count; ++i) {
-    CalibFrame f;
-    for (const auto& cam : config.cameras) {
-      // Smooth noise: a coarse random grid upsampled, like the low-frequency content of real frames.
-      cv::Mat coarse(std::max(2, cam.height / 16), std::max(2, cam.width / 16), CV_8UC3);
-      rng.fill(coarse, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(256));
-      cv::Mat full;
-      cv::resize(coarse, full, cv::Size(cam.width, cam.height), 0, 0, cv::INTER_LINEAR);
-      f.images.emplace_back(full.data, full.data + full.total() * 3);
-    }
-    if (config.state_dim > 0) f.state = states.sample(config.state_key, config.state_dim);
-    if (config.env_state_dim > 0) f.env_state = states.sample(config.env_state_key, config.env_state_dim);
-    f.origin = "synthetic#" + std::to_string(i);
-    set.frames.push_back(std::move(f));
-  }
-  set.notes.push_back("synthetic frames (smooth random noise, states sampled from the statistics): accuracy is only indicative");
-  set.preprocessing = "synthetic RGB uint8 at the model's input size";
   return set;
 }
 

@@ -138,9 +138,10 @@ class Converter {
     if (given) {
       frames_ = *given;
     } else if (!opt_.calib_sources.empty()) {
+      if (opt_.frame_loader == nullptr) fail(StatusCode::kUnimplemented, "this program reads no calibration files (built without OpenCV)");
       const size_t want = opt_.calib_samples + opt_.holdout.value_or(std::min<size_t>(16, std::max<size_t>(1, opt_.calib_samples / 4)));
       progress_.line("reading calibration frames from " + std::to_string(opt_.calib_sources.size()) + " source(s) ...");
-      frames_ = load_calibration_frames(opt_.calib_sources, config, fp32_->info(), blob, want, opt_.seed);
+      frames_ = opt_.frame_loader(opt_.calib_sources, config, fp32_->info(), blob, want, opt_.seed);
     } else if (opt_.mode == QuantMode::kDynamic) {
       frames_ = synthetic_calibration_frames(config, blob, opt_.holdout.value_or(8), opt_.seed);
     } else {

@@ -10,17 +10,23 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/convert/activation_stats.h"
-#include "apps/convert/calib_frames.h"
+#include "apps/convert/calib_set.h"
 #include "weights/lerobot_import.h"
 #include "weights/quant_config.h"
 
 namespace act {
+
+/// Reads calibration frames from files (calib_frames.h's load_calibration_frames, which needs
+/// OpenCV; programs built without it pass none).
+using CalibFrameLoader = CalibSet (*)(const std::vector<std::string>& sources, const ModelConfig& config,
+                                      const ModelInfo& info, const ActbFile& blob, size_t max_frames, uint64_t seed);
 
 struct Int8Options {
   QuantMode mode = QuantMode::kStatic;
   CalibrationMethod method = CalibrationMethod::kMse;
   double percentile = 99.99;
   std::vector<std::string> calib_sources;
+  CalibFrameLoader frame_loader = nullptr;  ///< reads calib_sources
   size_t calib_samples = 64;           ///< frames used for calibration
   std::optional<size_t> holdout;       ///< frames kept out for the report (default: a fifth, 1..16)
   std::optional<double> target_mse;    ///< mixed: the held-out normalised MSE to meet

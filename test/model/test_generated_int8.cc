@@ -5,6 +5,7 @@
 
 #include <filesystem>
 
+#include "apps/convert/calib_frames.h"
 #include "apps/convert/int8_conversion.h"
 #include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
@@ -33,7 +34,9 @@ const Case kCases[] = {
     // MSE target holds, the worst single value is measured at 0.053.
     {"multicam-prenorm-gelu", QuantMode::kStatic, 1e-3, 0.06},
     {"minmax-legacy-env", QuantMode::kStatic, 1e-3, 0.05},
-    {"quantiles-identity", QuantMode::kStatic, 1e-3, 0.05},
+    // Its worst single value sits at the limit: 0.048 with the AVX-512 float kernels, 0.053 with
+    // AVX2's (calibration runs the float path, which rounds differently per ISA).
+    {"quantiles-identity", QuantMode::kStatic, 1e-3, 0.06},
     {"resnet34-novae", QuantMode::kStatic, 5e-3, 0.2},
     {"resnet50-dilation", QuantMode::kStatic, 5e-3, 0.2},
 };
@@ -49,6 +52,7 @@ TEST_P(GeneratedInt8Test, Int8StaysNearFp32) {
   Int8Options opt;
   opt.mode = c.mode;
   opt.calib_sources = {test::fixture_dir("act-tiny"), test::fixture_dir("act-tiny-legacy"), dir + "/reference.safetensors"};
+  opt.frame_loader = load_calibration_frames;
   opt.calib_samples = 8;
   opt.holdout = 3;
   opt.threads = 2;

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # ThreadSanitizer stage: a narrow build (-DACT_SANITIZE=thread; only the act_thread_tests target:
-# the core library and the tests that run threads) and a run of it: the thread pool, Engines side by
-# side, opened concurrently and handed between threads, every thread count of the same model.
+# the core library, act_drive's pieces and the tests that run threads) and a run of it: the thread
+# pool, Engines side by side, opened concurrently and handed between threads, every thread count of
+# the same model, and act_drive's control loop (camera, inference, serial link, recorder threads).
 # -O2 with line tables only (-g1): full debug info of the Eigen-heavy kernels doubles the build time,
 # and line tables are all a race report needs. ACT_TSAN_FILTER replaces the gtest filter.
 set -euo pipefail
@@ -10,7 +11,7 @@ build="${ACT_TSAN_BUILD_DIR:-$root/build-tsan}"
 jobs="${ACT_JOBS:-2}"
 # The tests of act_thread_tests that start threads (the rest only come along with their files).
 threaded="ThreadPool.*:EngineApiTest.SameResultForAnyThreadCountAndMemoryPlan:EngineApiTest.TwoEnginesRunSideBySide"
-threaded+=":EngineApiTest.OneEngineHandedFromThreadToThread:EngineApiTest.EnginesOpenAndRunConcurrently"
+threaded+=":EngineApiTest.OneEngineHandedFromThreadToThread:EngineApiTest.EnginesOpenAndRunConcurrently:ControlLoop.*"
 
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
   -DACT_WERROR=ON -DACT_SANITIZE=thread -DACT_BUILD_BENCH=OFF >/dev/null

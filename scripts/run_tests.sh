@@ -4,7 +4,7 @@
 # (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it); then the whole suite again under
 # AddressSanitizer + UndefinedBehaviorSanitizer (ACT_SKIP_SANITIZERS=1 skips it); the threaded tests
 # under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it); and each parser's libFuzzer
-# target for ACT_FUZZ_SECONDS (default here 15; scripts/run_fuzz.sh; ACT_SKIP_FUZZ=1 skips it).
+# target for ACT_FUZZ_SECONDS (default here 10; scripts/run_fuzz.sh; ACT_SKIP_FUZZ=1 skips it).
 # This is README command (2) and what CI runs (.ci/run).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -63,7 +63,7 @@ fi
 
 if [ "${ACT_SKIP_FUZZ:-0}" != "1" ]; then
   echo "== libFuzzer: every parser of outside data =="
-  ACT_JOBS="$jobs" ACT_FUZZ_SECONDS="${ACT_FUZZ_SECONDS:-15}" "$root/scripts/run_fuzz.sh"
+  ACT_JOBS="$jobs" ACT_FUZZ_SECONDS="${ACT_FUZZ_SECONDS:-10}" "$root/scripts/run_fuzz.sh"
   stage_done fuzz-build+runs
 fi
 echo "stage times: ${timings[*]} (total $SECONDS s)"

@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "apps/drive/calibration.h"
 #include "weights/error.h"
 #include "weights/file_util.h"
 
@@ -20,33 +21,27 @@ void write_text(const fs::path& path, const std::string& text) {
   out.commit();
 }
 
-// One entry per action dimension: how a raw action value becomes an actuator command. The values
-// are placeholders to measure on the robot (act_drive reads the file; see its --help).
+// act_drive's calibration file (apps/drive/calibration.h) with placeholder endpoints and a low
+// throttle cap, plus comments on what to measure and which act_drive flags set the rest.
 std::string calibration_template(const ModelConfig& m) {
+  drive::Calibration calibration;
+  calibration.max_forward = 0.3;
+  calibration.max_reverse = 0.3;
   nlohmann::ordered_json j;
-  j["_comment"] = "Template written by act_convert --package: fill in the values measured on your robot. "
-                  "Each action dimension maps linearly to an actuator command: command = clamp(action * scale + offset, min, max).";
-  j["model"] = kPackageBlobName;
-  j["control_hz"] = 30;
-  j["n_action_steps"] = m.n_action_steps;
-  nlohmann::ordered_json actions = nlohmann::ordered_json::array();
-  for (int i = 0; i < m.action_dim; ++i) {
-    const char* name = m.action_dim == 2 ? (i == 0 ? "steering" : "throttle") : "";
-    actions.push_back({{"index", i}, {"name", name[0] ? name : ("action" + std::to_string(i))}, {"output", "pwm"},
-                       {"channel", i}, {"scale", 1.0}, {"offset", 0.0}, {"min", -1.0}, {"max", 1.0},
-                       {"pulse_us", {{"min", 1000}, {"center", 1500}, {"max", 2000}}}});
+  j["_comment"] = "Written by act_convert --package: act_drive's calibration file (README, act_drive). The pulse "
+                  "widths are placeholders: measure your servo and ESC with act_drive --calibrate --serial PORT -c "
+                  "drive_calibration.json. Keep the throttle cap low for the first runs.";
+  std::string model = "action_dim " + std::to_string(m.action_dim) + " (steering = action " +
+                      std::to_string(calibration.steering.action_index) + ", throttle = action " +
+                      std::to_string(calibration.throttle.action_index) + "), n_action_steps " +
+                      std::to_string(m.n_action_steps);
+  for (const CameraConfig& camera : m.cameras) {
+    const std::string size = std::to_string(camera.width) + "x" + std::to_string(camera.height);
+    model += ", camera " + camera.key + " " + size + " (act_drive --camera-size " + size + ")";
   }
-  j["actions"] = actions;
-  nlohmann::ordered_json cameras = nlohmann::ordered_json::array();
-  for (size_t i = 0; i < m.cameras.size(); ++i) {
-    const auto& c = m.cameras[i];
-    cameras.push_back({{"key", c.key}, {"device", "/dev/video" + std::to_string(i)}, {"width", c.width}, {"height", c.height}});
-  }
-  j["cameras"] = cameras;
-  if (m.state_dim > 0) {
-    j["state"] = {{"key", m.state_key}, {"dim", m.state_dim}, {"_comment", "where each state value comes from (e.g. the last command sent)"}};
-  }
-  j["safety"] = {{"stop_if_no_frame_ms", 200}, {"max_throttle", 0.3}};
+  j["_model"] = model;
+  const nlohmann::ordered_json fields = calibration.to_json();
+  for (const auto& [key, value] : fields.items()) j[key] = value;
   return j.dump(2) + "\n";
 }
 
@@ -66,7 +61,9 @@ std::string readme(const ModelConfig& m, const std::string& source) {
     << "## On the Raspberry Pi (64-bit Raspberry Pi OS / Debian bookworm)\n\n"
     << "    sudo apt install ./actengine_*_arm64.deb\n"
     << "    act_bench --model model/" << kPackageBlobName << " --threads 4      # speed and memory on this board\n"
-    << "    act_drive --model model/" << kPackageBlobName << " --calibration model/drive_calibration.json\n\n"
+    << "    act_drive --calibrate --serial /dev/ttyUSB0 -c model/drive_calibration.json   # measure the endpoints\n"
+    << "    act_drive --model model/" << kPackageBlobName << " --calibration model/drive_calibration.json --camera 0 "
+       "--serial /dev/ttyUSB0\n\n"
     << "Run `act_bench` first: it tells you the inference time per chunk, which bounds the control rate\n"
     << "(`control_hz` x `n_action_steps`). Check `act_drive --help` for its options. Keep the wheels off the\n"
     << "ground for the first run of `act_drive`.\n";

@@ -10,6 +10,7 @@ packages=(
   libeigen3-dev libxsimd-dev nlohmann-json3-dev libcli11-dev libcpuinfo-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libopencv-dev
+  gcc-avr avr-libc arduino-core-avr
   python3 python3-numpy python3-torch
 )
 

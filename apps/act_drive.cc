@@ -1,0 +1,256 @@
+// act_drive: drives the RC rover. Camera -> preprocess -> infer -> action chunking -> PWM over a
+// serial line to the Arduino (apps/arduino/act_rover), at a fixed control rate. See README "act_drive".
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdlib>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+#include <opencv2/core/utils/logger.hpp>
+
+#include "apps/drive/calibrate.h"
+#include "apps/drive/calibration.h"
+#include "apps/drive/camera.h"
+#include "apps/drive/control_loop.h"
+#include "apps/drive/inference.h"
+#include "apps/drive/recorder.h"
+#include "apps/drive/serial_link.h"
+#include "weights/error.h"
+
+namespace {
+
+using namespace act::drive;
+
+std::atomic<bool> g_stop{false};
+static_assert(std::atomic<bool>::is_always_lock_free, "the signal handler needs a lock-free flag");
+
+void request_stop(int) { g_stop.store(true); }
+
+// A crash still tells the board to stop (it would also time out to failsafe by itself in 250 ms).
+void neutral_then_die(int signal) {
+  SerialLink::emergency_neutral();
+  std::signal(signal, SIG_DFL);
+  std::raise(signal);
+}
+
+void install_signal_handlers() {
+  struct sigaction stop{};
+  stop.sa_handler = request_stop;
+  sigemptyset(&stop.sa_mask);
+  sigaction(SIGINT, &stop, nullptr);
+  sigaction(SIGTERM, &stop, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);  // a vanished port is an error code, not a death
+  std::vector<int> fatal{SIGABRT, SIGFPE, SIGILL};
+#if !defined(__SANITIZE_ADDRESS__)
+  fatal.insert(fatal.end(), {SIGSEGV, SIGBUS});  // AddressSanitizer reports these itself
+#endif
+  for (int s : fatal) std::signal(s, neutral_then_die);
+}
+
+// Sends neutral and closes the link on every way out of main (errors and exceptions included).
+struct NeutralOnExit {
+  ActuatorLink* link = nullptr;
+  PwmCommand safe;
+  ~NeutralOnExit() {
+    if (link) link->shutdown(safe);
+  }
+};
+
+bool parse_size(const std::string& text, int& width, int& height) {
+  const size_t x = text.find('x');
+  if (x == std::string::npos) return false;
+  try {
+    width = std::stoi(text.substr(0, x));
+    height = std::stoi(text.substr(x + 1));
+  } catch (const std::exception&) {
+    return false;
+  }
+  return width > 0 && height > 0;
+}
+
+struct Options {
+  std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
+  double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
+  int max_frame_age_ms = 200, threads = 0, baud = 115200;
+  int control_priority = 0, inference_priority = 0;
+  std::vector<int> control_cpus, inference_cpus;
+  bool dry_run = false, calibrate = false;
+};
+
+Calibration load_calibration(const Options& opt) {
+  if (opt.calibration_path.empty()) {
+    std::cerr << "act_drive: warning: no --calibration file: using 1000/1500/2000 us endpoints, no throttle cap "
+                 "(act_drive --calibrate helps write one)\n";
+    return Calibration{};
+  }
+  return Calibration::load(opt.calibration_path);
+}
+
+// Checks that act_drive can feed this model and act on its output; throws with what does not fit.
+void check_model(const act::ModelInfo& info, const Calibration& calibration, const Options& opt) {
+  using act::StatusCode;
+  act::check(info.cameras.size() == 1, StatusCode::kUnimplemented,
+             "act_drive drives with one camera; the model has " + std::to_string(info.cameras.size()));
+  act::check(info.env_state_dim == 0, StatusCode::kUnimplemented,
+             "the model needs an environment state (" + info.env_state_key + "), which a rover does not have");
+  act::check(calibration.max_action_index() < info.action_dim, StatusCode::kInvalidArgument,
+             "the calibration uses action index " + std::to_string(calibration.max_action_index()) + " but the model has " +
+                 std::to_string(info.action_dim) + " action values");
+  act::check(opt.state != "last-action" || info.state_dim <= info.action_dim, StatusCode::kInvalidArgument,
+             "--state last-action: the model's state has " + std::to_string(info.state_dim) + " values but its action only " +
+                 std::to_string(info.action_dim) + " (use --state zeros)");
+}
+
+nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& info, const Camera& camera,
+                                   const Calibration& calibration) {
+  return {{"format", "act_drive recording 1"},
+          {"model", opt.model},
+          {"model_summary", info.summary},
+          {"image_key", info.cameras.front().key},
+          {"image_height", info.cameras.front().height},
+          {"image_width", info.cameras.front().width},
+          {"image_format", "PNG, RGB, the model's input size: the exact bytes the model saw"},
+          {"camera", opt.camera},
+          {"camera_width", camera.width()},
+          {"camera_height", camera.height()},
+          {"control_hz", opt.control_hz},
+          {"state", opt.state},
+          {"calibration", calibration.to_json()}};
+}
+
+int drive(const Options& opt) {
+  const Calibration calibration = load_calibration(opt);
+  CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
+  if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.width, camera_options.height)) {
+    act::fail(act::StatusCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected WxH, e.g. 640x360");
+  }
+  Camera camera(camera_options);
+
+  InferenceWorkerOptions worker_options;
+  worker_options.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
+  worker_options.placement = {opt.inference_priority, opt.inference_cpus};
+  worker_options.keep_model_inputs = !opt.record_dir.empty();
+  InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options, std::cerr);
+  const act::ModelInfo& info = worker.info();
+  check_model(info, calibration, opt);
+  const act::CameraInfo& input = info.cameras.front();
+  if (std::abs(static_cast<double>(camera.width()) / camera.height() - static_cast<double>(input.width) / input.height) > 0.01) {
+    std::cerr << "act_drive: warning: the camera delivers " << camera.width() << "x" << camera.height()
+              << " but the model expects " << input.width << "x" << input.height
+              << ": frames are stretched (use --camera-size with the training aspect ratio)\n";
+  }
+  std::cerr << "act_drive: model " << info.summary << "; " << (info.temporal_ensembling ? "temporal ensembling" : "queue of ")
+            << (info.temporal_ensembling ? "" : std::to_string(info.n_action_steps) + " of " + std::to_string(info.chunk_size) + " actions")
+            << "\nact_drive: camera " << opt.camera << " " << camera.width() << "x" << camera.height() << " -> "
+            << input.width << "x" << input.height << "\n";
+
+  std::unique_ptr<ActuatorLink> link;
+  NeutralOnExit neutral_on_exit;
+  neutral_on_exit.safe = calibration.safe_command();
+  if (opt.dry_run) {
+    link = std::make_unique<DryRunLink>(std::cout);
+  } else {
+    SerialLinkOptions serial_options;
+    serial_options.path = opt.serial;
+    serial_options.baud = opt.baud;
+    serial_options.ready_timeout = std::chrono::milliseconds(static_cast<int64_t>(opt.ready_timeout * 1000));
+    serial_options.failsafe = calibration.safe_command();
+    auto serial = std::make_unique<SerialLink>(serial_options, std::cerr);
+    serial->connect();
+    std::cerr << "act_drive: board ready on " << opt.serial << "\n";
+    link = std::move(serial);
+  }
+  neutral_on_exit.link = link.get();
+
+  std::optional<Recorder> recorder;
+  if (!opt.record_dir.empty()) {
+    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, record_meta(opt, info, camera, calibration));
+  }
+
+  ControlOptions control;
+  control.control_hz = opt.control_hz;
+  control.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
+  control.stats_every_s = opt.stats_every;
+  control.duration_s = opt.duration;
+  control.state_source = opt.state == "zeros" ? ControlOptions::StateSource::kZeros : ControlOptions::StateSource::kLastAction;
+  control.placement = {opt.control_priority, opt.control_cpus};
+  ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);
+  const DriveSummary summary = loop.run(g_stop);
+  if (recorder) {
+    recorder->close();
+    std::cerr << "act_drive: recorded to " << opt.record_dir;
+    if (recorder->dropped_frames() > 0) std::cerr << " (" << recorder->dropped_frames() << " frames dropped: disk too slow)";
+    std::cerr << "\n";
+  }
+  std::cerr << summary.to_string();
+  return summary.exit_code;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"act_drive: drive the RC rover with an ACT policy. Camera -> model -> action chunks -> PWM commands "
+               "over serial to the Arduino sketch apps/arduino/act_rover, at a fixed control rate. Holds neutral "
+               "whenever something is wrong (stale frames, inference errors, serial errors, signals)."};
+  Options opt;
+  app.add_option("-m,--model", opt.model, "the .actb model (act_convert output)");
+  app.add_option("--camera", opt.camera, "camera: an index (0), a device (/dev/video0), a video file or a URL");
+  app.add_option("--camera-size", opt.camera_size, "capture resolution WxH to request (default: the camera's); "
+                                                   "frames are then resized to the model's input");
+  app.add_option("--camera-fps", opt.camera_fps, "capture rate to request; a video file plays at this rate "
+                                                 "(default: its own)")->check(CLI::NonNegativeNumber);
+  app.add_option("--serial", opt.serial, "the Arduino's serial port, e.g. /dev/ttyUSB0 or /dev/ttyACM0");
+  app.add_option("--baud", opt.baud, "serial baud rate (the sketch's ROVER_BAUD)")->capture_default_str();
+  app.add_option("--ready-timeout", opt.ready_timeout, "seconds to wait for the board's ready line after opening the port")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("-c,--calibration", opt.calibration_path, "calibration JSON: PWM endpoints, inversion, throttle cap, "
+                                                           "rate limits (README, act_drive --calibrate)");
+  app.add_option("--control-hz", opt.control_hz, "control rate: commands per second")->capture_default_str()
+      ->check(CLI::Range(1.0, 500.0));
+  app.add_option("--max-frame-age", opt.max_frame_age_ms, "milliseconds; an older frame is never used (the rover holds "
+                                                          "neutral instead)")->capture_default_str()->check(CLI::Range(1, 10000));
+  app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--state", opt.state, "the model's observation.state: the last action executed, or zeros")
+      ->capture_default_str()->check(CLI::IsMember({"last-action", "zeros"}));
+  app.add_option("--control-priority", opt.control_priority, "SCHED_FIFO priority of the control thread (1-99, 0 = off; "
+                                                            "needs CAP_SYS_NICE, falls back with a warning)")
+      ->capture_default_str()->check(CLI::Range(0, 99));
+  app.add_option("--inference-priority", opt.inference_priority, "SCHED_FIFO priority of the inference threads (0 = off)")
+      ->capture_default_str()->check(CLI::Range(0, 99));
+  app.add_option("--control-cpus", opt.control_cpus, "pin the control thread to these CPUs (comma-separated, e.g. 3)")->delimiter(',');
+  app.add_option("--inference-cpus", opt.inference_cpus, "pin the inference threads to these CPUs (comma-separated, e.g. 0,1,2)")->delimiter(',');
+  app.add_option("--stats-every", opt.stats_every, "print latency statistics every S seconds (0 = only at exit)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--duration", opt.duration, "stop after S seconds (0 = run until Ctrl-C or the video ends)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--record", opt.record_dir, "save frames, states, actions and timings to this new folder (README: "
+                                             "recording format; usable as act_convert calibration input)");
+  app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
+  app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
+                                             "calibration file to edit), then write --calibration");
+  CLI11_PARSE(app, argc, argv);
+
+  install_signal_handlers();
+  // act_drive names camera problems itself; OpenCV's backend chatter (GStreamer probing a file...)
+  // only confuses. OPENCV_LOG_LEVEL still overrides.
+  if (!std::getenv("OPENCV_LOG_LEVEL")) cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+  try {
+    if (opt.calibrate) {
+      return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
+    }
+    if (opt.model.empty()) act::fail(act::StatusCode::kInvalidArgument, "--model is required");
+    if (opt.camera.empty()) act::fail(act::StatusCode::kInvalidArgument, "--camera is required");
+    if (opt.serial.empty() && !opt.dry_run) {
+      act::fail(act::StatusCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
+    }
+    return drive(opt);
+  } catch (const std::exception& e) {
+    std::cerr << "act_drive: error: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,80 @@
+// act_drive's fixed-rate control loop: each tick picks the action (from the chunks the inference
+// worker delivers, or the safe action when anything is wrong), maps it to PWM and sends it, and
+// keeps the next inference going so the control rate never waits for the model.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "apps/bench_support.h"
+#include "apps/drive/calibration.h"
+#include "apps/drive/camera.h"
+#include "apps/drive/inference.h"
+#include "apps/drive/recorder.h"
+#include "apps/drive/serial_link.h"
+
+namespace act::drive {
+
+struct ControlOptions {
+  double control_hz = 30;
+  /// A frame older than this is never used: the rover holds the safe action instead.
+  std::chrono::milliseconds max_frame_age{200};
+  /// Print the statistics every this many seconds (0 = only at exit).
+  double stats_every_s = 0;
+  /// Stop after this many seconds (0 = until a signal or the video ends).
+  double duration_s = 0;
+  /// Inference failures in a row (errors, non-finite actions) that end the run.
+  int max_consecutive_inference_errors = 30;
+  /// What the model gets as observation.state: the last raw action executed (its first state_dim
+  /// values, zero-padded), or zeros.
+  enum class StateSource { kLastAction, kZeros } state_source = StateSource::kLastAction;
+  ThreadPlacement placement;  ///< for the control thread (the one calling run())
+};
+
+/// The first tick of each period during which the rover held the safe action because of a fault.
+struct FaultEvent {
+  Clock::time_point when;
+  std::string what;
+};
+
+struct DriveSummary {
+  int exit_code = 0;
+  std::string end_reason;
+  uint64_t ticks = 0, driving_ticks = 0, safe_ticks = 0;
+  uint64_t missed_ticks = 0;  ///< ticks skipped because the loop woke up a whole period late
+  uint64_t overrun_ticks = 0, overrun_events = 0;  ///< the chunk ran out before the next was ready
+  uint64_t inferences = 0, inference_errors = 0, stale_frames = 0, link_down_ticks = 0;
+  double elapsed_s = 0;
+  LatencySummary capture_age_ms, preprocess_ms, infer_ms, serial_write_ms, jitter_ms;
+  std::vector<FaultEvent> faults;  ///< the first 1000
+  std::string link_summary;
+  /// Several lines, for the exit report.
+  std::string to_string() const;
+};
+
+class ControlLoop {
+ public:
+  ControlLoop(ControlOptions options, const Calibration& calibration, const FrameSource& frames,
+              InferenceWorker& inference, ActuatorLink& link, Recorder* recorder, std::ostream& log);
+  /// Runs until `stop` becomes true, the video ends, `duration_s` passes or inference keeps
+  /// failing; always ends with the link's shutdown (neutral).
+  DriveSummary run(const std::atomic<bool>& stop);
+
+ private:
+  ControlOptions options_;
+  const Calibration& calibration_;
+  const FrameSource& frames_;
+  InferenceWorker& inference_;
+  ActuatorLink& link_;
+  Recorder* recorder_;
+  std::ostream& log_;
+};
+
+/// The raw action that corresponds to the safe command (centre, neutral) in the model's units.
+std::vector<float> safe_raw_action(const Calibration& calibration, int action_dim);
+
+}  // namespace act::drive

@@ -1,0 +1,230 @@
+#include "apps/drive/inference.h"
+
+#include <pthread.h>
+#include <sched.h>
+
+#include <cmath>
+#include <cstring>
+
+#include "apps/image_preprocess.h"
+#include "weights/error.h"
+
+namespace act::drive {
+namespace {
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+class EngineModel : public ChunkModel {
+ public:
+  explicit EngineModel(std::unique_ptr<Engine> engine) : engine_(std::move(engine)) {}
+  const ModelInfo& info() const override { return engine_->model_info(); }
+  Status infer(const Observation& observation, std::span<float> chunk) override {
+    return engine_->infer(observation, chunk);
+  }
+
+ private:
+  std::unique_ptr<Engine> engine_;
+};
+
+}  // namespace
+
+std::unique_ptr<ChunkModel> open_engine_model(const std::string& path, int threads) {
+  auto engine = Engine::open(path, {.threads = threads});
+  if (!engine.ok()) fail(engine.status().code(), engine.status().message());
+  return std::make_unique<EngineModel>(std::move(engine.value()));
+}
+
+void apply_thread_placement(const ThreadPlacement& placement, const std::string& thread_name, std::ostream& log) {
+  if (!placement.cpus.empty()) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    for (int cpu : placement.cpus) CPU_SET(cpu, &set);
+    const int err = pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+    if (err != 0) {
+      log << "act_drive: warning: cannot pin the " << thread_name << " thread to its CPUs (" << std::strerror(err)
+          << "); it runs on any CPU\n";
+    }
+  }
+  if (placement.fifo_priority > 0) {
+    sched_param param{};
+    param.sched_priority = placement.fifo_priority;
+    const int err = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+    if (err != 0) {
+      log << "act_drive: warning: SCHED_FIFO priority " << placement.fifo_priority << " for the " << thread_name
+          << " thread refused (" << std::strerror(err)
+          << "; needs root or CAP_SYS_NICE / an rtprio limit); using the default scheduler\n";
+    }
+  }
+}
+
+// ---- InferenceWorker ----
+
+InferenceWorker::InferenceWorker(ModelFactory factory, const FrameSource& frames, InferenceWorkerOptions options,
+                                 std::ostream& log)
+    : frames_(frames), options_(std::move(options)), log_(log) {
+  thread_ = std::thread([this, f = std::move(factory)]() mutable { run(std::move(f)); });
+  std::unique_lock lock(mutex_);
+  wake_.wait(lock, [this] { return started_; });
+  if (start_error_) {
+    lock.unlock();
+    thread_.join();
+    std::rethrow_exception(start_error_);
+  }
+}
+
+InferenceWorker::~InferenceWorker() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+bool InferenceWorker::busy() const {
+  std::lock_guard lock(mutex_);
+  return busy_;
+}
+
+void InferenceWorker::request(std::vector<float> state) {
+  {
+    std::lock_guard lock(mutex_);
+    busy_ = true;
+    pending_state_ = std::move(state);
+  }
+  wake_.notify_all();
+}
+
+std::optional<InferenceResult> InferenceWorker::take_result() {
+  std::lock_guard lock(mutex_);
+  if (!result_) return std::nullopt;
+  std::optional<InferenceResult> out = std::move(result_);
+  result_.reset();
+  busy_ = false;
+  return out;
+}
+
+void InferenceWorker::run(ModelFactory factory) {
+  std::unique_ptr<ChunkModel> model;
+  try {
+    apply_thread_placement(options_.placement, "inference", log_);
+    model = factory();
+    info_ = model->info();
+  } catch (...) {
+    std::lock_guard lock(mutex_);
+    start_error_ = std::current_exception();
+    started_ = true;
+    wake_.notify_all();
+    return;
+  }
+  {
+    std::lock_guard lock(mutex_);
+    started_ = true;
+  }
+  wake_.notify_all();
+  for (;;) {
+    std::vector<float> state;
+    {
+      std::unique_lock lock(mutex_);
+      wake_.wait(lock, [this] { return stop_ || pending_state_.has_value(); });
+      if (stop_) return;
+      state = std::move(*pending_state_);
+      pending_state_.reset();
+    }
+    InferenceResult result;
+    try {
+      result = infer_once(*model, std::move(state));
+    } catch (const std::exception& e) {  // a frame the preprocessing cannot take, out of memory...
+      result.error = std::string("inference failed: ") + e.what();
+    }
+    std::lock_guard lock(mutex_);
+    result_ = std::move(result);
+  }
+}
+
+InferenceResult InferenceWorker::infer_once(ChunkModel& model, std::vector<float> state) {
+  InferenceResult result;
+  const std::shared_ptr<const Frame> frame = frames_.latest();
+  const auto start = Clock::now();
+  if (!frame || start - frame->captured > options_.max_frame_age) {
+    result.stale_frame = true;
+    result.frame_age_ms = frame ? ms_between(frame->captured, start) : 0;
+    return result;
+  }
+  result.frame_captured = frame->captured;
+  result.frame_index = frame->index;
+  result.frame_age_ms = ms_between(frame->captured, start);
+
+  const CameraInfo& camera = info_.cameras.front();
+  frame_to_model_rgb(frame->bgr, camera.height, camera.width, result.model_input);
+  const auto preprocessed = Clock::now();
+  result.preprocess_ms = ms_between(start, preprocessed);
+
+  result.state = std::move(state);
+  Observation observation;
+  observation.images = {ImageView::rgb_u8(result.model_input.data(), camera.height, camera.width)};
+  observation.state = result.state;
+  result.chunk.resize(info_.chunk_values());
+  const Status status = model.infer(observation, result.chunk);
+  result.infer_ms = ms_between(preprocessed, Clock::now());
+  if (!options_.keep_model_inputs) result.model_input = {};
+  if (!status.ok()) {
+    result.error = "inference failed: " + status.to_string();
+    return result;
+  }
+  for (size_t i = 0; i < result.chunk.size(); ++i) {
+    if (!std::isfinite(result.chunk[i])) {
+      result.error = "the model returned a non-finite action (" + std::to_string(result.chunk[i]) + " at step " +
+                     std::to_string(i / static_cast<size_t>(info_.action_dim)) + ", value " +
+                     std::to_string(i % static_cast<size_t>(info_.action_dim)) + ")";
+      return result;
+    }
+  }
+  return result;
+}
+
+// ---- ChunkScheduler ----
+
+ChunkScheduler::ChunkScheduler(const ModelInfo& info)
+    : action_dim_(info.action_dim),
+      chunk_size_(info.chunk_size),
+      n_action_steps_(info.n_action_steps),
+      ensembling_(info.temporal_ensembling),
+      coeff_(info.temporal_ensemble_coeff) {}
+
+void ChunkScheduler::add(std::vector<float> chunk, int64_t observation_tick) {
+  if (!ensembling_) chunks_.clear();  // the queue only ever executes the newest chunk
+  // Ensembling: a chunk whose last row is older than the new observation can never count again.
+  while (!chunks_.empty() && chunks_.front().observation_tick + chunk_size_ <= observation_tick) chunks_.pop_front();
+  chunks_.push_back({std::move(chunk), observation_tick});
+}
+
+bool ChunkScheduler::action_at(int64_t tick, std::span<float> action) const {
+  const int64_t horizon = ensembling_ ? chunk_size_ : n_action_steps_;
+  double weight_sum = 0;
+  std::vector<double> sum(static_cast<size_t>(action_dim_), 0.0);
+  int age = 0;  // 0 for the oldest chunk that covers the tick
+  for (const Chunk& chunk : chunks_) {
+    const int64_t row = std::max<int64_t>(0, tick - chunk.observation_tick);
+    if (row >= horizon) continue;
+    const double weight = ensembling_ ? std::exp(-coeff_ * age) : 1.0;
+    ++age;
+    const float* values = chunk.actions.data() + row * action_dim_;
+    for (int d = 0; d < action_dim_; ++d) sum[static_cast<size_t>(d)] += weight * values[d];
+    weight_sum += weight;
+  }
+  if (weight_sum == 0) return false;
+  for (int d = 0; d < action_dim_; ++d) action[static_cast<size_t>(d)] = static_cast<float>(sum[static_cast<size_t>(d)] / weight_sum);
+  return true;
+}
+
+bool ChunkScheduler::wants_inference(int64_t tick, int latency_ticks) const {
+  if (ensembling_ || chunks_.empty()) return true;  // ensembling infers as often as it can, like LeRobot every step
+  // Two ticks of margin absorb jitter in the inference time (a busy machine).
+  const int64_t remaining = chunks_.back().observation_tick + n_action_steps_ - tick;
+  return remaining <= latency_ticks + 2;
+}
+
+}  // namespace act::drive

@@ -1,0 +1,136 @@
+// The inference side of act_drive: a model interface (the engine, or a test double), a worker thread
+// that turns the newest camera frame into an action chunk while the control loop keeps acting, and
+// the scheduler that picks each control tick's action out of the chunks (LeRobot's n_action_steps
+// queue or temporal ensembling, aligned to the tick each chunk's frame was captured at).
+#pragma once
+
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <ostream>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "actengine/engine.h"
+#include "apps/drive/camera.h"
+
+namespace act::drive {
+
+/// What act_drive needs from a model: its shapes and one chunk per observation.
+class ChunkModel {
+ public:
+  virtual ~ChunkModel() = default;
+  virtual const ModelInfo& info() const = 0;
+  /// Writes chunk_size x action_dim raw actions.
+  virtual Status infer(const Observation& observation, std::span<float> chunk) = 0;
+};
+
+/// The real model: an act::Engine on an .actb file. Throws act::Error when it cannot be opened.
+std::unique_ptr<ChunkModel> open_engine_model(const std::string& path, int threads);
+
+/// Real-time scheduling for one thread (Linux): SCHED_FIFO priority and CPU pinning.
+struct ThreadPlacement {
+  int fifo_priority = 0;   ///< 1..99, 0 = leave the default scheduler
+  std::vector<int> cpus;   ///< empty = any CPU
+};
+/// Applies `placement` to the calling thread; threads it creates later inherit it. Writes a warning
+/// naming `thread_name` and falls back to the default when the OS refuses (no permission).
+void apply_thread_placement(const ThreadPlacement& placement, const std::string& thread_name, std::ostream& log);
+
+struct InferenceResult {
+  std::string error;              ///< empty on success
+  bool stale_frame = false;       ///< no frame younger than max_frame_age: nothing was inferred
+  std::vector<float> chunk;       ///< chunk_size x action_dim raw actions
+  Clock::time_point frame_captured{};
+  uint64_t frame_index = 0;
+  double frame_age_ms = 0;        ///< age of the frame when the worker took it
+  double preprocess_ms = 0;
+  double infer_ms = 0;
+  std::vector<uint8_t> model_input;  ///< the RGB image the model saw (kept when recording)
+  std::vector<float> state;          ///< the state it saw
+};
+
+struct InferenceWorkerOptions {
+  std::chrono::milliseconds max_frame_age{200};
+  ThreadPlacement placement;
+  bool keep_model_inputs = false;  ///< return each observation's image (for --record)
+};
+
+/// One thread that owns the model. The control loop posts a request (with the state to use) and
+/// later picks up the result; a frame older than max_frame_age is never used.
+class InferenceWorker {
+ public:
+  using ModelFactory = std::function<std::unique_ptr<ChunkModel>()>;
+  /// Starts the thread, which applies the placement and then builds the model (so the engine's own
+  /// threads inherit the placement). Blocks until the model is ready; rethrows the factory's error.
+  InferenceWorker(ModelFactory factory, const FrameSource& frames, InferenceWorkerOptions options, std::ostream& log);
+  ~InferenceWorker();
+  InferenceWorker(const InferenceWorker&) = delete;
+  InferenceWorker& operator=(const InferenceWorker&) = delete;
+
+  const ModelInfo& info() const { return info_; }
+  /// True from request() until the result has been taken.
+  bool busy() const;
+  /// Asks for a chunk from the newest frame. Requires !busy().
+  void request(std::vector<float> state);
+  /// The finished result, if there is one (never blocks).
+  std::optional<InferenceResult> take_result();
+
+ private:
+  void run(ModelFactory factory);
+  InferenceResult infer_once(ChunkModel& model, std::vector<float> state);
+
+  const FrameSource& frames_;
+  InferenceWorkerOptions options_;
+  std::ostream& log_;
+  ModelInfo info_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  bool started_ = false;                  // guarded by mutex_
+  std::exception_ptr start_error_;        // guarded by mutex_
+  bool stop_ = false;                     // guarded by mutex_
+  bool busy_ = false;                     // guarded by mutex_
+  std::optional<std::vector<float>> pending_state_;  // guarded by mutex_
+  std::optional<InferenceResult> result_;            // guarded by mutex_
+  std::thread thread_;
+};
+
+/// Picks the action for each control tick from the chunks received so far. Chunk row i belongs to
+/// tick (observation tick + i), where the observation tick is when its frame was captured, so the
+/// rows that went by during inference are skipped.
+///  - queue (n_action_steps): the newest chunk is executed up to row n_action_steps - 1;
+///  - temporal ensembling: every chunk covering the tick contributes, weighted exp(-coeff * i) with
+///    i = 0 for the oldest (LeRobot's weights). Averaging raw actions equals LeRobot's averaging of
+///    normalised ones: un-normalisation is affine per dimension and the weights sum to 1.
+class ChunkScheduler {
+ public:
+  explicit ChunkScheduler(const ModelInfo& info);
+  bool ensembling() const { return ensembling_; }
+  void add(std::vector<float> chunk, int64_t observation_tick);
+  /// Writes the action for `tick`; false when no chunk covers it (the queue ran out).
+  bool action_at(int64_t tick, std::span<float> action) const;
+  /// True when a new inference should start now, given the inference latency in ticks: when the
+  /// current chunk has no more than latency + 2 rows left (ensembling: always).
+  bool wants_inference(int64_t tick, int latency_ticks) const;
+  bool empty() const { return chunks_.empty(); }
+  /// Forgets every chunk (after a fault).
+  void clear() { chunks_.clear(); }
+
+ private:
+  struct Chunk {
+    std::vector<float> actions;
+    int64_t observation_tick;
+  };
+  int action_dim_, chunk_size_, n_action_steps_;
+  bool ensembling_;
+  double coeff_;
+  std::deque<Chunk> chunks_;  // oldest first
+};
+
+}  // namespace act::drive

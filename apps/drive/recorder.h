@@ -1,0 +1,86 @@
+// --record DIR: what act_drive saw and did, for debugging and as act_convert calibration input.
+//
+//   DIR/meta.json         model, camera, control rate, calibration, column meanings
+//   DIR/frames/NNNNNN.png the model's input image of each inference (RGB, the model's size)
+//   DIR/log.jsonl         one line per inference: {"frame": "frames/NNNNNN.png", "state": [...],
+//                         "tick", "time_s", "frame_index", "frame_age_ms"} (what act_convert
+//                         --calib reads from a recording)
+//   DIR/ticks.csv         one row per control tick: the action, where it came from, the PWM sent
+//
+// A writer thread does the file work so the control loop never waits on the disk. Rows are flushed
+// after every batch and frames appear by atomic rename, so a killed or crashed run leaves complete
+// files holding everything up to its last moments.
+#pragma once
+
+#include <condition_variable>
+#include <cstdint>
+#include <cstdio>
+#include <deque>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <variant>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "apps/drive/calibration.h"
+
+namespace act::drive {
+
+struct ObservationRecord {
+  int64_t tick = 0;           ///< the control tick the frame belongs to
+  double time_s = 0;          ///< capture time, seconds since the loop started
+  uint64_t frame_index = 0;   ///< the camera's frame counter
+  double frame_age_ms = 0;    ///< age when inference took it
+  std::vector<float> state;
+  std::vector<uint8_t> rgb;   ///< height x width x 3
+  int height = 0, width = 0;
+};
+
+struct TickRecord {
+  int64_t tick = 0;
+  double time_s = 0;          ///< when the tick ran, seconds since the loop started
+  double jitter_ms = 0;       ///< how late it woke up
+  std::string source;         ///< "chunk", or "safe:<reason>"
+  std::vector<float> action;  ///< the raw action (empty for a safe action)
+  PwmCommand pwm;
+  bool sent = false;          ///< false when the link was down
+};
+
+class Recorder {
+ public:
+  /// Creates DIR (which must not exist or be empty) and its files; throws act::Error otherwise.
+  Recorder(const std::string& dir, int state_dim, int action_dim, const nlohmann::ordered_json& meta);
+  ~Recorder();
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  void add(ObservationRecord record);
+  void add(TickRecord record);
+  /// Writes everything queued and closes the files (also done by the destructor).
+  void close();
+  uint64_t dropped_frames() const;
+  const std::string& dir() const { return dir_; }
+
+ private:
+  using Item = std::variant<ObservationRecord, TickRecord>;
+  void run();
+  void write(const ObservationRecord& record);
+  void write(const TickRecord& record);
+
+  std::string dir_;
+  int state_dim_, action_dim_;
+  std::FILE* log_ = nullptr;
+  std::FILE* ticks_ = nullptr;
+  uint64_t observations_written_ = 0;  // writer thread only
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<Item> queue_;     // guarded by mutex_
+  size_t queued_frames_ = 0;   // guarded by mutex_
+  uint64_t dropped_frames_ = 0;  // guarded by mutex_
+  bool closing_ = false;       // guarded by mutex_
+  std::thread thread_;
+};
+
+}  // namespace act::drive

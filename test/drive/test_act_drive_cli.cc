@@ -1,0 +1,218 @@
+// The act_drive binary as a user runs it: clear errors, --dry-run on the act-tiny fixture with a
+// video file for the camera, and SIGTERM against a pseudo-terminal Arduino.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "apps/arduino/act_rover/rover_protocol.h"
+#include "apps/drive/calibration.h"
+#include "drive/drive_test_util.h"
+#include "drive/fake_arduino.h"
+#include "support/command.h"
+#include "support/test_paths.h"
+
+namespace act::drive::test {
+namespace {
+
+namespace fs = std::filesystem;
+using act::test::q;
+using act::test::run_command;
+
+const std::string kDrive = ACT_DRIVE_BIN;
+
+// act-tiny (one 96x128 camera, state 2, action 2, chunk 10) converted into `dir`.
+std::string act_tiny_blob(const std::string& dir) {
+  const std::string blob = (fs::path(dir) / "act-tiny.actb").string();
+  const auto r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " + q(blob) + " -q");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  return blob;
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+TEST(ActDriveCli, HelpListsTheOptions) {
+  const auto r = run_command(kDrive + " --help");
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* flag : {"--model", "--camera", "--camera-size", "--serial", "--baud", "--calibration", "--control-hz",
+                           "--max-frame-age", "--threads", "--control-priority", "--inference-cpus", "--stats-every",
+                           "--record", "--dry-run", "--calibrate", "--state", "--duration"}) {
+    EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
+  }
+}
+
+TEST(ActDriveCli, ClearErrorsForMissingInputs) {
+  const std::string dir = act::test::scratch_dir();
+  auto r = run_command(kDrive + " --camera 0 --dry-run");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--model is required"), std::string::npos) << r.output;
+  r = run_command(kDrive + " -m m.actb --camera 0");
+  EXPECT_NE(r.output.find("--serial is required"), std::string::npos) << r.output;
+  r = run_command(kDrive + " -m m.actb --camera " + q(dir + "/no-such-video.avi") + " --dry-run");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("cannot open camera"), std::string::npos) << r.output;
+  std::ofstream(dir + "/cal.json") << R"({"steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
+                                          "throttle": {"reverse_us": 1300, "neutral_us": 1900, "forward_us": 1800}})";
+  r = run_command(kDrive + " -m m.actb --camera 0 --dry-run -c " + q(dir + "/cal.json"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("'throttle.neutral_us' (1900) must lie strictly between"), std::string::npos) << r.output;
+}
+
+TEST(ActDriveCli, ClearErrorsForModelAndSerialPort) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 60, 30, 128, 96);
+  auto r = run_command(kDrive + " -m " + q(dir + "/none.actb") + " --camera " + q(video) + " --dry-run");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("none.actb"), std::string::npos) << r.output;
+  const std::string blob = act_tiny_blob(dir);
+  r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("cannot open serial port " + dir + "/ttyNONE"), std::string::npos) << r.output;
+  FakeArduino silent_board;
+  silent_board.set_silent(true);
+  r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(silent_board.port_path()) +
+                  " --ready-timeout 1.5");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("no ready line from the board"), std::string::npos) << r.output;
+  EXPECT_GT(silent_board.hellos(), 0);
+}
+
+TEST(ActDriveCli, DryRunDrivesTheRealModelUntilTheVideoEnds) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  // A camera at 160x120: resized to the model's 128x96.
+  const std::string video = write_test_video(dir + "/v.avi", 45, 30, 160, 120);
+  const auto r = run_command("(" + kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 --record " +
+                             q(dir + "/rec") + " --stats-every 0.5 2>" + q(dir + "/stderr.txt") + ")");
+  const std::string log = read_text(dir + "/stderr.txt");
+  EXPECT_EQ(r.exit_code, 0) << log;
+  EXPECT_NE(log.find("end of video file"), std::string::npos) << log;
+  EXPECT_NE(log.find("act_drive: stats:"), std::string::npos) << log;
+  EXPECT_NE(log.find("no --calibration file"), std::string::npos) << log;
+  std::istringstream lines(r.output);
+  std::string time, line, last;
+  int commands = 0;
+  while (lines >> time >> line) {
+    RoverMessage m{};
+    ASSERT_EQ(rover_parse(line.c_str(), line.size(), &m), ROVER_OK) << line;
+    ++commands;
+    last = line;
+  }
+  EXPECT_GE(commands, 30) << r.output;  // 1.5 s of video at 30 Hz
+  RoverMessage m{};
+  ASSERT_EQ(rover_parse(last.c_str(), last.size(), &m), ROVER_OK);
+  EXPECT_EQ(m.fields[1], 1500);
+  EXPECT_EQ(m.fields[2], 1500);
+  const cv::Mat frame = cv::imread(dir + "/rec/frames/000000.png");
+  EXPECT_EQ(frame.cols, 128);
+  EXPECT_EQ(frame.rows, 96);
+  EXPECT_NE(read_text(dir + "/rec/meta.json").find("\"image_width\": 128"), std::string::npos);
+  // The recording is INT8 calibration input as it is.
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                   q(dir + "/int8.actb") + " --precision int8 --calib " + q(dir + "/rec") + " --threads 1");
+  EXPECT_EQ(convert.exit_code, 0) << convert.output;
+  EXPECT_TRUE(fs::exists(dir + "/int8.actb")) << convert.output;
+}
+
+TEST(ActDriveCli, SigtermSendsNeutralAndExitsCleanly) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 300, 30, 128, 96);
+  FakeArduino board;
+  const std::string port = board.port_path();
+  const std::string log_path = dir + "/log.txt";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(log, 1);
+    ::dup2(log, 2);
+    ::execl(kDrive.c_str(), kDrive.c_str(), "-m", blob.c_str(), "--camera", video.c_str(), "--serial", port.c_str(),
+            "--threads", "1", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // Wait until it drives, then stop it.
+  const auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  const std::string log = read_text(log_path);
+  ASSERT_TRUE(WIFEXITED(status)) << log;
+  EXPECT_EQ(WEXITSTATUS(status), 0) << log;
+  EXPECT_NE(log.find("stopped by a signal"), std::string::npos) << log;
+  const auto commands = board.commands();
+  ASSERT_GE(commands.size(), 40u) << log;
+  EXPECT_EQ(commands.back().type, 'C');
+  EXPECT_EQ(commands.back().steering_us, 1500);
+  EXPECT_EQ(commands.back().throttle_us, 1500);
+  EXPECT_TRUE(board.bad_lines().empty());
+}
+
+TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {
+  const std::string dir = act::test::scratch_dir();
+  const auto r = run_command("(" + kDrive + " --calibrate > " + q(dir + "/cal.json") + ")");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.output.find("Edit the pulse widths"), std::string::npos) << r.output;
+  // What it prints is a valid calibration file.
+  const auto check = run_command(kDrive + " -m m.actb --camera " + q(dir + "/none.avi") + " --dry-run -c " + q(dir + "/cal.json"));
+  EXPECT_EQ(check.output.find("calibration"), std::string::npos) << check.output;
+  EXPECT_NE(check.output.find("cannot open camera"), std::string::npos) << check.output;
+}
+
+TEST(ActDriveCli, ThePackagesCalibrationTemplateIsAValidCalibrationFile) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) +
+                                   " --package " + q(dir + "/pkg") + " -q");
+  ASSERT_EQ(convert.exit_code, 0) << convert.output;
+  const Calibration calibration = Calibration::load(dir + "/pkg/drive_calibration.json");
+  EXPECT_EQ(calibration.max_forward, 0.3);
+  const std::string text = read_text(dir + "/pkg/drive_calibration.json");
+  EXPECT_NE(text.find("act_drive --calibrate"), std::string::npos) << text;
+  EXPECT_NE(text.find("--camera-size 128x96"), std::string::npos) << text;
+}
+
+TEST(ActDriveCli, CalibrateInteractivelyWritesTheEndpoints) {
+  const std::string dir = act::test::scratch_dir();
+  FakeArduino board;
+  // An existing file is the starting point: what is not re-measured is kept.
+  std::ofstream(dir + "/cal.json") << R"({"steering": {"left_us": 1100, "center_us": 1490, "right_us": 1900, "invert": true},
+                                          "throttle": {"reverse_us": 1300, "neutral_us": 1510, "forward_us": 1800}})";
+  std::ofstream(dir + "/input.txt") << "s 1200\nleft\ns 1850\nright\nt 1650\nforward\nt 1380\nreverse\nsave\nquit\n";
+  const auto r = run_command(kDrive + " --calibrate --serial " + q(board.port_path()) + " -c " + q(dir + "/cal.json") + " < " +
+                             q(dir + "/input.txt"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("saved"), std::string::npos) << r.output;
+  const nlohmann::json cal = nlohmann::json::parse(read_text(dir + "/cal.json"));
+  EXPECT_EQ(cal["steering"]["left_us"], 1200);
+  EXPECT_EQ(cal["steering"]["right_us"], 1850);
+  EXPECT_EQ(cal["throttle"]["forward_us"], 1650);
+  EXPECT_EQ(cal["throttle"]["reverse_us"], 1380);
+  EXPECT_EQ(cal["steering"]["center_us"], 1490);
+  EXPECT_EQ(cal["steering"]["invert"], true);
+  EXPECT_EQ(cal["throttle"]["neutral_us"], 1510);
+  const auto commands = board.commands();
+  ASSERT_FALSE(commands.empty());
+  EXPECT_EQ(commands.back().throttle_us, 1510);  // neutral on the way out
+  EXPECT_TRUE(board.bad_lines().empty());
+}
+
+}  // namespace
+}  // namespace act::drive::test

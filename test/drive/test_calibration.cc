@@ -1,0 +1,119 @@
+// Calibration: file parsing and validation, the action -> PWM map, the rate limiter.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "apps/drive/calibration.h"
+#include "support/test_paths.h"
+#include "weights/error.h"
+
+namespace act::drive {
+namespace {
+
+nlohmann::json example() {
+  return nlohmann::json::parse(R"({
+    "action_units": "normalized",
+    "steering": {"action_index": 0, "left_us": 1100, "center_us": 1500, "right_us": 1900, "invert": false,
+                 "rate_limit_us_per_s": 0},
+    "throttle": {"action_index": 1, "reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "invert": false,
+                 "max_forward": 0.5, "max_reverse": 1.0, "rate_limit_us_per_s": 0}
+  })");
+}
+
+std::string error_of(const nlohmann::json& j) {
+  try {
+    Calibration::from_json(j, "test.json");
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Calibration, MapsNormalizedActionsPiecewiseLinearly) {
+  const Calibration c = Calibration::from_json(example(), "test.json");
+  const float center[] = {0, 0}, left[] = {-1, 0}, right[] = {1, 0}, half_left[] = {-0.5f, 0};
+  EXPECT_EQ(c.map(center), (PwmCommand{1500, 1500}));
+  EXPECT_EQ(c.map(left).steering_us, 1100);
+  EXPECT_EQ(c.map(right).steering_us, 1900);
+  EXPECT_EQ(c.map(half_left).steering_us, 1300);
+  const float beyond[] = {7, -9};
+  EXPECT_EQ(c.map(beyond), (PwmCommand{1900, 1300}));  // clamped to the endpoints
+  const float full_forward[] = {0, 1}, reverse[] = {0, -0.5f};
+  EXPECT_EQ(c.map(full_forward).throttle_us, 1650);  // max_forward 0.5
+  EXPECT_EQ(c.map(reverse).throttle_us, 1400);
+  EXPECT_EQ(c.safe_command(), (PwmCommand{1500, 1500}));
+}
+
+TEST(Calibration, InvertAndMicrosecondUnits) {
+  nlohmann::json j = example();
+  j["steering"]["invert"] = true;
+  Calibration c = Calibration::from_json(j, "test.json");
+  const float right[] = {1, 0};
+  EXPECT_EQ(c.map(right).steering_us, 1100);
+
+  j = example();
+  j["action_units"] = "microseconds";
+  c = Calibration::from_json(j, "test.json");
+  const float us[] = {1700, 1800};
+  EXPECT_EQ(c.map(us), (PwmCommand{1700, 1650}));  // steering passes through, throttle capped at 0.5
+  const float beyond[] = {2500, 1000};
+  EXPECT_EQ(c.map(beyond), (PwmCommand{1900, 1300}));
+}
+
+TEST(Calibration, ErrorsNameTheField) {
+  auto with = [](const char* channel, const char* key, nlohmann::json value) {
+    nlohmann::json j = example();
+    j[channel][key] = value;
+    return j;
+  };
+  EXPECT_NE(error_of(with("steering", "center_us", 2000)).find("'steering.center_us' (2000) must lie strictly between"),
+            std::string::npos);
+  EXPECT_NE(error_of(with("throttle", "forward_us", 3000)).find("'throttle.forward_us' = 3000 us is outside"),
+            std::string::npos);
+  EXPECT_NE(error_of(with("throttle", "max_forward", 1.5)).find("'throttle.max_forward' must be in 0..1"), std::string::npos);
+  EXPECT_NE(error_of(with("steering", "invert", "yes")).find("'steering.invert' has the wrong type"), std::string::npos);
+  EXPECT_NE(error_of(with("steering", "centre_us", 1500)).find("unknown field 'steering.centre_us'"), std::string::npos);
+  EXPECT_NE(error_of(with("throttle", "action_index", 0)).find("same action_index"), std::string::npos);
+  nlohmann::json j = example();
+  j.erase("throttle");
+  EXPECT_NE(error_of(j).find("missing object 'throttle'"), std::string::npos);
+  j = example();
+  j["steering"].erase("left_us");
+  EXPECT_NE(error_of(j).find("missing field 'steering.left_us'"), std::string::npos);
+  EXPECT_NE(error_of(j).find("test.json"), std::string::npos);
+}
+
+TEST(Calibration, LoadReportsMissingAndInvalidFiles) {
+  const std::string dir = act::test::scratch_dir();
+  try {
+    Calibration::load(dir + "/none.json");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("none.json cannot be opened"), std::string::npos);
+  }
+  std::ofstream(dir + "/bad.json") << "{ \"steering\": ";
+  try {
+    Calibration::load(dir + "/bad.json");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("not valid JSON"), std::string::npos);
+  }
+  std::ofstream(dir + "/good.json") << example().dump();
+  const Calibration c = Calibration::load(dir + "/good.json");
+  EXPECT_EQ(Calibration::from_json(c.to_json(), "round trip").to_json(), c.to_json());
+}
+
+TEST(Calibration, RateLimiterBoundsTheChangePerTick) {
+  nlohmann::json j = example();
+  j["steering"]["rate_limit_us_per_s"] = 3000;  // 100 us per tick at 30 Hz
+  RateLimiter limiter(Calibration::from_json(j, "test.json"));
+  PwmCommand out = limiter.step({1900, 1650}, 1.0 / 30);
+  EXPECT_EQ(out, (PwmCommand{1600, 1650}));  // throttle has no limit
+  out = limiter.step({1900, 1650}, 1.0 / 30);
+  EXPECT_EQ(out.steering_us, 1700);
+  limiter.reset({1500, 1500});
+  EXPECT_EQ(limiter.step({1100, 1500}, 1.0 / 30).steering_us, 1400);
+}
+
+}  // namespace
+}  // namespace act::drive

@@ -1,0 +1,344 @@
+// The control loop end to end in-process: a video file (or a hand-fed source) for the camera, a fake
+// model, and a pseudo-terminal Arduino that parses and acknowledges every line. Checks the command
+// stream: rate, values within calibration, neutral on shutdown and within 250 ms of each fault.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "apps/drive/control_loop.h"
+#include "drive/drive_test_util.h"
+#include "drive/fake_arduino.h"
+#include "support/test_paths.h"
+
+namespace act::drive::test {
+namespace {
+
+namespace fs = std::filesystem;
+using std::chrono::milliseconds;
+
+constexpr auto kFaultDeadline = milliseconds(250);
+const PwmCommand kSafe{1500, 1500};
+const PwmCommand kDriving{1700, 1650};  // the fake model's 0.5 / 0.8 through the calibration below
+
+Calibration test_calibration() {
+  return Calibration::from_json(nlohmann::json::parse(R"({
+    "steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
+    "throttle": {"reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "max_forward": 0.5}})"),
+                                "test");
+}
+
+bool is(const FakeArduino::Command& c, PwmCommand p) { return c.steering_us == p.steering_us && c.throttle_us == p.throttle_us; }
+
+double ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
+
+// The drive commands (C lines) in arrival order.
+std::vector<FakeArduino::Command> drive_commands(const FakeArduino& board) {
+  std::vector<FakeArduino::Command> out;
+  for (const auto& c : board.commands()) {
+    if (c.type == 'C') out.push_back(c);
+  }
+  return out;
+}
+
+// Checks that the rover went neutral within kFaultDeadline of `fault` and stayed neutral until `until`.
+::testing::AssertionResult neutral_after(const std::vector<FakeArduino::Command>& commands, Clock::time_point fault,
+                                         Clock::time_point until) {
+  const FakeArduino::Command* first = nullptr;
+  for (const auto& c : commands) {
+    if (c.when >= fault && is(c, kSafe)) {
+      first = &c;
+      break;
+    }
+  }
+  if (!first) return ::testing::AssertionFailure() << "no neutral command after the fault";
+  if (first->when - fault > kFaultDeadline) {
+    return ::testing::AssertionFailure() << "first neutral " << ms(first->when - fault) << " ms after the fault";
+  }
+  for (const auto& c : commands) {
+    if (c.when > fault + kFaultDeadline && c.when < until && !is(c, kSafe)) {
+      return ::testing::AssertionFailure() << "a driving command " << c.steering_us << "/" << c.throttle_us << " "
+                                           << ms(c.when - fault) << " ms after the fault";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// One loop run with a fake model and a pseudo-terminal board.
+struct Rig {
+  std::string dir = act::test::scratch_dir();
+  std::unique_ptr<FakeArduino> board;
+  std::shared_ptr<FakeModelControls> controls = std::make_shared<FakeModelControls>();
+  Calibration calibration = test_calibration();
+  ModelInfo info = fake_model_info();
+  ControlOptions options;
+  std::ostringstream log;
+  std::atomic<bool> stop{false};
+  Clock::time_point started;
+  std::string recording;
+
+  explicit Rig(bool symlinked_port = false) {
+    board = std::make_unique<FakeArduino>(symlinked_port ? dir + "/tty" : "");
+    options.control_hz = 30;
+  }
+
+  // Runs the loop on its own thread; `during` runs on this thread meanwhile (then stop is set).
+  DriveSummary run(const FrameSource& frames, const std::function<void()>& during) {
+    SerialLinkOptions serial;
+    serial.path = board->port_path();
+    serial.hello_delay = milliseconds(0);
+    serial.failsafe = calibration.safe_command();
+    SerialLink link(serial, log);
+    link.connect();
+    InferenceWorkerOptions worker_options;
+    worker_options.max_frame_age = options.max_frame_age;
+    worker_options.keep_model_inputs = !recording.empty();
+    InferenceWorker worker([&] { return std::make_unique<FakeModel>(info, controls); }, frames, worker_options, log);
+    std::optional<Recorder> recorder;
+    if (!recording.empty()) recorder.emplace(recording, info.state_dim, info.action_dim, nlohmann::ordered_json{{"test", 1}});
+    ControlLoop loop(options, calibration, frames, worker, link, recorder ? &*recorder : nullptr, log);
+    DriveSummary summary;
+    started = Clock::now();
+    std::thread control([&] { summary = loop.run(stop); });
+    during();
+    stop.store(true);
+    control.join();
+    if (recorder) recorder->close();
+    EXPECT_TRUE(board->bad_lines().empty()) << board->bad_lines().front();
+    const auto commands = drive_commands(*board);
+    EXPECT_FALSE(commands.empty());
+    if (!commands.empty()) {
+      EXPECT_TRUE(is(commands.back(), kSafe)) << "the last command is not neutral";
+    }
+    return summary;
+  }
+};
+
+std::unique_ptr<Camera> video_camera(const std::string& dir, int frames) {
+  return std::make_unique<Camera>(CameraOptions{write_test_video(dir + "/camera.avi", frames, 30), 0, 0, 0});
+}
+
+void sleep_ms(int n) { std::this_thread::sleep_for(milliseconds(n)); }
+
+TEST(ControlLoop, DrivesAtTheControlRateWithinCalibrationAndEndsNeutral) {
+  Rig rig;
+  auto camera = video_camera(rig.dir, 150);
+  const DriveSummary summary = rig.run(*camera, [] { sleep_ms(2500); });
+  const auto all = rig.board->commands();
+  ASSERT_FALSE(all.empty());
+  // The handshake: failsafe values first, then neutral.
+  EXPECT_EQ(all.front().type, 'F');
+  EXPECT_TRUE(is(all.front(), kSafe));
+  const auto commands = drive_commands(*rig.board);
+  EXPECT_TRUE(is(commands.front(), kSafe));
+
+  // Rate over 2 s of steady driving: 30 Hz +-25% (a loaded 2-core CI machine).
+  const auto from = rig.started + milliseconds(500), to = rig.started + milliseconds(2500);
+  size_t in_window = 0, driving = 0;
+  for (const auto& c : commands) {
+    if (c.when >= from && c.when < to) ++in_window;
+    if (is(c, kDriving)) ++driving;
+    EXPECT_GE(c.steering_us, 1100);
+    EXPECT_LE(c.steering_us, 1900);
+    EXPECT_GE(c.throttle_us, 1300);
+    EXPECT_LE(c.throttle_us, 1650);  // max_forward 0.5
+  }
+  EXPECT_GE(in_window, 45u);
+  EXPECT_LE(in_window, 75u);
+  EXPECT_GT(driving, commands.size() / 2) << rig.log.str();
+  EXPECT_EQ(summary.end_reason, "stopped by a signal");
+  EXPECT_EQ(summary.exit_code, 0);
+  EXPECT_EQ(summary.inference_errors, 0u);
+  EXPECT_GE(summary.inferences, 6u);  // one chunk of 10 steps per 1/3 s
+  EXPECT_NE(summary.to_string().find("tick jitter"), std::string::npos);
+}
+
+TEST(ControlLoop, NeutralWithin250msOfTheModelReturningNaN) {
+  Rig rig;
+  rig.options.max_consecutive_inference_errors = 10;
+  auto camera = video_camera(rig.dir, 150);
+  const DriveSummary summary = rig.run(*camera, [&] {
+    sleep_ms(1000);
+    rig.controls->return_nan.store(true);
+    sleep_ms(1200);
+  });
+  std::optional<Clock::time_point> nan_at;
+  {
+    std::lock_guard lock(rig.controls->mutex);
+    nan_at = rig.controls->first_nan_returned;
+  }
+  ASSERT_TRUE(nan_at.has_value());
+  EXPECT_TRUE(neutral_after(drive_commands(*rig.board), *nan_at, Clock::now()));
+  EXPECT_GT(summary.inference_errors, 0u);
+  EXPECT_NE(rig.log.str().find("non-finite action"), std::string::npos) << rig.log.str();
+  // Inference that keeps failing ends the run.
+  EXPECT_EQ(summary.exit_code, 1);
+  EXPECT_NE(summary.end_reason.find("inference failed"), std::string::npos) << summary.end_reason;
+}
+
+TEST(ControlLoop, NeutralWithin250msOfTheCameraEnding) {
+  Rig rig;
+  auto camera = video_camera(rig.dir, 30);  // one second
+  const DriveSummary summary = rig.run(*camera, [&] {
+    while (camera->state() != FrameSource::State::kEnded) sleep_ms(10);
+    sleep_ms(300);
+  });
+  EXPECT_NE(summary.end_reason.find("end of video file"), std::string::npos) << summary.end_reason;
+  // The camera failed when its next frame was due.
+  const Clock::time_point ended = camera->latest()->captured + milliseconds(1000 / 30);
+  const auto commands = drive_commands(*rig.board);
+  EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [](const auto& c) { return is(c, kDriving); }));
+  EXPECT_TRUE(neutral_after(commands, ended, Clock::now()));
+}
+
+TEST(ControlLoop, NeutralWithin250msOfStaleFramesThenDrivesAgain) {
+  Rig rig;
+  rig.options.max_frame_age = milliseconds(200);
+  ManualFrameSource frames;
+  frames.push();
+  std::atomic<bool> feeding{true}, quit{false};
+  std::thread feeder([&] {
+    while (!quit.load()) {
+      if (feeding.load()) frames.push();
+      sleep_ms(33);
+    }
+  });
+  Clock::time_point frozen, resumed;
+  rig.run(frames, [&] {
+    sleep_ms(1000);
+    feeding.store(false);
+    sleep_ms(40);  // the feeder may be mid-push
+    frozen = frames.latest()->captured;
+    sleep_ms(800);
+    resumed = Clock::now();
+    feeding.store(true);
+    sleep_ms(1000);
+  });
+  quit.store(true);
+  feeder.join();
+  const auto commands = drive_commands(*rig.board);
+  // Stale from the moment the newest frame is older than --max-frame-age.
+  EXPECT_TRUE(neutral_after(commands, frozen + rig.options.max_frame_age, resumed));
+  EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [&](const auto& c) { return c.when > resumed && is(c, kDriving); }))
+      << "did not drive again after the frames came back";
+  EXPECT_NE(rig.log.str().find("stale frame"), std::string::npos);
+}
+
+TEST(ControlLoop, SerialHangUpReconnectsAndSendsNeutralFirst) {
+  Rig rig(/*symlinked_port=*/true);
+  auto camera = video_camera(rig.dir, 150);
+  Clock::time_point hang_up;
+  const DriveSummary summary = rig.run(*camera, [&] {
+    sleep_ms(800);
+    hang_up = Clock::now();
+    rig.board->replace();
+    sleep_ms(2000);
+  });
+  std::vector<FakeArduino::Command> after;
+  for (const auto& c : rig.board->commands()) {
+    if (c.generation == 1) after.push_back(c);
+  }
+  ASSERT_GE(after.size(), 3u) << rig.log.str();
+  EXPECT_EQ(after[0].type, 'F');  // failsafe values, then neutral, then driving resumes
+  EXPECT_TRUE(is(after[0], kSafe));
+  EXPECT_EQ(after[1].type, 'C');
+  EXPECT_TRUE(is(after[1], kSafe));
+  EXPECT_LT(ms(after[0].when - hang_up), 1500);
+  EXPECT_TRUE(std::any_of(after.begin(), after.end(), [](const auto& c) { return is(c, kDriving); }));
+  EXPECT_GT(summary.link_down_ticks, 0u);
+  EXPECT_NE(summary.link_summary.find("1 reconnects"), std::string::npos) << summary.link_summary;
+  EXPECT_NE(rig.log.str().find("reconnecting"), std::string::npos);
+}
+
+TEST(ControlLoop, SlowInferenceOverrunsAreCountedAndHoldNeutral) {
+  Rig rig;
+  // 333 ms of actions per chunk, 250 ms inference: each chunk arrives with only ~2 of its ticks left.
+  rig.controls->delay_ms.store(250);
+  auto camera = video_camera(rig.dir, 150);
+  const DriveSummary summary = rig.run(*camera, [] { sleep_ms(2500); });
+  EXPECT_GE(summary.overrun_events, 2u);
+  EXPECT_GT(summary.overrun_ticks, summary.overrun_events);
+  EXPECT_NE(rig.log.str().find("overrun"), std::string::npos);
+  // Between chunks the rover holds neutral; the control rate does not drop.
+  const auto commands = drive_commands(*rig.board);
+  EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [](const auto& c) { return is(c, kDriving); }));
+  EXPECT_GE(summary.ticks, 55u);
+}
+
+TEST(ControlLoop, TemporalEnsemblingDrivesAtTheControlRate) {
+  Rig rig;
+  rig.info = fake_model_info(/*ensembling=*/true);
+  auto camera = video_camera(rig.dir, 150);
+  const DriveSummary summary = rig.run(*camera, [] { sleep_ms(1500); });
+  const auto commands = drive_commands(*rig.board);
+  size_t driving = 0;
+  for (const auto& c : commands) driving += is(c, kDriving);
+  EXPECT_GT(driving, 25u) << rig.log.str();
+  EXPECT_GT(summary.inferences, 10u);  // ensembling keeps inferring
+}
+
+TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
+  Rig rig;
+  rig.recording = rig.dir + "/rec";
+  auto camera = video_camera(rig.dir, 150);
+  const DriveSummary summary = rig.run(*camera, [] { sleep_ms(1200); });
+  ASSERT_TRUE(fs::exists(rig.recording + "/meta.json"));
+  auto lines = [](const std::string& path) {
+    std::ifstream in(path);
+    std::vector<std::string> out;
+    for (std::string line; std::getline(in, line);) out.push_back(line);
+    return out;
+  };
+  const auto observations = lines(rig.recording + "/log.jsonl");
+  const auto ticks = lines(rig.recording + "/ticks.csv");
+  ASSERT_GE(observations.size(), 2u);
+  EXPECT_EQ(ticks[0], "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,sent");
+  EXPECT_EQ(ticks.size() - 1, summary.ticks);
+  size_t pngs = 0;
+  for (const auto& e : fs::directory_iterator(rig.recording + "/frames")) {
+    EXPECT_EQ(e.path().extension(), ".png") << e.path();
+    ++pngs;
+  }
+  EXPECT_EQ(pngs, observations.size());
+  // The lines act_convert's calibration reads: {"frame": <relative path>, "state": [...]}.
+  const nlohmann::json first_line = nlohmann::json::parse(observations[0]);
+  EXPECT_EQ(first_line["frame"], "frames/000000.png");
+  EXPECT_EQ(first_line["state"].size(), 2u);
+  for (const char* key : {"tick", "time_s", "frame_index", "frame_age_ms"}) EXPECT_TRUE(first_line.contains(key)) << key;
+  const cv::Mat first = cv::imread(rig.recording + "/frames/000000.png");
+  EXPECT_EQ(first.cols, 64);
+  EXPECT_EQ(first.rows, 48);
+  bool drove = false;
+  for (const auto& t : ticks) drove = drove || t.find(",chunk,0.5,0.800000012,1700,1650,1") != std::string::npos;
+  EXPECT_TRUE(drove) << ticks[ticks.size() / 2];
+}
+
+TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {
+  std::ostringstream log;
+  std::thread([&] { apply_thread_placement({0, {1000}}, "test", log); }).join();  // no CPU 1000 here
+  EXPECT_NE(log.str().find("cannot pin the test thread"), std::string::npos) << log.str();
+}
+
+TEST(ControlLoop, DryRunPrintsProtocolLines) {
+  std::ostringstream out;
+  DryRunLink link(out);
+  link.send({1600, 1400}, Clock::now());
+  link.shutdown({1500, 1500});
+  std::istringstream lines(out.str());
+  std::string time, line;
+  int n = 0;
+  while (lines >> time >> line) {
+    RoverMessage m{};
+    ASSERT_EQ(rover_parse(line.c_str(), line.size(), &m), ROVER_OK) << line;
+    EXPECT_EQ(m.type, 'C');
+    EXPECT_EQ(m.fields[0], n);
+    ++n;
+  }
+  EXPECT_EQ(n, 2);
+}
+
+}  // namespace
+}  // namespace act::drive::test

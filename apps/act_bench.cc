@@ -360,6 +360,9 @@ int run(const Options& opt) {
 int main(int argc, char** argv) {
   CLI::App app{"act_bench: end-to-end latency of an ACT policy. Without --model it benchmarks a built-in synthetic "
                "copy of LeRobot's default ACT (resnet18, D 512, 4+1 layers, one 480x640 camera)."};
+  // A repeated option takes its last value, so scripts can set defaults users override
+  // (scripts/run_bench.sh passes --num_runs 20 before the user's arguments).
+  app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   Options opt;
   app.add_option("-m,--model", opt.model, "an .actb blob (from act_convert); default: a built-in model");
   app.add_option("--config", opt.config, "built-in model: default, rover (360x640, 2-dim state/action), or WxH")

@@ -72,7 +72,7 @@ ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
   if (!t.s8) return t;
   if (auto it = converted_.find(t.id); it != converted_.end() && !it->second.s8) return it->second;
   check(t.params == kNoValue, StatusCode::kInternal, "dequantizing a dynamically quantized value");
-  const Value& v = graph_.value(t.id);
+  const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const std::string name = v.name + ".f32";
   const ValueId y = graph_.add_value(name, v.shape);
   add(std::make_unique<DequantizeOp>(v.elements, t.q, t.id, y), name);
@@ -82,7 +82,7 @@ ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
 ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
   if (t.s8) return t;
   if (auto it = converted_.find(t.id); it != converted_.end() && it->second.s8 && it->second.params == kNoValue) return it->second;
-  const Value& v = graph_.value(t.id);
+  const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const ActivationQuant& a = quant_.activation(v.name);
   const kernels::QuantS8 q{a.scale, a.zero_point};
   const std::string name = v.name + ".s8";
@@ -95,7 +95,7 @@ ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
 ActNetwork::Tensor ActNetwork::as_dynamic_s8(const Tensor& t) {
   check(!t.s8, StatusCode::kInternal, "dynamic quantization of an int8 value");
   if (auto it = converted_.find(t.id); it != converted_.end() && it->second.params != kNoValue) return it->second;
-  const Value& v = graph_.value(t.id);
+  const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const std::string name = v.name + ".s8dyn";
   const ValueId y = graph_.add_value(name, v.shape, DataType::kS8);
   const ValueId params = graph_.add_value(name + ".params", {2});

@@ -242,17 +242,7 @@ struct ConvBench {
 };
 
 kernels::Conv2dShape conv_shape(int h, int w, int cin, int cout, int kernel, int stride) {
-  kernels::Conv2dShape s;
-  s.in_h = h;
-  s.in_w = w;
-  s.in_c = cin;
-  s.out_c = cout;
-  s.kernel_h = s.kernel_w = kernel;
-  s.stride = stride;
-  s.pad = kernel / 2;
-  s.out_h = kernels::Conv2dShape::out_dim(h, kernel, stride, s.pad, 1);
-  s.out_w = kernels::Conv2dShape::out_dim(w, kernel, stride, s.pad, 1);
-  return s;
+  return kernels::Conv2dShape::square(h, w, cin, cout, kernel, stride, kernel / 2);
 }
 
 // Every distinct convolution of ResNet18 (torchvision's BasicBlock layout) on an h x w image.

@@ -105,17 +105,7 @@ ActNetwork::Tensor ActNetwork::as_dynamic_s8(const Tensor& t) {
 
 ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, int& w, bool relu, const Tensor* residual,
                                     const std::string& name) {
-  kernels::Conv2dShape s;
-  s.in_h = h;
-  s.in_w = w;
-  s.in_c = c.in_c;
-  s.kernel_h = s.kernel_w = c.kernel;
-  s.stride = c.stride;
-  s.pad = c.pad;
-  s.dilation = c.dilation;
-  s.out_h = kernels::Conv2dShape::out_dim(h, c.kernel, c.stride, c.pad, c.dilation);
-  s.out_w = kernels::Conv2dShape::out_dim(w, c.kernel, c.stride, c.pad, c.dilation);
-  s.out_c = c.out_c;
+  const auto s = kernels::Conv2dShape::square(h, w, c.in_c, c.out_c, c.kernel, c.stride, c.pad, c.dilation);
   h = s.out_h;
   w = s.out_w;
   const std::vector<int64_t> w_shape = {c.out_c, c.kernel, c.kernel, c.in_c};
@@ -246,10 +236,7 @@ ValueId ActNetwork::backbone(size_t camera) {
   if (const ActbTensor* q8 = int8_weight(bn::kImgProjWeight, {D, C}); q8 != nullptr && x.s8) {
     // Static int8 features: the projection is a 1x1 int8 conv with a float output.
     ConvS8Spec spec;
-    spec.shape.in_h = spec.shape.out_h = h;
-    spec.shape.in_w = spec.shape.out_w = w;
-    spec.shape.in_c = C;
-    spec.shape.out_c = D;
+    spec.shape = kernels::Conv2dShape::square(h, w, C, D, 1, 1, 0);
     spec.weight = reinterpret_cast<const int8_t*>(q8->data);
     spec.w_scale = q8->quant.scales.data();
     spec.bias = proj_bias;

@@ -31,6 +31,21 @@ struct Conv2dShape {
   static int out_dim(int in, int kernel, int stride, int pad, int dilation) {
     return (in + 2 * pad - dilation * (kernel - 1) - 1) / stride + 1;
   }
+  /// A square-kernel conv of an in_h x in_w x in_c input, with its output size computed.
+  static Conv2dShape square(int in_h, int in_w, int in_c, int out_c, int kernel, int stride, int pad, int dilation = 1) {
+    Conv2dShape s;
+    s.in_h = in_h;
+    s.in_w = in_w;
+    s.in_c = in_c;
+    s.out_c = out_c;
+    s.kernel_h = s.kernel_w = kernel;
+    s.stride = stride;
+    s.pad = pad;
+    s.dilation = dilation;
+    s.out_h = out_dim(in_h, kernel, stride, pad, dilation);
+    s.out_w = out_dim(in_w, kernel, stride, pad, dilation);
+    return s;
+  }
 };
 
 /// Gathers the patches of output pixels [pixel_begin, pixel_begin + count) (row-major pixel index)

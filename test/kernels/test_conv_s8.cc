@@ -43,18 +43,7 @@ const ConvCase kCases[] = {
 };
 
 Conv2dShape shape_of(const ConvCase& c) {
-  Conv2dShape s;
-  s.in_h = c.h;
-  s.in_w = c.w;
-  s.in_c = c.cin;
-  s.out_c = c.cout;
-  s.kernel_h = s.kernel_w = c.kernel;
-  s.stride = c.stride;
-  s.pad = c.pad;
-  s.dilation = c.dilation;
-  s.out_h = Conv2dShape::out_dim(c.h, c.kernel, c.stride, c.pad, c.dilation);
-  s.out_w = Conv2dShape::out_dim(c.w, c.kernel, c.stride, c.pad, c.dilation);
-  return s;
+  return Conv2dShape::square(c.h, c.w, c.cin, c.cout, c.kernel, c.stride, c.pad, c.dilation);
 }
 
 // acc[pixel][o] = sum over taps inside the image of (x - zp) * w + bias[o]: padding contributes 0.

@@ -54,17 +54,7 @@ TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
       {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
   };
   for (const ConvCase& c : cases) {
-    Conv2dShape s;
-    s.in_h = c.h;
-    s.in_w = c.w;
-    s.in_c = c.cin;
-    s.out_c = c.cout;
-    s.kernel_h = s.kernel_w = c.kernel;
-    s.stride = c.stride;
-    s.pad = c.pad;
-    s.dilation = c.dilation;
-    s.out_h = Conv2dShape::out_dim(c.h, c.kernel, c.stride, c.pad, c.dilation);
-    s.out_w = Conv2dShape::out_dim(c.w, c.kernel, c.stride, c.pad, c.dilation);
+    const Conv2dShape s = Conv2dShape::square(c.h, c.w, c.cin, c.cout, c.kernel, c.stride, c.pad, c.dilation);
     const auto x = random_vector(static_cast<size_t>(c.h) * c.w * c.cin, rng);
     const auto w = random_vector(static_cast<size_t>(c.cout) * s.patch_size(), rng);
     const auto expected = conv_naive(s, x, w);

@@ -17,6 +17,23 @@ timings=()
 stage_start=$SECONDS
 stage_done() { timings+=("$1 $((SECONDS - stage_start))s"); stage_start=$SECONDS; }
 
+# ctest over a build tree; when tests fail, their whole output is printed again at the very end, so
+# the tail of a long CI log says what failed and why.
+run_ctest() {
+  local dir="$1"
+  shift
+  if ctest --test-dir "$dir" --output-on-failure -j "$jobs" "$@"; then return 0; fi
+  echo "== output of the failed tests in $dir =="
+  local failed
+  while IFS=: read -r _ failed; do
+    awk -v name="$failed" '{ p = index($0, " Testing: ") } p && substr($0, p + 10) == name {on = 1}
+                             on {print} on && /end time:/ {on = 0}' \
+      "$dir/Testing/Temporary/LastTest.log" | tail -n 80
+  done < "$dir/Testing/Temporary/LastTestsFailed.log"
+  echo "stage times: ${timings[*]} (failed in $dir after $SECONDS s)"
+  exit 1
+}
+
 "$root/scripts/install_deps.sh"
 stage_done install
 
@@ -34,7 +51,7 @@ echo "== Release build (-Werror) =="
 ACT_BUILD_DIR="$root/build" "$root/scripts/build.sh" -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
 stage_done release-build
 echo "== Release tests =="
-ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
+run_ctest "$root/build"
 stage_done release-tests
 echo "== kernel benchmarks (smoke run; the numbers are not judged) =="
 "$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01
@@ -58,7 +75,7 @@ if [ "${ACT_SKIP_SANITIZERS:-0}" != "1" ]; then
   # the INT8 conversion's code runs here through the fixture tests (ActConvertInt8.*).
   asan_skip="GeneratedInt8Test"
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs" -E "$asan_skip"
+    run_ctest "$root/build-asan" -E "$asan_skip"
   stage_done asan-tests
 fi
 if [ "${ACT_SKIP_TSAN:-0}" != "1" ]; then

@@ -123,7 +123,8 @@ class Loader {
 
   // Opens a video; throws naming it when OpenCV cannot.
   static cv::VideoCapture open_video(const fs::path& p) {
-    cv::VideoCapture cap(p.string());
+    // FFmpeg only, as act_drive reads video files: the same decoder gives the same frames.
+    cv::VideoCapture cap(p.string(), cv::CAP_FFMPEG);
     if (!cap.isOpened()) fail(StatusCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
     return cap;
   }

@@ -20,13 +20,19 @@ bool is_index(const std::string& s) {
   return !s.empty() && s.size() < 4 && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
 }
 
+bool is_url(const std::string& s) { return s.find("://") != std::string::npos; }
+
 void open_capture(cv::VideoCapture& video, const CameraOptions& options, bool is_file) {
   if (is_index(options.source)) {
     video.open(std::stoi(options.source), cv::CAP_ANY);
   } else if (options.source.rfind("/dev/", 0) == 0) {
     video.open(options.source, cv::CAP_V4L2);
-  } else {
-    // Files and URLs: FFmpeg first (it handles both), then whatever else this OpenCV has.
+  } else if (is_file) {
+    // Files through FFmpeg only, as act_convert's calibration reads them (no GStreamer fallback:
+    // it decodes differently and behaves differently from one machine's plugin set to another's).
+    video.open(options.source, cv::CAP_FFMPEG);
+  } else if (is_url(options.source)) {
+    // URLs: FFmpeg first, then whatever else this OpenCV has.
     if (!video.open(options.source, cv::CAP_FFMPEG)) video.open(options.source, cv::CAP_ANY);
   }
   if (!video.isOpened() || is_file) return;
@@ -43,8 +49,10 @@ Camera::Camera(CameraOptions options) : options_(std::move(options)), capture_(s
   is_file_ = std::filesystem::is_regular_file(options_.source);
   open_capture(capture_->video, options_, is_file_);
   if (!capture_->video.isOpened()) {
-    fail(StatusCode::kNotFound, "cannot open camera '" + options_.source +
-                                    "' (an index like 0, a device like /dev/video0, a video file or a URL)");
+    const bool missing_file = !is_index(options_.source) && !is_url(options_.source) &&
+                              !std::filesystem::exists(options_.source);
+    fail(StatusCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing_file ? ": no such file" : "") +
+                                    " (an index like 0, a device like /dev/video0, a video file or a URL)");
   }
   cv::Mat first;
   if (!capture_->video.read(first) || first.empty()) {

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Builds the parsers' libFuzzer targets (test/fuzz, clang, ASan + UBSan; only the parser sources)
-# and runs each for ACT_FUZZ_SECONDS (default 60) from its seed corpus in test/fuzz/corpus/.
+# and runs each for ACT_FUZZ_SECONDS (default 60) from its seed corpus in test/fuzz/corpus/, ACT_JOBS
+# (default 2) targets at a time.
 # Prints the executions per target; fails on any crash, leak, sanitizer report or timeout, leaving
 # the input in $ACT_FUZZ_BUILD_DIR/findings/ (store it under test/fuzz/regressions/ with a test).
 # Generated inputs go to a scratch corpus in the build tree; the committed seeds stay as they are.
@@ -18,27 +19,41 @@ cmake --build "$build" -j "$jobs"
 
 targets=(${ACT_FUZZ_TARGETS:-$(cd "$root/test/fuzz/corpus" && ls)})
 mkdir -p "$build/findings"
-summary=()
-failed=0
-for target in "${targets[@]}"; do
-  corpus="$build/corpus/$target"
+
+# Runs one target; its result line goes to $build/<target>.result. Each fuzzer is one process, so
+# $jobs of them run side by side.
+fuzz_one() {
+  local target="$1" corpus="$build/corpus/$1" log="$build/$1.log" dict=()
   mkdir -p "$corpus"
-  log="$build/$target.log"
-  dict=()
   [ -f "$root/test/fuzz/$target.dict" ] && dict=(-dict="$root/test/fuzz/$target.dict")
-  echo "== $target: ${seconds}s =="
   # New inputs go to the scratch corpus (first folder); the seeds are read from the second.
   if ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
      "$build/test/fuzz/$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
        -print_final_stats=1 "${dict[@]}" -artifact_prefix="$build/findings/$target-" \
        "$corpus" "$root/test/fuzz/corpus/$target" >"$log" 2>&1; then
-    execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
-    summary+=("$target: $execs executions in ${seconds}s")
+    echo "$target: $(sed -n 's/^stat::number_of_executed_units: *//p' "$log") executions in ${seconds}s" >"$build/$target.result"
   else
-    failed=1
-    tail -n 60 "$log"
-    summary+=("$target: FAILED (log $log, input in $build/findings/)")
+    echo "$target: FAILED (log $log, input in $build/findings/)" >"$build/$target.result"
+  fi
+}
+
+echo "== ${#targets[@]} fuzz targets, ${seconds}s each, $jobs at a time =="
+running=0
+for target in "${targets[@]}"; do
+  fuzz_one "$target" &
+  running=$((running + 1))
+  if [ "$running" -ge "$jobs" ]; then
+    wait -n
+    running=$((running - 1))
   fi
 done
-printf '%s\n' "${summary[@]}"
+wait
+failed=0
+for target in "${targets[@]}"; do
+  cat "$build/$target.result"
+  if grep -q FAILED "$build/$target.result"; then
+    failed=1
+    tail -n 60 "$build/$target.log"
+  fi
+done
 exit "$failed"

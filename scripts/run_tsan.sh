@@ -3,8 +3,9 @@
 # the core library, act_drive's pieces and the tests that run threads) and a run of it: the thread
 # pool, Engines side by side, opened concurrently and handed between threads, every thread count of
 # the same model, and act_drive's control loop (camera, inference, serial link, recorder threads).
-# -O2 with line tables only (-g1): full debug info of the Eigen-heavy kernels doubles the build time,
-# and line tables are all a race report needs. ACT_TSAN_FILTER replaces the gtest filter.
+# -O1 (the kernels -O2, kernels/CMakeLists.txt) with line tables only (-g1): -O2 everywhere and full
+# debug info each double the build time, and line tables are all a race report needs.
+# ACT_TSAN_FILTER replaces the gtest filter.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${ACT_TSAN_BUILD_DIR:-$root/build-tsan}"
@@ -16,7 +17,7 @@ threaded+=":EngineApiTest.OneEngineHandedFromThreadToThread:EngineApiTest.Engine
 # threads ran race-free when tried; the count assertion was what failed).
 threaded+=":-ControlLoop.RecordWritesFramesObservationsAndTicks"
 
-cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
+cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
   -DACT_WERROR=ON -DACT_SANITIZE=thread -DACT_BUILD_BENCH=OFF >/dev/null
 cmake --build "$build" -j "$jobs" --target act_thread_tests
 # halt_on_error: the first race fails the stage (a report alone would not change the exit code).

@@ -17,9 +17,11 @@ for arch in $archs; do
   configure=(-G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON -DACT_BUILD_TESTS=OFF -DACT_BUILD_BENCH=OFF)
   case "$arch" in
     amd64) ;;
-    # Debian's arm64 OpenCV cannot be installed next to the host's: the arm64 package has the
-    # OpenCV-free apps (act_bench, act_eval); act_convert runs on the desktop.
-    arm64) configure+=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_WITH_OPENCV=OFF) ;;
+    # Debian's arm64 OpenCV cannot be installed next to the host's: act_convert and act_drive link
+    # the arm64 libraries unpacked by fetch_arm64_opencv.sh (the package depends on their runtime packages).
+    arm64)
+      "$root/scripts/fetch_arm64_opencv.sh" "$out/opencv-arm64"
+      configure+=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_ARM64_OPENCV_ROOT="$out/opencv-arm64/root") ;;
     *) echo "build_packages: unknown architecture '$arch' (amd64, arm64)" >&2; exit 2 ;;
   esac
   echo "== actengine package for $arch =="

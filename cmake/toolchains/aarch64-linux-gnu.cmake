@@ -14,6 +14,8 @@
 #   ACT_QEMU_CPU  CPU model qemu emulates when tests run: max (default; every feature qemu has,
 #                 dotprod and SVE included), cortex-a76 (the Raspberry Pi 5's exact feature set),
 #                 cortex-a72 (Raspberry Pi 4: NEON without dotprod, for the fallback paths)
+#   ACT_ARM64_OPENCV_ROOT  where scripts/fetch_arm64_opencv.sh unpacked the arm64 OpenCV libraries
+#                 (DIR/root); needed only for the apps that use OpenCV (act_convert, act_drive)
 
 set(CMAKE_SYSTEM_NAME Linux)
 set(CMAKE_SYSTEM_PROCESSOR aarch64)
@@ -55,6 +57,12 @@ list(APPEND CMAKE_LIBRARY_PATH "${_act_cross_files}/lib")
 foreach(kind EXE SHARED MODULE)
   set(CMAKE_${kind}_LINKER_FLAGS_INIT "-L${_act_cross_files}/lib")
 endforeach()
+
+# OpenCV (act_convert, act_drive): libopencv-dev:arm64 cannot be installed beside the host's either;
+# opencv/OpenCVConfig.cmake links the arm64 libraries scripts/fetch_arm64_opencv.sh unpacks into
+# ACT_ARM64_OPENCV_ROOT (-D or environment), with the host's headers.
+set(OpenCV_DIR "${_act_cross_files}/opencv")
+list(APPEND CMAKE_TRY_COMPILE_PLATFORM_VARIABLES ACT_ARM64_OPENCV_ROOT)
 
 # pkg-config (FindPkgConfig) must report the target's .pc files, not the host's.
 set(ENV{PKG_CONFIG_LIBDIR} "${_act_cross_files}/lib/pkgconfig:\

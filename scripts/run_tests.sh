@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # README command (2) and what CI runs (.ci/run): installs the dependencies, builds actengine and runs
 # every test, in stages (each one's wall time is printed at the end):
-#   1. the whole suite in one native build under AddressSanitizer + UndefinedBehaviorSanitizer,
-#      warnings as errors (build-asan/; -O1, the kernels -O2: a third of the build time of -O2
-#      everywhere, and the whole-model tests stay quick), then a smoke run of act_kernel_bench;
-#   2. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
+#   1. Release (build/, only what these need): the tests of the full-size generated models, which
+#      take seconds here and many minutes under ASan, and a smoke run of act_kernel_bench;
+#   2. every other test in a native build under AddressSanitizer + UndefinedBehaviorSanitizer
+#      (build-asan/; -O1 with the kernels at -O2, which builds in much less time than -O2
+#      everywhere while the whole-model tests stay quick);
+#   3. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
 #      Debian package (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
-#   3. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
-#   4. each parser's libFuzzer target for ACT_FUZZ_SECONDS (default 60; scripts/run_fuzz.sh;
+#   4. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
+#   5. each parser's libFuzzer target for ACT_FUZZ_SECONDS (default 60; scripts/run_fuzz.sh;
 #      ACT_SKIP_FUZZ=1 skips it).
 # The Release build users run (scripts/build.sh) compiles the same sources; its speed is measured by
 # act_bench and act_kernel_bench, never asserted by a test.
@@ -49,21 +51,36 @@ ACT_TEST_REQUIRE_ISAS=$(IFS=,; echo "${required[*]}")
 export ACT_TEST_REQUIRE_ISAS
 echo "kernel variants required by the tests: ${ACT_TEST_REQUIRE_ISAS:-none}"
 
+# Both native trees share the generated test checkpoints (generating them takes minutes).
+checkpoints="$root/build/test-checkpoints"
+# Tests of the full-size generated models (Presets/...: FP32 against float64 references, INT8
+# calibration and accuracy at 480x640): seconds each in Release, many minutes under ASan.
+full_size='^Presets/'
+
+echo "== Release build of the full-size model tests and the kernel benchmarks (-Werror) =="
+cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON \
+  -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints" >/dev/null
+cmake --build "$root/build" -j "$jobs" --target act_model_tests act_kernel_bench
+stage_done release-build
+echo "== Release: full-size model tests =="
+run_ctest "$root/build" -R "$full_size"
+stage_done release-tests
+echo "== kernel benchmarks (smoke run; the numbers are not judged) =="
+"$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01 >"$root/build/kernel_bench.txt" 2>&1 ||
+  { tail -n 40 "$root/build/kernel_bench.txt"; exit 1; }
+echo "$(grep -c 'GMAC/s=' "$root/build/kernel_bench.txt") benchmarks ran (build/kernel_bench.txt)"
+stage_done kernel-bench-smoke
+
 echo "== ASan + UBSan build (-Werror) =="
 # -g1 (line tables) is all the sanitizer reports need, and builds much faster than -g.
 ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DACT_SANITIZE=ON -DACT_WERROR=ON
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DACT_SANITIZE=ON -DACT_WERROR=ON -DACT_BUILD_BENCH=OFF \
+  -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
 stage_done asan-build
-echo "== ASan + UBSan tests =="
-export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
-run_ctest "$root/build-asan"
+echo "== ASan + UBSan: every other test =="
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+  run_ctest "$root/build-asan" -E "$full_size"
 stage_done asan-tests
-echo "== kernel benchmarks (smoke run under the sanitizers; the numbers are not judged) =="
-"$root/build-asan/bench/act_kernel_bench" --benchmark_min_time=0.01 >"$root/build-asan/kernel_bench.txt" 2>&1 ||
-  { tail -n 40 "$root/build-asan/kernel_bench.txt"; exit 1; }
-echo "$(grep -c GMAC "$root/build-asan/kernel_bench.txt") benchmarks ran (build-asan/kernel_bench.txt)"
-unset ASAN_OPTIONS UBSAN_OPTIONS
-stage_done kernel-bench-smoke
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then
   ACT_JOBS="$jobs" "$root/scripts/run_arm64_tests.sh"

@@ -133,13 +133,16 @@ class Converter {
   }
 
  private:
+  // The held-out frames when --holdout is not given: one per four calibration frames, 1 to 16.
+  static size_t default_holdout(size_t calibration_frames) { return std::clamp<size_t>(calibration_frames / 4, 1, 16); }
+
   void load_frames(const CalibSet* given, const ActbFile& blob) {
     const ModelConfig& config = fp32_->config();
     if (given) {
       frames_ = *given;
     } else if (!opt_.calib_sources.empty()) {
       if (opt_.frame_loader == nullptr) fail(StatusCode::kUnimplemented, "this program reads no calibration files (built without OpenCV)");
-      const size_t want = opt_.calib_samples + opt_.holdout.value_or(std::min<size_t>(16, std::max<size_t>(1, opt_.calib_samples / 4)));
+      const size_t want = opt_.calib_samples + opt_.holdout.value_or(default_holdout(opt_.calib_samples));
       progress_.line("reading calibration frames from " + std::to_string(opt_.calib_sources.size()) + " source(s) ...");
       frames_ = opt_.frame_loader(opt_.calib_sources, config, fp32_->info(), blob, want, opt_.seed);
     } else if (opt_.mode == QuantMode::kDynamic) {
@@ -152,7 +155,7 @@ class Converter {
     const size_t n = frames_.frames.size();
     if (n == 0) fail(StatusCode::kInvalidArgument, "no calibration frames");
     // Held-out frames interleaved through the sources, so both sets cover all of them.
-    size_t holdout = opt_.holdout.value_or(n >= 2 ? std::clamp<size_t>(n / 5, 1, 16) : 0);
+    size_t holdout = opt_.holdout.value_or(n >= 2 ? default_holdout(n - n / 5) : 0);  // about a fifth
     holdout = std::min(holdout, n - 1);
     const size_t stride = holdout ? n / holdout : 0;
     for (size_t i = 0; i < n; ++i) {

@@ -198,7 +198,8 @@ int main(int argc, char** argv) {
                "whenever something is wrong (stale frames, inference errors, serial errors, signals)."};
   Options opt;
   app.add_option("-m,--model", opt.model, "the .actb model (act_convert output)");
-  app.add_option("--camera", opt.camera, "camera: an index (0), a device (/dev/video0), a video file or a URL");
+  app.add_option("--camera", opt.camera, "camera: an index (0), a device (/dev/video0), a video file, an image "
+                 "sequence (frames/%06d.png), a URL or a GStreamer pipeline ending in appsink");
   app.add_option("--camera-size", opt.camera_size, "capture resolution WxH to request (default: the camera's); "
                                                    "frames are then resized to the model's input");
   app.add_option("--camera-fps", opt.camera_fps, "capture rate to request; a video file plays at this rate "

@@ -10,6 +10,7 @@ set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${ACT_BUILD_DIR:-$root/build}"
 seconds="${1:-180}"
+shift $(($# > 0 ? 1 : 0))  # the rest goes to act_drive (e.g. --control-priority 50, as on the rover)
 tolerance_kb="${ACT_SOAK_TOLERANCE_KB:-2048}"
 fixture="${ACT_SHARED_DIR:-$root/../shared}/fixtures/act-tiny"
 work="$(mktemp -d)"
@@ -21,7 +22,7 @@ frames=("$fixture"/sample*.png)
 for i in $(seq 0 299); do ln -s "${frames[$((i % ${#frames[@]}))]}" "$work/frames/$(printf %06d "$i").png"; done
 
 "$build/apps/act_drive" -m "$work/tiny.actb" --camera "$work/frames/%06d.png" --dry-run --threads 1 \
-  --duration "$seconds" --stats-every 60 >"$work/commands.txt" 2>"$work/log.txt" &
+  --duration "$seconds" --stats-every 60 "$@" >"$work/commands.txt" 2>"$work/log.txt" &
 pid=$!
 samples=()
 while kill -0 "$pid" 2>/dev/null; do

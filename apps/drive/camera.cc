@@ -21,16 +21,25 @@ bool is_index(const std::string& s) {
 }
 
 bool is_url(const std::string& s) { return s.find("://") != std::string::npos; }
+// An image sequence such as frames/%06d.png, read like a camera.
+bool is_image_pattern(const std::string& s) { return s.find('%') != std::string::npos; }
+// A GStreamer pipeline ending in appsink, e.g. a Pi camera: "libcamerasrc ! videoconvert ! appsink".
+bool is_gstreamer_pipeline(const std::string& s) { return s.find(" ! ") != std::string::npos; }
 
+// Each kind of source through one OpenCV backend, chosen here: files through FFmpeg, as act_convert's
+// calibration reads them (no fallback to GStreamer, which decodes differently and behaves differently
+// from one machine's plugin set to another's).
 void open_capture(cv::VideoCapture& video, const CameraOptions& options, bool is_file) {
   if (is_index(options.source)) {
     video.open(std::stoi(options.source), cv::CAP_ANY);
   } else if (options.source.rfind("/dev/", 0) == 0) {
     video.open(options.source, cv::CAP_V4L2);
   } else if (is_file) {
-    // Files through FFmpeg only, as act_convert's calibration reads them (no GStreamer fallback:
-    // it decodes differently and behaves differently from one machine's plugin set to another's).
     video.open(options.source, cv::CAP_FFMPEG);
+  } else if (is_image_pattern(options.source)) {
+    video.open(options.source, cv::CAP_IMAGES);
+  } else if (is_gstreamer_pipeline(options.source)) {
+    video.open(options.source, cv::CAP_GSTREAMER);
   } else if (is_url(options.source)) {
     // URLs: FFmpeg first, then whatever else this OpenCV has.
     if (!video.open(options.source, cv::CAP_FFMPEG)) video.open(options.source, cv::CAP_ANY);
@@ -50,9 +59,11 @@ Camera::Camera(CameraOptions options) : options_(std::move(options)), capture_(s
   open_capture(capture_->video, options_, is_file_);
   if (!capture_->video.isOpened()) {
     const bool missing_file = !is_index(options_.source) && !is_url(options_.source) &&
+                              !is_image_pattern(options_.source) && !is_gstreamer_pipeline(options_.source) &&
                               !std::filesystem::exists(options_.source);
     fail(StatusCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing_file ? ": no such file" : "") +
-                                    " (an index like 0, a device like /dev/video0, a video file or a URL)");
+                                    " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
+                                    "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
   }
   cv::Mat first;
   if (!capture_->video.read(first) || first.empty()) {

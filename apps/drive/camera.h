@@ -41,7 +41,9 @@ class FrameSource {
 };
 
 struct CameraOptions {
-  std::string source;  ///< an index ("0"), a device (/dev/video0), a video file or a URL
+  /// An index ("0"), a device (/dev/video0), a video file, an image sequence (frames/%06d.png), a URL
+  /// or a GStreamer pipeline ending in appsink.
+  std::string source;
   int width = 0;       ///< requested capture size; 0 = the driver's default
   int height = 0;
   double fps = 0;      ///< requested rate (a video file plays at its own rate when 0)

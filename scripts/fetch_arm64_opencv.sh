@@ -39,8 +39,17 @@ packages=()
 for m in "${modules[@]}"; do packages+=("libopencv-$m$soversion:arm64=$version"); done
 echo "fetch_arm64_opencv: downloading ${packages[*]}"
 # apt-get download writes into the current folder; as root it warns that its _apt user cannot.
-(cd "$dir/debs" && apt-get download -q "${packages[@]}" 2>&1 | grep -v "unsandboxed as root" || true)
+download() { (cd "$dir/debs" && apt-get download -q "${packages[@]}" 2>&1 | grep -v "unsandboxed as root" || true); }
+download
 debs=("$dir"/debs/*.deb)
+if [ ${#debs[@]} -ne ${#modules[@]} ] || [ ! -f "${debs[0]}" ]; then
+  echo "fetch_arm64_opencv: not in apt's package lists; updating them once"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  $SUDO apt-get update -q >/dev/null || true
+  download
+  debs=("$dir"/debs/*.deb)
+fi
 if [ ${#debs[@]} -ne ${#modules[@]} ] || [ ! -f "${debs[0]}" ]; then
   echo "fetch_arm64_opencv: could not download the arm64 packages ${packages[*]}" \
        "(is the arm64 architecture added and 'apt-get update' done? scripts/install_cross_deps.sh does both)" >&2

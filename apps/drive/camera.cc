@@ -23,7 +23,8 @@ bool is_index(const std::string& s) {
 bool is_url(const std::string& s) { return s.find("://") != std::string::npos; }
 // An image sequence such as frames/%06d.png, read like a camera.
 bool is_image_pattern(const std::string& s) { return s.find('%') != std::string::npos; }
-// A GStreamer pipeline ending in appsink, e.g. a Pi camera: "libcamerasrc ! videoconvert ! appsink".
+// A GStreamer pipeline ending in appsink, e.g. a Pi camera:
+// "libcamerasrc ! video/x-raw,width=640,height=480 ! videoconvert ! video/x-raw,format=BGR ! appsink".
 bool is_gstreamer_pipeline(const std::string& s) { return s.find(" ! ") != std::string::npos; }
 
 // Each kind of source through one OpenCV backend, chosen here: files through FFmpeg, as act_convert's

@@ -20,32 +20,43 @@ bool is_index(const std::string& s) {
   return !s.empty() && s.size() < 4 && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
 }
 
-bool is_url(const std::string& s) { return s.find("://") != std::string::npos; }
-// An image sequence such as frames/%06d.png, read like a camera.
-bool is_image_pattern(const std::string& s) { return s.find('%') != std::string::npos; }
-// A GStreamer pipeline ending in appsink, e.g. a Pi camera:
-// "libcamerasrc ! video/x-raw,width=640,height=480 ! videoconvert ! video/x-raw,format=BGR ! appsink".
-bool is_gstreamer_pipeline(const std::string& s) { return s.find(" ! ") != std::string::npos; }
+// What a --camera string names; each kind opens through one OpenCV backend (open_capture).
+enum class SourceKind {
+  kIndex,              // "0"
+  kDevice,             // /dev/video0
+  kFile,               // a video file
+  kGstreamerPipeline,  // e.g. a Pi camera: "libcamerasrc ! video/x-raw,width=640,height=480 ! videoconvert !
+                       //   video/x-raw,format=BGR ! appsink"
+  kUrl,                // rtsp://, http://... (may hold %-escapes, so before image sequences)
+  kImageSequence,      // frames/%06d.png, read like a camera
+  kUnknown,            // none of these: a path that does not exist, or a folder
+};
 
-// Each kind of source through one OpenCV backend, chosen here: files through FFmpeg, as act_convert's
-// calibration reads them (no fallback to GStreamer, which decodes differently and behaves differently
-// from one machine's plugin set to another's).
-void open_capture(cv::VideoCapture& video, const CameraOptions& options, bool is_file) {
-  if (is_index(options.source)) {
-    video.open(std::stoi(options.source), cv::CAP_ANY);
-  } else if (options.source.rfind("/dev/", 0) == 0) {
-    video.open(options.source, cv::CAP_V4L2);
-  } else if (is_file) {
-    video.open(options.source, cv::CAP_FFMPEG);
-  } else if (is_image_pattern(options.source)) {
-    video.open(options.source, cv::CAP_IMAGES);
-  } else if (is_gstreamer_pipeline(options.source)) {
-    video.open(options.source, cv::CAP_GSTREAMER);
-  } else if (is_url(options.source)) {
-    // URLs: FFmpeg first, then whatever else this OpenCV has.
-    if (!video.open(options.source, cv::CAP_FFMPEG)) video.open(options.source, cv::CAP_ANY);
+SourceKind source_kind(const std::string& s) {
+  if (is_index(s)) return SourceKind::kIndex;
+  if (s.rfind("/dev/", 0) == 0) return SourceKind::kDevice;
+  if (std::filesystem::is_regular_file(s)) return SourceKind::kFile;
+  if (s.find(" ! ") != std::string::npos) return SourceKind::kGstreamerPipeline;
+  if (s.find("://") != std::string::npos) return SourceKind::kUrl;
+  if (s.find('%') != std::string::npos) return SourceKind::kImageSequence;
+  return SourceKind::kUnknown;
+}
+
+// Files go through FFmpeg only, as act_convert's calibration reads them (no fallback to GStreamer,
+// which decodes differently and behaves differently from one machine's plugin set to another's).
+void open_capture(cv::VideoCapture& video, const CameraOptions& options, SourceKind kind) {
+  switch (kind) {
+    case SourceKind::kIndex: video.open(std::stoi(options.source), cv::CAP_ANY); break;
+    case SourceKind::kDevice: video.open(options.source, cv::CAP_V4L2); break;
+    case SourceKind::kFile: video.open(options.source, cv::CAP_FFMPEG); break;
+    case SourceKind::kGstreamerPipeline: video.open(options.source, cv::CAP_GSTREAMER); break;
+    case SourceKind::kUrl:  // FFmpeg first, then whatever else this OpenCV has
+      if (!video.open(options.source, cv::CAP_FFMPEG)) video.open(options.source, cv::CAP_ANY);
+      break;
+    case SourceKind::kImageSequence: video.open(options.source, cv::CAP_IMAGES); break;
+    case SourceKind::kUnknown: break;
   }
-  if (!video.isOpened() || is_file) return;
+  if (!video.isOpened() || kind == SourceKind::kFile) return;
   // Only the newest frame matters: keep the driver's queue short where it has one.
   video.set(cv::CAP_PROP_BUFFERSIZE, 1);
   if (options.width > 0) video.set(cv::CAP_PROP_FRAME_WIDTH, options.width);
@@ -56,13 +67,13 @@ void open_capture(cv::VideoCapture& video, const CameraOptions& options, bool is
 }  // namespace
 
 Camera::Camera(CameraOptions options) : options_(std::move(options)), capture_(std::make_unique<Capture>()) {
-  is_file_ = std::filesystem::is_regular_file(options_.source);
-  open_capture(capture_->video, options_, is_file_);
+  const SourceKind kind = source_kind(options_.source);
+  is_file_ = kind == SourceKind::kFile;
+  open_capture(capture_->video, options_, kind);
   if (!capture_->video.isOpened()) {
-    const bool missing_file = !is_index(options_.source) && !is_url(options_.source) &&
-                              !is_image_pattern(options_.source) && !is_gstreamer_pipeline(options_.source) &&
-                              !std::filesystem::exists(options_.source);
-    fail(StatusCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing_file ? ": no such file" : "") +
+    const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) &&
+                         !std::filesystem::exists(options_.source);
+    fail(StatusCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing ? ": no such file" : "") +
                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
                                     "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
   }
@@ -136,7 +147,7 @@ void Camera::run() {
     set_problem(State::kReconnecting, "camera '" + options_.source + "' stopped delivering frames; reopening");
     video.release();
     for (int i = 0; i < 10 && !stop_.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    if (!stop_.load()) open_capture(video, options_, false);
+    if (!stop_.load()) open_capture(video, options_, source_kind(options_.source));
   }
 }
 

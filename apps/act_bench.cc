@@ -23,10 +23,11 @@
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
 #include "apps/observation_file.h"
-#include "weights/actb.h"
-#include "weights/error.h"
-#include "weights/model_config.h"
-#include "weights/synthetic_model.h"
+#include "weights/blob/actb.h"
+#include "apps/status_error.h"
+#include "weights/blob/error.h"
+#include "weights/blob/model_config.h"
+#include "weights/import/synthetic_model.h"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -117,9 +118,9 @@ void build_builtin(const Options& opt, bool want_int8, BuiltinBlobs& out) {
   // In a child process, so that the calibration's FP32 run and its buffers do not count in this
   // process's peak RSS. The child reports the held-out error through a pipe.
   int fds[2];
-  if (::pipe(fds) != 0) act::fail(act::StatusCode::kIoError, "pipe() failed");
+  if (::pipe(fds) != 0) act::fail(act::ErrorCode::kIoError, "pipe() failed");
   const pid_t child = ::fork();
-  if (child < 0) act::fail(act::StatusCode::kIoError, "fork() failed");
+  if (child < 0) act::fail(act::ErrorCode::kIoError, "fork() failed");
   if (child == 0) {
     ::close(fds[0]);
     int code = 0;
@@ -140,20 +141,20 @@ void build_builtin(const Options& opt, bool want_int8, BuiltinBlobs& out) {
   ::close(fds[0]);
   int status = 0;
   ::waitpid(child, &status, 0);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::StatusCode::kInternal, "INT8 conversion of the built-in model failed");
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::ErrorCode::kInternal, "INT8 conversion of the built-in model failed");
   out.has_int8 = true;
   out.int8_note = "INT8 static, mse calibration on 4 synthetic frames (held-out action MSE " + mse + ")";
 }
 
 std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   auto engine_or = act::Engine::open(path, {.threads = threads, .profile = true});
-  if (!engine_or.ok()) act::fail(engine_or.status().code(), engine_or.status().message());
+  act::throw_if_failed(engine_or.status());
   return std::move(*engine_or);
 }
 
 int run(const Options& opt) {
   if (opt.compare && !opt.model.empty() && opt.compare_with.empty()) {
-    act::fail(act::StatusCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
+    act::fail(act::ErrorCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
   }
   // The model: a blob, or a built-in synthetic one written to a temporary blob.
   std::string blob_path = opt.model, model_label = opt.model, other_path = opt.compare_with;
@@ -168,7 +169,7 @@ int run(const Options& opt) {
     build_ms = ms_since(start);
     model_label = "built-in \"" + opt.config + "\" (synthetic weights, seed " + std::to_string(opt.seed) + ")";
   } else if (opt.precision != "fp32") {
-    act::fail(act::StatusCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
+    act::fail(act::ErrorCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
   }
   const act::ActbFile blob_file = act::ActbFile::open(blob_path);
   const act::ModelConfig config = act::ModelConfig::from_json(blob_file.config());
@@ -183,7 +184,7 @@ int run(const Options& opt) {
   if (!other_path.empty()) {
     other = open_engine(other_path, opt.threads);
     if (other->model_info().chunk_values() != info.chunk_values() || other->model_info().summary != info.summary) {
-      act::fail(act::StatusCode::kInvalidArgument, "--compare-with " + other_path + " is not the same model (" +
+      act::fail(act::ErrorCode::kInvalidArgument, "--compare-with " + other_path + " is not the same model (" +
                 other->model_info().summary + " vs " + info.summary + ")");
     }
   }
@@ -203,7 +204,7 @@ int run(const Options& opt) {
   std::vector<float> chunk(info.chunk_values()), other_chunk(info.chunk_values());
   auto infer = [&](act::Engine& e, int i, std::vector<float>& out) {
     const act::Status s = e.infer_normalized(observation(i), out);
-    if (!s.ok()) act::fail(s.code(), s.message());
+    act::throw_if_failed(s);
   };
   const auto first_start = Clock::now();
   infer(engine, 0, chunk);

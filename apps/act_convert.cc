@@ -9,11 +9,11 @@
 #include "apps/convert/int8_conversion.h"
 #include "apps/deploy_package.h"
 #include "apps/pytorch_options.h"
-#include "weights/config_inference.h"
-#include "weights/error.h"
-#include "weights/file_util.h"
-#include "weights/lerobot_import.h"
-#include "weights/signal_cleanup.h"
+#include "weights/import/config_inference.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
+#include "weights/import/lerobot_import.h"
+#include "apps/signal_cleanup.h"
 
 namespace {
 
@@ -86,20 +86,20 @@ int main(int argc, char** argv) {
   act::install_signal_cleanup();  // a killed conversion leaves no partial blob or scratch folder
   try {
     if (precision == "fp32" && (!int8.calib_sources.empty() || app.count("--mode") || app.count("--max-mse") || app.count("--report"))) {
-      act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --max-mse and --report need --precision int8");
+      act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --max-mse and --report need --precision int8");
     }
     if (!package.empty()) {
-      if (!output.empty()) act::fail(act::StatusCode::kInvalidArgument, "give either -o or --package (which writes " +
+      if (!output.empty()) act::fail(act::ErrorCode::kInvalidArgument, "give either -o or --package (which writes " +
                                      std::string(act::kPackageBlobName) + " into the folder)");
       output = act::prepare_package_dir(package);
     }
-    if (output.empty() && !explain) act::fail(act::StatusCode::kInvalidArgument, "--output (or --package, or --explain) is required");
+    if (output.empty() && !explain) act::fail(act::ErrorCode::kInvalidArgument, "--output (or --package, or --explain) is required");
     if (!quiet) std::cerr << "reading " << checkpoint << " ...\n";
     act::ImportedModel model;
     std::string source_kind;
     if (std::filesystem::is_directory(checkpoint)) {
       if (act::any_pytorch_option(app)) {
-        act::fail(act::StatusCode::kInvalidArgument, "the .pth options (--config, --stats, ...) do not apply to a LeRobot "
+        act::fail(act::ErrorCode::kInvalidArgument, "the .pth options (--config, --stats, ...) do not apply to a LeRobot "
                   "checkpoint folder: its config.json and statistics are in the folder");
       }
       if (explain) std::cout << "checkpoint   " << checkpoint << ": a LeRobot checkpoint folder; every value comes from its config.json\n";

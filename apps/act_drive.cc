@@ -19,7 +19,7 @@
 #include "apps/drive/inference.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace {
 
@@ -92,15 +92,15 @@ Calibration load_calibration(const Options& opt) {
 
 // Checks that act_drive can feed this model and act on its output; throws with what does not fit.
 void check_model(const act::ModelInfo& info, const Calibration& calibration, const Options& opt) {
-  using act::StatusCode;
-  act::check(info.cameras.size() == 1, StatusCode::kUnimplemented,
+  using act::ErrorCode;
+  act::check(info.cameras.size() == 1, ErrorCode::kUnimplemented,
              "act_drive drives with one camera; the model has " + std::to_string(info.cameras.size()));
-  act::check(info.env_state_dim == 0, StatusCode::kUnimplemented,
+  act::check(info.env_state_dim == 0, ErrorCode::kUnimplemented,
              "the model needs an environment state (" + info.env_state_key + "), which a rover does not have");
-  act::check(calibration.max_action_index() < info.action_dim, StatusCode::kInvalidArgument,
+  act::check(calibration.max_action_index() < info.action_dim, ErrorCode::kInvalidArgument,
              "the calibration uses action index " + std::to_string(calibration.max_action_index()) + " but the model has " +
                  std::to_string(info.action_dim) + " action values");
-  act::check(opt.state != "last-action" || info.state_dim <= info.action_dim, StatusCode::kInvalidArgument,
+  act::check(opt.state != "last-action" || info.state_dim <= info.action_dim, ErrorCode::kInvalidArgument,
              "--state last-action: the model's state has " + std::to_string(info.state_dim) + " values but its action only " +
                  std::to_string(info.action_dim) + " (use --state zeros)");
 }
@@ -126,7 +126,7 @@ int drive(const Options& opt) {
   const Calibration calibration = load_calibration(opt);
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
   if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.width, camera_options.height)) {
-    act::fail(act::StatusCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected WxH, e.g. 640x360");
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected WxH, e.g. 640x360");
   }
   Camera camera(camera_options);
 
@@ -244,10 +244,10 @@ int main(int argc, char** argv) {
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
     }
-    if (opt.model.empty()) act::fail(act::StatusCode::kInvalidArgument, "--model is required");
-    if (opt.camera.empty()) act::fail(act::StatusCode::kInvalidArgument, "--camera is required");
+    if (opt.model.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--model is required");
+    if (opt.camera.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--camera is required");
     if (opt.serial.empty() && !opt.dry_run) {
-      act::fail(act::StatusCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
+      act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
     }
     return drive(opt);
   } catch (const std::exception& e) {

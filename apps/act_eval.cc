@@ -9,8 +9,9 @@
 
 #include "actengine/engine.h"
 #include "apps/observation_file.h"
-#include "weights/error.h"
-#include "weights/safetensors.h"
+#include "apps/status_error.h"
+#include "weights/blob/error.h"
+#include "weights/import/safetensors.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"act_eval: run an .actb model on observations stored in a safetensors file "
@@ -42,7 +43,7 @@ int main(int argc, char** argv) {
                                                       : act::ImageSource::kAuto;
     const act::ObservationBatch batch = act::ObservationBatch::read(input_path, info, source);
     if (compare && !batch.has_expected_actions()) {
-      act::fail(act::StatusCode::kNotFound, input_path + ": --compare needs an 'output.action' tensor");
+      act::fail(act::ErrorCode::kNotFound, input_path + ": --compare needs an 'output.action' tensor");
     }
     const size_t per = info.chunk_values();
     std::vector<float> actions(batch.size() * per);
@@ -50,7 +51,7 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < batch.size(); ++i) {
       std::span<float> out(actions.data() + i * per, per);
       const act::Status s = engine.infer(batch.at(i), out);
-      if (!s.ok()) act::fail(s.code(), "observation " + std::to_string(i) + ": " + s.message());
+      act::throw_if_failed(s, "observation " + std::to_string(i));
       if (compare) {
         const float* ref = batch.expected_actions(i);
         for (size_t j = 0; j < per; ++j) {

@@ -6,8 +6,8 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/drive/calibration.h"
-#include "weights/error.h"
-#include "weights/file_util.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act {
 
@@ -75,7 +75,7 @@ std::string readme(const ModelConfig& m, const std::string& source) {
 std::string prepare_package_dir(const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec) fail(StatusCode::kIoError, "cannot create package folder " + dir + ": " + ec.message());
+  if (ec) fail(ErrorCode::kIoError, "cannot create package folder " + dir + ": " + ec.message());
   return (fs::path(dir) / kPackageBlobName).string();
 }
 

@@ -3,7 +3,7 @@
 
 #include <string>
 
-#include "weights/model_config.h"
+#include "weights/blob/model_config.h"
 
 namespace act {
 

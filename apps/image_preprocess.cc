@@ -2,19 +2,19 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
 void frame_to_model_rgb(const cv::Mat& frame, int height, int width, std::vector<uint8_t>& rgb) {
-  if (frame.empty()) fail(StatusCode::kInvalidArgument, "empty camera frame");
-  if (frame.depth() != CV_8U) fail(StatusCode::kInvalidArgument, "camera frame is not 8-bit");
+  if (frame.empty()) fail(ErrorCode::kInvalidArgument, "empty camera frame");
+  if (frame.depth() != CV_8U) fail(ErrorCode::kInvalidArgument, "camera frame is not 8-bit");
   cv::Mat converted;
   switch (frame.channels()) {
     case 1: cv::cvtColor(frame, converted, cv::COLOR_GRAY2RGB); break;
     case 3: cv::cvtColor(frame, converted, cv::COLOR_BGR2RGB); break;
     case 4: cv::cvtColor(frame, converted, cv::COLOR_BGRA2RGB); break;
-    default: fail(StatusCode::kInvalidArgument, "camera frame has " + std::to_string(frame.channels()) + " channels");
+    default: fail(ErrorCode::kInvalidArgument, "camera frame has " + std::to_string(frame.channels()) + " channels");
   }
   rgb.resize(static_cast<size_t>(height) * width * 3);
   cv::Mat out(height, width, CV_8UC3, rgb.data());

@@ -4,7 +4,7 @@
 #include <iosfwd>
 #include <string>
 
-#include "weights/config_inference.h"
+#include "weights/import/config_inference.h"
 
 namespace CLI {
 class App;

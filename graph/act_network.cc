@@ -2,8 +2,8 @@
 
 #include <cmath>
 
-#include "weights/blob_names.h"
-#include "weights/error.h"
+#include "weights/blob/blob_names.h"
+#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -15,9 +15,9 @@ std::string cam_prefix(size_t camera) { return "cam" + std::to_string(camera) + 
 
 const float* ActNetwork::weight(const std::string& name, const std::vector<int64_t>& shape) const {
   const ActbTensor* t = blob_.find(name);
-  if (!t) fail(StatusCode::kDataLoss, blob_.path() + ": missing tensor \"" + name + "\"");
+  if (!t) fail(ErrorCode::kDataLoss, blob_.path() + ": missing tensor \"" + name + "\"");
   if (t->shape != shape) {
-    fail(StatusCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+    fail(ErrorCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
          ", the model config implies " + shape_string(shape));
   }
   return t->f32();
@@ -27,15 +27,15 @@ const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::ve
   const ActbTensor* t = blob_.find(name);
   if (!t || t->dtype != DType::kI8) return nullptr;
   if (t->shape != shape) {
-    fail(StatusCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+    fail(ErrorCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
          ", the model config implies " + shape_string(shape));
   }
-  if (!int8_) fail(StatusCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" in a blob whose precision is not int8");
+  if (!int8_) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" in a blob whose precision is not int8");
   if (t->quant.scales.size() != static_cast<size_t>(shape[0]) || t->quant.axis != 0) {
-    fail(StatusCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" needs one scale per output channel");
+    fail(ErrorCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" needs one scale per output channel");
   }
   for (float s : t->quant.scales) {
-    if (!(s > 0.0f) || !std::isfinite(s)) fail(StatusCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" has a bad scale");
+    if (!(s > 0.0f) || !std::isfinite(s)) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" has a bad scale");
   }
   return t;
 }
@@ -71,7 +71,7 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
 ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
   if (!t.s8) return t;
   if (auto it = converted_.find(t.id); it != converted_.end() && !it->second.s8) return it->second;
-  check(t.params == kNoValue, StatusCode::kInternal, "dequantizing a dynamically quantized value");
+  check(t.params == kNoValue, ErrorCode::kInternal, "dequantizing a dynamically quantized value");
   const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const std::string name = v.name + ".f32";
   const ValueId y = graph_.add_value(name, v.shape);
@@ -93,7 +93,7 @@ ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
 }
 
 ActNetwork::Tensor ActNetwork::as_dynamic_s8(const Tensor& t) {
-  check(!t.s8, StatusCode::kInternal, "dynamic quantization of an int8 value");
+  check(!t.s8, ErrorCode::kInternal, "dynamic quantization of an int8 value");
   if (auto it = converted_.find(t.id); it != converted_.end() && it->second.params != kNoValue) return it->second;
   const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const std::string name = v.name + ".s8dyn";
@@ -333,10 +333,10 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
 ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob) : config_(config), blob_(blob) {
   int8_ = blob_.config().value("precision", "") == "int8";
   if (int8_) {
-    if (!blob_.config().contains("quantization")) fail(StatusCode::kDataLoss, blob_.path() + ": int8 blob without a quantization section");
+    if (!blob_.config().contains("quantization")) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 blob without a quantization section");
     quant_ = QuantConfig::from_json(blob_.config()["quantization"]);
     const kernels::GemmS8Selection selection = kernels::gemm_s8_select();
-    if (selection.kernels == nullptr) fail(StatusCode::kInvalidArgument, selection.error);
+    if (selection.kernels == nullptr) fail(ErrorCode::kInvalidArgument, selection.error);
     gemm_s8_ = selection.kernels;
   }
   const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;

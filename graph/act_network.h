@@ -15,9 +15,9 @@
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
 #include "graph/ops_int8.h"
-#include "weights/actb.h"
-#include "weights/model_config.h"
-#include "weights/quant_config.h"
+#include "weights/blob/actb.h"
+#include "weights/blob/model_config.h"
+#include "weights/blob/quant_config.h"
 
 namespace act::graph {
 

@@ -5,7 +5,7 @@
 #include <map>
 
 #include "kernels/gemm_s8/gemm_s8.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -116,8 +116,8 @@ void Graph::plan(int threads, bool keep_all_values) {
 }
 
 void Graph::run(ThreadPool& pool, StageTimes* times) {
-  check(planned_, StatusCode::kInternal, "Graph::run before plan");
-  check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), StatusCode::kInternal,
+  check(planned_, ErrorCode::kInternal, "Graph::run before plan");
+  check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
         "graph planned for fewer threads than the pool has");
   RunContext ctx(arena_.data(), values_, pool, arena_.data() + scratch_offset_, scratch_per_thread_);
   if (times == nullptr) {

@@ -5,7 +5,7 @@
 #include <cstdlib>
 #include <limits>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -34,7 +34,7 @@ void PackedWeights::Free::operator()(void* p) const { std::free(p); }
 
 PackedWeights::PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
                              int32_t a_zero_point) {
-  check(k >= 1 && k <= kernels::kGemmS8MaxK, StatusCode::kUnimplemented,
+  check(k >= 1 && k <= kernels::kGemmS8MaxK, ErrorCode::kUnimplemented,
         "an int8 layer with " + std::to_string(k) + " inputs per output (the INT8 kernels take at most " +
             std::to_string(kernels::kGemmS8MaxK) + ")");
   const size_t bytes = kernels.packed_size(n, k);
@@ -124,7 +124,7 @@ ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec
     : kernels_(kernels), spec_(spec), tile_pixels_(kernels::conv_s8_tile_pixels(spec.shape)),
       packed_(kernels, spec.shape.out_c, spec.shape.patch_size(), spec.weight,
               spec.s8_out ? integer_bias(spec).data() : nullptr, spec.input_params == kNoValue ? spec.input_q.zero_point : 0) {
-  check(!spec.s8_out || spec.input_params == kNoValue, StatusCode::kInternal, "an int8-out conv needs static input parameters");
+  check(!spec.s8_out || spec.input_params == kNoValue, ErrorCode::kInternal, "an int8-out conv needs static input parameters");
   if (spec.s8_out) {
     requant_scale_.resize(static_cast<size_t>(spec.shape.out_c));
     for (size_t n = 0; n < requant_scale_.size(); ++n) {
@@ -218,7 +218,7 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
       epilogue_(epilogue), packed_(kernels, out, in, weight, nullptr, 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
-  check(!(bias_table && has_residual), StatusCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
+  check(!(bias_table && has_residual), ErrorCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
   for (const MatrixRef* r : {&x_, &bias_, &residual_}) {
     if (r->value != kNoValue) inputs.push_back(r->value);
   }

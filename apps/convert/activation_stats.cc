@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "kernels/quant/quant_s8.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -21,7 +21,7 @@ CalibrationMethod parse_calibration_method(const std::string& name) {
   if (name == "minmax") return CalibrationMethod::kMinMax;
   if (name == "percentile") return CalibrationMethod::kPercentile;
   if (name == "mse") return CalibrationMethod::kMse;
-  fail(StatusCode::kInvalidArgument, "unknown calibration method \"" + name + "\" (minmax, percentile, mse)");
+  fail(ErrorCode::kInvalidArgument, "unknown calibration method \"" + name + "\" (minmax, percentile, mse)");
 }
 
 namespace {

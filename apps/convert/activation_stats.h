@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "weights/quant_config.h"
+#include "weights/blob/quant_config.h"
 
 namespace act {
 

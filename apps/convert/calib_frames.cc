@@ -15,8 +15,8 @@
 
 #include "apps/image_preprocess.h"
 #include "apps/observation_file.h"
-#include "weights/blob_names.h"
-#include "weights/error.h"
+#include "weights/blob/blob_names.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -61,7 +61,7 @@ class Loader {
 
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
-    if (!fs::exists(p)) fail(StatusCode::kNotFound, "calibration source not found: " + source);
+    if (!fs::exists(p)) fail(ErrorCode::kNotFound, "calibration source not found: " + source);
     if (fs::is_directory(p)) {
       if (fs::exists(p / "meta" / "info.json") && fs::is_directory(p / "videos")) return add_lerobot_dataset(p, max_frames);
       if (fs::exists(p / "log.jsonl")) return add_recording(p, max_frames);
@@ -71,7 +71,7 @@ class Loader {
     if (ext == ".safetensors") return add_observation_file(p, max_frames);
     if (kVideoExtensions.count(ext)) return add_video(p, max_frames);
     if (kImageExtensions.count(ext)) return add_images({p}, max_frames, p.string());
-    fail(StatusCode::kInvalidArgument, "calibration source " + source +
+    fail(ErrorCode::kInvalidArgument, "calibration source " + source +
          " is not a folder, a video (mp4, avi, mkv, mov, webm), an image or an observation .safetensors file");
   }
 
@@ -109,10 +109,10 @@ class Loader {
   }
 
   void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
-    if (files.empty()) fail(StatusCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
+    if (files.empty()) fail(ErrorCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
     for (size_t i : spread(files.size(), max_frames)) {
       const cv::Mat image = cv::imread(files[i].string(), cv::IMREAD_COLOR);
-      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode image " + files[i].string());
+      if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + files[i].string());
       add_frame_all_cameras(image, files[i].string());
     }
   }
@@ -125,7 +125,7 @@ class Loader {
   static cv::VideoCapture open_video(const fs::path& p) {
     // FFmpeg only, as act_drive reads video files: the same decoder gives the same frames.
     cv::VideoCapture cap(p.string(), cv::CAP_FFMPEG);
-    if (!cap.isOpened()) fail(StatusCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
+    if (!cap.isOpened()) fail(ErrorCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
     return cap;
   }
 
@@ -157,10 +157,10 @@ class Loader {
 
   void add_video(const fs::path& p, size_t max_frames) {
     const size_t n = video_length(p);
-    if (n == 0) fail(StatusCode::kDataLoss, "video " + p.string() + " has no frames");
+    if (n == 0) fail(ErrorCode::kDataLoss, "video " + p.string() + " has no frames");
     const std::vector<size_t> wanted = spread(n, max_frames);
     const std::vector<cv::Mat> frames = video_frames(p, wanted);
-    if (frames.empty()) fail(StatusCode::kDataLoss, "could not decode any frame of " + p.string());
+    if (frames.empty()) fail(ErrorCode::kDataLoss, "could not decode any frame of " + p.string());
     for (size_t i = 0; i < frames.size(); ++i) add_frame_all_cameras(frames[i], p.string() + "#" + std::to_string(wanted[i]));
   }
 
@@ -178,10 +178,10 @@ class Loader {
         }
       }
       if (files.empty()) {
-        fail(StatusCode::kNotFound, "LeRobot dataset " + dir.string() + " has no videos for camera \"" + cam.key + "\"");
+        fail(ErrorCode::kNotFound, "LeRobot dataset " + dir.string() + " has no videos for camera \"" + cam.key + "\"");
       }
       if (!per_camera.empty() && files.size() != per_camera[0].size()) {
-        fail(StatusCode::kDataLoss, "LeRobot dataset " + dir.string() + ": cameras have different numbers of video files");
+        fail(ErrorCode::kDataLoss, "LeRobot dataset " + dir.string() + ": cameras have different numbers of video files");
       }
       per_camera.push_back(std::move(files));
     }
@@ -236,7 +236,7 @@ class Loader {
     if (entries.empty()) return add_image_folder(dir, max_frames);
     for (size_t i : spread(entries.size(), max_frames)) {
       const cv::Mat image = cv::imread(entries[i].first.string(), cv::IMREAD_COLOR);
-      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
+      if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
       add_frame_all_cameras(image, entries[i].first.string(), &entries[i].second);
     }
   }
@@ -283,7 +283,7 @@ class Loader {
 
 CalibSet load_calibration_frames(const std::vector<std::string>& sources, const ModelConfig& config, const ModelInfo& info,
                                  const ActbFile& blob, size_t max_frames, uint64_t seed) {
-  if (sources.empty()) fail(StatusCode::kInvalidArgument, "no calibration sources given");
+  if (sources.empty()) fail(ErrorCode::kInvalidArgument, "no calibration sources given");
   Loader loader(config, info, blob, seed);
   // Every source contributes its share of the frames.
   const size_t share = std::max<size_t>(1, (max_frames + sources.size() - 1) / sources.size());

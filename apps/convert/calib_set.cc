@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "weights/blob_names.h"
+#include "weights/blob/blob_names.h"
 
 namespace act {
 

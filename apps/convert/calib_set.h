@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "actengine/engine.h"
-#include "weights/actb.h"
-#include "weights/model_config.h"
+#include "weights/blob/actb.h"
+#include "weights/blob/model_config.h"
 
 namespace act {
 

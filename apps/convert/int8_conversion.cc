@@ -13,9 +13,9 @@
 #include <sstream>
 
 #include "engine/src/engine_impl.h"
-#include "weights/error.h"
-#include "weights/quantize_model.h"
-#include "weights/signal_cleanup.h"
+#include "weights/blob/error.h"
+#include "weights/quantize/quantize_model.h"
+#include "apps/signal_cleanup.h"
 
 namespace act {
 
@@ -33,7 +33,7 @@ class ScratchDir {
     path_ = parent / (".act_convert." + std::to_string(::getpid()) + "." + std::to_string(rd()) + ".tmp");
     std::error_code ec;
     if (!fs::create_directory(path_, ec)) {
-      fail(StatusCode::kIoError, "cannot create a scratch folder " + path_.string() + ": " + ec.message());
+      fail(ErrorCode::kIoError, "cannot create a scratch folder " + path_.string() + ": " + ec.message());
     }
     remove_on_signal_.emplace_back(std::make_unique<SignalCleanup>(path_.string(), true));
     for (const char* f : kFiles) remove_on_signal_.emplace_back(std::make_unique<SignalCleanup>(file(f)));
@@ -120,13 +120,13 @@ class Converter {
     result.report["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     result.text = text_report(result.report);
     if (opt_.max_mse && !(err.mse <= *opt_.max_mse)) {
-      fail(StatusCode::kFailedPrecondition, "the INT8 model misses --max-mse: held-out MSE " + fmt(err.mse) + " > " +
+      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses --max-mse: held-out MSE " + fmt(err.mse) + " > " +
            fmt(*opt_.max_mse) + " (normalised units); nothing was written. Try --mode mixed --target-mse " +
            fmt(*opt_.max_mse) + ", more calibration frames, or another --calib-method.\n" + result.text);
     }
     std::error_code ec;
     fs::rename(blob, output_, ec);
-    if (ec) fail(StatusCode::kIoError, "cannot move the INT8 blob to " + output_ + ": " + ec.message());
+    if (ec) fail(ErrorCode::kIoError, "cannot move the INT8 blob to " + output_ + ": " + ec.message());
     result.bytes = fs::file_size(output_);
     result.report["int8_bytes"] = result.bytes;
     return result;
@@ -141,19 +141,19 @@ class Converter {
     if (given) {
       frames_ = *given;
     } else if (!opt_.calib_sources.empty()) {
-      if (opt_.frame_loader == nullptr) fail(StatusCode::kUnimplemented, "this program reads no calibration files (built without OpenCV)");
+      if (opt_.frame_loader == nullptr) fail(ErrorCode::kUnimplemented, "this program reads no calibration files (built without OpenCV)");
       const size_t want = opt_.calib_samples + opt_.holdout.value_or(default_holdout(opt_.calib_samples));
       progress_.line("reading calibration frames from " + std::to_string(opt_.calib_sources.size()) + " source(s) ...");
       frames_ = opt_.frame_loader(opt_.calib_sources, config, fp32_->info(), blob, want, opt_.seed);
     } else if (opt_.mode == QuantMode::kDynamic) {
       frames_ = synthetic_calibration_frames(config, blob, opt_.holdout.value_or(8), opt_.seed);
     } else {
-      fail(StatusCode::kInvalidArgument, std::string(quant_mode_name(opt_.mode)) +
+      fail(ErrorCode::kInvalidArgument, std::string(quant_mode_name(opt_.mode)) +
            " quantization needs calibration frames: --calib DIR|VIDEO|DATASET|OBS.safetensors "
            "(or --mode dynamic, which needs none)");
     }
     const size_t n = frames_.frames.size();
-    if (n == 0) fail(StatusCode::kInvalidArgument, "no calibration frames");
+    if (n == 0) fail(ErrorCode::kInvalidArgument, "no calibration frames");
     // Held-out frames interleaved through the sources, so both sets cover all of them.
     size_t holdout = opt_.holdout.value_or(n >= 2 ? default_holdout(n - n / 5) : 0);  // about a fifth
     holdout = std::min(holdout, n - 1);
@@ -269,7 +269,7 @@ class Converter {
   // Mixed: the fewest float layers (most sensitive first) that meet the target.
   ActionError choose_float_layers(QuantConfig& quant, const std::string& blob, ActionError all_int8,
                                   std::vector<std::pair<std::string, double>>& sensitivity) {
-    if (!opt_.target_mse) fail(StatusCode::kInvalidArgument, "--mode mixed needs --target-mse (held-out MSE in normalised units)");
+    if (!opt_.target_mse) fail(ErrorCode::kInvalidArgument, "--mode mixed needs --target-mse (held-out MSE in normalised units)");
     const double target = *opt_.target_mse;
     progress_.line("all layers int8: held-out MSE " + fmt(all_int8.mse) + " (target " + fmt(target) + ")");
     if (all_int8.mse <= target) return all_int8;
@@ -298,7 +298,7 @@ class Converter {
     };
     auto [best, best_err] = try_prefix(layers.size());
     if (!(best_err.mse <= target)) {
-      fail(StatusCode::kFailedPrecondition, "--target-mse " + fmt(target) + " cannot be met: even with every layer in float "
+      fail(ErrorCode::kFailedPrecondition, "--target-mse " + fmt(target) + " cannot be met: even with every layer in float "
            "the held-out MSE is " + fmt(best_err.mse));
     }
     fs::rename(probe, blob);

@@ -11,8 +11,8 @@
 
 #include "apps/convert/activation_stats.h"
 #include "apps/convert/calib_set.h"
-#include "weights/lerobot_import.h"
-#include "weights/quant_config.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/blob/quant_config.h"
 
 namespace act {
 

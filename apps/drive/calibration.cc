@@ -6,7 +6,7 @@
 #include <set>
 
 #include "apps/arduino/act_rover/rover_protocol.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -21,7 +21,7 @@ constexpr EndpointNames kSteeringNames{"left_us", "center_us", "right_us"};
 constexpr EndpointNames kThrottleNames{"reverse_us", "neutral_us", "forward_us"};
 
 [[noreturn]] void bad(const std::string& source, const std::string& what) {
-  fail(StatusCode::kInvalidArgument, "calibration " + source + ": " + what);
+  fail(ErrorCode::kInvalidArgument, "calibration " + source + ": " + what);
 }
 
 void reject_unknown_keys(const nlohmann::json& object, const std::set<std::string>& known, const std::string& source,
@@ -124,12 +124,12 @@ Calibration Calibration::from_json(const nlohmann::json& json, const std::string
 
 Calibration Calibration::load(const std::string& path) {
   std::ifstream in(path);
-  if (!in) fail(StatusCode::kNotFound, "calibration file " + path + " cannot be opened");
+  if (!in) fail(ErrorCode::kNotFound, "calibration file " + path + " cannot be opened");
   nlohmann::json json;
   try {
     json = nlohmann::json::parse(in);
   } catch (const nlohmann::json::exception& e) {
-    fail(StatusCode::kInvalidArgument, "calibration " + path + ": not valid JSON: " + e.what());
+    fail(ErrorCode::kInvalidArgument, "calibration " + path + ": not valid JSON: " + e.what());
   }
   return from_json(json, path);
 }

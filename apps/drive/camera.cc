@@ -6,7 +6,7 @@
 
 #include <opencv2/videoio.hpp>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::drive {
 
@@ -73,16 +73,16 @@ Camera::Camera(CameraOptions options) : options_(std::move(options)), capture_(s
   if (!capture_->video.isOpened()) {
     const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) &&
                          !std::filesystem::exists(options_.source);
-    fail(StatusCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing ? ": no such file" : "") +
+    fail(ErrorCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing ? ": no such file" : "") +
                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
                                     "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
   }
   cv::Mat first;
   if (!capture_->video.read(first) || first.empty()) {
-    fail(StatusCode::kIoError, "camera '" + options_.source + "' opened but delivered no frame");
+    fail(ErrorCode::kIoError, "camera '" + options_.source + "' opened but delivered no frame");
   }
   if (first.type() != CV_8UC3) {
-    fail(StatusCode::kUnimplemented, "camera '" + options_.source + "' delivers " + std::to_string(first.channels()) +
+    fail(ErrorCode::kUnimplemented, "camera '" + options_.source + "' delivers " + std::to_string(first.channels()) +
                                          "-channel frames; act_drive needs 8-bit colour (BGR)");
   }
   width_ = first.cols;

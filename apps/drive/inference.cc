@@ -7,7 +7,8 @@
 #include <cstring>
 
 #include "apps/image_preprocess.h"
-#include "weights/error.h"
+#include "apps/status_error.h"
+#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -32,7 +33,7 @@ class EngineModel : public ChunkModel {
 
 std::unique_ptr<ChunkModel> open_engine_model(const std::string& path, int threads) {
   auto engine = Engine::open(path, {.threads = threads});
-  if (!engine.ok()) fail(engine.status().code(), engine.status().message());
+  throw_if_failed(engine.status());
   return std::make_unique<EngineModel>(std::move(engine.value()));
 }
 

@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace fs = std::filesystem;
 
@@ -20,7 +20,7 @@ constexpr size_t kMaxQueuedFrames = 64;
 
 std::FILE* open_table(const fs::path& path) {
   std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) fail(StatusCode::kIoError, "--record: cannot create " + path.string() + ": " + std::strerror(errno));
+  if (!f) fail(ErrorCode::kIoError, "--record: cannot create " + path.string() + ": " + std::strerror(errno));
   return f;
 }
 
@@ -41,14 +41,14 @@ Recorder::Recorder(const std::string& dir, int state_dim, int action_dim, const 
     : dir_(dir), state_dim_(state_dim), action_dim_(action_dim) {
   std::error_code ec;
   if (fs::exists(dir) && !fs::is_empty(dir, ec)) {
-    fail(StatusCode::kInvalidArgument, "--record: " + dir + " exists and is not empty (choose a new folder)");
+    fail(ErrorCode::kInvalidArgument, "--record: " + dir + " exists and is not empty (choose a new folder)");
   }
   fs::create_directories(fs::path(dir) / "frames", ec);
-  if (ec) fail(StatusCode::kIoError, "--record: cannot create " + dir + "/frames: " + ec.message());
+  if (ec) fail(ErrorCode::kIoError, "--record: cannot create " + dir + "/frames: " + ec.message());
   {
     std::ofstream out(fs::path(dir) / "meta.json");
     out << meta.dump(2) << "\n";
-    if (!out) fail(StatusCode::kIoError, "--record: cannot write " + dir + "/meta.json");
+    if (!out) fail(ErrorCode::kIoError, "--record: cannot write " + dir + "/meta.json");
   }
   log_ = open_table(fs::path(dir) / "log.jsonl");
   ticks_ = open_table(fs::path(dir) / "ticks.csv");

@@ -11,7 +11,7 @@
 #include <iomanip>
 #include <sstream>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -28,7 +28,7 @@ speed_t baud_constant(int baud) {
     case 500000: return B500000;
     case 1000000: return B1000000;
     default:
-      fail(StatusCode::kInvalidArgument, "unsupported baud rate " + std::to_string(baud) +
+      fail(ErrorCode::kInvalidArgument, "unsupported baud rate " + std::to_string(baud) +
                                              " (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 1000000)");
   }
 }
@@ -73,14 +73,14 @@ void SerialPort::open(const std::string& path, int baud) {
     if (err == ENOENT) hint = " (is the Arduino plugged in? see ls /dev/ttyUSB* /dev/ttyACM*)";
     if (err == EACCES) hint = " (permission: add the user to the 'dialout' group)";
     if (err == EBUSY) hint = " (another program has it open)";
-    fail(err == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError,
+    fail(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
          "cannot open serial port " + path + ": " + std::strerror(err) + hint);
   }
   termios tty{};
   if (::tcgetattr(fd, &tty) != 0) {
     const int err = errno;
     ::close(fd);
-    fail(StatusCode::kInvalidArgument, "serial port " + path + " is not a terminal device: " + std::strerror(err));
+    fail(ErrorCode::kInvalidArgument, "serial port " + path + " is not a terminal device: " + std::strerror(err));
   }
   ::cfmakeraw(&tty);
   tty.c_cflag |= CLOCAL | CREAD;
@@ -92,7 +92,7 @@ void SerialPort::open(const std::string& path, int baud) {
   if (::tcsetattr(fd, TCSANOW, &tty) != 0) {
     const int err = errno;
     ::close(fd);
-    fail(StatusCode::kIoError, "cannot configure serial port " + path + ": " + std::strerror(err));
+    fail(ErrorCode::kIoError, "cannot configure serial port " + path + ": " + std::strerror(err));
   }
   ::tcflush(fd, TCIOFLUSH);  // drop whatever the board printed before we listened
   fd_ = fd;
@@ -186,13 +186,13 @@ void SerialLink::connect() {
     if (now - start > options_.ready_timeout) {
       port_.close();
       state_ = State::kDisconnected;
-      fail(StatusCode::kIoError,
+      fail(ErrorCode::kIoError,
            "no ready line from the board on " + options_.path + " within " +
                std::to_string(options_.ready_timeout.count()) + " ms at " + std::to_string(options_.baud) +
                " baud (is apps/arduino/act_rover uploaded, the baud rate the same, the port right?)");
     }
     poll(now);
-    if (state_ == State::kDisconnected) fail(StatusCode::kIoError, "serial port " + options_.path + ": " + last_error_);
+    if (state_ == State::kDisconnected) fail(ErrorCode::kIoError, "serial port " + options_.path + ": " + last_error_);
     if (state_ == State::kWaitingReady) read_input(std::chrono::milliseconds(10), now);
   }
 }

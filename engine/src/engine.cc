@@ -4,8 +4,8 @@
 
 #include "engine/src/engine_impl.h"
 #include "kernels/fp32/gemm_f32.h"
-#include "weights/blob_names.h"
-#include "weights/error.h"
+#include "weights/blob/blob_names.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -31,7 +31,7 @@ Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t 
   const std::vector<int64_t> shape = {static_cast<int64_t>(size)};
   for (const auto& [name, ptr] : {std::pair{bn::norm_sub(key), &n.sub}, std::pair{bn::norm_div(key), &n.div}}) {
     const ActbTensor& t = blob_.get(name);
-    if (t.shape != shape) fail(StatusCode::kDataLoss, blob_.path() + ": \"" + name + "\" has shape " + shape_string(t.shape));
+    if (t.shape != shape) fail(ErrorCode::kDataLoss, blob_.path() + ": \"" + name + "\" has shape " + shape_string(t.shape));
     *ptr = t.f32();
   }
   return n;
@@ -44,10 +44,10 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
       profile_(options.profile) {
   // A bad ACT_ISA (unknown, or an ISA this CPU lacks) is an error here, never a silent fallback.
   const kernels::GemmF32Selection gemm = kernels::gemm_f32_select();
-  if (!gemm.error.empty()) fail(StatusCode::kInvalidArgument, gemm.error);
+  if (!gemm.error.empty()) fail(ErrorCode::kInvalidArgument, gemm.error);
   const std::string precision = blob_.config().value("precision", "");
   if (precision != "fp32" && precision != "int8") {
-    fail(StatusCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32, int8)");
+    fail(ErrorCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32, int8)");
   }
   network_ = std::make_unique<graph::ActNetwork>(config_, blob_);
   network_->plan(pool_.threads(), keep_intermediates);
@@ -63,7 +63,7 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
     for (const auto& [name, ptr] : {std::pair{bn::kUnnormShift, &unnorm_shift_}, std::pair{bn::kUnnormScale, &unnorm_scale_},
                                     std::pair{bn::kUnnormOffset, &unnorm_offset_}}) {
       const ActbTensor& t = blob_.get(name);
-      if (t.shape != shape) fail(StatusCode::kDataLoss, blob_.path() + ": \"" + std::string(name) + "\" has the wrong shape");
+      if (t.shape != shape) fail(ErrorCode::kDataLoss, blob_.path() + ": \"" + std::string(name) + "\" has the wrong shape");
       *ptr = t.f32();
     }
   }
@@ -88,9 +88,9 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
 void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   const CameraConfig& cam = config_.cameras[camera];
   const std::string what = "image " + std::to_string(camera) + " (" + cam.key + ")";
-  if (image.data == nullptr) fail(StatusCode::kInvalidArgument, what + " has no data");
+  if (image.data == nullptr) fail(ErrorCode::kInvalidArgument, what + " has no data");
   if (image.height != cam.height || image.width != cam.width) {
-    fail(StatusCode::kInvalidArgument, what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) +
+    fail(ErrorCode::kInvalidArgument, what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) +
          ", the model expects " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
   }
   const InputNorm& norm = camera_norm_[camera];
@@ -98,7 +98,7 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
   if (image.format == ImageView::Format::kRgbU8Hwc) {
     const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;
-    if (stride < w * 3) fail(StatusCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
+    if (stride < w * 3) fail(ErrorCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
     // uint8 -> [0, 1] by a float32 division, as LeRobot does (255 -> exactly 1.0); then normalise.
     float lut[3][256];
     for (size_t c = 0; c < 3; ++c) {
@@ -115,7 +115,7 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
     for (size_t c = 0; c < 3; ++c) {
       for (size_t i = 0; i < h * w; ++i) {
         const float v = src[c * h * w + i];
-        if (!std::isfinite(v)) fail(StatusCode::kInvalidArgument, what + " contains NaN or Inf");
+        if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contains NaN or Inf");
         dst[i * 3 + c] = norm.apply(v, c);
       }
     }
@@ -125,22 +125,22 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
 void Engine::Impl::load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm,
                                float* dst) {
   if (values.size() != expected) {
-    fail(StatusCode::kInvalidArgument, std::string(what) + " has " + std::to_string(values.size()) +
+    fail(ErrorCode::kInvalidArgument, std::string(what) + " has " + std::to_string(values.size()) +
          " values, the model expects " + std::to_string(expected));
   }
   for (size_t i = 0; i < expected; ++i) {
-    if (!std::isfinite(values[i])) fail(StatusCode::kInvalidArgument, std::string(what) + "[" + std::to_string(i) + "] is not finite");
+    if (!std::isfinite(values[i])) fail(ErrorCode::kInvalidArgument, std::string(what) + "[" + std::to_string(i) + "] is not finite");
     dst[i] = norm.apply(values[i], i);
   }
 }
 
 void Engine::Impl::run(const Observation& obs, std::span<float> actions_normalized) {
   if (obs.images.size() != config_.cameras.size()) {
-    fail(StatusCode::kInvalidArgument, "observation has " + std::to_string(obs.images.size()) + " images, the model has " +
+    fail(ErrorCode::kInvalidArgument, "observation has " + std::to_string(obs.images.size()) + " images, the model has " +
          std::to_string(config_.cameras.size()) + " cameras");
   }
   if (actions_normalized.size() != info_.chunk_values()) {
-    fail(StatusCode::kInvalidArgument, "action buffer holds " + std::to_string(actions_normalized.size()) +
+    fail(ErrorCode::kInvalidArgument, "action buffer holds " + std::to_string(actions_normalized.size()) +
          " values, the chunk has " + std::to_string(info_.chunk_values()));
   }
   using Clock = std::chrono::steady_clock;
@@ -149,13 +149,13 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
   if (config_.state_dim > 0) {
     load_vector("state", obs.state, static_cast<size_t>(config_.state_dim), state_norm_, network_->state_input());
   } else if (!obs.state.empty()) {
-    fail(StatusCode::kInvalidArgument, "the model takes no robot state, but the observation has one");
+    fail(ErrorCode::kInvalidArgument, "the model takes no robot state, but the observation has one");
   }
   if (config_.env_state_dim > 0) {
     load_vector("environment state", obs.env_state, static_cast<size_t>(config_.env_state_dim), env_norm_,
                 network_->env_state_input());
   } else if (!obs.env_state.empty()) {
-    fail(StatusCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
+    fail(ErrorCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
   }
   const auto preprocessed = Clock::now();
   graph::StageTimes stages;
@@ -192,7 +192,7 @@ Engine::~Engine() = default;
 StatusOr<std::unique_ptr<Engine>> Engine::open(const std::string& blob_path, const EngineOptions& options) {
   std::unique_ptr<Engine> engine;
   Status s = guarded([&] {
-    if (options.threads < 0) fail(StatusCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
+    if (options.threads < 0) fail(ErrorCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
     engine.reset(new Engine(std::make_unique<Impl>(blob_path, options, false)));
   });
   if (!s.ok()) return s;

@@ -10,8 +10,8 @@
 #include "apps/bench_support.h"
 #include "support/command.h"
 #include "support/test_paths.h"
-#include "weights/lerobot_import.h"
-#include "weights/synthetic_model.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/import/synthetic_model.h"
 
 namespace act {
 namespace {

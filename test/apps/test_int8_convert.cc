@@ -11,7 +11,7 @@
 
 #include "apps/convert/activation_stats.h"
 #include "support/command.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 #include "support/test_paths.h"
 
 namespace fs = std::filesystem;

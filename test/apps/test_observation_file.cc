@@ -2,12 +2,14 @@
 // is an error that names the tensor and what was expected.
 #include <gtest/gtest.h>
 
+#include <optional>
 #include <vector>
 
 #include "apps/observation_file.h"
+#include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/error.h"
-#include "weights/safetensors.h"
+#include "weights/blob/error.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 namespace {
@@ -22,7 +24,7 @@ class ObservationFileTest : public ::testing::Test {
     path_ = test::scratch_dir() + "/obs.safetensors";
   }
   // Writes float tensors of the given shapes (values 0.5) and returns the reader's error (kOk if none).
-  Error read_error(const std::vector<std::pair<std::string, std::vector<int64_t>>>& tensors,
+  std::optional<Error> read_error(const std::vector<std::pair<std::string, std::vector<int64_t>>>& tensors,
                    ImageSource source = ImageSource::kAuto) {
     std::vector<std::vector<float>> values;
     std::vector<SafetensorsWriteTensor> out;
@@ -31,25 +33,20 @@ class ObservationFileTest : public ::testing::Test {
       out.push_back({name, DType::kF32, shape, values.back().data(), values.back().size() * sizeof(float)});
     }
     write_safetensors(path_, out);
-    try {
-      ObservationBatch::read(path_, model_, source);
-    } catch (const Error& e) {
-      return e;
-    }
-    return Error(StatusCode::kOk, "");
+    return test::error_thrown_by([&] { ObservationBatch::read(path_, model_, source); });
   }
-  void expect_error(const Error& e, StatusCode code, const std::string& needle) {
-    EXPECT_EQ(e.code(), code) << e.what();
-    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "message: " << e.what() << "\nexpected: " << needle;
+  void expect_error(const std::optional<Error>& e, ErrorCode code, const std::string& needle) {
+    ASSERT_TRUE(e.has_value()) << "read without an error; expected: " << needle;
+    EXPECT_EQ(e->code(), code) << e->what();
+    EXPECT_NE(std::string(e->what()).find(needle), std::string::npos) << "message: " << e->what() << "\nexpected: " << needle;
   }
   ModelInfo model_;
   std::string path_;
 };
 
 TEST_F(ObservationFileTest, ReadsAWellFormedFile) {
-  EXPECT_EQ(read_error({{"input.observation.images.front", {2, 3, 4, 6}}, {"input.observation.state", {2, 2}},
-                        {"output.action", {2, 3, 2}}}).code(),
-            StatusCode::kOk);
+  EXPECT_FALSE(read_error({{"input.observation.images.front", {2, 3, 4, 6}}, {"input.observation.state", {2, 2}},
+                           {"output.action", {2, 3, 2}}}).has_value());
   const ObservationBatch batch = ObservationBatch::read(path_, model_);
   EXPECT_EQ(batch.size(), 2u);
   EXPECT_TRUE(batch.has_expected_actions());
@@ -58,27 +55,27 @@ TEST_F(ObservationFileTest, ReadsAWellFormedFile) {
 TEST_F(ObservationFileTest, ImageInTheWrongLayoutOrSize) {
   // NHWC floats where NCHW is expected: the shapes differ, and both are named.
   expect_error(read_error({{"input.observation.images.front", {2, 4, 6, 3}}, {"input.observation.state", {2, 2}}}),
-               StatusCode::kInvalidArgument, "has shape [2, 4, 6, 3], expected [2, 3, 4, 6]");
+               ErrorCode::kInvalidArgument, "has shape [2, 4, 6, 3], expected [2, 3, 4, 6]");
   // Another camera size.
   expect_error(read_error({{"input.observation.images.front", {2, 3, 8, 6}}, {"input.observation.state", {2, 2}}}),
-               StatusCode::kInvalidArgument, "expected [2, 3, 4, 6]");
+               ErrorCode::kInvalidArgument, "expected [2, 3, 4, 6]");
   // A u8 image stored as float.
   expect_error(read_error({{"input.observation.images.front.u8_nhwc", {2, 4, 6, 3}}, {"input.observation.state", {2, 2}}}),
-               StatusCode::kInvalidArgument, "must be U8");
+               ErrorCode::kInvalidArgument, "must be U8");
 }
 
 TEST_F(ObservationFileTest, StateOrActionsOfTheWrongSizeOrMissing) {
   expect_error(read_error({{"input.observation.images.front", {2, 3, 4, 6}}, {"input.observation.state", {2, 3}}}),
-               StatusCode::kInvalidArgument, "\"input.observation.state\" has shape [2, 3], expected [2, 2]");
+               ErrorCode::kInvalidArgument, "\"input.observation.state\" has shape [2, 3], expected [2, 2]");
   // The batch size comes from the state; an image batch that disagrees is named.
   expect_error(read_error({{"input.observation.images.front", {3, 3, 4, 6}}, {"input.observation.state", {2, 2}}}),
-               StatusCode::kInvalidArgument, "expected [2, 3, 4, 6]");
+               ErrorCode::kInvalidArgument, "expected [2, 3, 4, 6]");
   expect_error(read_error({{"input.observation.images.front", {2, 3, 4, 6}}, {"input.observation.state", {2, 2}},
                            {"output.action", {2, 4, 2}}}),
-               StatusCode::kInvalidArgument, "\"output.action\" has shape [2, 4, 2], expected [2, 3, 2]");
-  expect_error(read_error({{"input.observation.state", {2, 2}}}), StatusCode::kNotFound,
+               ErrorCode::kInvalidArgument, "\"output.action\" has shape [2, 4, 2], expected [2, 3, 2]");
+  expect_error(read_error({{"input.observation.state", {2, 2}}}), ErrorCode::kNotFound,
                "missing \"input.observation.images.front\"");
-  expect_error(read_error({{"input.observation.state", {0, 2}}}), StatusCode::kInvalidArgument, "no batch axis");
+  expect_error(read_error({{"input.observation.state", {0, 2}}}), ErrorCode::kInvalidArgument, "no batch axis");
 }
 
 }  // namespace

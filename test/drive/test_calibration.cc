@@ -5,7 +5,7 @@
 
 #include "apps/drive/calibration.h"
 #include "support/test_paths.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {

@@ -10,7 +10,7 @@
 #include "apps/drive/camera.h"
 #include "drive/drive_test_util.h"
 #include "support/test_paths.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::drive::test {
 namespace {

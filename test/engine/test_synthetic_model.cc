@@ -5,8 +5,8 @@
 
 #include "engine/src/engine_impl.h"
 #include "support/test_paths.h"
-#include "weights/error.h"
-#include "weights/synthetic_model.h"
+#include "weights/blob/error.h"
+#include "weights/import/synthetic_model.h"
 
 namespace act {
 namespace {
@@ -25,7 +25,7 @@ TEST(SyntheticModel, ConfigsAndErrors) {
       synthetic_config(bad);
       ADD_FAILURE() << bad << " accepted";
     } catch (const Error& e) {
-      EXPECT_EQ(e.code(), StatusCode::kInvalidArgument);
+      EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
       EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
     }
   }

@@ -2,10 +2,10 @@
 // quantization sections), as Engine::open runs them. The checksum is skipped for most inputs (the
 // first byte decides) so that mutations reach the header and tensor-directory checks behind it.
 #include "test/fuzz/fuzz_input_file.h"
-#include "weights/actb.h"
-#include "weights/error.h"
-#include "weights/model_config.h"
-#include "weights/quant_config.h"
+#include "weights/blob/actb.h"
+#include "weights/blob/error.h"
+#include "weights/blob/model_config.h"
+#include "weights/blob/quant_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static act::fuzz::InputFile input;

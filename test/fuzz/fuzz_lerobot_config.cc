@@ -3,8 +3,8 @@
 // tried as both; JSON that does not parse is the JSON library's business, not ours.
 #include <nlohmann/json.hpp>
 
-#include "weights/error.h"
-#include "weights/lerobot_import.h"
+#include "weights/blob/error.h"
+#include "weights/import/lerobot_import.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto json = nlohmann::ordered_json::parse(data, data + size, nullptr, /*allow_exceptions=*/false);

@@ -4,7 +4,7 @@
 #include "apps/observation_file.h"
 #include "test/fuzz/fuzz_input_file.h"
 #include "test/fuzz/fuzz_models.h"
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static act::fuzz::InputFile input;

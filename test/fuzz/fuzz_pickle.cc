@@ -3,9 +3,9 @@
 #include <span>
 
 #include "test/fuzz/fuzz_input_file.h"
-#include "weights/error.h"
-#include "weights/pickle_reader.h"
-#include "weights/pytorch_checkpoint.h"
+#include "weights/blob/error.h"
+#include "weights/import/pickle_reader.h"
+#include "weights/import/pytorch_checkpoint.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static act::fuzz::InputFile input;

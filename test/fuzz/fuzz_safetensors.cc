@@ -1,7 +1,7 @@
 // libFuzzer target: the safetensors reader (header, dtypes, offsets) and the float conversions.
 #include "test/fuzz/fuzz_input_file.h"
-#include "weights/error.h"
-#include "weights/safetensors.h"
+#include "weights/blob/error.h"
+#include "weights/import/safetensors.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static act::fuzz::InputFile input;

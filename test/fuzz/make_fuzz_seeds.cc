@@ -7,10 +7,10 @@
 #include <vector>
 
 #include "test/fuzz/fuzz_models.h"
-#include "weights/actb.h"
-#include "weights/lerobot_import.h"
-#include "weights/quant_config.h"
-#include "weights/safetensors.h"
+#include "weights/blob/actb.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/blob/quant_config.h"
+#include "weights/import/safetensors.h"
 
 namespace fs = std::filesystem;
 

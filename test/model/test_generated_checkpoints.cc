@@ -12,7 +12,7 @@
 #include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
-#include "weights/safetensors.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 namespace {

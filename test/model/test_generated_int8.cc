@@ -10,7 +10,7 @@
 #include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
-#include "weights/lerobot_import.h"
+#include "weights/import/lerobot_import.h"
 
 namespace fs = std::filesystem;
 

@@ -8,10 +8,10 @@
 #include <iterator>
 
 #include "support/test_paths.h"
-#include "weights/config_inference.h"
-#include "weights/error.h"
-#include "weights/lerobot_import.h"
-#include "weights/pytorch_checkpoint.h"
+#include "weights/import/config_inference.h"
+#include "weights/blob/error.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/import/pytorch_checkpoint.h"
 
 namespace act {
 namespace {

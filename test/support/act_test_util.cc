@@ -7,7 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/lerobot_import.h"
+#include "weights/import/lerobot_import.h"
 
 namespace fs = std::filesystem;
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "weights/safetensors.h"
+#include "weights/import/safetensors.h"
 
 namespace act::test {
 

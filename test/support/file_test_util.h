@@ -11,10 +11,11 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <string>
 #include <vector>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::test {
 
@@ -40,16 +41,27 @@ inline std::vector<std::string> list_dir(const std::string& dir) {
   return names;
 }
 
+/// The act::Error that `f()` throws, or nothing when it returns normally.
+template <typename F>
+std::optional<Error> error_thrown_by(F&& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e;
+  }
+  return std::nullopt;
+}
+
 /// Success iff `f()` throws act::Error with `code` and a message containing every one of `needles`.
 template <typename F>
-::testing::AssertionResult throws_error(F&& f, StatusCode code, const std::vector<std::string>& needles) {
+::testing::AssertionResult throws_error(F&& f, ErrorCode code, const std::vector<std::string>& needles) {
   try {
     f();
   } catch (const Error& e) {
     const std::string msg = e.what();
     if (e.code() != code) {
-      return ::testing::AssertionFailure() << "code " << status_code_name(e.code()) << ", expected "
-                                           << status_code_name(code) << "; message: " << msg;
+      return ::testing::AssertionFailure() << "code " << static_cast<int>(e.code()) << ", expected "
+                                           << static_cast<int>(code) << "; message: " << msg;
     }
     for (const std::string& n : needles) {
       if (msg.find(n) == std::string::npos) {

@@ -1,4 +1,4 @@
-#include "weights/actb.h"
+#include "weights/blob/actb.h"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
@@ -17,8 +17,8 @@
 
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/error.h"
-#include "weights/safetensors.h"
+#include "weights/blob/error.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 namespace {
@@ -127,7 +127,7 @@ class ActbBad : public ::testing::Test {
     header_size_ = get_le(good_, 16, 8);
   }
 
-  ::testing::AssertionResult rejects(const std::vector<uint8_t>& bytes, StatusCode code,
+  ::testing::AssertionResult rejects(const std::vector<uint8_t>& bytes, ErrorCode code,
                                      std::vector<std::string> needles, bool verify = true) {
     test::write_file(path_, bytes);
     needles.push_back(path_);
@@ -135,7 +135,7 @@ class ActbBad : public ::testing::Test {
   }
   ::testing::AssertionResult corrupt(const std::vector<uint8_t>& bytes, std::vector<std::string> needles,
                                      bool verify = true) {
-    return rejects(bytes, StatusCode::kDataLoss, std::move(needles), verify);
+    return rejects(bytes, ErrorCode::kDataLoss, std::move(needles), verify);
   }
   // A hand-built blob with these tensor entries over `data_size` bytes of data must be rejected.
   ::testing::AssertionResult rejects_entries(const std::string& entries, size_t data_size,
@@ -338,21 +338,21 @@ TEST(Actb, GetMissingTensorIsNotFound) {
   small_writer().write(path);
   const ActbFile f = ActbFile::open(path);
   EXPECT_EQ(f.find("nope"), nullptr);
-  EXPECT_TRUE(throws_error([&] { f.get("nope"); }, StatusCode::kNotFound, {"'nope'", path}));
+  EXPECT_TRUE(throws_error([&] { f.get("nope"); }, ErrorCode::kNotFound, {"'nope'", path}));
 }
 
 TEST(Actb, F32AccessorChecksDtype) {
   const std::string path = test::scratch_dir() + "/f32.actb";
   small_writer().write(path);
   const ActbFile f = ActbFile::open(path);
-  EXPECT_TRUE(throws_error([&] { f.get("q").f32(); }, StatusCode::kInvalidArgument, {"'q'", "I8", "F32"}));
+  EXPECT_TRUE(throws_error([&] { f.get("q").f32(); }, ErrorCode::kInvalidArgument, {"'q'", "I8", "F32"}));
 }
 
 TEST(Actb, OpenMissingOrDirectory) {
   const std::string dir = test::scratch_dir();
-  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir + "/missing.actb"); }, StatusCode::kNotFound,
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir + "/missing.actb"); }, ErrorCode::kNotFound,
                            {dir + "/missing.actb"}));
-  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, StatusCode::kIoError, {dir}));
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, ErrorCode::kIoError, {dir}));
 }
 
 // ---------------------------------------------------------------------------------------------- writer
@@ -361,35 +361,35 @@ TEST(ActbWrite, RejectsBadTensors) {
   ActbWriter w;
   w.add_f32("a", {2}, {1, 2});
   const std::vector<int8_t> q(6, 1);
-  EXPECT_TRUE(throws_error([&] { w.add_f32("a", {1}, {3}); }, StatusCode::kInvalidArgument, {"'a'", "duplicate"}));
-  EXPECT_TRUE(throws_error([&] { w.add_f32("b", {3}, {1, 2}); }, StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_f32("a", {1}, {3}); }, ErrorCode::kInvalidArgument, {"'a'", "duplicate"}));
+  EXPECT_TRUE(throws_error([&] { w.add_f32("b", {3}, {1, 2}); }, ErrorCode::kInvalidArgument,
                            {"'b'", "[3]", "8 bytes"}));
-  EXPECT_TRUE(throws_error([&] { w.add_tensor("c", DType::kF16, {3}, q.data(), 5); }, StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_tensor("c", DType::kF16, {3}, q.data(), 5); }, ErrorCode::kInvalidArgument,
                            {"'c'", "F16"}));
-  EXPECT_TRUE(throws_error([&] { w.add_f32("d", {-2}, {}); }, StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_f32("d", {-2}, {}); }, ErrorCode::kInvalidArgument,
                            {"'d'", "negative dimension"}));
-  EXPECT_TRUE(throws_error([&] { w.add_tensor("e", DType::kI8, {4}, nullptr, 4); }, StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_tensor("e", DType::kI8, {4}, nullptr, 4); }, ErrorCode::kInvalidArgument,
                            {"'e'", "null"}));
-  EXPECT_TRUE(throws_error([&] { w.add_f32("", {1}, {1}); }, StatusCode::kInvalidArgument, {"empty name"}));
+  EXPECT_TRUE(throws_error([&] { w.add_f32("", {1}, {1}); }, ErrorCode::kInvalidArgument, {"empty name"}));
 }
 
 TEST(ActbWrite, RejectsBadQuantParams) {
   ActbWriter w;
   const std::vector<int8_t> q(6, 1);
   auto add = [&](QuantParams p) { return [&w, &q, p] { w.add_tensor("q", DType::kI8, {2, 3}, q.data(), 6, p); }; };
-  EXPECT_TRUE(throws_error(add({{0.1f, 0.2f}, {0}, 0}), StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{0.1f, 0.2f}, {0}, 0}), ErrorCode::kInvalidArgument,
                            {"'q'", "2 scales but 1 zero_points"}));
-  EXPECT_TRUE(throws_error(add({{}, {0}, 0}), StatusCode::kInvalidArgument, {"zero_points but no scales"}));
-  EXPECT_TRUE(throws_error(add({{0.0f}, {0}, 0}), StatusCode::kInvalidArgument, {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{-1.0f}, {0}, 0}), StatusCode::kInvalidArgument, {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::quiet_NaN()}, {0}, 0}), StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{}, {0}, 0}), ErrorCode::kInvalidArgument, {"zero_points but no scales"}));
+  EXPECT_TRUE(throws_error(add({{0.0f}, {0}, 0}), ErrorCode::kInvalidArgument, {"positive finite"}));
+  EXPECT_TRUE(throws_error(add({{-1.0f}, {0}, 0}), ErrorCode::kInvalidArgument, {"positive finite"}));
+  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::quiet_NaN()}, {0}, 0}), ErrorCode::kInvalidArgument,
                            {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::infinity()}, {0}, 0}), StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::infinity()}, {0}, 0}), ErrorCode::kInvalidArgument,
                            {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 2}), StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 2}), ErrorCode::kInvalidArgument,
                            {"axis 2 is out of range", "[2, 3]"}));
-  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, -1}), StatusCode::kInvalidArgument, {"axis -1"}));
-  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 0}), StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, -1}), ErrorCode::kInvalidArgument, {"axis -1"}));
+  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 0}), ErrorCode::kInvalidArgument,
                            {"3 scales", "2 channels on axis 0"}));
   // Valid: per-channel along axis 1, and per-tensor (axis ignored).
   w.add_tensor("ok1", DType::kI8, {2, 3}, q.data(), 6, {{1, 2, 3}, {0, 0, 0}, 1});
@@ -400,10 +400,10 @@ TEST(ActbWrite, RejectsInvalidUtf8) {
   const std::string dir = test::scratch_dir();
   ActbWriter w;
   w.add_f32("bad\xfe", {1}, {1});
-  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, StatusCode::kInvalidArgument, {"JSON"}));
+  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, ErrorCode::kInvalidArgument, {"JSON"}));
   ActbWriter p;
   p.set_producer("\xc3");
-  EXPECT_TRUE(throws_error([&] { p.write(dir + "/x.actb"); }, StatusCode::kInvalidArgument, {"JSON"}));
+  EXPECT_TRUE(throws_error([&] { p.write(dir + "/x.actb"); }, ErrorCode::kInvalidArgument, {"JSON"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
 
@@ -411,7 +411,7 @@ TEST(ActbWrite, RejectsNonObjectConfig) {
   const std::string dir = test::scratch_dir();
   ActbWriter w;
   w.set_config(nlohmann::json::array({1, 2}));
-  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, StatusCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, ErrorCode::kInvalidArgument,
                            {"config must be a JSON object", "array"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -432,7 +432,7 @@ TEST(ActbWrite, ReplacesExistingFileAndLeavesNoTemp) {
 TEST(ActbWrite, MissingFolderFailsCleanly) {
   const std::string dir = test::scratch_dir();
   const std::string path = dir + "/no/such/dir/m.actb";
-  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, StatusCode::kIoError,
+  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, ErrorCode::kIoError,
                            {path, "No such file or directory"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -443,7 +443,7 @@ TEST(ActbWrite, ReadOnlyFolderFailsCleanly) {
   fs::create_directories(dir);
   ASSERT_EQ(::chmod(dir.c_str(), 0555), 0);
   const std::string path = dir + "/m.actb";
-  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, StatusCode::kIoError, {path, "Permission denied"}));
+  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, ErrorCode::kIoError, {path, "Permission denied"}));
   ::chmod(dir.c_str(), 0755);
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -453,7 +453,7 @@ TEST(ActbWrite, FailedRenameRemovesTempFile) {
   const std::string dir = test::scratch_dir();
   const std::string path = dir + "/m.actb";
   fs::create_directories(path + "/keep");
-  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, StatusCode::kIoError, {path, "rename"}));
+  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, ErrorCode::kIoError, {path, "rename"}));
   EXPECT_EQ(list_dir(dir), std::vector<std::string>{"m.actb"});
   EXPECT_TRUE(fs::is_directory(path + "/keep"));
 }
@@ -465,7 +465,7 @@ TEST(ActbWrite, WriteErrorMidwayRemovesTempFile) {
   w.add_f32("big", {50000}, std::vector<float>(50000, 1.0f));
   {
     test::FileSizeLimit limit(4096);  // the 200 KB write fails part way with EFBIG
-    EXPECT_TRUE(throws_error([&] { w.write(path); }, StatusCode::kIoError, {path, "File too large"}));
+    EXPECT_TRUE(throws_error([&] { w.write(path); }, ErrorCode::kIoError, {path, "File too large"}));
   }
   EXPECT_TRUE(list_dir(dir).empty());
   w.write(path);  // and works again once the limit is gone
@@ -505,7 +505,7 @@ TEST_F(ActbBad, WrongVersion) {
   for (uint32_t version : {0u, 2u, 7u, 0xFFFFFFFFu}) {
     std::vector<uint8_t> b = good_;
     put_le(b, 8, version, 4);
-    EXPECT_TRUE(rejects(b, StatusCode::kUnimplemented,
+    EXPECT_TRUE(rejects(b, ErrorCode::kUnimplemented,
                         {"format version " + std::to_string(version) + ", this build reads 1"}))
         << version;
   }
@@ -788,7 +788,7 @@ TEST_F(ActbBad, RandomCorruptionNeverCrashes) {
       }
       ++opened;
     } catch (const Error& e) {
-      ASSERT_TRUE(e.code() == StatusCode::kDataLoss || e.code() == StatusCode::kUnimplemented) << e.what();
+      ASSERT_TRUE(e.code() == ErrorCode::kDataLoss || e.code() == ErrorCode::kUnimplemented) << e.what();
       ASSERT_NE(std::string(e.what()).find(path_), std::string::npos) << e.what();
       ++rejected;
     }

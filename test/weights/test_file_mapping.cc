@@ -1,4 +1,4 @@
-#include "weights/file_mapping.h"
+#include "weights/blob/file_mapping.h"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
@@ -49,18 +49,18 @@ TEST(FileMapping, DefaultConstructedIsEmpty) {
 
 TEST(FileMapping, MissingFileIsNotFound) {
   const std::string path = test::scratch_dir() + "/nope.bin";
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kNotFound,
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kNotFound,
                            {path, "No such file or directory"}));
 }
 
 TEST(FileMapping, MissingFolderIsNotFound) {
   const std::string path = test::scratch_dir() + "/no_dir/nope.bin";
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kNotFound, {path}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kNotFound, {path}));
 }
 
 TEST(FileMapping, DirectoryIsIoError) {
   const std::string dir = test::scratch_dir();
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(dir); }, StatusCode::kIoError, {dir, "not a regular file"}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(dir); }, ErrorCode::kIoError, {dir, "not a regular file"}));
 }
 
 TEST(FileMapping, UnreadableFileIsIoError) {
@@ -68,7 +68,7 @@ TEST(FileMapping, UnreadableFileIsIoError) {
   const std::string path = test::scratch_dir() + "/secret.bin";
   test::write_file(path, {1, 2, 3});
   ASSERT_EQ(::chmod(path.c_str(), 0), 0);
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kIoError, {path, "Permission denied"}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kIoError, {path, "Permission denied"}));
 }
 
 TEST(FileMapping, MoveTransfersOwnership) {

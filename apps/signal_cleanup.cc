@@ -1,4 +1,4 @@
-#include "weights/signal_cleanup.h"
+#include "apps/signal_cleanup.h"
 
 #include <limits.h>
 #include <signal.h>

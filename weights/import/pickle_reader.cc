@@ -1,10 +1,10 @@
-#include "weights/pickle_reader.h"
+#include "weights/import/pickle_reader.h"
 
 #include <algorithm>
 #include <cstring>
 #include <unordered_map>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -102,10 +102,10 @@ class Parser {
 
  private:
   [[noreturn]] void error(const std::string& what) const {
-    fail(StatusCode::kDataLoss, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what);
+    fail(ErrorCode::kDataLoss, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what);
   }
   [[noreturn]] void unsupported(const std::string& what) const {
-    fail(StatusCode::kUnimplemented, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what +
+    fail(ErrorCode::kUnimplemented, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what +
          " (a PyTorch state dict only needs dicts, lists, tuples, numbers, strings and tensors; this reader "
          "never runs code from a checkpoint)");
   }

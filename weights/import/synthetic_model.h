@@ -8,8 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/lerobot_import.h"
-#include "weights/safetensors.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 

@@ -1,12 +1,12 @@
-#include "weights/quantize_model.h"
+#include "weights/quantize/quantize_model.h"
 
 #include <algorithm>
 #include <cmath>
 #include <set>
 
-#include "weights/actb.h"
-#include "weights/blob_names.h"
-#include "weights/error.h"
+#include "weights/blob/actb.h"
+#include "weights/blob/blob_names.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -49,7 +49,7 @@ size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, con
   const std::vector<std::string> layers = quantizable_layers(model);
   const std::set<std::string> quantize(layers.begin(), layers.end());
   for (const auto& name : quant.float_layers) {
-    if (!quantize.count(name)) fail(StatusCode::kInvalidArgument, "\"" + name + "\" is not a quantizable layer of this model");
+    if (!quantize.count(name)) fail(ErrorCode::kInvalidArgument, "\"" + name + "\" is not a quantizable layer of this model");
   }
   const std::set<std::string> keep_float(quant.float_layers.begin(), quant.float_layers.end());
 

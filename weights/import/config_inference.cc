@@ -1,4 +1,4 @@
-#include "weights/config_inference.h"
+#include "weights/import/config_inference.h"
 
 #include <filesystem>
 #include <fstream>
@@ -6,8 +6,8 @@
 #include <set>
 #include <sstream>
 
-#include "weights/error.h"
-#include "weights/file_util.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act {
 
@@ -63,7 +63,7 @@ void normalise_keys(PyTorchCheckpoint& ckpt, std::vector<std::string>& notes) {
 
 OrderedJson read_json(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) fail(StatusCode::kNotFound, "cannot open " + path);
+  if (!in) fail(ErrorCode::kNotFound, "cannot open " + path);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   // Same untrusted-JSON rules as file headers (depth bound, duplicate keys), in file order.
   const nlohmann::json checked = detail::parse_json_header(path, reinterpret_cast<const uint8_t*>(text.data()), text.size());
@@ -102,12 +102,12 @@ class Planner {
   const SafetensorsTensor* tensor(const std::string& name) const { return sd_.find(name); }
   const SafetensorsTensor& required(const std::string& name) const {
     const SafetensorsTensor* t = sd_.find(name);
-    if (!t) fail(StatusCode::kInvalidArgument, sd_.origin() + ": no \"" + name + "\": this is not the state dict of a LeRobot ACT policy");
+    if (!t) fail(ErrorCode::kInvalidArgument, sd_.origin() + ": no \"" + name + "\": this is not the state dict of a LeRobot ACT policy");
     return *t;
   }
   std::string described(const SafetensorsTensor& t) const { return t.name + " " + shape_string(t.shape); }
   int dim(const SafetensorsTensor& t, size_t i, size_t rank) const {
-    if (t.shape.size() != rank) fail(StatusCode::kInvalidArgument, sd_.origin() + ": " + described(t) + " should have " + std::to_string(rank) + " dimensions");
+    if (t.shape.size() != rank) fail(ErrorCode::kInvalidArgument, sd_.origin() + ": " + described(t) + " should have " + std::to_string(rank) + " dimensions");
     return static_cast<int>(t.shape[i]);
   }
   // How many "<prefix><i>." indices exist; they must be 0..n-1.
@@ -121,7 +121,7 @@ class Planner {
       seen.insert(std::stoi(idx));
     }
     if (!seen.empty() && (*seen.begin() != 0 || *seen.rbegin() != static_cast<int>(seen.size()) - 1)) {
-      fail(StatusCode::kInvalidArgument, sd_.origin() + ": the indices of " + prefix + "<i> are not 0.." + std::to_string(seen.size() - 1));
+      fail(ErrorCode::kInvalidArgument, sd_.origin() + ": the indices of " + prefix + "<i> are not 0.." + std::to_string(seen.size() - 1));
     }
     return static_cast<int>(seen.size());
   }
@@ -164,7 +164,7 @@ class Planner {
     std::string counts;
     for (int b : blocks) counts += (counts.empty() ? "" : "+") + std::to_string(b);
     if (bb == kResnets.end()) {
-      fail(StatusCode::kUnimplemented, sd_.origin() + ": the backbone has " + counts + " blocks per stage" +
+      fail(ErrorCode::kUnimplemented, sd_.origin() + ": the backbone has " + counts + " blocks per stage" +
            (bottleneck ? " (bottleneck)" : "") + ", which is no torchvision ResNet this engine runs");
     }
     infer("vision_backbone", bb->second, "model.backbone.layer<s>.<block> keys: " + counts + " blocks" + (bottleneck ? ", conv3 (bottleneck)" : ""));
@@ -288,12 +288,12 @@ class Planner {
     take_inferred(c, "dim_feedforward");
     if (inferred_.count("feedforward_activation")) {
       if (src_.activation && *src_.activation != "glu") {
-        fail(StatusCode::kInvalidArgument, "--activation " + *src_.activation + " contradicts the weights: " + inferred_["feedforward_activation"].second);
+        fail(ErrorCode::kInvalidArgument, "--activation " + *src_.activation + " contradicts the weights: " + inferred_["feedforward_activation"].second);
       }
       take_inferred(c, "feedforward_activation");
     } else {
       if (src_.activation == "glu") {
-        fail(StatusCode::kInvalidArgument, "--activation glu contradicts the weights (linear2 takes all of dim_feedforward)");
+        fail(ErrorCode::kInvalidArgument, "--activation glu contradicts the weights (linear2 takes all of dim_feedforward)");
       }
       choose(c, "feedforward_activation", src_.activation, "--activation", "relu", "relu and gelu leave no trace in the weights");
     }
@@ -320,10 +320,10 @@ class Planner {
   void normalization(OrderedJson& c, const std::vector<std::string>& cameras) {
     if (has_buffers_) {
       if (!src_.stats_paths.empty()) {
-        fail(StatusCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics "
+        fail(ErrorCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics "
              "(normalize_inputs.* buffers); drop --stats");
       }
-      if (src_.no_normalization) fail(StatusCode::kInvalidArgument, sd_.origin() + ": --no-normalization, but the state dict carries normalisation statistics");
+      if (src_.no_normalization) fail(ErrorCode::kInvalidArgument, sd_.origin() + ": --no-normalization, but the state dict carries normalisation statistics");
       OrderedJson mapping = OrderedJson::object();
       std::string visual = cameras.empty() ? "IDENTITY" : buffer_mode("normalize_inputs.buffer_" + flat(cameras[0]));
       mapping["VISUAL"] = visual;
@@ -357,7 +357,7 @@ class Planner {
   // --config: LeRobot's config.json is the source; the weights must agree with it, flags override it.
   void merge_config_file() {
     OrderedJson c = read_json(src_.config_path);
-    if (!c.is_object()) fail(StatusCode::kDataLoss, src_.config_path + ": expected a JSON object");
+    if (!c.is_object()) fail(ErrorCode::kDataLoss, src_.config_path + ": expected a JSON object");
     const std::string cfg = "config.json";
     for (const auto& [field, inferred] : inferred_) {
       const auto& [value, source] = inferred;
@@ -368,14 +368,14 @@ class Planner {
         const std::string key = field.substr(dot + 1);
         given = features.contains(key) ? features[key].value("shape", OrderedJson::array()) : OrderedJson();
         if (given != OrderedJson::array({value})) {
-          fail(StatusCode::kInvalidArgument, src_.config_path + ": " + field + " has shape " + given.dump() + ", but " + source +
+          fail(ErrorCode::kInvalidArgument, src_.config_path + ": " + field + " has shape " + given.dump() + ", but " + source +
                " says [" + value.dump() + "]");
         }
       } else {
         if (!c.contains(field)) continue;  // the import reports fields it needs
         given = c[field];
         if (given != value) {
-          fail(StatusCode::kInvalidArgument, src_.config_path + ": " + field + " is " + given.dump() + ", but " + source + " says " + value.dump());
+          fail(ErrorCode::kInvalidArgument, src_.config_path + ": " + field + " is " + given.dump() + ", but " + source + " says " + value.dump());
         }
       }
     }
@@ -387,7 +387,7 @@ class Planner {
         if (f.is_object() && f.value("type", "") == "VISUAL") f["shape"] = {3, src_.image_size->first, src_.image_size->second};
       }
     }
-    if (!src_.cameras.empty()) fail(StatusCode::kInvalidArgument, "--camera and --config: the cameras come from config.json's input_features");
+    if (!src_.cameras.empty()) fail(ErrorCode::kInvalidArgument, "--camera and --config: the cameras come from config.json's input_features");
     for (const auto& [field, value] : c.items()) {
       std::string source = cfg;
       if (inferred_.count(field)) source = inferred_[field].second + " (agrees with " + cfg + ")";
@@ -400,7 +400,7 @@ class Planner {
     }
     if (has_buffers_) {
       if (!src_.stats_paths.empty()) {
-        fail(StatusCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics (normalize_inputs.* buffers); drop --stats");
+        fail(ErrorCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics (normalize_inputs.* buffers); drop --stats");
       }
       plan_.statistics_source = "the state dict's normalisation buffers";
     } else if (src_.no_normalization) {
@@ -432,7 +432,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
   OwnedTensorSet out(origin);
   auto add = [&](const std::string& path, const std::string& name, std::vector<float> values) {
     if (const SafetensorsTensor* existing = out.find(name)) {
-      if (existing->to_f32() != values) fail(StatusCode::kInvalidArgument, path + ": \"" + name + "\" differs from an earlier statistics file");
+      if (existing->to_f32() != values) fail(ErrorCode::kInvalidArgument, path + ": \"" + name + "\" differs from an earlier statistics file");
       return;
     }
     const int64_t n = static_cast<int64_t>(values.size());
@@ -442,7 +442,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
     if (std::filesystem::path(path).extension() == ".json") {
       // LeRobot's meta/stats.json: {"<feature>": {"<stat>": [nested numbers], ...}, ...}
       const OrderedJson j = read_json(path);
-      if (!j.is_object()) fail(StatusCode::kDataLoss, path + ": expected {\"<feature>\": {\"<stat>\": [...]}}");
+      if (!j.is_object()) fail(ErrorCode::kDataLoss, path + ": expected {\"<feature>\": {\"<stat>\": [...]}}");
       for (const auto& [feature, stats] : j.items()) {
         if (!stats.is_object()) continue;
         for (const auto& [stat, value] : stats.items()) {
@@ -458,7 +458,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
       }
     }
   }
-  if (out.names().empty()) fail(StatusCode::kInvalidArgument, origin + ": no statistics found");
+  if (out.names().empty()) fail(ErrorCode::kInvalidArgument, origin + ": no statistics found");
   return out;
 }
 
@@ -474,7 +474,7 @@ ImportedModel import_pytorch_conversion(const PyTorchConversion& plan) {
   if (!plan.missing.empty()) {
     std::string list;
     for (const auto& m : plan.missing) list += "\n  - " + m;
-    fail(StatusCode::kInvalidArgument, plan.checkpoint.state_dict.origin() + ": cannot convert without knowing:" + list +
+    fail(ErrorCode::kInvalidArgument, plan.checkpoint.state_dict.origin() + ": cannot convert without knowing:" + list +
          "\n(act_convert --explain shows what was inferred from the weights and from where)");
   }
   ImportedModel model = plan.stats ? import_lerobot_state_dict(plan.config, plan.checkpoint.state_dict, *plan.stats)

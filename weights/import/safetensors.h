@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "weights/file_mapping.h"
-#include "weights/tensor_types.h"
+#include "weights/blob/file_mapping.h"
+#include "weights/blob/tensor_types.h"
 
 namespace act {
 

@@ -13,9 +13,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/lerobot_import.h"
-#include "weights/pytorch_checkpoint.h"
-#include "weights/safetensors.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/import/pytorch_checkpoint.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 

@@ -1,4 +1,4 @@
-#include "weights/actb.h"
+#include "weights/blob/actb.h"
 
 #include <zlib.h>
 
@@ -9,8 +9,8 @@
 #include <limits>
 #include <utility>
 
-#include "weights/error.h"
-#include "weights/file_util.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act {
 
@@ -22,7 +22,7 @@ constexpr size_t kFixedHeaderSize = 64;
 constexpr uint64_t kMaxHeaderSize = 100'000'000;
 
 [[noreturn]] void corrupt(const std::string& path, const std::string& what) {
-  fail(StatusCode::kDataLoss, "'" + path + "': " + what);
+  fail(ErrorCode::kDataLoss, "'" + path + "': " + what);
 }
 
 uint32_t read_le32(const uint8_t* p) {
@@ -130,7 +130,7 @@ std::string parse_quant(const nlohmann::json& j, QuantParams* q) {
 
 const float* ActbTensor::f32() const {
   if (dtype != DType::kF32) {
-    fail(StatusCode::kInvalidArgument, "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", not F32");
+    fail(ErrorCode::kInvalidArgument, "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", not F32");
   }
   // Data is 64-byte aligned inside the mapping (checked at open), so viewing it as floats is safe.
   return static_cast<const float*>(static_cast<const void*>(data));
@@ -141,22 +141,22 @@ const float* ActbTensor::f32() const {
 void ActbWriter::add_tensor(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data,
                             size_t nbytes, QuantParams quant) {
   const std::string where = "actb tensor '" + name + "': ";
-  if (name.empty()) fail(StatusCode::kInvalidArgument, "actb tensor with an empty name");
-  if (index_.count(name) != 0) fail(StatusCode::kInvalidArgument, where + "duplicate tensor name");
+  if (name.empty()) fail(ErrorCode::kInvalidArgument, "actb tensor with an empty name");
+  if (index_.count(name) != 0) fail(ErrorCode::kInvalidArgument, where + "duplicate tensor name");
   uint64_t elements = 0;
   try {
     elements = shape_elements(shape);
   } catch (const Error& e) {
-    fail(StatusCode::kInvalidArgument, where + e.what());
+    fail(ErrorCode::kInvalidArgument, where + e.what());
   }
   uint64_t expected = 0;
   if (!detail::checked_mul(elements, dtype_size(dtype), &expected) || expected != nbytes) {
-    fail(StatusCode::kInvalidArgument, where + "shape " + shape_string(shape) + " with dtype " + dtype_name(dtype) +
+    fail(ErrorCode::kInvalidArgument, where + "shape " + shape_string(shape) + " with dtype " + dtype_name(dtype) +
                                            " does not match " + std::to_string(nbytes) + " bytes");
   }
-  if (data == nullptr && nbytes != 0) fail(StatusCode::kInvalidArgument, where + "data is null");
+  if (data == nullptr && nbytes != 0) fail(ErrorCode::kInvalidArgument, where + "data is null");
   const std::string quant_error = check_quant(quant, shape);
-  if (!quant_error.empty()) fail(StatusCode::kInvalidArgument, where + quant_error);
+  if (!quant_error.empty()) fail(ErrorCode::kInvalidArgument, where + quant_error);
 
   Pending p{name, dtype, std::move(shape), {}, std::move(quant)};
   if (nbytes != 0) {
@@ -174,7 +174,7 @@ void ActbWriter::add_f32(const std::string& name, std::vector<int64_t> shape, co
 size_t ActbWriter::write(const std::string& path) const {
   // The reader insists on an object; refuse to produce a file it would reject.
   if (!config_.is_object()) {
-    fail(StatusCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
+    fail(ErrorCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
                                            config_.type_name());
   }
   // Lay the tensors out back to back, each at a 64-byte aligned offset in the data area.
@@ -209,7 +209,7 @@ size_t ActbWriter::write(const std::string& path) const {
   header["tensors"] = std::move(dir);
   const std::string text = detail::dump_json(header, "the .actb header of '" + path + "'");
   if (text.size() > kMaxHeaderSize) {
-    fail(StatusCode::kInvalidArgument, "'" + path + "': .actb header of " + std::to_string(text.size()) +
+    fail(ErrorCode::kInvalidArgument, "'" + path + "': .actb header of " + std::to_string(text.size()) +
                                            " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
   }
   const uint64_t data_offset = align_up(kFixedHeaderSize + text.size());
@@ -266,7 +266,7 @@ ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
   }
   f.version_ = read_le32(base + 8);
   if (f.version_ != kActbFormatVersion) {
-    fail(StatusCode::kUnimplemented, "'" + path + "': format version " + std::to_string(f.version_) +
+    fail(ErrorCode::kUnimplemented, "'" + path + "': format version " + std::to_string(f.version_) +
                                          ", this build reads " + std::to_string(kActbFormatVersion));
   }
   const uint32_t reserved0 = read_le32(base + 12);
@@ -417,7 +417,7 @@ const ActbTensor* ActbFile::find(const std::string& name) const {
 
 const ActbTensor& ActbFile::get(const std::string& name) const {
   const ActbTensor* t = find(name);
-  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + path() + "'");
+  if (t == nullptr) fail(ErrorCode::kNotFound, "tensor '" + name + "' not found in '" + path() + "'");
   return *t;
 }
 

@@ -1,4 +1,4 @@
-#include "weights/file_util.h"
+#include "weights/blob/file_util.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -14,7 +14,7 @@
 #include <system_error>
 #include <utility>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act::detail {
 
@@ -33,23 +33,41 @@ std::string clip(std::string s, size_t max_len = 300) {
 
 }  // namespace
 
-AtomicFileWriter::AtomicFileWriter(std::string path)
-    : path_(std::move(path)), temp_path_(path_ + ".tmp." + std::to_string(::getpid())), remove_on_signal_(temp_path_) {
-  // O_TRUNC rather than O_EXCL: a stale temp file left by a crashed process with the same pid (common
-  // in containers) must not block writing forever. O_NOFOLLOW: never write through a planted symlink.
+AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path)) {
+  std::string dir = std::filesystem::path(path_).parent_path().string();
+  if (dir.empty()) dir = ".";
+  // An unnamed file in the target's folder: until commit() gives it a name, a crash, a signal or
+  // SIGKILL leaves nothing behind, with no handler to install.
+  do {
+    fd_ = ::open(dir.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0644);
+  } while (fd_ < 0 && errno == EINTR);
+  if (fd_ >= 0) return;
+  const int tmpfile_err = errno;
+  if (tmpfile_err != EOPNOTSUPP && tmpfile_err != EISDIR && tmpfile_err != EINVAL) {
+    fail(ErrorCode::kIoError, "cannot write '" + path_ + "': cannot create a file in '" + dir + "': " +
+                                   errno_text(tmpfile_err));
+  }
+  // A file system without O_TMPFILE: a named temporary file, removed by the destructor. O_TRUNC
+  // rather than O_EXCL: a stale one left by a crashed process with the same pid (common in
+  // containers) must not block writing forever. O_NOFOLLOW: never write through a planted symlink.
+  temp_path_ = path_ + ".tmp." + std::to_string(::getpid());
   do {
     fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, 0644);
   } while (fd_ < 0 && errno == EINTR);
   if (fd_ < 0) {
     const int err = errno;
-    fail(StatusCode::kIoError,
+    fail(ErrorCode::kIoError,
          "cannot write '" + path_ + "': cannot create '" + temp_path_ + "': " + errno_text(err));
   }
 }
 
 AtomicFileWriter::~AtomicFileWriter() {
   if (fd_ >= 0) ::close(fd_);
-  if (!committed_) ::unlink(temp_path_.c_str());
+  if (!committed_ && !temp_path_.empty()) ::unlink(temp_path_.c_str());
+}
+
+std::string AtomicFileWriter::describe_target() const {
+  return "'" + path_ + "'" + (temp_path_.empty() ? std::string() : " (via '" + temp_path_ + "')");
 }
 
 void AtomicFileWriter::write(const void* data, size_t size) {
@@ -62,11 +80,9 @@ void AtomicFileWriter::write(const void* data, size_t size) {
     if (n < 0) {
       if (errno == EINTR) continue;
       const int err = errno;
-      fail(StatusCode::kIoError, "cannot write '" + path_ + "' (via '" + temp_path_ + "'): " + errno_text(err));
+      fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": " + errno_text(err));
     }
-    if (n == 0) {
-      fail(StatusCode::kIoError, "cannot write '" + path_ + "' (via '" + temp_path_ + "'): write returned 0");
-    }
+    if (n == 0) fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": write returned 0");
     p += n;
     left -= static_cast<size_t>(n);
   }
@@ -82,22 +98,39 @@ void AtomicFileWriter::write_zeros(size_t size) {
   }
 }
 
+void AtomicFileWriter::name_unnamed_file() {
+  // linkat cannot replace an existing name, so the unnamed file gets a fresh temporary name first and
+  // is then renamed over the target: the name exists only between these two calls.
+  temp_path_ = path_ + ".tmp." + std::to_string(::getpid());
+  const std::string fd_link = "/proc/self/fd/" + std::to_string(fd_);
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    if (::linkat(AT_FDCWD, fd_link.c_str(), AT_FDCWD, temp_path_.c_str(), AT_SYMLINK_FOLLOW) == 0) return;
+    if (errno == EEXIST && attempt == 0) {  // a stale one from a crashed process with our pid
+      ::unlink(temp_path_.c_str());
+      continue;
+    }
+    break;
+  }
+  const int err = errno;
+  temp_path_.clear();
+  fail(ErrorCode::kIoError, "cannot write '" + path_ + "': cannot give the new file a name: " + errno_text(err));
+}
+
 void AtomicFileWriter::commit() {
   // fsync before rename: otherwise a crash can leave the new name pointing at unwritten blocks.
   if (::fsync(fd_) != 0) {
     const int err = errno;
-    fail(StatusCode::kIoError, "cannot write '" + path_ + "': fsync of '" + temp_path_ + "' failed: " +
-                                   errno_text(err));
+    fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": fsync failed: " + errno_text(err));
   }
+  if (temp_path_.empty()) name_unnamed_file();
   const int fd = std::exchange(fd_, -1);
   if (::close(fd) != 0) {
     const int err = errno;
-    fail(StatusCode::kIoError, "cannot write '" + path_ + "': close of '" + temp_path_ + "' failed: " +
-                                   errno_text(err));
+    fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": close failed: " + errno_text(err));
   }
   if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
     const int err = errno;
-    fail(StatusCode::kIoError,
+    fail(ErrorCode::kIoError,
          "cannot write '" + path_ + "': rename from '" + temp_path_ + "' failed: " + errno_text(err));
   }
   committed_ = true;
@@ -143,29 +176,29 @@ nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, s
   // nlohmann stops at a NUL byte as if the input ended there, which would let anything after it pass
   // unchecked. Valid JSON text never contains a raw NUL, so reject it up front.
   if (const void* nul = size == 0 ? nullptr : std::memchr(begin, 0, size); nul != nullptr) {
-    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: NUL byte at offset " +
+    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: NUL byte at offset " +
                                     std::to_string(static_cast<const char*>(nul) - begin));
   }
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(begin, begin + size, callback);
   } catch (const nlohmann::json::exception& e) {
-    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: " + clip(e.what()));
+    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: " + clip(e.what()));
   }
   // Parsing and destroying are iterative in nlohmann, but copying, comparing and dumping recurse: bound
   // the depth so no later use of the header can overflow the stack.
   if (max_depth > kMaxJsonDepth) {
-    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: nested deeper than " +
+    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: nested deeper than " +
                                     std::to_string(kMaxJsonDepth) + " levels");
   }
   if (has_duplicate) {
-    fail(StatusCode::kDataLoss, "'" + path + "': malformed JSON header: duplicate key '" + clip(duplicate) + "'");
+    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: duplicate key '" + clip(duplicate) + "'");
   }
   return j;
 }
 
 void throw_dump_error(const std::string& what, const char* reason) {
-  fail(StatusCode::kInvalidArgument, "cannot serialise " + what + " as JSON: " + clip(reason));
+  fail(ErrorCode::kInvalidArgument, "cannot serialise " + what + " as JSON: " + clip(reason));
 }
 
 bool json_to_i64(const nlohmann::json& j, int64_t* out) {

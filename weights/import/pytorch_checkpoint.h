@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "weights/safetensors.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 

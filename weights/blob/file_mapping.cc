@@ -1,4 +1,4 @@
-#include "weights/file_mapping.h"
+#include "weights/blob/file_mapping.h"
 
 #include <fcntl.h>
 #include <sys/mman.h>
@@ -11,7 +11,7 @@
 #include <system_error>
 #include <utility>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -42,21 +42,21 @@ FileMapping FileMapping::open(const std::string& path) {
   } while (fd < 0 && errno == EINTR);
   if (fd < 0) {
     const int err = errno;
-    const StatusCode code = (err == ENOENT || err == ENOTDIR) ? StatusCode::kNotFound : StatusCode::kIoError;
+    const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIoError;
     fail(code, "cannot open '" + path + "': " + errno_text(err));
   }
   FdGuard guard(fd);
 
   struct stat st{};
   if (::fstat(fd, &st) != 0) {
-    fail(StatusCode::kIoError, "cannot stat '" + path + "': " + errno_text(errno));
+    fail(ErrorCode::kIoError, "cannot stat '" + path + "': " + errno_text(errno));
   }
   // Directories and devices open fine with O_RDONLY but cannot be mapped as weights.
   if (!S_ISREG(st.st_mode)) {
-    fail(StatusCode::kIoError, "cannot map '" + path + "': not a regular file");
+    fail(ErrorCode::kIoError, "cannot map '" + path + "': not a regular file");
   }
   if (st.st_size < 0 || static_cast<uint64_t>(st.st_size) > std::numeric_limits<size_t>::max()) {
-    fail(StatusCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +
+    fail(ErrorCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +
                                    " does not fit in the address space");
   }
 
@@ -67,7 +67,7 @@ FileMapping FileMapping::open(const std::string& path) {
 
   void* p = ::mmap(nullptr, m.size_, PROT_READ, MAP_PRIVATE, fd, 0);
   if (p == MAP_FAILED) {
-    fail(StatusCode::kIoError, "cannot mmap '" + path + "' (" + std::to_string(m.size_) +
+    fail(ErrorCode::kIoError, "cannot mmap '" + path + "' (" + std::to_string(m.size_) +
                                    " bytes): " + errno_text(errno));
   }
   m.data_ = static_cast<const uint8_t*>(p);

@@ -1,10 +1,10 @@
-#include "weights/model_config.h"
+#include "weights/blob/model_config.h"
 
 #include <cmath>
 #include <sstream>
 
-#include "weights/error.h"
-#include "weights/file_util.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act {
 
@@ -154,18 +154,18 @@ std::string ModelConfig::summary() const {
 }
 
 void ModelConfig::validate() const {
-  auto bad = [](const std::string& msg) { fail(StatusCode::kInvalidArgument, "invalid model config: " + msg); };
+  auto bad = [](const std::string& msg) { fail(ErrorCode::kInvalidArgument, "invalid model config: " + msg); };
   if (backbone_blocks.size() != 4) bad("backbone must have 4 stages");
   for (int b : backbone_blocks) {
     if (b < 1 || b > 64) bad("backbone stage with " + std::to_string(b) + " blocks");
   }
   if (dilate_layer4 && !bottleneck) {
-    fail(StatusCode::kUnimplemented,
+    fail(ErrorCode::kUnimplemented,
          "replace_final_stride_with_dilation needs a Bottleneck ResNet (resnet50+); torchvision refuses "
          "dilation in BasicBlock (" + backbone + ")");
   }
   if (cameras.empty()) {
-    fail(StatusCode::kUnimplemented, "the model has no camera (VISUAL) input; image-less ACT is not supported");
+    fail(ErrorCode::kUnimplemented, "the model has no camera (VISUAL) input; image-less ACT is not supported");
   }
   for (const auto& cam : cameras) {
     if (cam.height < 1 || cam.width < 1 || cam.height > 8192 || cam.width > 8192) {
@@ -205,14 +205,14 @@ NormMode norm_from_json(const nlohmann::json& j) {
   if (s == "IDENTITY") return NormMode::kIdentity;
   if (s == "MEAN_STD") return NormMode::kMeanStd;
   if (s == "MIN_MAX") return NormMode::kMinMax;
-  fail(StatusCode::kDataLoss, "unknown normalisation mode '" + s + "'");
+  fail(ErrorCode::kDataLoss, "unknown normalisation mode '" + s + "'");
 }
 
 Activation activation_from_string(const std::string& s) {
   if (s == "relu") return Activation::kRelu;
   if (s == "gelu") return Activation::kGelu;
   if (s == "glu") return Activation::kGlu;
-  fail(StatusCode::kDataLoss, "unknown activation '" + s + "'");
+  fail(ErrorCode::kDataLoss, "unknown activation '" + s + "'");
 }
 
 }  // namespace
@@ -253,7 +253,7 @@ namespace {
 int int_field(const nlohmann::json& j, const std::string& key) {
   int32_t v = 0;
   if (!detail::json_to_i32(j.at(key), &v)) {
-    fail(StatusCode::kDataLoss, "malformed model config in blob: \"" + key + "\" must be a 32-bit integer");
+    fail(ErrorCode::kDataLoss, "malformed model config in blob: \"" + key + "\" must be a 32-bit integer");
   }
   return v;
 }
@@ -266,7 +266,7 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     c.backbone = j.at("backbone").get<std::string>();
     for (const auto& blocks : j.at("backbone_blocks")) {
       int32_t v = 0;
-      if (!detail::json_to_i32(blocks, &v)) fail(StatusCode::kDataLoss, "malformed model config in blob: bad backbone_blocks");
+      if (!detail::json_to_i32(blocks, &v)) fail(ErrorCode::kDataLoss, "malformed model config in blob: bad backbone_blocks");
       c.backbone_blocks.push_back(v);
     }
     c.bottleneck = j.at("bottleneck").get<bool>();
@@ -292,7 +292,7 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     for (const auto& e : j.at("input_norm")) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
     c.action_norm = norm_from_json(j.at("action_norm"));
   } catch (const nlohmann::json::exception& e) {
-    fail(StatusCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
+    fail(ErrorCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
   }
   c.validate();
   return c;

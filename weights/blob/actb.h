@@ -25,8 +25,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/file_mapping.h"
-#include "weights/tensor_types.h"
+#include "weights/blob/file_mapping.h"
+#include "weights/blob/tensor_types.h"
 
 namespace act {
 

@@ -1,9 +1,9 @@
-#include "weights/synthetic_model.h"
+#include "weights/import/synthetic_model.h"
 
 #include <cmath>
 #include <random>
 
-#include "weights/error.h"
+#include "weights/blob/error.h"
 
 namespace act {
 
@@ -58,10 +58,10 @@ nlohmann::ordered_json synthetic_config(const std::string& name) {
     state = action = 2;
   } else if (parse_size(name, &width, &height)) {
     if (width < 32 || height < 32 || width > 4096 || height > 4096) {
-      fail(StatusCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
+      fail(ErrorCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
     }
   } else {
-    fail(StatusCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or WxH such as 640x480)");
+    fail(ErrorCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or WxH such as 640x480)");
   }
   nlohmann::ordered_json c;
   c["type"] = "act";

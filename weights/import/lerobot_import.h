@@ -14,8 +14,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/model_config.h"
-#include "weights/safetensors.h"
+#include "weights/blob/model_config.h"
+#include "weights/import/safetensors.h"
 
 namespace act {
 

@@ -9,16 +9,16 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/signal_cleanup.h"
-
 namespace act::detail {
 
-/// Writes a file atomically: data goes to "<path>.tmp.<pid>" in the same folder, and commit() fsyncs
-/// and renames it over `path`. If commit() is never reached (an exception, a failed write) the
-/// destructor removes the temporary file, so `path` either keeps its old content or gets the new one.
+/// Writes a file atomically: data goes to an unnamed file (O_TMPFILE) in the same folder, and commit()
+/// fsyncs it, names it "<path>.tmp.<pid>" and renames that over `path`. Until commit() nothing is
+/// visible, so a crash or a kill (even SIGKILL) leaves `path` with its old content and no leftover.
+/// (On a file system without O_TMPFILE the data goes to the named temporary file from the start, and
+/// the destructor removes it when commit() is never reached.)
 class AtomicFileWriter {
  public:
-  /// Creates the temporary file. Throws act::Error(kIoError) naming both paths.
+  /// Creates the unnamed file. Throws act::Error(kIoError) naming the path.
   explicit AtomicFileWriter(std::string path);
   ~AtomicFileWriter();
   AtomicFileWriter(const AtomicFileWriter&) = delete;
@@ -30,12 +30,13 @@ class AtomicFileWriter {
   void commit();
 
   size_t bytes_written() const { return written_; }
-  const std::string& temp_path() const { return temp_path_; }
 
  private:
+  void name_unnamed_file();
+  std::string describe_target() const;
+
   std::string path_;
-  std::string temp_path_;
-  SignalCleanup remove_on_signal_;  // the temporary file goes if the process is killed
+  std::string temp_path_;  // empty while the file has no name
   int fd_ = -1;
   size_t written_ = 0;
   bool committed_ = false;

@@ -1,4 +1,4 @@
-#include "weights/safetensors.h"
+#include "weights/import/safetensors.h"
 
 #include <algorithm>
 #include <set>
@@ -6,8 +6,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/error.h"
-#include "weights/file_util.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act {
 
@@ -18,7 +18,7 @@ namespace {
 constexpr uint64_t kMaxHeaderSize = 100'000'000;
 
 [[noreturn]] void corrupt(const std::string& path, const std::string& what) {
-  fail(StatusCode::kDataLoss, "'" + path + "': " + what);
+  fail(ErrorCode::kDataLoss, "'" + path + "': " + what);
 }
 
 uint64_t read_le64(const uint8_t* p) {
@@ -106,13 +106,13 @@ SafetensorsTensor parse_entry(const std::string& path, const std::string& name, 
 
 std::vector<float> SafetensorsTensor::to_f32() const {
   if (dtype != DType::kF32 && dtype != DType::kF16 && dtype != DType::kBF16) {
-    fail(StatusCode::kInvalidArgument,
+    fail(ErrorCode::kInvalidArgument,
          "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", cannot convert to F32");
   }
   const uint64_t count = elements();
   // Guards hand-built tensors; tensors from open() always pass.
   if (count > nbytes / dtype_size(dtype) || count * dtype_size(dtype) != nbytes) {
-    fail(StatusCode::kInvalidArgument, "tensor '" + name + "': shape " + shape_string(shape) + " does not match " +
+    fail(ErrorCode::kInvalidArgument, "tensor '" + name + "': shape " + shape_string(shape) + " does not match " +
                                            std::to_string(nbytes) + " bytes");
   }
   std::vector<float> out(static_cast<size_t>(count));
@@ -195,7 +195,7 @@ const SafetensorsTensor* TensorSet::find(const std::string& name) const {
 
 const SafetensorsTensor& TensorSet::get(const std::string& name) const {
   const SafetensorsTensor* t = find(name);
-  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + origin_ + "'");
+  if (t == nullptr) fail(ErrorCode::kNotFound, "tensor '" + name + "' not found in '" + origin_ + "'");
   return *t;
 }
 
@@ -207,9 +207,9 @@ std::vector<std::string> TensorSet::names() const {
 }
 
 void OwnedTensorSet::add_f32(const std::string& name, std::vector<int64_t> shape, std::vector<float> values) {
-  if (index_.count(name)) fail(StatusCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
+  if (index_.count(name)) fail(ErrorCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
   if (shape_elements(shape) != values.size()) {
-    fail(StatusCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(values.size()) +
+    fail(ErrorCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(values.size()) +
          " values for shape " + shape_string(shape));
   }
   std::vector<float>& stored = storage_[name] = std::move(values);
@@ -223,10 +223,10 @@ void OwnedTensorSet::add_f32(const std::string& name, std::vector<int64_t> shape
 }
 
 void OwnedTensorSet::add(const std::string& name, DType dtype, std::vector<int64_t> shape, std::vector<uint8_t> bytes) {
-  if (index_.count(name)) fail(StatusCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
+  if (index_.count(name)) fail(ErrorCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
   uint64_t expected = 0;
   if (!detail::checked_mul(shape_elements(shape), dtype_size(dtype), &expected) || expected != bytes.size()) {
-    fail(StatusCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(bytes.size()) +
+    fail(ErrorCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(bytes.size()) +
          " bytes for " + dtype_name(dtype) + " shape " + shape_string(shape));
   }
   std::vector<uint8_t>& stored = byte_storage_[name] = std::move(bytes);
@@ -247,7 +247,7 @@ void OwnedTensorSet::rename(const std::function<std::string(const std::string&)>
   for (auto& [old_name, t] : index_) {
     std::string name = new_name(old_name);
     if (index.count(name)) {
-      fail(StatusCode::kInvalidArgument, origin_ + ": renaming '" + old_name + "' to '" + name + "' collides with another tensor");
+      fail(ErrorCode::kInvalidArgument, origin_ + ": renaming '" + old_name + "' to '" + name + "' collides with another tensor");
     }
     if (auto it = storage_.find(old_name); it != storage_.end()) storage[name] = std::move(it->second);
     if (auto it = byte_storage_.find(old_name); it != byte_storage_.end()) byte_storage[name] = std::move(it->second);
@@ -272,22 +272,22 @@ void write_safetensors(const std::string& path, const std::vector<SafetensorsWri
   uint64_t offset = 0;
   for (const SafetensorsWriteTensor& t : tensors) {
     const std::string where = "write_safetensors '" + path + "': tensor '" + t.name + "': ";
-    if (t.name.empty()) fail(StatusCode::kInvalidArgument, where + "empty name");
-    if (t.name == "__metadata__") fail(StatusCode::kInvalidArgument, where + "name is reserved");
-    if (!seen.insert(t.name).second) fail(StatusCode::kInvalidArgument, where + "duplicate name");
+    if (t.name.empty()) fail(ErrorCode::kInvalidArgument, where + "empty name");
+    if (t.name == "__metadata__") fail(ErrorCode::kInvalidArgument, where + "name is reserved");
+    if (!seen.insert(t.name).second) fail(ErrorCode::kInvalidArgument, where + "duplicate name");
     uint64_t elements = 0;
     try {
       elements = shape_elements(t.shape);
     } catch (const Error& e) {
-      fail(StatusCode::kInvalidArgument, where + e.what());
+      fail(ErrorCode::kInvalidArgument, where + e.what());
     }
     uint64_t expected = 0;
     if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected) || expected != t.nbytes) {
-      fail(StatusCode::kInvalidArgument, where + "shape " + shape_string(t.shape) + " with dtype " +
+      fail(ErrorCode::kInvalidArgument, where + "shape " + shape_string(t.shape) + " with dtype " +
                                              dtype_name(t.dtype) + " does not match " + std::to_string(t.nbytes) +
                                              " bytes");
     }
-    if (t.data == nullptr && t.nbytes != 0) fail(StatusCode::kInvalidArgument, where + "data is null");
+    if (t.data == nullptr && t.nbytes != 0) fail(ErrorCode::kInvalidArgument, where + "data is null");
     nlohmann::ordered_json entry = nlohmann::ordered_json::object();
     entry["dtype"] = dtype_name(t.dtype);
     entry["shape"] = t.shape;
@@ -300,7 +300,7 @@ void write_safetensors(const std::string& path, const std::vector<SafetensorsWri
   // Pad with spaces so the data area starts 8-byte aligned (JSON allows trailing whitespace).
   text.append((8 - text.size() % 8) % 8, ' ');
   if (text.size() > kMaxHeaderSize) {
-    fail(StatusCode::kInvalidArgument, "write_safetensors '" + path + "': header of " + std::to_string(text.size()) +
+    fail(ErrorCode::kInvalidArgument, "write_safetensors '" + path + "': header of " + std::to_string(text.size()) +
                                            " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
   }
 

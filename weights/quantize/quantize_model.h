@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "weights/lerobot_import.h"
-#include "weights/quant_config.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/blob/quant_config.h"
 
 namespace act {
 

@@ -20,7 +20,7 @@
 #include <utility>
 #include <vector>
 
-#include "weights/tensor_types.h"
+#include "weights/blob/tensor_types.h"
 
 namespace act {
 

@@ -7,6 +7,7 @@
 
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act::drive {
 namespace {
@@ -123,11 +124,15 @@ Calibration Calibration::from_json(const nlohmann::json& json, const std::string
 }
 
 Calibration Calibration::load(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) fail(ErrorCode::kNotFound, "calibration file " + path + " cannot be opened");
+  std::string text;
+  try {
+    text = detail::read_regular_file(path);
+  } catch (const Error& e) {
+    fail(e.code(), "calibration file " + path + " cannot be opened: " + e.what());
+  }
   nlohmann::json json;
   try {
-    json = nlohmann::json::parse(in);
+    json = nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {
     fail(ErrorCode::kInvalidArgument, "calibration " + path + ": not valid JSON: " + e.what());
   }

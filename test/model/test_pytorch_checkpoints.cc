@@ -200,6 +200,7 @@ TEST(PthSecurity, MaliciousPicklesAreRefusedAndRunNothing) {
       {"evil_in_wrapper.pth", "GLOBAL 'posix.system' is not allowed"},
       {"evil_legacyformat.pth", "GLOBAL 'posix.system' is not allowed"},
       {"evil_huge_length.pth", "length 4294967280 runs past the end"},
+      {"evil_inflated_storage.pth", "declares 67108864 bytes, the pickle says 2 elements of 4 bytes"},
       {"not_a_checkpoint.pth", "not a PyTorch checkpoint"},
   };
   for (const auto& c : cases) {

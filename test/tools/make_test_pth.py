@@ -161,6 +161,16 @@ def main() -> int:
     (out / "evil_legacyformat.pth").write_bytes(legacy_head + pickle.dumps(RunsShell(marker), protocol=2))
     # A 4 GB string length in a 40-byte pickle.
     write_torch_like_zip(out / "evil_huge_length.pth", b"\x80\x02X\xf0\xff\xff\xffabc.")
+    # A storage entry that inflates far past what its tensor needs (2 floats declared, 64 MiB of zeros
+    # deflated to about 64 kB): refused from the sizes, before anything is inflated.
+    buf = io.BytesIO()
+    torch.save(collections.OrderedDict(w=torch.ones(2)), buf)
+    with zipfile.ZipFile(buf) as src, zipfile.ZipFile(out / "evil_inflated_storage.pth", "w") as dst:
+        for info in src.infolist():
+            if info.filename.endswith("/data/0"):
+                dst.writestr(info.filename, bytes(64 << 20), compress_type=zipfile.ZIP_DEFLATED)
+            else:
+                dst.writestr(info, src.read(info.filename))
     # Not a checkpoint at all.
     (out / "not_a_checkpoint.pth").write_bytes(b"hello, this is text\n")
     print(f"wrote {len(list(out.glob('*.pth')))} .pth files to {out}")

@@ -1,4 +1,5 @@
 #include "weights/blob/file_mapping.h"
+#include "weights/blob/file_util.h"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
@@ -61,6 +62,21 @@ TEST(FileMapping, MissingFolderIsNotFound) {
 TEST(FileMapping, DirectoryIsIoError) {
   const std::string dir = test::scratch_dir();
   EXPECT_TRUE(throws_error([&] { FileMapping::open(dir); }, ErrorCode::kIoError, {dir, "not a regular file"}));
+}
+
+TEST(FileMapping, FifoIsRefusedAtOnce) {
+  // Opening a FIFO for reading used to wait for a writer forever (and ignore SIGINT/SIGTERM).
+  const std::string path = test::scratch_dir() + "/model.fifo";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kIoError, {path, "a FIFO"}));
+  EXPECT_TRUE(throws_error([&] { detail::read_regular_file(path); }, ErrorCode::kIoError, {path, "a FIFO"}));
+}
+
+TEST(FileMapping, ReadRegularFileReadsItWhole) {
+  const std::string path = test::scratch_dir() + "/text.json";
+  test::write_file(path, test::bytes_of("{\"a\": 1}"));
+  EXPECT_EQ(detail::read_regular_file(path), "{\"a\": 1}");
+  EXPECT_TRUE(throws_error([&] { detail::read_regular_file(path + ".missing"); }, ErrorCode::kNotFound, {path}));
 }
 
 TEST(FileMapping, UnreadableFileIsIoError) {

@@ -33,12 +33,22 @@ class FdGuard {
   int fd_;
 };
 
+const char* file_kind(mode_t mode) {
+  if (S_ISDIR(mode)) return "a folder";
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISCHR(mode) || S_ISBLK(mode)) return "a device";
+  return "not a plain file";
+}
+
 }  // namespace
 
 FileMapping FileMapping::open(const std::string& path) {
   int fd;
   do {
-    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    // O_NONBLOCK: opening a FIFO for reading would otherwise wait, signals and all, for a writer
+    // that may never come; a regular file ignores it.
+    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   } while (fd < 0 && errno == EINTR);
   if (fd < 0) {
     const int err = errno;
@@ -51,9 +61,9 @@ FileMapping FileMapping::open(const std::string& path) {
   if (::fstat(fd, &st) != 0) {
     fail(ErrorCode::kIoError, "cannot stat '" + path + "': " + errno_text(errno));
   }
-  // Directories and devices open fine with O_RDONLY but cannot be mapped as weights.
+  // Directories, FIFOs and devices open fine with O_RDONLY but cannot be mapped as weights.
   if (!S_ISREG(st.st_mode)) {
-    fail(ErrorCode::kIoError, "cannot map '" + path + "': not a regular file");
+    fail(ErrorCode::kIoError, "cannot map '" + path + "': not a regular file (" + file_kind(st.st_mode) + ")");
   }
   if (st.st_size < 0 || static_cast<uint64_t>(st.st_size) > std::numeric_limits<size_t>::max()) {
     fail(ErrorCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +

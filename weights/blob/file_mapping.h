@@ -11,7 +11,8 @@ class FileMapping {
  public:
   FileMapping() = default;
   /// Maps `path` read-only. Throws act::Error: kNotFound if missing, kIoError if it cannot be opened
-  /// or mapped. An empty file maps to size() == 0, data() == nullptr.
+  /// or mapped or is not a regular file (a FIFO is refused at once, never waited on). An empty file
+  /// maps to size() == 0, data() == nullptr.
   static FileMapping open(const std::string& path);
   ~FileMapping();
   FileMapping(FileMapping&& other) noexcept;

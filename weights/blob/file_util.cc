@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "weights/blob/error.h"
+#include "weights/blob/file_mapping.h"
 
 namespace act::detail {
 
@@ -142,6 +143,11 @@ void AtomicFileWriter::commit() {
     (void)::fsync(dfd);
     ::close(dfd);
   }
+}
+
+std::string read_regular_file(const std::string& path) {
+  const FileMapping file = FileMapping::open(path);
+  return std::string(reinterpret_cast<const char*>(file.data()), file.size());
 }
 
 nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, size_t size) {

@@ -42,6 +42,10 @@ class AtomicFileWriter {
   bool committed_ = false;
 };
 
+/// The whole content of a regular file (FileMapping's rules: a missing file is kNotFound; a folder,
+/// FIFO or device is refused at once, never waited on).
+std::string read_regular_file(const std::string& path);
+
 /// a + b / a * b, false on uint64 overflow.
 inline bool checked_add(uint64_t a, uint64_t b, uint64_t* out) { return !__builtin_add_overflow(a, b, out); }
 inline bool checked_mul(uint64_t a, uint64_t b, uint64_t* out) { return !__builtin_mul_overflow(a, b, out); }

@@ -62,9 +62,7 @@ void normalise_keys(PyTorchCheckpoint& ckpt, std::vector<std::string>& notes) {
 }
 
 OrderedJson read_json(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(ErrorCode::kNotFound, "cannot open " + path);
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string text = detail::read_regular_file(path);
   // Same untrusted-JSON rules as file headers (depth bound, duplicate keys), in file order.
   const nlohmann::json checked = detail::parse_json_header(path, reinterpret_cast<const uint8_t*>(text.data()), text.size());
   (void)checked;

@@ -15,6 +15,7 @@
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_names.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"
 
 namespace fs = std::filesystem;
@@ -45,10 +46,9 @@ constexpr float kLegacyEps = 1e-8f;
 // ------------------------------------------------------------------------------------------ config
 
 OrderedJson read_json_file(const fs::path& path) {
-  std::ifstream in(path);
-  if (!in) fail(ErrorCode::kNotFound, "cannot open " + path.string());
+  const std::string text = detail::read_regular_file(path.string());
   try {
-    return OrderedJson::parse(in);
+    return OrderedJson::parse(text);
   } catch (const nlohmann::json::exception& e) {
     fail(ErrorCode::kDataLoss, path.string() + " is not valid JSON: " + e.what());
   }

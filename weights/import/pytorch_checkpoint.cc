@@ -31,6 +31,16 @@ bool is_tensor_dict(const PickleValue& v) {
   return true;
 }
 
+// Bytes of the tensor's whole storage as the pickle declares it (UINT64_MAX when that overflows).
+uint64_t storage_bytes(const PickleTensor& t) {
+  uint64_t bytes = 0;
+  if (t.storage_elements < 0 ||
+      !detail::checked_mul(static_cast<uint64_t>(t.storage_elements), t.storage_type.element_size, &bytes)) {
+    return UINT64_MAX;
+  }
+  return bytes;
+}
+
 // Copies a (possibly strided) view of a storage into a contiguous buffer, checking every bound.
 std::vector<uint8_t> materialize(const std::string& where, const PickleTensor& t, std::span<const uint8_t> storage) {
   if (!t.storage_type.dtype) {
@@ -258,6 +268,13 @@ PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::st
       // Read (and CRC-checked) once, however many tensors view it.
       const ZipEntry* entry = zip.find(prefix + "data/" + t.storage_key);
       if (!entry) fail(ErrorCode::kDataLoss, where + ": storage " + prefix + "data/" + t.storage_key + " is missing");
+      // The size the pickle implies is known before inflating: a deflated entry that declares more is
+      // refused here, not after inflating it (a few kB can declare gigabytes).
+      if (t.storage_type.dtype && entry->size != storage_bytes(t)) {
+        fail(ErrorCode::kDataLoss, where + ": storage " + entry->name + " declares " + std::to_string(entry->size) +
+             " bytes, the pickle says " + std::to_string(t.storage_elements) + " elements of " +
+             std::to_string(t.storage_type.element_size) + " bytes");
+      }
       storage = storages.emplace(t.storage_key, zip.read(*entry, inflated[t.storage_key])).first;
     }
     std::vector<uint8_t> data = materialize(where, t, storage->second);  // checks that the dtype is supported

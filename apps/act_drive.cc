@@ -30,25 +30,38 @@ static_assert(std::atomic<bool>::is_always_lock_free, "the signal handler needs 
 
 void request_stop(int) { g_stop.store(true); }
 
-// A crash still tells the board to stop (it would also time out to failsafe by itself in 250 ms).
+// Any other signal that would end the process: the board is told to stop before the signal's own
+// action (it would also time out to failsafe by itself in 250 ms).
 void neutral_then_die(int signal) {
   SerialLink::emergency_neutral();
   std::signal(signal, SIG_DFL);
   std::raise(signal);
 }
 
+// Ctrl-Z and friends suspend the process, and nothing drives while it sleeps: neutral first.
+void neutral_then_suspend(int signal) {
+  SerialLink::emergency_neutral();
+  std::signal(signal, SIG_DFL);
+  std::raise(signal);                          // stops here until SIGCONT
+  std::signal(signal, neutral_then_suspend);  // resumed: the loop sends commands again
+}
+
 void install_signal_handlers() {
+  // Stop requests: neutral, the summary, exit 0. SIGHUP is an SSH or Wi-Fi drop taking the terminal.
   struct sigaction stop{};
   stop.sa_handler = request_stop;
   sigemptyset(&stop.sa_mask);
-  sigaction(SIGINT, &stop, nullptr);
-  sigaction(SIGTERM, &stop, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);  // a vanished port is an error code, not a death
-  std::vector<int> fatal{SIGABRT, SIGFPE, SIGILL};
+  for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaction(s, &stop, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);  // a vanished port (or terminal) is an error code, not a death
+  // Every other catchable signal whose default action ends the process (SIGKILL cannot be caught:
+  // the board's own watchdog covers it).
+  std::vector<int> fatal{SIGQUIT, SIGABRT, SIGFPE, SIGILL, SIGTRAP, SIGSYS, SIGUSR1, SIGUSR2, SIGALRM,
+                         SIGVTALRM, SIGPROF, SIGXCPU, SIGXFSZ, SIGIO, SIGPWR, SIGSTKFLT};
 #if !defined(__SANITIZE_ADDRESS__)
   fatal.insert(fatal.end(), {SIGSEGV, SIGBUS});  // AddressSanitizer reports these itself
 #endif
   for (int s : fatal) std::signal(s, neutral_then_die);
+  for (int s : {SIGTSTP, SIGTTIN, SIGTTOU}) std::signal(s, neutral_then_suspend);
 }
 
 // Sends neutral and closes the link on every way out of main (errors and exceptions included).

@@ -8,6 +8,7 @@
 #include <iostream>
 
 #include "actengine/engine.h"
+#include "apps/diff_stats.h"
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
@@ -47,19 +48,14 @@ int main(int argc, char** argv) {
     }
     const size_t per = info.chunk_values();
     std::vector<float> actions(batch.size() * per);
-    double max_abs = 0.0, max_rel = 0.0, worst_ratio = 0.0;
+    act::DiffStats diff;
     for (size_t i = 0; i < batch.size(); ++i) {
       std::span<float> out(actions.data() + i * per, per);
       const act::Status s = engine.infer(batch.at(i), out);
       act::throw_if_failed(s, "observation " + std::to_string(i));
       if (compare) {
         const float* ref = batch.expected_actions(i);
-        for (size_t j = 0; j < per; ++j) {
-          const double diff = std::fabs(static_cast<double>(out[j]) - ref[j]);
-          max_abs = std::max(max_abs, diff);
-          max_rel = std::max(max_rel, diff / std::max(1e-12, std::fabs(static_cast<double>(ref[j]))));
-          worst_ratio = std::max(worst_ratio, diff / (1.0 + std::fabs(static_cast<double>(ref[j]))));
-        }
+        for (size_t j = 0; j < per; ++j) diff.add(out[j], ref[j]);
       }
     }
     std::cout << "model        " << info.summary << "\n"
@@ -71,9 +67,13 @@ int main(int argc, char** argv) {
       std::cout << "wrote        " << output_path << "\n";
     }
     if (compare) {
-      const bool pass = worst_ratio <= tol;
+      const bool pass = diff.within(tol);
+      if (diff.non_finite > 0) {
+        std::printf("compare      %zu of %zu values are NaN or infinite (ours or the reference's)\n", diff.non_finite,
+                    diff.count);
+      }
       std::printf("compare      max abs error %.3g, max relative error %.3g, max |diff|/(1+|ref|) %.3g (tol %.3g): %s\n",
-                  max_abs, max_rel, worst_ratio, tol, pass ? "PASS" : "FAIL");
+                  diff.max_abs, diff.max_rel, diff.max_ratio, tol, pass ? "PASS" : "FAIL");
       return pass ? 0 : 1;
     }
     return 0;

@@ -220,6 +220,7 @@ void SerialLink::fail_link(const std::string& why, Clock::time_point now) {
        << options_.reconnect_interval.count() << " ms (the board goes to failsafe by itself)\n";
   port_.close();
   state_ = State::kDisconnected;
+  awaiting_ack_ = false;
   next_attempt_ = now + options_.reconnect_interval;
 }
 
@@ -233,6 +234,10 @@ bool SerialLink::send_message(char type, PwmCommand command) {
     return false;
   }
   last_sent_seq_ = seq;
+  if (!awaiting_ack_) {
+    awaiting_ack_ = true;
+    awaiting_since_ = Clock::now();
+  }
   if (type == 'C') ++commands_sent_;
   return true;
 }
@@ -269,6 +274,9 @@ void SerialLink::handle_line(const RoverLineReader& reader) {
     case 'A':
       ++acks_;
       last_acked_seq_ = message.fields[0];
+      // The board is alive: the clock for the lines still in flight restarts from this ack.
+      awaiting_ack_ = last_acked_seq_ != last_sent_seq_;
+      awaiting_since_ = Clock::now();
       break;
     case 'E':
       if (++rejected_ <= 5) {
@@ -323,6 +331,17 @@ void SerialLink::poll(Clock::time_point now) {
     }
   }
   read_input(std::chrono::milliseconds(0), now);
+  check_acks(now);
+}
+
+void SerialLink::check_acks(Clock::time_point now) {
+  if (state_ != State::kReady || !awaiting_ack_ || now - awaiting_since_ <= options_.ack_timeout) return;
+  ++ack_timeouts_;
+  fail_link("no acknowledgement from the board for " +
+                std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(now - awaiting_since_).count()) +
+                " ms (" + std::to_string(commands_sent_) + " commands sent, " + std::to_string(acks_) +
+                " acked): its transmit line or the board itself is gone",
+            now);
 }
 
 bool SerialLink::send(PwmCommand command, Clock::time_point now) {
@@ -347,7 +366,8 @@ void SerialLink::shutdown(PwmCommand neutral) {
 std::string SerialLink::summary() const {
   std::ostringstream s;
   s << "serial " << options_.path << ": " << commands_sent_ << " commands, " << acks_ << " acked, " << rejected_
-    << " rejected by the board, " << watchdog_notices_ << " board watchdog timeouts, " << errors_ << " errors, "
+    << " rejected by the board, " << watchdog_notices_ << " board watchdog timeouts, " << ack_timeouts_
+    << " ack timeouts, " << errors_ << " errors, "
     << reconnects_ << " reconnects";
   return s.str();
 }

@@ -64,6 +64,9 @@ struct SerialLinkOptions {
   std::chrono::milliseconds reconnect_interval{500};
   /// Longest a single command write may block the control loop.
   std::chrono::milliseconds write_timeout{20};
+  /// Longest a sent command may go without any acknowledgement from the board before the link counts
+  /// as lost: alarm, close, reconnect (the board, if it still listens, then times out to failsafe).
+  std::chrono::milliseconds ack_timeout{ROVER_WATCHDOG_MS};
   /// The outputs the board falls back to by itself (sent as the F line after every handshake).
   PwmCommand failsafe;
 };
@@ -88,6 +91,7 @@ class SerialLink : public ActuatorLink {
   uint64_t rejected() const { return rejected_; }
   uint64_t reconnects() const { return reconnects_; }
   uint64_t watchdog_notices() const { return watchdog_notices_; }
+  uint64_t ack_timeouts() const { return ack_timeouts_; }
 
   /// Writes a neutral line to the open port with nothing but write(2): for fatal-signal handlers.
   static void emergency_neutral() noexcept;
@@ -100,6 +104,7 @@ class SerialLink : public ActuatorLink {
   void handle_line(const RoverLineReader& reader);
   void read_input(std::chrono::milliseconds timeout, Clock::time_point now);
   void become_ready();
+  void check_acks(Clock::time_point now);
 
   SerialLinkOptions options_;
   std::ostream& log_;
@@ -111,7 +116,10 @@ class SerialLink : public ActuatorLink {
   uint16_t next_seq_ = 0;
   uint16_t last_sent_seq_ = 0;
   uint16_t last_acked_seq_ = 0xFFFF;
-  uint64_t commands_sent_ = 0, acks_ = 0, rejected_ = 0, reconnects_ = 0, errors_ = 0, watchdog_notices_ = 0;
+  bool awaiting_ack_ = false;          // a sent line has not been acknowledged yet
+  Clock::time_point awaiting_since_{};  // since then, or since the last ack, whichever is later
+  uint64_t commands_sent_ = 0, acks_ = 0, rejected_ = 0, reconnects_ = 0, errors_ = 0, watchdog_notices_ = 0,
+           ack_timeouts_ = 0;
   std::string last_error_;
 };
 

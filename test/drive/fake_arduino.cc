@@ -69,6 +69,11 @@ void FakeArduino::set_silent(bool silent) {
   silent_ = silent;
 }
 
+void FakeArduino::set_acking(bool acking) {
+  std::lock_guard lock(mutex_);
+  acking_ = acking;
+}
+
 std::vector<FakeArduino::Command> FakeArduino::commands() const {
   std::lock_guard lock(mutex_);
   return commands_;
@@ -123,7 +128,7 @@ void FakeArduino::handle(const char* line, size_t length) {
     return;
   }
   commands_.push_back({now, message.type, message.fields[0], message.fields[1], message.fields[2], generation_});
-  reply({'A', 1, {message.fields[0], 0, 0}});
+  if (acking_) reply({'A', 1, {message.fields[0], 0, 0}});
 }
 
 void FakeArduino::reply(const RoverMessage& message) {

@@ -35,6 +35,8 @@ class FakeArduino {
   void replace();
   /// Stops answering hello lines (a board that never becomes ready).
   void set_silent(bool silent);
+  /// Stops acknowledging commands while still taking them (a board whose transmit line broke).
+  void set_acking(bool acking);
 
   /// Every valid C and F line received so far; `generation` counts replace() calls at receipt.
   struct Command {
@@ -61,6 +63,7 @@ class FakeArduino {
   std::string slave_path_;     // guarded by mutex_
   int generation_ = 0;         // guarded by mutex_
   bool silent_ = false;        // guarded by mutex_
+  bool acking_ = true;         // guarded by mutex_
   bool stop_ = false;          // guarded by mutex_
   std::vector<Command> commands_;     // guarded by mutex_
   std::vector<std::string> bad_lines_;  // guarded by mutex_

@@ -1,5 +1,6 @@
 // The Arduino sketch itself, compiled on the host against a stub of the Arduino API
-// (test/drive/arduino_stub): ready line, acks, rejected lines, failsafe values, the 250 ms watchdog.
+// (test/drive/arduino_stub): ready line, acks, rejected lines, failsafe values, the 250 ms protocol
+// watchdog and the hardware one.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -47,6 +48,7 @@ class Sketch : public ::testing::Test {
   void SetUp() override {
     arduino_stub::now_ms = 1000;
     Serial.take_output();
+    arduino_stub::wdt_timeout = -1;  // as at power-up: setup() must switch it on
     setup();
   }
 };
@@ -66,6 +68,16 @@ TEST_F(Sketch, BootsNeutralWithA50HzFrameAndSaysReady) {
   const auto again = replies();
   ASSERT_EQ(again.size(), 1u);
   EXPECT_EQ(again[0].type, 'R');
+}
+
+TEST_F(Sketch, HardwareWatchdogIsOnAndEveryLoopPetsIt) {
+  // A hung sketch would keep Timer1 on its last pulse: the AVR watchdog must reset it first.
+  ASSERT_GT(arduino_stub::wdt_timeout_ms(), 0) << "setup() leaves the hardware watchdog off";
+  EXPECT_LT(arduino_stub::wdt_timeout_ms(), static_cast<int>(ROVER_WATCHDOG_MS));
+  const uint32_t resets = arduino_stub::wdt_resets;
+  run_for_ms(300);
+  EXPECT_EQ(arduino_stub::wdt_resets, resets + 300);
+  EXPECT_EQ(arduino_stub::wdt_last_reset_ms, arduino_stub::now_ms);
 }
 
 TEST_F(Sketch, AppliesAndAcknowledgesDriveCommands) {

@@ -1,11 +1,14 @@
 // act_rover: the Arduino end of act_drive. Turns protocol lines from the host (rover_protocol.h)
 // into servo and ESC pulses, acknowledges every line, and drops to its failsafe outputs by itself
-// when no valid drive command arrives for ROVER_WATCHDOG_MS.
+// when no valid drive command arrives for ROVER_WATCHDOG_MS. The AVR's hardware watchdog resets a
+// sketch that hangs (loop() stops running) within 120 ms: the reset stops the pulses and setup()
+// starts again from neutral.
 //
 // Boards: ATmega328P (Uno, Nano, Pro Mini) and ATmega32U4 (Leonardo, Micro): steering on pin 9,
 // ESC on pin 10; ATmega2560 (Mega): pins 11 and 12. The pulses come from Timer1's hardware PWM
 // (50 Hz, 0.5 us resolution at 16 MHz), so serial traffic never makes them jitter.
 #include <Arduino.h>
+#include <avr/wdt.h>
 
 #include "rover_protocol.h"
 
@@ -19,6 +22,17 @@ static const uint8_t kThrottlePin = 12;  // OC1B
 #else
 static const uint8_t kSteeringPin = 9;   // OC1A
 static const uint8_t kThrottlePin = 10;  // OC1B
+#endif
+
+#if defined(__AVR__)
+// A watchdog reset leaves the watchdog running at its shortest timeout, which would reset the board
+// again before setup() (bootloaders without this fix loop forever): switch it off first thing, before
+// main() (.init3 runs right after the stack is set up).
+extern "C" void disable_watchdog_at_boot() __attribute__((naked, used, section(".init3")));
+extern "C" void disable_watchdog_at_boot() {
+  MCUSR = 0;
+  wdt_disable();
+}
 #endif
 
 static const uint32_t kTimerTicksPerUs = F_CPU / 8000000UL;  // Timer1 runs at F_CPU / 8
@@ -109,9 +123,11 @@ void setup() {
   Serial.begin(ROVER_BAUD);
   send_fields('R', 2, ROVER_PROTOCOL_VERSION, ROVER_WATCHDOG_MS);
   last_valid_ms = millis();
+  wdt_enable(WDTO_120MS);  // well inside the protocol's 250 ms, far above one loop() pass
 }
 
 void loop() {
+  wdt_reset();
   while (Serial.available() > 0) {
     if (rover_reader_push(&reader, static_cast<char>(Serial.read()))) handle_line();
   }

@@ -155,6 +155,9 @@ PwmCommand Calibration::safe_command() const {
 int Calibration::max_action_index() const { return std::max(steering.action_index, throttle.action_index); }
 
 PwmCommand Calibration::map(std::span<const float> action) const {
+  for (const ChannelCalibration* ch : {&steering, &throttle}) {
+    if (!std::isfinite(action[static_cast<size_t>(ch->action_index)])) return safe_command();
+  }
   auto normalized = [&](const ChannelCalibration& ch) {
     const double raw = action[static_cast<size_t>(ch.action_index)];
     double v = action_units == Units::kNormalized ? raw : normalized_from_us(raw, ch);

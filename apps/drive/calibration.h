@@ -48,7 +48,9 @@ struct Calibration {
 
   /// Center steering, neutral throttle: what the rover holds whenever anything is wrong.
   PwmCommand safe_command() const;
-  /// The pulse widths for one raw action (no rate limit). Values must be finite.
+  /// The pulse widths for one raw action (no rate limit). A NaN or infinite value in a channel's
+  /// action gives safe_command(): this is the last step before the wire, and a non-finite number
+  /// must never become a pulse width (it once became "$C,10,0,0").
   PwmCommand map(std::span<const float> action) const;
   /// The largest action index used (to check against the model's action_dim).
   int max_action_index() const;

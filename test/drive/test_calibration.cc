@@ -1,6 +1,8 @@
 // Calibration: file parsing and validation, the action -> PWM map, the rate limiter.
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cmath>
 #include <fstream>
 
 #include "apps/drive/calibration.h"
@@ -58,6 +60,20 @@ TEST(Calibration, InvertAndMicrosecondUnits) {
   EXPECT_EQ(c.map(us), (PwmCommand{1700, 1650}));  // steering passes through, throttle capped at 0.5
   const float beyond[] = {2500, 1000};
   EXPECT_EQ(c.map(beyond), (PwmCommand{1900, 1300}));
+}
+
+TEST(Calibration, NonFiniteActionsMapToTheSafeCommand) {
+  // NaN once went through clamp and lround and reached the wire as "$C,10,0,0".
+  const float nan = std::nanf(""), inf = INFINITY;
+  for (const char* units : {"normalized", "microseconds"}) {
+    nlohmann::json j = example();
+    j["action_units"] = units;
+    const Calibration c = Calibration::from_json(j, "test.json");
+    for (const auto& action : {std::array{nan, 0.0f}, std::array{0.0f, nan}, std::array{inf, 0.0f},
+                               std::array{0.0f, -inf}}) {
+      EXPECT_EQ(c.map(action), c.safe_command()) << units << " " << action[0] << ", " << action[1];
+    }
+  }
 }
 
 TEST(Calibration, ErrorsNameTheField) {

@@ -64,6 +64,26 @@ TEST(FileMapping, DirectoryIsIoError) {
   EXPECT_TRUE(throws_error([&] { FileMapping::open(dir); }, ErrorCode::kIoError, {dir, "not a regular file"}));
 }
 
+TEST(FileMapping, PrivateCopyIsImmuneToChangesOfTheFile) {
+  // A model copied over the running one (cp, scp: same inode) must not change what was loaded, and a
+  // truncated file must not kill the process with SIGBUS.
+  const std::string path = test::scratch_dir() + "/model.bin";
+  std::vector<uint8_t> original(3 * 4096 + 17);
+  for (size_t i = 0; i < original.size(); ++i) original[i] = static_cast<uint8_t>(i * 7 + 1);
+  test::write_file(path, original);
+  const FileMapping copy = FileMapping::open(path, FileMapping::Mode::kPrivateCopy);
+  ASSERT_EQ(copy.size(), original.size());
+  test::write_file(path, std::vector<uint8_t>(original.size(), 0xEE));  // rewritten in place
+  EXPECT_TRUE(std::equal(original.begin(), original.end(), copy.data()));
+  ASSERT_EQ(::truncate(path.c_str(), 100), 0);
+  EXPECT_TRUE(std::equal(original.begin(), original.end(), copy.data()));  // every page still readable
+  // The shared mapping, by contrast, shows the rewrite: this is what kPrivateCopy exists for.
+  test::write_file(path, original);
+  const FileMapping shared = FileMapping::open(path);
+  test::write_file(path, std::vector<uint8_t>(original.size(), 0xEE));
+  EXPECT_EQ(shared.data()[0], 0xEE);
+}
+
 TEST(FileMapping, FifoIsRefusedAtOnce) {
   // Opening a FIFO for reading used to wait for a writer forever (and ignore SIGINT/SIGTERM).
   const std::string path = test::scratch_dir() + "/model.fifo";

@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <limits>
@@ -41,9 +42,39 @@ const char* file_kind(mode_t mode) {
   return "not a plain file";
 }
 
+// Reads `size` bytes of the file into anonymous memory (page-aligned, read-only afterwards), so that
+// it is released with munmap like a mapping. A file that shrinks or grows meanwhile is an error.
+const uint8_t* read_private_copy(int fd, const std::string& path, size_t size) {
+  void* p = ::mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) {
+    fail(ErrorCode::kIoError, "cannot allocate " + std::to_string(size) + " bytes to read '" + path + "': " +
+                                   errno_text(errno));
+  }
+  auto* bytes = static_cast<uint8_t*>(p);
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::pread(fd, bytes + done, std::min<size_t>(size - done, size_t{1} << 30), static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int err = n < 0 ? errno : 0;
+      ::munmap(p, size);
+      fail(ErrorCode::kIoError, "cannot read '" + path + "': " +
+                                    (err != 0 ? errno_text(err) : "the file became shorter while it was read"));
+    }
+    done += static_cast<size_t>(n);
+  }
+  char extra = 0;
+  if (::pread(fd, &extra, 1, static_cast<off_t>(size)) > 0) {
+    ::munmap(p, size);
+    fail(ErrorCode::kIoError, "cannot read '" + path + "': the file grew while it was read");
+  }
+  ::mprotect(p, size, PROT_READ);
+  return bytes;
+}
+
 }  // namespace
 
-FileMapping FileMapping::open(const std::string& path) {
+FileMapping FileMapping::open(const std::string& path, Mode mode) {
   int fd;
   do {
     // O_NONBLOCK: opening a FIFO for reading would otherwise wait, signals and all, for a writer
@@ -75,6 +106,10 @@ FileMapping FileMapping::open(const std::string& path) {
   m.size_ = static_cast<size_t>(st.st_size);
   if (m.size_ == 0) return m;  // mmap rejects length 0
 
+  if (mode == Mode::kPrivateCopy) {
+    m.data_ = read_private_copy(fd, path, m.size_);
+    return m;
+  }
   void* p = ::mmap(nullptr, m.size_, PROT_READ, MAP_PRIVATE, fd, 0);
   if (p == MAP_FAILED) {
     fail(ErrorCode::kIoError, "cannot mmap '" + path + "' (" + std::to_string(m.size_) +

@@ -1,4 +1,4 @@
-// A read-only memory mapping of a whole file (RAII, movable).
+// A whole file in read-only memory (RAII, movable): mapped from the file, or a private copy.
 #pragma once
 
 #include <cstddef>
@@ -9,11 +9,16 @@ namespace act {
 
 class FileMapping {
  public:
+  /// kMap shares the file's pages (no copy): a later write to the file shows through, and a
+  /// truncation makes reading the lost pages raise SIGBUS. kPrivateCopy reads the file into memory
+  /// of its own at open: what was read never changes, whatever happens to the file.
+  enum class Mode { kMap, kPrivateCopy };
+
   FileMapping() = default;
   /// Maps `path` read-only. Throws act::Error: kNotFound if missing, kIoError if it cannot be opened
   /// or mapped or is not a regular file (a FIFO is refused at once, never waited on). An empty file
   /// maps to size() == 0, data() == nullptr.
-  static FileMapping open(const std::string& path);
+  static FileMapping open(const std::string& path, Mode mode = Mode::kMap);
   ~FileMapping();
   FileMapping(FileMapping&& other) noexcept;
   FileMapping& operator=(FileMapping&& other) noexcept;

@@ -146,7 +146,8 @@ void AtomicFileWriter::commit() {
 }
 
 std::string read_regular_file(const std::string& path) {
-  const FileMapping file = FileMapping::open(path);
+  // A private copy: a file truncated meanwhile is an error, never a SIGBUS.
+  const FileMapping file = FileMapping::open(path, FileMapping::Mode::kPrivateCopy);
   return std::string(reinterpret_cast<const char*>(file.data()), file.size());
 }
 

@@ -113,15 +113,17 @@ class Engine {
   /// Stage times of the last successful infer (all zero unless EngineOptions::profile is set).
   const InferenceTimings& last_timings() const;
 
-  class Impl;
-  Impl& impl() { return *impl_; }  ///< internal (tests and tools); not part of the stable API
+  class Impl;  ///< defined inside the library (engine/src); not part of the API
 
  private:
+  friend class Policy;  // un-normalises the actions it picks
   explicit Engine(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 
-/// LeRobot's select_action: returns one action per control step.
+/// LeRobot's select_action: returns one action per control step, inferring synchronously. A thin
+/// use of ChunkScheduler (actengine/scheduler.h), which also serves robots that keep acting while
+/// the next chunk is inferred.
 ///  - n_action_steps queue (temporal ensembling off): runs the network when the queue is empty and
 ///    queues the first n_action_steps rows of the chunk;
 ///  - temporal ensembling (coeff set, n_action_steps == 1): runs every step and averages all

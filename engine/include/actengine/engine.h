@@ -32,6 +32,9 @@ struct EngineOptions {
   bool verify_checksum = true;
   /// Time every stage of every inference (see Engine::last_timings); costs a clock read per op.
   bool profile = false;
+  /// Give every network value its own memory so Engine::intermediate() can read it after an
+  /// inference (to compare with LeRobot layer by layer); costs memory, never changes results.
+  bool keep_intermediates = false;
 };
 
 /// Wall time of one inference by stage, in milliseconds. "other" is what belongs to no stage: the
@@ -112,6 +115,15 @@ class Engine {
   Status infer_normalized(const Observation& observation, std::span<float> actions_normalized);
   /// Stage times of the last successful infer (all zero unless EngineOptions::profile is set).
   const InferenceTimings& last_timings() const;
+
+  /// The names of the network's values, in the order they are computed ("cam0.backbone.layer1",
+  /// "encoder_layer0_out", "actions_normalized", ...).
+  std::vector<std::string> intermediate_names() const;
+  /// One value of the last inference as floats, in the engine's layout (image features are
+  /// height x width x channels); int8 values dequantized. Needs EngineOptions::keep_intermediates.
+  /// kNotFound for an unknown name; kFailedPrecondition without keep_intermediates or before the
+  /// first inference; kUnimplemented for an int8 value quantized at run time (no scale is kept).
+  StatusOr<std::vector<float>> intermediate(const std::string& name) const;
 
   class Impl;  ///< defined inside the library (engine/src); not part of the API
 

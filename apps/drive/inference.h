@@ -44,7 +44,7 @@ void apply_thread_placement(const ThreadPlacement& placement, const std::string&
 struct InferenceResult {
   std::string error;              ///< empty on success
   bool stale_frame = false;       ///< no frame younger than max_frame_age: nothing was inferred
-  std::vector<float> chunk;       ///< chunk_size x action_dim raw actions (not yet checked for NaN)
+  std::vector<float> chunk;       ///< chunk_size x action_dim raw actions (ChunkScheduler::add refuses NaN)
   Clock::time_point frame_captured{};
   uint64_t frame_index = 0;
   double frame_age_ms = 0;        ///< age of the frame when the worker took it

@@ -152,209 +152,292 @@ std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   return std::move(*engine_or);
 }
 
-int run(const Options& opt) {
-  if (opt.compare && !opt.model.empty() && opt.compare_with.empty()) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
-  }
-  // The model: a blob, or a built-in synthetic one written to a temporary blob.
-  std::string blob_path = opt.model, model_label = opt.model, other_path = opt.compare_with;
-  double build_ms = 0;
-  BuiltinBlobs builtin;
-  if (blob_path.empty()) {
-    const auto start = Clock::now();
-    const bool int8 = opt.precision == "int8";
-    build_builtin(opt, int8 || opt.compare, builtin);
-    blob_path = int8 ? builtin.int8.path : builtin.fp32.path;
-    if (opt.compare) other_path = int8 ? builtin.fp32.path : builtin.int8.path;
-    build_ms = ms_since(start);
-    model_label = "built-in \"" + opt.config + "\" (synthetic weights, seed " + std::to_string(opt.seed) + ")";
-  } else if (opt.precision != "fp32") {
-    act::fail(act::ErrorCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
-  }
-  const act::ActbFile blob_file = act::ActbFile::open(blob_path);
-  const act::ModelConfig config = act::ModelConfig::from_json(blob_file.config());
-  const size_t weight_bytes = blob_file.file_size();
+// Latency per stage, in the order of the report; the last is the whole inference.
+const std::pair<const char*, double act::InferenceTimings::*> kStages[] = {
+    {"preprocess", &act::InferenceTimings::preprocess_ms}, {"backbone", &act::InferenceTimings::backbone_ms},
+    {"encoder", &act::InferenceTimings::encoder_ms},       {"decoder", &act::InferenceTimings::decoder_ms},
+    {"other", &act::InferenceTimings::other_ms},           {"total", &act::InferenceTimings::total_ms}};
 
-  const auto load_start = Clock::now();
-  std::unique_ptr<act::Engine> engine_ptr = open_engine(blob_path, opt.threads);
-  const double load_ms = ms_since(load_start);
-  act::Engine& engine = *engine_ptr;
-  const act::ModelInfo& info = engine.model_info();
-  std::unique_ptr<act::Engine> other;
-  if (!other_path.empty()) {
-    other = open_engine(other_path, opt.threads);
-    if (other->model_info().chunk_values() != info.chunk_values() || other->model_info().summary != info.summary) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--compare-with " + other_path + " is not the same model (" +
-                other->model_info().summary + " vs " + info.summary + ")");
+// What each run infers on: observations from a file (cycled through), or the synthetic one.
+class Observations {
+ public:
+  Observations(const std::string& input_path, const act::ModelInfo& info) {
+    if (!input_path.empty()) {
+      batch_.emplace(act::ObservationBatch::read(input_path, info));
+    } else {
+      synthetic_ = make_input(info);
     }
   }
+  act::Observation at(int i) const { return batch_ ? batch_->at(static_cast<size_t>(i) % batch_->size()) : synthetic_.obs; }
 
-  // Inputs: real observations, or a synthetic one.
-  std::optional<act::ObservationBatch> batch;
-  SyntheticInput synthetic;
-  if (!opt.input_path.empty()) {
-    batch.emplace(act::ObservationBatch::read(opt.input_path, info));
-  } else {
-    synthetic = make_input(info);
-  }
-  auto observation = [&](int i) {
-    return batch ? batch->at(static_cast<size_t>(i) % batch->size()) : synthetic.obs;
-  };
+ private:
+  std::optional<act::ObservationBatch> batch_;
+  SyntheticInput synthetic_;
+};
 
-  std::vector<float> chunk(info.chunk_values()), other_chunk(info.chunk_values());
-  auto infer = [&](act::Engine& e, int i, std::vector<float>& out) {
-    const act::Status s = e.infer_normalized(observation(i), out);
-    act::throw_if_failed(s);
-  };
-  const auto first_start = Clock::now();
-  infer(engine, 0, chunk);
-  const double first_ms = ms_since(first_start);
-  for (int i = 0; i < opt.warmup_runs; ++i) {
-    infer(engine, i, chunk);
-    if (other) infer(*other, i, other_chunk);
-  }
-
-  const bool progress = ::isatty(STDERR_FILENO);
+// The timed runs: each run's stage times and, with --compare, the other precision's interleaved
+// runs and the action difference between the two (normalised units).
+struct TimedRuns {
+  double first_ms = 0;  ///< the first inference, before the warm-up
+  double bench_ms = 0;  ///< wall time of the timed runs
   std::vector<act::InferenceTimings> runs, other_runs;
   double err_sq = 0, err_max = 0;
   size_t err_count = 0;
-  const auto bench_start = Clock::now();
-  for (int i = 0; i < opt.num_runs; ++i) {
-    infer(engine, i, chunk);
-    runs.push_back(engine.last_timings());
-    if (other) {  // interleaved run by run, so both see the same machine conditions
-      infer(*other, i, other_chunk);
-      other_runs.push_back(other->last_timings());
-      for (size_t k = 0; k < chunk.size(); ++k) {
-        const double d = static_cast<double>(chunk[k]) - other_chunk[k];
-        err_sq += d * d;
-        err_max = std::max(err_max, std::fabs(d));
-      }
-      err_count += chunk.size();
+};
+
+// This core's peak for the engine's main kernels (int8 dot products, or float FMAs), measured by
+// the same register-only probe as act_kernel_bench.
+struct Peak {
+  bool int8 = false;
+  act::kernels::Isa isa{};
+  const act::kernels::PeakProbe* probe = nullptr;
+  double gmacs_per_core = 0;
+};
+
+Peak measure_peak(const act::ModelInfo& info) {
+  Peak peak;
+  peak.int8 = info.precision.rfind("int8", 0) == 0;
+  peak.isa = peak.int8 ? act::kernels::gemm_s8_select().kernels->isa : act::kernels::gemm_f32_select().kernels->isa;
+  peak.probe = act::kernels::isa_peak_probe(peak.isa, peak.int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
+  peak.gmacs_per_core = peak.probe ? act::kernels::measure_peak_gmacs(*peak.probe) : 0.0;
+  return peak;
+}
+
+// --compare: the other precision's latency, and how far its actions are from ours.
+struct Comparison {
+  std::string other_precision;
+  act::LatencySummary other_total;
+  double speed_ratio = 0, rmse = 0, max_abs = 0;
+  nlohmann::ordered_json to_json() const {
+    return {{"other_precision", other_precision}, {"other_latency_ms", other_total.to_json()},
+            {"speed_ratio", speed_ratio}, {"action_mse", rmse * rmse}, {"action_max_abs", max_abs}};
+  }
+};
+
+// One benchmark, step by step: choose the model, open it, time it, summarise, report.
+class Benchmark {
+ public:
+  explicit Benchmark(const Options& opt) : opt_(opt) {}
+
+  int run() {
+    choose_model();
+    blob_file_.emplace(act::ActbFile::open(blob_path_));
+    config_ = act::ModelConfig::from_json(blob_file_->config());
+    open_engines();
+    time_runs(Observations(opt_.input_path, engine_->model_info()));
+    summarize_runs();
+    print_report();
+    if (!opt_.json_path.empty()) write_json();
+    if (!opt_.csv_path.empty()) write_csv();
+    return 0;
+  }
+
+ private:
+  // The model: a blob, or a built-in synthetic one written to a temporary blob.
+  void choose_model() {
+    if (opt_.compare && !opt_.model.empty() && opt_.compare_with.empty()) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
     }
-    if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt.num_runs, runs.back().total_ms);
-    if (ms_since(bench_start) > opt.max_secs * 1e3) break;
-  }
-  if (progress) std::fprintf(stderr, "\r%40s\r", "");
-  const double bench_ms = ms_since(bench_start);
-
-  // Statistics per stage.
-  const std::pair<const char*, double act::InferenceTimings::*> stages[] = {
-      {"preprocess", &act::InferenceTimings::preprocess_ms}, {"backbone", &act::InferenceTimings::backbone_ms},
-      {"encoder", &act::InferenceTimings::encoder_ms},       {"decoder", &act::InferenceTimings::decoder_ms},
-      {"other", &act::InferenceTimings::other_ms},           {"total", &act::InferenceTimings::total_ms}};
-  nlohmann::ordered_json stage_json;
-  std::vector<std::pair<std::string, act::LatencySummary>> summaries;
-  for (const auto& [name, member] : stages) {
-    std::vector<double> samples;
-    for (const auto& r : runs) samples.push_back(r.*member);
-    summaries.emplace_back(name, act::summarize(samples));
-    stage_json[name] = summaries.back().second.to_json();
-  }
-  const act::LatencySummary& total = summaries.back().second;
-  const auto macs = config.macs();
-  const double gmac = macs.total() / 1e9;
-  const double gmacs_per_s = gmac / (total.mean / 1e3);
-  std::optional<act::LatencySummary> other_total;
-  if (other) {
-    std::vector<double> samples;
-    for (const auto& r : other_runs) samples.push_back(r.total_ms);
-    other_total = act::summarize(samples);
-  }
-  const act::MachineInfo machine = act::read_machine_info();
-  // This core's peak for the engine's main kernels (int8 dot products, or float FMAs), measured now
-  // by the same register-only probe as act_kernel_bench; the achieved rate is compared with it
-  // times the threads.
-  const bool int8 = info.precision.rfind("int8", 0) == 0;
-  const act::kernels::Isa isa = int8 ? act::kernels::gemm_s8_select().kernels->isa : act::kernels::gemm_f32_select().kernels->isa;
-  const act::kernels::PeakProbe* probe =
-      act::kernels::isa_peak_probe(isa, int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
-  const double peak_gmacs = probe ? act::kernels::measure_peak_gmacs(*probe) : 0.0;
-  const double pct_peak = peak_gmacs > 0 ? 100.0 * gmacs_per_s / (peak_gmacs * engine.threads()) : 0.0;
-  const size_t rss = act::peak_rss_bytes();
-
-  // Report.
-  std::printf("actengine act_bench %s\n", act::version());
-  std::printf("model        %s\n             %s\n", model_label.c_str(), config.summary().c_str());
-  std::printf("compute      %.3f GMAC per inference (backbone %.3f, projections %.3f, encoder %.3f, decoder %.3f, head %.4f)\n",
-              gmac, macs.backbone / 1e9, macs.projections / 1e9, macs.encoder / 1e9, macs.decoder / 1e9, macs.head / 1e9);
-  std::printf("engine       %s, weights %.1f MB, %d threads\nkernels      %s\n", info.precision.c_str(),
-              static_cast<double>(weight_bytes) / 1e6, engine.threads(), info.kernels.c_str());
-  if (!builtin.int8_note.empty()) std::printf("int8         %s\n", builtin.int8_note.c_str());
-  std::printf("machine      %s\n", machine.one_line().c_str());
-  if (build_ms > 0) std::printf("build        %.0f ms (synthetic weights, import, blob)\n", build_ms);
-  std::printf("init         load + plan %.1f ms, first inference %.1f ms\n", load_ms, first_ms);
-  std::printf("runs         %zu timed (after %d warm-up) in %.1f s\n\n", runs.size(), opt.warmup_runs, bench_ms / 1e3);
-  std::printf("%-11s %9s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "mean", "std", "min", "p50", "p90", "p95", "p99",
-              "max");
-  for (const auto& [name, s] : summaries) {
-    std::printf("%-11s %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.mean, s.stddev, s.min, s.p50, s.p90,
-                s.p95, s.p99, s.max);
-  }
-  std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total.mean, gmacs_per_s);
-  if (probe != nullptr && peak_gmacs > 0) {
-    std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads\n", pct_peak,
-                int8 ? "INT8" : "FP32", peak_gmacs, probe->name, engine.threads());
-  } else {
-    std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(isa));
-  }
-  std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss) / 1e6);
-  nlohmann::ordered_json compare_json;
-  if (other) {
-    const act::ModelInfo& oi = other->model_info();
-    const double ratio = other_total->mean / total.mean;
-    const double rmse = std::sqrt(err_sq / static_cast<double>(std::max<size_t>(err_count, 1)));
-    std::printf("\ncompare      %s: mean %.2f ms, p50 %.2f ms (interleaved with the runs above)\n", oi.precision.c_str(),
-                other_total->mean, other_total->p50);
-    std::printf("             %s is %.2fx the speed of %s\n", info.precision.c_str(), ratio, oi.precision.c_str());
-    std::printf("             action difference (normalised units): MSE %.3g, RMS %.3g, max |diff| %.3g\n", rmse * rmse, rmse,
-                err_max);
-    compare_json = {{"other_precision", oi.precision}, {"other_latency_ms", other_total->to_json()},
-                    {"speed_ratio", ratio}, {"action_mse", rmse * rmse}, {"action_max_abs", err_max}};
+    blob_path_ = model_label_ = opt_.model;
+    other_path_ = opt_.compare_with;
+    if (blob_path_.empty()) {
+      const auto start = Clock::now();
+      const bool int8 = opt_.precision == "int8";
+      build_builtin(opt_, int8 || opt_.compare, builtin_);
+      blob_path_ = int8 ? builtin_.int8.path : builtin_.fp32.path;
+      if (opt_.compare) other_path_ = int8 ? builtin_.fp32.path : builtin_.int8.path;
+      build_ms_ = ms_since(start);
+      model_label_ = "built-in \"" + opt_.config + "\" (synthetic weights, seed " + std::to_string(opt_.seed) + ")";
+    } else if (opt_.precision != "fp32") {
+      act::fail(act::ErrorCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
+    }
   }
 
-  if (!opt.json_path.empty()) {
+  // The engine and, with --compare, the same model in the other precision.
+  void open_engines() {
+    const auto load_start = Clock::now();
+    engine_ = open_engine(blob_path_, opt_.threads);
+    load_ms_ = ms_since(load_start);
+    if (other_path_.empty()) return;
+    other_ = open_engine(other_path_, opt_.threads);
+    const act::ModelInfo& info = engine_->model_info();
+    if (other_->model_info().chunk_values() != info.chunk_values() || other_->model_info().summary != info.summary) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--compare-with " + other_path_ + " is not the same model (" +
+                other_->model_info().summary + " vs " + info.summary + ")");
+    }
+  }
+
+  // The first inference, the warm-up, then the timed runs (until num_runs or max_secs).
+  void time_runs(const Observations& inputs) {
+    std::vector<float> chunk(engine_->model_info().chunk_values()), other_chunk(chunk.size());
+    auto infer = [&](act::Engine& e, int i, std::vector<float>& out) {
+      const act::Status s = e.infer_normalized(inputs.at(i), out);
+      act::throw_if_failed(s);
+    };
+    const auto first_start = Clock::now();
+    infer(*engine_, 0, chunk);
+    timed_.first_ms = ms_since(first_start);
+    for (int i = 0; i < opt_.warmup_runs; ++i) {
+      infer(*engine_, i, chunk);
+      if (other_) infer(*other_, i, other_chunk);
+    }
+
+    const bool progress = ::isatty(STDERR_FILENO);
+    const auto bench_start = Clock::now();
+    for (int i = 0; i < opt_.num_runs; ++i) {
+      infer(*engine_, i, chunk);
+      timed_.runs.push_back(engine_->last_timings());
+      if (other_) {  // interleaved run by run, so both see the same machine conditions
+        infer(*other_, i, other_chunk);
+        timed_.other_runs.push_back(other_->last_timings());
+        for (size_t k = 0; k < chunk.size(); ++k) {
+          const double d = static_cast<double>(chunk[k]) - other_chunk[k];
+          timed_.err_sq += d * d;
+          timed_.err_max = std::max(timed_.err_max, std::fabs(d));
+        }
+        timed_.err_count += chunk.size();
+      }
+      if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt_.num_runs, timed_.runs.back().total_ms);
+      if (ms_since(bench_start) > opt_.max_secs * 1e3) break;
+    }
+    if (progress) std::fprintf(stderr, "\r%40s\r", "");
+    timed_.bench_ms = ms_since(bench_start);
+  }
+
+  // Statistics per stage, the achieved rate against this CPU's peak, the comparison, the memory.
+  void summarize_runs() {
+    for (const auto& [name, member] : kStages) {
+      std::vector<double> samples;
+      for (const auto& r : timed_.runs) samples.push_back(r.*member);
+      stages_.emplace_back(name, act::summarize(samples));
+      stage_json_[name] = stages_.back().second.to_json();
+    }
+    macs_ = config_.macs();
+    gmac_ = macs_.total() / 1e9;
+    gmacs_per_s_ = gmac_ / (total().mean / 1e3);
+    if (other_) {
+      std::vector<double> samples;
+      for (const auto& r : timed_.other_runs) samples.push_back(r.total_ms);
+      Comparison c;
+      c.other_precision = other_->model_info().precision;
+      c.other_total = act::summarize(samples);
+      c.speed_ratio = c.other_total.mean / total().mean;
+      c.rmse = std::sqrt(timed_.err_sq / static_cast<double>(std::max<size_t>(timed_.err_count, 1)));
+      c.max_abs = timed_.err_max;
+      comparison_ = c;
+    }
+    machine_ = act::read_machine_info();
+    // The achieved rate is compared with the per-core peak times the threads.
+    peak_ = measure_peak(engine_->model_info());
+    pct_peak_ = peak_.gmacs_per_core > 0 ? 100.0 * gmacs_per_s_ / (peak_.gmacs_per_core * engine_->threads()) : 0.0;
+    rss_ = act::peak_rss_bytes();
+  }
+
+  const act::LatencySummary& total() const { return stages_.back().second; }
+
+  void print_report() const {
+    const act::ModelInfo& info = engine_->model_info();
+    std::printf("actengine act_bench %s\n", act::version());
+    std::printf("model        %s\n             %s\n", model_label_.c_str(), config_.summary().c_str());
+    std::printf("compute      %.3f GMAC per inference (backbone %.3f, projections %.3f, encoder %.3f, decoder %.3f, head %.4f)\n",
+                gmac_, macs_.backbone / 1e9, macs_.projections / 1e9, macs_.encoder / 1e9, macs_.decoder / 1e9, macs_.head / 1e9);
+    std::printf("engine       %s, weights %.1f MB, %d threads\nkernels      %s\n", info.precision.c_str(),
+                static_cast<double>(blob_file_->file_size()) / 1e6, engine_->threads(), info.kernels.c_str());
+    if (!builtin_.int8_note.empty()) std::printf("int8         %s\n", builtin_.int8_note.c_str());
+    std::printf("machine      %s\n", machine_.one_line().c_str());
+    if (build_ms_ > 0) std::printf("build        %.0f ms (synthetic weights, import, blob)\n", build_ms_);
+    std::printf("init         load + plan %.1f ms, first inference %.1f ms\n", load_ms_, timed_.first_ms);
+    std::printf("runs         %zu timed (after %d warm-up) in %.1f s\n\n", timed_.runs.size(), opt_.warmup_runs,
+                timed_.bench_ms / 1e3);
+    std::printf("%-11s %9s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "mean", "std", "min", "p50", "p90", "p95", "p99",
+                "max");
+    for (const auto& [name, s] : stages_) {
+      std::printf("%-11s %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.mean, s.stddev, s.min, s.p50, s.p90,
+                  s.p95, s.p99, s.max);
+    }
+    std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total().mean, gmacs_per_s_);
+    if (peak_.probe != nullptr && peak_.gmacs_per_core > 0) {
+      std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads\n", pct_peak_,
+                  peak_.int8 ? "INT8" : "FP32", peak_.gmacs_per_core, peak_.probe->name, engine_->threads());
+    } else {
+      std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(peak_.isa));
+    }
+    std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss_) / 1e6);
+    if (comparison_) {
+      const Comparison& c = *comparison_;
+      std::printf("\ncompare      %s: mean %.2f ms, p50 %.2f ms (interleaved with the runs above)\n", c.other_precision.c_str(),
+                  c.other_total.mean, c.other_total.p50);
+      std::printf("             %s is %.2fx the speed of %s\n", info.precision.c_str(), c.speed_ratio, c.other_precision.c_str());
+      std::printf("             action difference (normalised units): MSE %.3g, RMS %.3g, max |diff| %.3g\n", c.rmse * c.rmse,
+                  c.rmse, c.max_abs);
+    }
+  }
+
+  void write_json() const {
+    const act::ModelInfo& info = engine_->model_info();
     nlohmann::ordered_json j;
     j["actengine_version"] = act::version();
-    j["model"] = {{"source", opt.model.empty() ? "built-in" : "blob"},
-                  {"name", model_label},
-                  {"summary", config.summary()},
-                  {"config", config.to_json()},
+    j["model"] = {{"source", opt_.model.empty() ? "built-in" : "blob"},
+                  {"name", model_label_},
+                  {"summary", config_.summary()},
+                  {"config", config_.to_json()},
                   {"precision", info.precision},
-                  {"weight_bytes", weight_bytes},
-                  {"gmac", {{"total", gmac},
-                            {"backbone", macs.backbone / 1e9},
-                            {"projections", macs.projections / 1e9},
-                            {"encoder", macs.encoder / 1e9},
-                            {"decoder", macs.decoder / 1e9},
-                            {"head", macs.head / 1e9}}}};
-    j["engine"] = {{"threads", engine.threads()}, {"kernels", info.kernels}};
-    if (other) j["compare"] = compare_json;
-    j["machine"] = machine.to_json();
-    j["init"] = {{"build_ms", build_ms}, {"load_ms", load_ms}, {"first_inference_ms", first_ms}};
-    j["runs"] = {{"warmup", opt.warmup_runs}, {"timed", runs.size()}, {"seconds", bench_ms / 1e3}};
-    j["latency_ms"] = stage_json;
-    j["throughput_per_s"] = 1e3 / total.mean;
-    j["achieved_gmac_per_s"] = gmacs_per_s;
-    j["peak"] = {{"kind", int8 ? "int8" : "fp32"},
-                 {"probe", probe ? probe->name : ""},
-                 {"gmac_per_s_per_core", peak_gmacs},
-                 {"percent_of_peak", pct_peak}};
-    j["peak_rss_bytes"] = rss;
-    std::ofstream(opt.json_path) << j.dump(2) << "\n";
+                  {"weight_bytes", blob_file_->file_size()},
+                  {"gmac", {{"total", gmac_},
+                            {"backbone", macs_.backbone / 1e9},
+                            {"projections", macs_.projections / 1e9},
+                            {"encoder", macs_.encoder / 1e9},
+                            {"decoder", macs_.decoder / 1e9},
+                            {"head", macs_.head / 1e9}}}};
+    j["engine"] = {{"threads", engine_->threads()}, {"kernels", info.kernels}};
+    if (comparison_) j["compare"] = comparison_->to_json();
+    j["machine"] = machine_.to_json();
+    j["init"] = {{"build_ms", build_ms_}, {"load_ms", load_ms_}, {"first_inference_ms", timed_.first_ms}};
+    j["runs"] = {{"warmup", opt_.warmup_runs}, {"timed", timed_.runs.size()}, {"seconds", timed_.bench_ms / 1e3}};
+    j["latency_ms"] = stage_json_;
+    j["throughput_per_s"] = 1e3 / total().mean;
+    j["achieved_gmac_per_s"] = gmacs_per_s_;
+    j["peak"] = {{"kind", peak_.int8 ? "int8" : "fp32"},
+                 {"probe", peak_.probe ? peak_.probe->name : ""},
+                 {"gmac_per_s_per_core", peak_.gmacs_per_core},
+                 {"percent_of_peak", pct_peak_}};
+    j["peak_rss_bytes"] = rss_;
+    std::ofstream(opt_.json_path) << j.dump(2) << "\n";
   }
-  if (!opt.csv_path.empty()) {
-    std::ofstream csv(opt.csv_path);
+
+  void write_csv() const {
+    std::ofstream csv(opt_.csv_path);
     csv << std::fixed << std::setprecision(4);  // 0.1 us: the default 6 significant digits lose that on slow runs
     csv << "run,preprocess_ms,backbone_ms,encoder_ms,decoder_ms,other_ms,total_ms\n";
-    for (size_t i = 0; i < runs.size(); ++i) {
-      const auto& r = runs[i];
+    for (size_t i = 0; i < timed_.runs.size(); ++i) {
+      const auto& r = timed_.runs[i];
       csv << i << "," << r.preprocess_ms << "," << r.backbone_ms << "," << r.encoder_ms << "," << r.decoder_ms << ","
           << r.other_ms << "," << r.total_ms << "\n";
     }
   }
-  return 0;
-}
+
+  const Options& opt_;
+  // The model.
+  BuiltinBlobs builtin_;  // owns the built-in model's temporary blobs until the benchmark ends
+  std::string blob_path_, model_label_, other_path_;
+  double build_ms_ = 0;
+  std::optional<act::ActbFile> blob_file_;
+  act::ModelConfig config_;
+  // Its engines.
+  std::unique_ptr<act::Engine> engine_, other_;
+  double load_ms_ = 0;
+  // The measurements and what they add up to.
+  TimedRuns timed_;
+  std::vector<std::pair<std::string, act::LatencySummary>> stages_;  // kStages order
+  nlohmann::ordered_json stage_json_;
+  act::ModelConfig::Macs macs_;
+  double gmac_ = 0, gmacs_per_s_ = 0;
+  std::optional<Comparison> comparison_;
+  act::MachineInfo machine_;
+  Peak peak_;
+  double pct_peak_ = 0;
+  size_t rss_ = 0;
+};
 
 }  // namespace
 
@@ -387,7 +470,7 @@ int main(int argc, char** argv) {
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
-    return run(opt);
+    return Benchmark(opt).run();
   } catch (const std::exception& e) {
     std::cerr << "act_bench: error: " << e.what() << "\n";
     return 1;

@@ -3,8 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <sstream>
 #include <thread>
+
+#include "actengine/scheduler.h"
+#include "apps/status_error.h"
 
 namespace act::drive {
 namespace {
@@ -70,6 +74,289 @@ std::string DriveSummary::to_string() const {
   return s.str();
 }
 
+namespace {
+
+// Ticks of margin on top of the measured inference latency before the chunk runs out: they absorb
+// jitter in the inference time (a busy machine).
+constexpr int kInferenceMarginTicks = 2;
+
+ChunkScheduler make_scheduler(const ModelInfo& info) {
+  StatusOr<ChunkScheduler> scheduler = ChunkScheduler::create(info);
+  throw_if_failed(scheduler.status(), "act_drive");
+  return std::move(scheduler).value();
+}
+
+// One tick of the loop: its index, when it was due and when the loop woke up for it.
+struct Tick {
+  int64_t index;
+  Clock::time_point scheduled, now;
+};
+
+// One run of the control loop: the state that lives from the first tick to the last, and the steps
+// of a tick in the order they happen.
+class ControlRun {
+ public:
+  ControlRun(const ControlOptions& options, const Calibration& calibration, const FrameSource& frames,
+             InferenceWorker& inference, ActuatorLink& link, Recorder* recorder, std::ostream& log)
+      : options_(options),
+        calibration_(calibration),
+        frames_(frames),
+        inference_(inference),
+        link_(link),
+        recorder_(recorder),
+        log_(log),
+        info_(inference.info()),
+        period_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.control_hz))),
+        period_s_(1.0 / options.control_hz),
+        safe_(calibration.safe_command()),
+        safe_action_(safe_raw_action(calibration, info_.action_dim)),
+        scheduler_(make_scheduler(info_)),
+        limiter_(calibration),
+        action_(static_cast<size_t>(info_.action_dim)),
+        last_action_(safe_action_) {}
+
+  DriveSummary run(const std::atomic<bool>& stop) {
+    start_ = Clock::now();
+    last_stats_ = start_;
+    link_.send(safe_, start_);  // neutral on start
+    for (int64_t next = 0;; ++next) {
+      const Tick tick = wait_for(next);
+      next = tick.index;
+      if (std::string reason = end_reason(tick, stop); !reason.empty()) {
+        summary_.end_reason = std::move(reason);
+        break;
+      }
+      fault_.clear();
+      if (!take_inference_result(tick)) break;
+      const FrameSource::State source_state = frames_.state();
+      check_camera(source_state, tick.now);
+      PwmCommand command = safe_;
+      const std::string source = choose_action(tick, command);
+      send(tick, source, command);
+      if (source_state == FrameSource::State::kEnded) {
+        summary_.end_reason = frames_.problem();
+        break;
+      }
+      request_inference(tick.index);
+      report_stats(tick.now);
+    }
+    return finish();
+  }
+
+ private:
+  double tick_time(int64_t tick) const { return std::chrono::duration<double>(period_ * tick).count(); }
+  int64_t tick_of(Clock::time_point t) const {
+    return static_cast<int64_t>(std::llround((t - start_) / std::chrono::duration<double>(period_)));
+  }
+
+  // Sleeps until tick `index` is due. Woken up a whole period late (a stalled machine), it skips the
+  // missed ticks instead of bursting: the tick returned is then a later one.
+  Tick wait_for(int64_t index) {
+    Clock::time_point scheduled = start_ + period_ * index;
+    std::this_thread::sleep_until(scheduled);
+    const auto now = Clock::now();
+    if (now - scheduled >= period_) {
+      const int64_t behind = (now - scheduled) / period_;
+      index += behind;
+      summary_.missed_ticks += static_cast<uint64_t>(behind);
+      scheduled = start_ + period_ * index;
+    }
+    jitter_.add(ms_between(scheduled, now));
+    return {index, scheduled, now};
+  }
+
+  // Why the run ends at this tick, or "" to go on.
+  std::string end_reason(const Tick& tick, const std::atomic<bool>& stop) const {
+    if (stop.load()) return "stopped by a signal";
+    if (options_.duration_s > 0 && tick.now - start_ >= std::chrono::duration<double>(options_.duration_s)) {
+      return "--duration reached";
+    }
+    return "";
+  }
+
+  // A finished inference: a new chunk, or a fault. False when inference keeps failing (the run ends).
+  bool take_inference_result(const Tick& tick) {
+    std::optional<InferenceResult> result = inference_.take_result();
+    if (!result) return true;
+    if (result->stale_frame) {
+      fault_ = "stale frame (" + std::to_string(std::lround(result->frame_age_ms)) + " ms old)";
+      return true;
+    }
+    ++summary_.inferences;
+    capture_age_.add(result->frame_age_ms);
+    preprocess_.add(result->preprocess_ms);
+    infer_.add(result->infer_ms);
+    if (!result->error.empty()) return inference_failed(result->error, tick.now);
+    const int64_t observation_tick = std::min(tick.index, tick_of(result->frame_captured));
+    if (const Status added = scheduler_.add(result->chunk, observation_tick); !added.ok()) {
+      return inference_failed("the model returned an unusable chunk: " + added.message(), tick.now);
+    }
+    consecutive_errors_ = 0;
+    latency_ticks_ = track_latency(latency_ticks_, static_cast<double>(tick.index - observation_tick));
+    if (recorder_) {
+      recorder_->add(ObservationRecord{observation_tick, tick_time(observation_tick), result->frame_index,
+                                       result->frame_age_ms, result->state, std::move(result->model_input),
+                                       info_.cameras.front().height, info_.cameras.front().width});
+    }
+    return true;
+  }
+
+  // Counts a failed inference as this tick's fault; false (after sending the safe command) when it
+  // is one failure too many in a row.
+  bool inference_failed(const std::string& error, Clock::time_point now) {
+    ++summary_.inference_errors;
+    fault_ = error;
+    if (++consecutive_errors_ < options_.max_consecutive_inference_errors) return true;
+    log_ << "act_drive: error: " << error << "\n";
+    summary_.end_reason = "inference failed " + std::to_string(consecutive_errors_) + " times in a row";
+    summary_.exit_code = 1;
+    link_.send(safe_, now);
+    return false;
+  }
+
+  // The camera: gone, or only old frames.
+  void check_camera(FrameSource::State source_state, Clock::time_point now) {
+    if (source_state != FrameSource::State::kRunning) {
+      fault_ = frames_.problem();
+    } else if (const auto frame = frames_.latest(); !frame || now - frame->captured > options_.max_frame_age) {
+      fault_ = "stale frame (newest is " + (frame ? std::to_string(std::lround(ms_between(frame->captured, now))) : "none") +
+               " ms old, --max-frame-age " + std::to_string(options_.max_frame_age.count()) + " ms)";
+    }
+  }
+
+  // This tick's action into `command` (left safe unless a chunk drives); returns its source for the
+  // recording: "chunk", "safe:fault", "safe:overrun" or "safe:waiting".
+  std::string choose_action(const Tick& tick, PwmCommand& command) {
+    std::string source;
+    if (!fault_.empty()) {
+      hold_for_fault(tick.now);
+      source = "safe:fault";
+    } else if (scheduler_.action_at(tick.index, action_).ok()) {
+      command = limiter_.step(calibration_.map(action_), period_s_);
+      last_action_ = action_;
+      executing_ = true;
+      source = "chunk";
+      ++summary_.driving_ticks;
+    } else {
+      source = run_dry();
+    }
+    if (source != "chunk") {
+      overrunning_ = overrunning_ && fault_.empty();
+      limiter_.reset(safe_);
+      last_action_ = safe_action_;
+      ++summary_.safe_ticks;
+    } else {
+      overrunning_ = false;
+    }
+    previous_fault_ = fault_;
+    return source;
+  }
+
+  // A fault drops every chunk; warns once per episode (a new kind of fault starts one).
+  void hold_for_fault(Clock::time_point now) {
+    scheduler_.clear();
+    executing_ = false;
+    if (fault_.rfind("stale frame", 0) == 0) ++summary_.stale_frames;
+    if (fault_kind(fault_) != fault_kind(previous_fault_)) {
+      if (summary_.faults.size() < kMaxFaultEvents) summary_.faults.push_back({now, fault_});
+      log_ << "act_drive: warning: holding the safe action: " << fault_ << "\n";
+    }
+  }
+
+  // No chunk covers the tick: an overrun when one was driving until now, else still waiting (for
+  // the first chunk after start or a fault).
+  std::string run_dry() {
+    if (executing_) {
+      overrunning_ = true;
+      ++summary_.overrun_events;
+      if (summary_.overrun_events <= 5 || summary_.overrun_events % 100 == 0) {
+        log_ << "act_drive: warning: overrun #" << summary_.overrun_events
+             << ": the action chunk ran out before the next was ready (inference "
+             << std::lround(latency_ticks_ * period_s_ * 1000) << " ms); holding the safe action\n";
+      }
+    }
+    executing_ = false;
+    if (overrunning_) ++summary_.overrun_ticks;
+    return overrunning_ ? "safe:overrun" : "safe:waiting";
+  }
+
+  void send(const Tick& tick, const std::string& source, const PwmCommand& command) {
+    const auto write_start = Clock::now();
+    const bool sent = link_.send(command, write_start);
+    serial_write_.add(ms_between(write_start, Clock::now()));
+    if (!sent) ++summary_.link_down_ticks;
+    ++summary_.ticks;
+    if (recorder_) {
+      recorder_->add(TickRecord{tick.index, tick_time(tick.index), ms_between(tick.scheduled, tick.now), source,
+                                source == "chunk" ? action_ : std::vector<float>{}, command, sent});
+    }
+  }
+
+  // Keeps the next chunk coming while this one executes.
+  void request_inference(int64_t tick) {
+    if (!fault_.empty() || inference_.busy()) return;
+    const int lead_ticks = static_cast<int>(std::ceil(latency_ticks_)) + kInferenceMarginTicks;
+    if (!scheduler_.wants_inference(tick, lead_ticks)) return;
+    std::vector<float> state(static_cast<size_t>(info_.state_dim), 0.0f);
+    if (options_.state_source == ControlOptions::StateSource::kLastAction) {
+      std::copy_n(last_action_.begin(), std::min(state.size(), last_action_.size()), state.begin());
+    }
+    inference_.request(std::move(state));
+  }
+
+  void report_stats(Clock::time_point now) {
+    if (options_.stats_every_s <= 0 || now - last_stats_ < std::chrono::duration<double>(options_.stats_every_s)) return;
+    last_stats_ = now;
+    log_ << "act_drive: stats: " << summary_.ticks << " ticks, " << summary_.overrun_events << " overruns, "
+         << summary_.inferences << " inferences\n"
+         << format_stage("capture age", capture_age_.since_report()) << format_stage("preprocess", preprocess_.since_report())
+         << format_stage("infer", infer_.since_report()) << format_stage("serial write", serial_write_.since_report())
+         << format_stage("tick jitter", jitter_.since_report());
+    for (StageSamples* s : {&capture_age_, &preprocess_, &infer_, &serial_write_, &jitter_}) s->reported = s->all.size();
+  }
+
+  DriveSummary finish() {
+    link_.shutdown(safe_);  // neutral on every way out of the loop
+    summary_.elapsed_s = std::chrono::duration<double>(Clock::now() - start_).count();
+    summary_.capture_age_ms = summarize(capture_age_.all);
+    summary_.preprocess_ms = summarize(preprocess_.all);
+    summary_.infer_ms = summarize(infer_.all);
+    summary_.serial_write_ms = summarize(serial_write_.all);
+    summary_.jitter_ms = summarize(jitter_.all);
+    summary_.link_summary = link_.summary();
+    return std::move(summary_);
+  }
+
+  const ControlOptions& options_;
+  const Calibration& calibration_;
+  const FrameSource& frames_;
+  InferenceWorker& inference_;
+  ActuatorLink& link_;
+  Recorder* recorder_;
+  std::ostream& log_;
+  const ModelInfo& info_;
+  const Clock::duration period_;
+  const double period_s_;
+  const PwmCommand safe_;
+  const std::vector<float> safe_action_;
+
+  ChunkScheduler scheduler_;
+  RateLimiter limiter_;
+  DriveSummary summary_;
+  StageSamples capture_age_, preprocess_, infer_, serial_write_, jitter_;
+  Clock::time_point start_, last_stats_;
+  std::vector<float> action_;
+  std::vector<float> last_action_;  // the state the model sees (--state last-action)
+  double latency_ticks_ = 0;
+  int consecutive_errors_ = 0;
+  bool executing_ = false;    // a chunk was driving the last tick: running dry now is an overrun
+  bool overrunning_ = false;  // in an overrun: no action since the chunk ran out
+  std::string fault_;         // why the rover holds the safe action this tick ("" = no fault)
+  std::string previous_fault_;
+};
+
+}  // namespace
+
 ControlLoop::ControlLoop(ControlOptions options, const Calibration& calibration, const FrameSource& frames,
                          InferenceWorker& inference, ActuatorLink& link, Recorder* recorder, std::ostream& log)
     : options_(std::move(options)),
@@ -82,182 +369,7 @@ ControlLoop::ControlLoop(ControlOptions options, const Calibration& calibration,
 
 DriveSummary ControlLoop::run(const std::atomic<bool>& stop) {
   apply_thread_placement(options_.placement, "control", log_);
-  const ModelInfo& info = inference_.info();
-  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options_.control_hz));
-  const double period_s = 1.0 / options_.control_hz;
-  const PwmCommand safe = calibration_.safe_command();
-  const std::vector<float> safe_action = safe_raw_action(calibration_, info.action_dim);
-
-  ChunkScheduler scheduler(info);
-  RateLimiter limiter(calibration_);
-  DriveSummary summary;
-  StageSamples capture_age, preprocess, infer, serial_write, jitter;
-  std::vector<float> action(static_cast<size_t>(info.action_dim));
-  std::vector<float> last_action = safe_action;  // the state the model sees (--state last-action)
-  double latency_ticks = 0;
-  int consecutive_errors = 0;
-  bool executing = false;        // a chunk was driving the last tick: running dry now is an overrun
-  bool overrunning = false;      // in an overrun: no action since the chunk ran out
-  std::string fault;             // why the rover holds the safe action this tick ("" = no fault)
-  std::string previous_fault;
-  auto tick_time = [&](int64_t tick) { return std::chrono::duration<double>(period * tick).count(); };
-
-  const auto start = Clock::now();
-  auto last_stats = start;
-  auto tick_of = [&](Clock::time_point t) { return static_cast<int64_t>(std::llround((t - start) / std::chrono::duration<double>(period))); };
-
-  link_.send(safe, start);  // neutral on start
-  for (int64_t tick = 0;; ++tick) {
-    auto scheduled = start + period * tick;
-    std::this_thread::sleep_until(scheduled);
-    const auto now = Clock::now();
-    if (now - scheduled >= period) {
-      // Woke up a whole period late (a stalled machine): skip the missed ticks instead of bursting.
-      const int64_t behind = (now - scheduled) / period;
-      tick += behind;
-      summary.missed_ticks += static_cast<uint64_t>(behind);
-      scheduled = start + period * tick;
-    }
-    jitter.add(ms_between(scheduled, now));
-    if (stop.load()) {
-      summary.end_reason = "stopped by a signal";
-      break;
-    }
-    if (options_.duration_s > 0 && now - start >= std::chrono::duration<double>(options_.duration_s)) {
-      summary.end_reason = "--duration reached";
-      break;
-    }
-    fault.clear();
-
-    // A finished inference: a new chunk, or a fault.
-    if (std::optional<InferenceResult> result = inference_.take_result()) {
-      if (result->stale_frame) {
-        fault = "stale frame (" + std::to_string(std::lround(result->frame_age_ms)) + " ms old)";
-      } else {
-        ++summary.inferences;
-        capture_age.add(result->frame_age_ms);
-        preprocess.add(result->preprocess_ms);
-        infer.add(result->infer_ms);
-        if (!result->error.empty()) {
-          ++summary.inference_errors;
-          fault = result->error;
-          if (++consecutive_errors >= options_.max_consecutive_inference_errors) {
-            log_ << "act_drive: error: " << result->error << "\n";
-            summary.end_reason = "inference failed " + std::to_string(consecutive_errors) + " times in a row";
-            summary.exit_code = 1;
-            link_.send(safe, now);
-            break;
-          }
-        } else {
-          consecutive_errors = 0;
-          const int64_t observation_tick = std::min(tick, tick_of(result->frame_captured));
-          latency_ticks = track_latency(latency_ticks, static_cast<double>(tick - observation_tick));
-          if (recorder_) {
-            recorder_->add(ObservationRecord{observation_tick, tick_time(observation_tick), result->frame_index,
-                                             result->frame_age_ms, result->state, std::move(result->model_input),
-                                             info.cameras.front().height, info.cameras.front().width});
-          }
-          scheduler.add(std::move(result->chunk), observation_tick);
-        }
-      }
-    }
-
-    // The camera: gone, or only old frames.
-    const FrameSource::State source_state = frames_.state();
-    if (source_state != FrameSource::State::kRunning) {
-      fault = frames_.problem();
-    } else if (const auto frame = frames_.latest(); !frame || now - frame->captured > options_.max_frame_age) {
-      fault = "stale frame (newest is " + (frame ? std::to_string(std::lround(ms_between(frame->captured, now))) : "none") +
-              " ms old, --max-frame-age " + std::to_string(options_.max_frame_age.count()) + " ms)";
-    }
-
-    // This tick's action.
-    PwmCommand command = safe;
-    std::string source;
-    if (!fault.empty()) {
-      scheduler.clear();
-      executing = false;
-      if (fault.rfind("stale frame", 0) == 0) ++summary.stale_frames;
-      if (fault_kind(fault) != fault_kind(previous_fault)) {
-        if (summary.faults.size() < kMaxFaultEvents) summary.faults.push_back({now, fault});
-        log_ << "act_drive: warning: holding the safe action: " << fault << "\n";
-      }
-      source = "safe:fault";
-    } else if (scheduler.action_at(tick, action)) {
-      command = limiter.step(calibration_.map(action), period_s);
-      last_action = action;
-      executing = true;
-      source = "chunk";
-      ++summary.driving_ticks;
-    } else {
-      if (executing) {
-        overrunning = true;
-        ++summary.overrun_events;
-        if (summary.overrun_events <= 5 || summary.overrun_events % 100 == 0) {
-          log_ << "act_drive: warning: overrun #" << summary.overrun_events
-               << ": the action chunk ran out before the next was ready (inference "
-               << std::lround(latency_ticks * period_s * 1000) << " ms); holding the safe action\n";
-        }
-      }
-      executing = false;
-      if (overrunning) ++summary.overrun_ticks;
-      source = overrunning ? "safe:overrun" : "safe:waiting";  // waiting: for the first chunk after start or a fault
-    }
-    if (source != "chunk") {
-      overrunning = overrunning && fault.empty();
-      limiter.reset(safe);
-      last_action = safe_action;
-      ++summary.safe_ticks;
-    } else {
-      overrunning = false;
-    }
-    previous_fault = fault;
-
-    const auto write_start = Clock::now();
-    const bool sent = link_.send(command, write_start);
-    serial_write.add(ms_between(write_start, Clock::now()));
-    if (!sent) ++summary.link_down_ticks;
-    ++summary.ticks;
-    if (recorder_) {
-      recorder_->add(TickRecord{tick, tick_time(tick), ms_between(scheduled, now), source,
-                                source == "chunk" ? action : std::vector<float>{}, command, sent});
-    }
-
-    if (source_state == FrameSource::State::kEnded) {
-      summary.end_reason = frames_.problem();
-      break;
-    }
-
-    // Keep the next chunk coming while this one executes.
-    if (fault.empty() && !inference_.busy() &&
-        scheduler.wants_inference(tick, static_cast<int>(std::ceil(latency_ticks)))) {
-      std::vector<float> state(static_cast<size_t>(info.state_dim), 0.0f);
-      if (options_.state_source == ControlOptions::StateSource::kLastAction) {
-        std::copy_n(last_action.begin(), std::min(state.size(), last_action.size()), state.begin());
-      }
-      inference_.request(std::move(state));
-    }
-
-    if (options_.stats_every_s > 0 && now - last_stats >= std::chrono::duration<double>(options_.stats_every_s)) {
-      last_stats = now;
-      log_ << "act_drive: stats: " << summary.ticks << " ticks, " << summary.overrun_events << " overruns, "
-           << summary.inferences << " inferences\n"
-           << format_stage("capture age", capture_age.since_report()) << format_stage("preprocess", preprocess.since_report())
-           << format_stage("infer", infer.since_report()) << format_stage("serial write", serial_write.since_report())
-           << format_stage("tick jitter", jitter.since_report());
-      for (StageSamples* s : {&capture_age, &preprocess, &infer, &serial_write, &jitter}) s->reported = s->all.size();
-    }
-  }
-
-  link_.shutdown(safe);  // neutral on every way out of the loop
-  summary.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
-  summary.capture_age_ms = summarize(capture_age.all);
-  summary.preprocess_ms = summarize(preprocess.all);
-  summary.infer_ms = summarize(infer.all);
-  summary.serial_write_ms = summarize(serial_write.all);
-  summary.jitter_ms = summarize(jitter.all);
-  summary.link_summary = link_.summary();
-  return summary;
+  return ControlRun(options_, calibration_, frames_, inference_, link_, recorder_, log_).run(stop);
 }
 
 }  // namespace act::drive

@@ -3,7 +3,6 @@
 #include <pthread.h>
 #include <sched.h>
 
-#include <cmath>
 #include <cstring>
 
 #include "apps/image_preprocess.h"
@@ -171,61 +170,8 @@ InferenceResult InferenceWorker::infer_once(ChunkModel& model, std::vector<float
   const Status status = model.infer(observation, result.chunk);
   result.infer_ms = ms_between(preprocessed, Clock::now());
   if (!options_.keep_model_inputs) result.model_input = {};
-  if (!status.ok()) {
-    result.error = "inference failed: " + status.to_string();
-    return result;
-  }
-  for (size_t i = 0; i < result.chunk.size(); ++i) {
-    if (!std::isfinite(result.chunk[i])) {
-      result.error = "the model returned a non-finite action (" + std::to_string(result.chunk[i]) + " at step " +
-                     std::to_string(i / static_cast<size_t>(info_.action_dim)) + ", value " +
-                     std::to_string(i % static_cast<size_t>(info_.action_dim)) + ")";
-      return result;
-    }
-  }
+  if (!status.ok()) result.error = "inference failed: " + status.to_string();
   return result;
-}
-
-// ---- ChunkScheduler ----
-
-ChunkScheduler::ChunkScheduler(const ModelInfo& info)
-    : action_dim_(info.action_dim),
-      chunk_size_(info.chunk_size),
-      n_action_steps_(info.n_action_steps),
-      ensembling_(info.temporal_ensembling),
-      coeff_(info.temporal_ensemble_coeff) {}
-
-void ChunkScheduler::add(std::vector<float> chunk, int64_t observation_tick) {
-  if (!ensembling_) chunks_.clear();  // the queue only ever executes the newest chunk
-  // Ensembling: a chunk whose last row is older than the new observation can never count again.
-  while (!chunks_.empty() && chunks_.front().observation_tick + chunk_size_ <= observation_tick) chunks_.pop_front();
-  chunks_.push_back({std::move(chunk), observation_tick});
-}
-
-bool ChunkScheduler::action_at(int64_t tick, std::span<float> action) const {
-  const int64_t horizon = ensembling_ ? chunk_size_ : n_action_steps_;
-  double weight_sum = 0;
-  std::vector<double> sum(static_cast<size_t>(action_dim_), 0.0);
-  int age = 0;  // 0 for the oldest chunk that covers the tick
-  for (const Chunk& chunk : chunks_) {
-    const int64_t row = std::max<int64_t>(0, tick - chunk.observation_tick);
-    if (row >= horizon) continue;
-    const double weight = ensembling_ ? std::exp(-coeff_ * age) : 1.0;
-    ++age;
-    const float* values = chunk.actions.data() + row * action_dim_;
-    for (int d = 0; d < action_dim_; ++d) sum[static_cast<size_t>(d)] += weight * values[d];
-    weight_sum += weight;
-  }
-  if (weight_sum == 0) return false;
-  for (int d = 0; d < action_dim_; ++d) action[static_cast<size_t>(d)] = static_cast<float>(sum[static_cast<size_t>(d)] / weight_sum);
-  return true;
-}
-
-bool ChunkScheduler::wants_inference(int64_t tick, int latency_ticks) const {
-  if (ensembling_ || chunks_.empty()) return true;  // ensembling infers as often as it can, like LeRobot every step
-  // Two ticks of margin absorb jitter in the inference time (a busy machine).
-  const int64_t remaining = chunks_.back().observation_tick + n_action_steps_ - tick;
-  return remaining <= latency_ticks + 2;
 }
 
 }  // namespace act::drive

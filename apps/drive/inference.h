@@ -1,11 +1,9 @@
-// The inference side of act_drive: a model interface (the engine, or a test double), a worker thread
-// that turns the newest camera frame into an action chunk while the control loop keeps acting, and
-// the scheduler that picks each control tick's action out of the chunks (LeRobot's n_action_steps
-// queue or temporal ensembling, aligned to the tick each chunk's frame was captured at).
+// The inference side of act_drive: a model interface (the engine, or a test double) and a worker
+// thread that turns the newest camera frame into an action chunk while the control loop keeps acting
+// (the loop picks each tick's action out of the chunks with act::ChunkScheduler).
 #pragma once
 
 #include <condition_variable>
-#include <deque>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -46,7 +44,7 @@ void apply_thread_placement(const ThreadPlacement& placement, const std::string&
 struct InferenceResult {
   std::string error;              ///< empty on success
   bool stale_frame = false;       ///< no frame younger than max_frame_age: nothing was inferred
-  std::vector<float> chunk;       ///< chunk_size x action_dim raw actions
+  std::vector<float> chunk;       ///< chunk_size x action_dim raw actions (ChunkScheduler::add refuses NaN)
   Clock::time_point frame_captured{};
   uint64_t frame_index = 0;
   double frame_age_ms = 0;        ///< age of the frame when the worker took it
@@ -99,38 +97,6 @@ class InferenceWorker {
   std::optional<std::vector<float>> pending_state_;  // guarded by mutex_
   std::optional<InferenceResult> result_;            // guarded by mutex_
   std::thread thread_;
-};
-
-/// Picks the action for each control tick from the chunks received so far. Chunk row i belongs to
-/// tick (observation tick + i), where the observation tick is when its frame was captured, so the
-/// rows that went by during inference are skipped.
-///  - queue (n_action_steps): the newest chunk is executed up to row n_action_steps - 1;
-///  - temporal ensembling: every chunk covering the tick contributes, weighted exp(-coeff * i) with
-///    i = 0 for the oldest (LeRobot's weights). Averaging raw actions equals LeRobot's averaging of
-///    normalised ones: un-normalisation is affine per dimension and the weights sum to 1.
-class ChunkScheduler {
- public:
-  explicit ChunkScheduler(const ModelInfo& info);
-  bool ensembling() const { return ensembling_; }
-  void add(std::vector<float> chunk, int64_t observation_tick);
-  /// Writes the action for `tick`; false when no chunk covers it (the queue ran out).
-  bool action_at(int64_t tick, std::span<float> action) const;
-  /// True when a new inference should start now, given the inference latency in ticks: when the
-  /// current chunk has no more than latency + 2 rows left (ensembling: always).
-  bool wants_inference(int64_t tick, int latency_ticks) const;
-  bool empty() const { return chunks_.empty(); }
-  /// Forgets every chunk (after a fault).
-  void clear() { chunks_.clear(); }
-
- private:
-  struct Chunk {
-    std::vector<float> actions;
-    int64_t observation_tick;
-  };
-  int action_dim_, chunk_size_, n_action_steps_;
-  bool ensembling_;
-  double coeff_;
-  std::deque<Chunk> chunks_;  // oldest first
 };
 
 }  // namespace act::drive

@@ -41,7 +41,8 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
     : blob_(ActbFile::open(blob_path, options.verify_checksum)),
       config_(ModelConfig::from_json(blob_.config())),
       pool_(options.threads),
-      profile_(options.profile) {
+      profile_(options.profile),
+      keep_intermediates_(keep_intermediates) {
   // A bad ACT_ISA (unknown, or an ISA this CPU lacks) is an error here, never a silent fallback.
   const kernels::GemmF32Selection gemm = kernels::gemm_f32_select();
   if (!gemm.error.empty()) fail(ErrorCode::kInvalidArgument, gemm.error);
@@ -162,6 +163,7 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
   network_->run(pool_, profile_ ? &stages : nullptr);
   const float* out = network_->actions_normalized();
   std::copy(out, out + actions_normalized.size(), actions_normalized.begin());
+  has_run_ = true;
   if (profile_) {
     const auto ms = [](double seconds) { return seconds * 1e3; };
     timings_.preprocess_ms = std::chrono::duration<double, std::milli>(preprocessed - start).count();
@@ -184,6 +186,22 @@ void Engine::Impl::unnormalize(std::span<const float> normalized, std::span<floa
   }
 }
 
+std::vector<float> Engine::Impl::intermediate(const std::string& name) {
+  graph::Graph& g = network_->graph();
+  const graph::ValueId id = g.find(name);
+  if (id == graph::kNoValue) fail(ErrorCode::kNotFound, "the network has no value \"" + name + "\"");
+  if (!keep_intermediates_) {
+    fail(ErrorCode::kFailedPrecondition, "intermediate \"" + name + "\": open the engine with EngineOptions::keep_intermediates");
+  }
+  if (!has_run_) fail(ErrorCode::kFailedPrecondition, "intermediate \"" + name + "\": no inference has run yet");
+  const graph::Value& v = g.value(id);
+  if (v.dtype == graph::DataType::kS32) fail(ErrorCode::kUnimplemented, "intermediate \"" + name + "\" is an int32 accumulator");
+  if (v.dtype == graph::DataType::kS8 && !v.quant) {
+    fail(ErrorCode::kUnimplemented, "intermediate \"" + name + "\" is int8 quantized at run time; its scale is not kept");
+  }
+  return g.read_f32(id);
+}
+
 // -------------------------------------------------------------------------------------- Engine
 
 Engine::Engine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -193,7 +211,7 @@ StatusOr<std::unique_ptr<Engine>> Engine::open(const std::string& blob_path, con
   std::unique_ptr<Engine> engine;
   Status s = guarded([&] {
     if (options.threads < 0) fail(ErrorCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
-    engine.reset(new Engine(std::make_unique<Impl>(blob_path, options, false)));
+    engine.reset(new Engine(std::make_unique<Impl>(blob_path, options, options.keep_intermediates)));
   });
   if (!s.ok()) return s;
   return engine;
@@ -221,5 +239,20 @@ Status Engine::infer(const Observation& observation, std::span<float> actions) {
 }
 
 const InferenceTimings& Engine::last_timings() const { return impl_->timings(); }
+
+std::vector<std::string> Engine::intermediate_names() const {
+  const graph::Graph& g = impl_->network().graph();
+  std::vector<std::string> names;
+  names.reserve(g.value_count());
+  for (size_t i = 0; i < g.value_count(); ++i) names.push_back(g.value(static_cast<graph::ValueId>(i)).name);
+  return names;
+}
+
+StatusOr<std::vector<float>> Engine::intermediate(const std::string& name) const {
+  std::vector<float> values;
+  Status s = guarded([&] { values = impl_->intermediate(name); });
+  if (!s.ok()) return s;
+  return values;
+}
 
 }  // namespace act

@@ -32,6 +32,8 @@ class Engine::Impl {
   void run(const Observation& observation, std::span<float> actions_normalized);
   /// x = (y + shift) * scale + offset per action dimension, for `rows` rows.
   void unnormalize(std::span<const float> normalized, std::span<float> raw, size_t rows) const;
+  /// A value of the last run as floats (see Engine::intermediate). Throws act::Error.
+  std::vector<float> intermediate(const std::string& name);
   /// Stage times of the last run (zeros unless profiling).
   InferenceTimings& timings() { return timings_; }
   bool profiling() const { return profile_; }
@@ -58,6 +60,8 @@ class Engine::Impl {
   const float* unnorm_scale_ = nullptr;
   const float* unnorm_offset_ = nullptr;
   bool profile_ = false;
+  bool keep_intermediates_ = false;
+  bool has_run_ = false;
   InferenceTimings timings_;
 };
 

@@ -1,6 +1,7 @@
-// consumer BLOB: opens the blob with the installed libactengine, runs one zero observation and
-// prints the first action. Exits non-zero on any failure, including a non-finite action.
+// consumer BLOB: opens the blob with the installed libactengine, runs one zero observation, takes
+// tick 0's action through the chunk scheduler and prints the first action. Exits non-zero on any failure, including a non-finite action.
 #include <actengine/engine.h>
+#include <actengine/scheduler.h>
 
 #include <cmath>
 #include <cstdio>
@@ -39,6 +40,13 @@ int main(int argc, char** argv) {
   }
   for (float v : chunk) {
     if (!std::isfinite(v)) return 1;
+  }
+  auto scheduler = act::ChunkScheduler::create(info);
+  std::vector<float> action(static_cast<size_t>(info.action_dim));
+  const act::Status scheduled = scheduler.ok() ? scheduler->add(chunk, 0) : scheduler.status();
+  if (!scheduled.ok() || !scheduler->action_at(0, action).ok() || action[0] != chunk[0]) {
+    std::fprintf(stderr, "the chunk scheduler did not return row 0 for tick 0: %s\n", scheduled.to_string().c_str());
+    return 1;
   }
   std::printf("actengine %s: %s -> first action %g\n", act::version(), info.summary.c_str(), chunk[0]);
   return 0;

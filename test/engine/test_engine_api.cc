@@ -2,6 +2,7 @@
 // memory planning or which Engine runs them; Engines run side by side and can change threads.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -9,9 +10,10 @@
 #include <thread>
 
 #include "actengine/engine.h"
-#include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/quantize/quantize_model.h"
 
 namespace fs = std::filesystem;
 
@@ -133,10 +135,10 @@ TEST_F(EngineApiTest, SameResultForAnyThreadCountAndMemoryPlan) {
   ASSERT_TRUE(engine_->infer(observation(), reference).ok());
   for (int threads : {1, 3}) {
     for (bool keep_all : {false, true}) {
-      Engine::Impl impl(blob_, {.threads = threads}, keep_all);
-      auto normalized = chunk(), raw = chunk();
-      impl.run(observation(), normalized);
-      impl.unnormalize(normalized, raw, static_cast<size_t>(impl.info().chunk_size));
+      auto engine = Engine::open(blob_, {.threads = threads, .keep_intermediates = keep_all});
+      ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+      auto raw = chunk();
+      ASSERT_TRUE((*engine)->infer(observation(), raw).ok());
       // Tiles are split the same way whatever the thread count, so results are bit-identical.
       EXPECT_EQ(raw, reference) << threads << " threads, keep_all " << keep_all;
     }
@@ -233,6 +235,90 @@ TEST_F(EngineApiTest, ProfilingReportsEveryStage) {
     EXPECT_LT(stage, t.total_ms);
   }
   EXPECT_GE(t.other_ms, 0.0);
+}
+
+TEST_F(EngineApiTest, IntermediatesAreReadAfterARunWhenKept) {
+  const std::vector<std::string> names = engine_->intermediate_names();
+  for (const char* name : {"cam0.image", "state", "cam0.backbone.layer4", "encoder_layer0_out", "actions_normalized"}) {
+    EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
+  }
+  const auto not_kept = engine_->intermediate("actions_normalized");
+  EXPECT_EQ(not_kept.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(not_kept.status().message().find("keep_intermediates"), std::string::npos) << not_kept.status().message();
+
+  auto kept = Engine::open(blob_, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(kept.ok()) << kept.status().to_string();
+  EXPECT_EQ((*kept)->intermediate_names(), names);
+  EXPECT_EQ((*kept)->intermediate("actions_normalized").status().code(), StatusCode::kFailedPrecondition)
+      << "before the first inference";
+  auto normalized = chunk();
+  ASSERT_TRUE((*kept)->infer_normalized(observation(), normalized).ok());
+  const auto actions = (*kept)->intermediate("actions_normalized");
+  ASSERT_TRUE(actions.ok()) << actions.status().to_string();
+  EXPECT_EQ(actions.value(), normalized);
+  const auto state = (*kept)->intermediate("state");
+  ASSERT_TRUE(state.ok()) << state.status().to_string();
+  EXPECT_EQ(state->size(), state_.size());
+  const auto unknown = (*kept)->intermediate("cam7.backbone");
+  EXPECT_EQ(unknown.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(unknown.status().message().find("cam7.backbone"), std::string::npos) << unknown.status().message();
+}
+
+TEST_F(EngineApiTest, Int8IntermediatesAreDequantized) {
+  // Static INT8 with each activation's scale taken from its own FP32 range on this observation.
+  auto fp32 = Engine::open(blob_, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(fp32.ok()) << fp32.status().to_string();
+  auto fp32_actions = chunk();
+  ASSERT_TRUE((*fp32)->infer(observation(), fp32_actions).ok());
+  QuantConfig quant;
+  quant.mode = QuantMode::kStatic;
+  quant.calibration = "max";
+  for (const std::string& name : (*fp32)->intermediate_names()) {
+    const auto values = (*fp32)->intermediate(name);
+    ASSERT_TRUE(values.ok()) << values.status().to_string();
+    float max_abs = 0;
+    for (float v : values.value()) max_abs = std::max(max_abs, std::abs(v));
+    quant.activations[name] = {std::max(max_abs, 1e-3f) / 127.0f, 0};
+  }
+  const ImportedModel model = import_lerobot_checkpoint(test::fixture_dir("act-tiny"));
+  const std::string int8_blob = scratch_ + "/static.actb";
+  write_int8_blob(model, quant, int8_blob);
+  auto int8 = Engine::open(int8_blob, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(int8.ok()) << int8.status().to_string();
+  auto int8_actions = chunk();
+  ASSERT_TRUE((*int8)->infer(observation(), int8_actions).ok());
+
+  // An int8 value comes back as scale * q: whole multiples of its scale, near the float value.
+  const std::string name = "cam0.backbone.layer1";
+  const auto dequantized = (*int8)->intermediate(name);
+  ASSERT_TRUE(dequantized.ok()) << dequantized.status().to_string();
+  const auto reference = (*fp32)->intermediate(name);
+  ASSERT_TRUE(reference.ok());
+  ASSERT_EQ(dequantized->size(), reference->size());
+  const float scale = quant.activations.at(name).scale;
+  double error = 0, magnitude = 0;
+  size_t nonzero = 0;
+  for (size_t i = 0; i < dequantized->size(); ++i) {
+    const float steps = dequantized.value()[i] / scale;
+    ASSERT_NEAR(steps, std::round(steps), 1e-3) << "value " << i << " is not a multiple of the scale";
+    nonzero += steps != 0;
+    error += std::abs(dequantized.value()[i] - reference.value()[i]);
+    magnitude += std::abs(reference.value()[i]);
+  }
+  EXPECT_GT(nonzero, dequantized->size() / 10);
+  EXPECT_LT(error, 0.2 * magnitude);
+
+  // Dynamic INT8 quantizes at run time and keeps no scale: such a value cannot be read as floats.
+  const std::string dynamic_blob = scratch_ + "/dynamic.actb";
+  write_int8_blob(model, QuantConfig{}, dynamic_blob);
+  auto dynamic = Engine::open(dynamic_blob, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(dynamic.ok()) << dynamic.status().to_string();
+  ASSERT_TRUE((*dynamic)->infer(observation(), int8_actions).ok());
+  const std::vector<std::string> names = (*dynamic)->intermediate_names();
+  const auto run_time = std::find_if(names.begin(), names.end(), [](const std::string& n) { return n.ends_with(".s8dyn"); });
+  ASSERT_NE(run_time, names.end());
+  EXPECT_EQ((*dynamic)->intermediate(*run_time).status().code(), StatusCode::kUnimplemented);
+  EXPECT_TRUE((*dynamic)->intermediate("cam0.backbone.layer1").ok());
 }
 
 TEST_F(EngineApiTest, CorruptBlobsAreClearErrors) {

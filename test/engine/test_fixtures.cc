@@ -5,9 +5,9 @@
 #include <filesystem>
 
 #include "actengine/engine.h"
-#include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
+#include "weights/blob/actb.h"
 #include "weights/import/safetensors.h"
 
 namespace act {
@@ -51,42 +51,45 @@ RefObservation load_obs(const SafetensorsFile& f, size_t i, int h, int w) {
 }
 
 TEST_P(FixtureTest, EveryIntermediateMatchesLeRobot) {
-  Engine::Impl impl(blob_, {.threads = 2}, /*keep_intermediates=*/true);
-  const auto& cam = impl.config().cameras.at(0);
+  auto engine = Engine::open(blob_, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  const ModelInfo& info = (*engine)->model_info();
+  const auto& cam = info.cameras.at(0);
   const RefObservation o = load_obs(*ref_, 0, cam.height, cam.width);
   Observation obs;
   obs.images = {ImageView::rgb_f32_chw(o.image_f32.data(), cam.height, cam.width)};
   obs.state = o.state;
-  std::vector<float> actions(impl.info().chunk_values());
-  impl.run(obs, actions);
+  std::vector<float> actions(info.chunk_values());
+  ASSERT_TRUE((*engine)->infer_normalized(obs, actions).ok());
 
-  graph::Graph& g = impl.network().graph();
-  auto value = [&](const std::string& name) {
-    const graph::ValueId id = g.find(name);
-    EXPECT_NE(id, graph::kNoValue) << name;
-    return id == graph::kNoValue ? nullptr : g.data(id);
+  // Engine value `name` against `expected` (the reference, in the engine's layout).
+  auto expect_close = [&](const std::string& what, const std::string& name, const float* expected, size_t n) {
+    const StatusOr<std::vector<float>> value = (*engine)->intermediate(name);
+    ASSERT_TRUE(value.ok()) << value.status().to_string();
+    ASSERT_EQ(value->size(), n) << name;
+    EXPECT_TRUE(test::all_close(what, value->data(), expected, n, kTol));
   };
   // Normalised image: ours is HWC.
   {
     const auto& r = ref("sample0.model_input.observation.images.front");
     const auto hwc = test::nchw_to_hwc(r.to_f32().data(), 3, cam.height, cam.width);
-    EXPECT_TRUE(test::all_close("normalised image", value("cam0.image"), hwc.data(), hwc.size(), kTol));
+    expect_close("normalised image", "cam0.image", hwc.data(), hwc.size());
   }
   {
     const auto r = ref("sample0.model_input.observation.state").to_f32();
-    EXPECT_TRUE(test::all_close("normalised state", value("state"), r.data(), r.size(), kTol));
+    expect_close("normalised state", "state", r.data(), r.size());
   }
   for (const std::string stage : {"stem", "maxpool", "layer1", "layer2", "layer3", "layer4"}) {
     const auto& r = ref("sample0.cam0.backbone." + stage);
     const auto hwc = test::nchw_to_hwc(r.to_f32().data(), static_cast<int>(r.shape[1]), static_cast<int>(r.shape[2]),
                                        static_cast<int>(r.shape[3]));
-    EXPECT_TRUE(test::all_close("backbone." + stage, value("cam0.backbone." + stage), hwc.data(), hwc.size(), kTol));
+    expect_close("backbone." + stage, "cam0.backbone." + stage, hwc.data(), hwc.size());
   }
   {
     const auto& r = ref("sample0.cam0.img_feat_proj");  // (1, D, h, w) -> tokens [h*w, D]
     const auto tokens = test::nchw_to_hwc(r.to_f32().data(), static_cast<int>(r.shape[1]), static_cast<int>(r.shape[2]),
                                           static_cast<int>(r.shape[3]));
-    EXPECT_TRUE(test::all_close("img_feat_proj", value("cam0.img_feat_proj"), tokens.data(), tokens.size(), kTol));
+    expect_close("img_feat_proj", "cam0.img_feat_proj", tokens.data(), tokens.size());
   }
   {
     // Positional embeddings are folded into bias tables; the blob keeps them for this check.
@@ -98,11 +101,11 @@ TEST_P(FixtureTest, EveryIntermediateMatchesLeRobot) {
                                  "decoder_out", "actions_normalized"}) {
     const std::string ref_name = name == "actions_normalized" ? "sample0.actions_normalized" : "sample0." + name;
     const auto r = ref(ref_name).to_f32();
-    EXPECT_TRUE(test::all_close(name, value(name), r.data(), r.size(), kTol));
+    expect_close(name, name, r.data(), r.size());
   }
   // Post-norm: the encoder output is the last layer's output.
   const auto enc = ref("sample0.encoder_out").to_f32();
-  EXPECT_TRUE(test::all_close("encoder_out", value("encoder_layer1_out"), enc.data(), enc.size(), kTol));
+  expect_close("encoder_out", "encoder_layer1_out", enc.data(), enc.size());
 }
 
 TEST_P(FixtureTest, ActionChunksMatchLeRobotForEverySampleAndImageFormat) {

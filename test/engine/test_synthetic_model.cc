@@ -3,7 +3,7 @@
 
 #include <cmath>
 
-#include "engine/src/engine_impl.h"
+#include "actengine/engine.h"
 #include "support/test_paths.h"
 #include "weights/blob/error.h"
 #include "weights/import/synthetic_model.h"
@@ -43,27 +43,27 @@ TEST(SyntheticModel, DeterministicForASeed) {
 TEST(SyntheticModel, ActivationsStayWellScaled) {
   const std::string dir = test::scratch_dir();
   write_fp32_blob(make_synthetic_model("rover"), dir + "/rover.actb");
-  Engine::Impl impl(dir + "/rover.actb", {.threads = 2}, /*keep_intermediates=*/true);
-  const auto& cam = impl.info().cameras[0];
+  auto engine = Engine::open(dir + "/rover.actb", {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  const auto& cam = (*engine)->model_info().cameras[0];
   std::vector<uint8_t> image(static_cast<size_t>(cam.height) * cam.width * 3);
   for (size_t i = 0; i < image.size(); ++i) image[i] = static_cast<uint8_t>((i / 3 % cam.width + i / (3 * cam.width)) % 256);
   const std::vector<float> state = {0.1f, -0.2f};
   Observation obs;
   obs.images = {ImageView::rgb_u8(image.data(), cam.height, cam.width)};
   obs.state = state;
-  std::vector<float> actions(impl.info().chunk_values());
-  impl.run(obs, actions);
-  graph::Graph& g = impl.network().graph();
+  std::vector<float> actions((*engine)->model_info().chunk_values());
+  ASSERT_TRUE((*engine)->infer_normalized(obs, actions).ok());
   for (const char* name : {"cam0.backbone.layer1", "cam0.backbone.layer4", "encoder_layer3_out", "actions_normalized"}) {
-    const graph::ValueId id = g.find(name);
-    ASSERT_NE(id, graph::kNoValue) << name;
+    const StatusOr<std::vector<float>> values = (*engine)->intermediate(name);
+    ASSERT_TRUE(values.ok()) << values.status().to_string();
+    ASSERT_FALSE(values->empty()) << name;
     double sq = 0;
-    const size_t n = g.value(id).elements;
-    for (size_t i = 0; i < n; ++i) {
-      ASSERT_TRUE(std::isfinite(g.data(id)[i])) << name;
-      sq += static_cast<double>(g.data(id)[i]) * g.data(id)[i];
+    for (float v : values.value()) {
+      ASSERT_TRUE(std::isfinite(v)) << name;
+      sq += static_cast<double>(v) * v;
     }
-    const double rms = std::sqrt(sq / static_cast<double>(n));
+    const double rms = std::sqrt(sq / static_cast<double>(values->size()));
     EXPECT_GT(rms, 0.05) << name;
     EXPECT_LT(rms, 20.0) << name;
   }

@@ -5,11 +5,11 @@
 // reference chunks, intermediates and select_action sequences at the fixtures' tolerance.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include "actengine/engine.h"
 #include "apps/observation_file.h"
-#include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
 #include "weights/import/safetensors.h"
@@ -26,6 +26,17 @@ double intermediate_tolerance(const std::string& preset) { return preset == "res
 const char* const kPresets[] = {"default-480x640",   "default-360x640-legacy", "multicam-prenorm-gelu", "minmax-legacy-env",
                                 "resnet34-novae",    "resnet50-dilation",      "quantiles-identity"};
 
+bool has(const std::vector<std::string>& names, const std::string& name) {
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
+// "encoder_layer<N-1>_out" for an encoder of N layers.
+std::string last_encoder_layer_output(const std::vector<std::string>& names) {
+  int layers = 0;
+  while (has(names, "encoder_layer" + std::to_string(layers) + "_out")) ++layers;
+  return "encoder_layer" + std::to_string(layers - 1) + "_out";
+}
+
 class GeneratedCheckpointTest : public ::testing::TestWithParam<const char*> {
  protected:
   void SetUp() override {
@@ -39,8 +50,10 @@ class GeneratedCheckpointTest : public ::testing::TestWithParam<const char*> {
 };
 
 TEST_P(GeneratedCheckpointTest, ChunksMatchTheReference) {
-  Engine::Impl impl(blob_, {.threads = 2}, /*keep_intermediates=*/true);
-  const ModelInfo& info = impl.info();
+  auto engine = Engine::open(blob_, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  const ModelInfo& info = (*engine)->model_info();
+  const std::vector<std::string> names = (*engine)->intermediate_names();
   const SafetensorsFile ref = SafetensorsFile::open(reference_);
   const auto expected_norm = ref.get("output.action_normalized").to_f32();
   for (ImageSource source : {ImageSource::kFloat, ImageSource::kU8}) {
@@ -48,24 +61,27 @@ TEST_P(GeneratedCheckpointTest, ChunksMatchTheReference) {
     ASSERT_TRUE(batch.has_expected_actions());
     const size_t per = info.chunk_values();
     for (size_t i = 0; i < batch.size(); ++i) {
-      std::vector<float> norm(per), raw(per);
-      impl.run(batch.at(i), norm);
-      impl.unnormalize(norm, raw, static_cast<size_t>(info.chunk_size));
+      std::vector<float> raw(per);
+      ASSERT_TRUE((*engine)->infer(batch.at(i), raw).ok());
+      const StatusOr<std::vector<float>> norm = (*engine)->intermediate("actions_normalized");  // of the same run
+      ASSERT_TRUE(norm.ok()) << norm.status().to_string();
+      ASSERT_EQ(norm->size(), per);
       const std::string what = std::string(GetParam()) + " sample " + std::to_string(i) +
                                (source == ImageSource::kU8 ? " (u8)" : " (f32)");
-      EXPECT_TRUE(test::all_close(what + " normalised", norm.data(), expected_norm.data() + i * per, per, kTol));
+      EXPECT_TRUE(test::all_close(what + " normalised", norm->data(), expected_norm.data() + i * per, per, kTol));
       EXPECT_TRUE(test::all_close(what + " raw", raw.data(), batch.expected_actions(i), per, kTol));
       if (i == 0 && source == ImageSource::kFloat) {
-        // Sample 0's intermediates, where the generator stored them under the fixtures' names.
-        graph::Graph& g = impl.network().graph();
+        // Sample 0's intermediates, where the generator stored them under the fixtures' names. Post-norm
+        // (no final encoder norm, so no "encoder_out" value): the encoder output is the last layer's.
         for (const std::string name : {"encoder_in_tokens", "encoder_out", "decoder_out"}) {
           const SafetensorsTensor* r = ref.find("sample0." + name);
-          const graph::ValueId id = g.find(name == "encoder_out" && !impl.config().pre_norm
-                                                ? "encoder_layer" + std::to_string(impl.config().n_encoder_layers - 1) + "_out"
-                                                : name);
-          if (!r || id == graph::kNoValue) continue;
+          const std::string ours = name == "encoder_out" && !has(names, name) ? last_encoder_layer_output(names) : name;
+          if (!r || !has(names, ours)) continue;
           const auto values = r->to_f32();
-          EXPECT_TRUE(test::all_close(what + " " + name, g.data(id), values.data(), values.size(),
+          const StatusOr<std::vector<float>> got = (*engine)->intermediate(ours);
+          ASSERT_TRUE(got.ok()) << got.status().to_string();
+          ASSERT_EQ(got->size(), values.size()) << ours;
+          EXPECT_TRUE(test::all_close(what + " " + name, got->data(), values.data(), values.size(),
                                       intermediate_tolerance(GetParam())));
         }
       }

@@ -5,9 +5,9 @@
 
 #include <filesystem>
 
+#include "actengine/engine.h"
 #include "apps/convert/calib_frames.h"
 #include "apps/convert/int8_conversion.h"
-#include "engine/src/engine_impl.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
 #include "weights/import/lerobot_import.h"

@@ -248,13 +248,15 @@ size_t ActbWriter::write(const std::string& path) const {
 
 // ---------------------------------------------------------------------------------------------- reader
 
-ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
-  ActbFile f;
-  f.mapping_ = FileMapping::open(path);
-  const uint8_t* base = f.mapping_.data();
-  const uint64_t size = f.mapping_.size();
+namespace {
 
-  // Fixed header.
+// The fixed 64-byte header, checked against the file's size.
+struct FixedHeader {
+  uint32_t version = 0;
+  uint64_t header_size = 0, data_offset = 0, data_size = 0, checksum = 0;
+};
+
+FixedHeader read_fixed_header(const std::string& path, const uint8_t* base, uint64_t size) {
   if (size < sizeof kMagic) {
     corrupt(path, "truncated or not an .actb file: file has " + std::to_string(size) +
                       " bytes, too short for the magic");
@@ -264,23 +266,24 @@ ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
     corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, the fixed header needs " +
                       std::to_string(kFixedHeaderSize));
   }
-  f.version_ = read_le32(base + 8);
-  if (f.version_ != kActbFormatVersion) {
-    fail(ErrorCode::kUnimplemented, "'" + path + "': format version " + std::to_string(f.version_) +
+  FixedHeader h;
+  h.version = read_le32(base + 8);
+  if (h.version != kActbFormatVersion) {
+    fail(ErrorCode::kUnimplemented, "'" + path + "': format version " + std::to_string(h.version) +
                                          ", this build reads " + std::to_string(kActbFormatVersion));
   }
   const uint32_t reserved0 = read_le32(base + 12);
-  const uint64_t header_size = read_le64(base + 16);
-  const uint64_t data_offset = read_le64(base + 24);
-  const uint64_t data_size = read_le64(base + 32);
-  const uint64_t checksum = read_le64(base + 40);
+  h.header_size = read_le64(base + 16);
+  h.data_offset = read_le64(base + 24);
+  h.data_size = read_le64(base + 32);
+  h.checksum = read_le64(base + 40);
   bool reserved_zero = reserved0 == 0;
   for (size_t i = 48; i < kFixedHeaderSize; ++i) reserved_zero = reserved_zero && base[i] == 0;
   if (!reserved_zero) corrupt(path, "reserved fixed-header bytes are not zero");
 
   uint64_t expected_size = 0;
-  if (!detail::checked_add(data_offset, data_size, &expected_size)) {
-    corrupt(path, "data_offset " + std::to_string(data_offset) + " + data_size " + std::to_string(data_size) +
+  if (!detail::checked_add(h.data_offset, h.data_size, &expected_size)) {
+    corrupt(path, "data_offset " + std::to_string(h.data_offset) + " + data_size " + std::to_string(h.data_size) +
                       " overflows");
   }
   if (expected_size > size) {
@@ -291,112 +294,132 @@ ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
     corrupt(path, "file has " + std::to_string(size) + " bytes, header says " + std::to_string(expected_size) +
                       " (trailing garbage)");
   }
-  if (header_size > kMaxHeaderSize) {
-    corrupt(path, "header_size " + std::to_string(header_size) + " exceeds the limit of " +
+  if (h.header_size > kMaxHeaderSize) {
+    corrupt(path, "header_size " + std::to_string(h.header_size) + " exceeds the limit of " +
                       std::to_string(kMaxHeaderSize));
   }
-  if (data_offset % kActbAlignment != 0) {
-    corrupt(path, "data_offset " + std::to_string(data_offset) + " is not 64-byte aligned");
+  if (h.data_offset % kActbAlignment != 0) {
+    corrupt(path, "data_offset " + std::to_string(h.data_offset) + " is not 64-byte aligned");
   }
-  if (data_offset < kFixedHeaderSize + header_size) {
-    corrupt(path, "JSON header of " + std::to_string(header_size) + " bytes at offset 64 overruns data_offset " +
-                      std::to_string(data_offset));
+  if (h.data_offset < kFixedHeaderSize + h.header_size) {
+    corrupt(path, "JSON header of " + std::to_string(h.header_size) + " bytes at offset 64 overruns data_offset " +
+                      std::to_string(h.data_offset));
   }
-  if (checksum > std::numeric_limits<uint32_t>::max()) {
-    corrupt(path, "checksum field " + std::to_string(checksum) + " is not a zero-extended CRC-32");
+  if (h.checksum > std::numeric_limits<uint32_t>::max()) {
+    corrupt(path, "checksum field " + std::to_string(h.checksum) + " is not a zero-extended CRC-32");
   }
-  if (verify_checksum) {
-    uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
-    crc = crc_update(crc, base + kFixedHeaderSize, static_cast<size_t>(size - kFixedHeaderSize));
-    if (crc != checksum) {
-      corrupt(path, "checksum mismatch (stored " + hex32(static_cast<uint32_t>(checksum)) + ", computed " +
-                        hex32(crc) + "): the file is corrupt");
-    }
-  }
+  return h;
+}
 
-  // JSON header.
+// CRC-32 of everything after the fixed header.
+void verify_checksum_of(const std::string& path, const uint8_t* base, uint64_t size, uint64_t checksum) {
+  uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
+  crc = crc_update(crc, base + kFixedHeaderSize, static_cast<size_t>(size - kFixedHeaderSize));
+  if (crc != checksum) {
+    corrupt(path, "checksum mismatch (stored " + hex32(static_cast<uint32_t>(checksum)) + ", computed " +
+                      hex32(crc) + "): the file is corrupt");
+  }
+}
+
+// The JSON header's three parts.
+struct JsonHeader {
+  std::string producer;
+  nlohmann::json config;   // an object
+  nlohmann::json tensors;  // an array: the tensor directory
+};
+
+JsonHeader read_json_header(const std::string& path, const uint8_t* base, uint64_t header_size) {
   nlohmann::json header =
       detail::parse_json_header(path, base + kFixedHeaderSize, static_cast<size_t>(header_size));
   if (!header.is_object()) corrupt(path, std::string("JSON header must be an object, got ") + header.type_name());
+  JsonHeader h;
   const auto producer = header.find("producer");
   if (producer == header.end() || !producer->is_string()) corrupt(path, "JSON header needs a 'producer' string");
-  f.producer_ = producer->get<std::string>();
+  h.producer = producer->get<std::string>();
   const auto config = header.find("config");
   if (config == header.end() || !config->is_object()) corrupt(path, "JSON header needs a 'config' object");
-  f.config_ = std::move(*config);
+  h.config = std::move(*config);
   const auto tensors = header.find("tensors");
   if (tensors == header.end() || !tensors->is_array()) corrupt(path, "JSON header needs a 'tensors' array");
+  h.tensors = std::move(*tensors);
+  return h;
+}
 
-  // Tensor directory.
-  const uint8_t* data_area = base + data_offset;
-  f.tensors_.reserve(tensors->size());
-  for (size_t i = 0; i < tensors->size(); ++i) {
-    const nlohmann::json& e = (*tensors)[i];
-    std::string where = "tensors[" + std::to_string(i) + "]: ";
-    if (!e.is_object()) corrupt(path, where + "must be an object, got " + e.type_name());
-    const auto name = e.find("name");
-    if (name == e.end() || !name->is_string() || name->get_ref<const std::string&>().empty()) {
-      corrupt(path, where + "needs a non-empty 'name' string");
-    }
-    ActbTensor t;
-    t.name = name->get<std::string>();
-    where = "tensor '" + t.name + "': ";
-    if (f.index_.count(t.name) != 0) corrupt(path, where + "duplicate tensor name");
-
-    const auto dtype = e.find("dtype");
-    if (dtype == e.end() || !dtype->is_string()) corrupt(path, where + "needs a 'dtype' string");
-    if (!parse_dtype(dtype->get_ref<const std::string&>(), &t.dtype)) {
-      corrupt(path, where + "unknown dtype '" + dtype->get_ref<const std::string&>().substr(0, 32) + "'");
-    }
-    const auto shape = e.find("shape");
-    if (shape == e.end()) corrupt(path, where + "missing 'shape'");
-    std::string why;
-    if (!detail::json_to_shape(*shape, &t.shape, &why)) corrupt(path, where + why);
-    uint64_t elements = 0;
-    try {
-      elements = shape_elements(t.shape);
-    } catch (const Error& err) {
-      corrupt(path, where + err.what());
-    }
-    const auto offset_it = e.find("offset");
-    const auto nbytes_it = e.find("nbytes");
-    uint64_t offset = 0;
-    uint64_t nbytes = 0;
-    if (offset_it == e.end() || !detail::json_to_u64(*offset_it, &offset)) {
-      corrupt(path, where + "needs a non-negative integer 'offset'");
-    }
-    if (nbytes_it == e.end() || !detail::json_to_u64(*nbytes_it, &nbytes)) {
-      corrupt(path, where + "needs a non-negative integer 'nbytes'");
-    }
-    uint64_t expected = 0;
-    if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected) || expected != nbytes) {
-      corrupt(path, where + "nbytes " + std::to_string(nbytes) + " does not match shape " + shape_string(t.shape) +
-                        " with dtype " + dtype_name(t.dtype));
-    }
-    if (offset % kActbAlignment != 0) {
-      corrupt(path, where + "offset " + std::to_string(offset) + " is not 64-byte aligned");
-    }
-    uint64_t end = 0;
-    if (!detail::checked_add(offset, nbytes, &end) || end > data_size) {
-      corrupt(path, where + "bytes [" + std::to_string(offset) + ", +" + std::to_string(nbytes) +
-                        ") are out of bounds of the data area of " + std::to_string(data_size) + " bytes");
-    }
-    const auto quant = e.find("quant");
-    if (quant != e.end()) {
-      std::string error = parse_quant(*quant, &t.quant);
-      if (error.empty()) error = check_quant(t.quant, t.shape);
-      if (!error.empty()) corrupt(path, where + error);
-    }
-    t.data = data_area + offset;
-    t.nbytes = static_cast<size_t>(nbytes);
-    f.index_.emplace(t.name, f.tensors_.size());
-    f.tensors_.push_back(std::move(t));
+// Where tensor `t` (its dtype and shape read) lies: 'offset' and 'nbytes', which must match the shape
+// and dtype and lie inside the data area. `where` names the tensor in errors.
+void read_tensor_extent(const std::string& path, const std::string& where, const nlohmann::json& e, uint64_t elements,
+                        const uint8_t* data_area, uint64_t data_size, ActbTensor& t) {
+  const auto offset_it = e.find("offset");
+  const auto nbytes_it = e.find("nbytes");
+  uint64_t offset = 0;
+  uint64_t nbytes = 0;
+  if (offset_it == e.end() || !detail::json_to_u64(*offset_it, &offset)) {
+    corrupt(path, where + "needs a non-negative integer 'offset'");
   }
+  if (nbytes_it == e.end() || !detail::json_to_u64(*nbytes_it, &nbytes)) {
+    corrupt(path, where + "needs a non-negative integer 'nbytes'");
+  }
+  uint64_t expected = 0;
+  if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected) || expected != nbytes) {
+    corrupt(path, where + "nbytes " + std::to_string(nbytes) + " does not match shape " + shape_string(t.shape) +
+                      " with dtype " + dtype_name(t.dtype));
+  }
+  if (offset % kActbAlignment != 0) {
+    corrupt(path, where + "offset " + std::to_string(offset) + " is not 64-byte aligned");
+  }
+  uint64_t end = 0;
+  if (!detail::checked_add(offset, nbytes, &end) || end > data_size) {
+    corrupt(path, where + "bytes [" + std::to_string(offset) + ", +" + std::to_string(nbytes) +
+                      ") are out of bounds of the data area of " + std::to_string(data_size) + " bytes");
+  }
+  t.data = data_area + offset;
+  t.nbytes = static_cast<size_t>(nbytes);
+}
 
-  // Overlap check over non-empty tensors in offset order.
+// Entry `i` of the tensor directory; `index` holds the names read so far (a duplicate is corrupt).
+ActbTensor read_tensor_entry(const std::string& path, const nlohmann::json& e, size_t i,
+                             const std::map<std::string, size_t>& index, const uint8_t* data_area, uint64_t data_size) {
+  std::string where = "tensors[" + std::to_string(i) + "]: ";
+  if (!e.is_object()) corrupt(path, where + "must be an object, got " + e.type_name());
+  const auto name = e.find("name");
+  if (name == e.end() || !name->is_string() || name->get_ref<const std::string&>().empty()) {
+    corrupt(path, where + "needs a non-empty 'name' string");
+  }
+  ActbTensor t;
+  t.name = name->get<std::string>();
+  where = "tensor '" + t.name + "': ";
+  if (index.count(t.name) != 0) corrupt(path, where + "duplicate tensor name");
+
+  const auto dtype = e.find("dtype");
+  if (dtype == e.end() || !dtype->is_string()) corrupt(path, where + "needs a 'dtype' string");
+  if (!parse_dtype(dtype->get_ref<const std::string&>(), &t.dtype)) {
+    corrupt(path, where + "unknown dtype '" + dtype->get_ref<const std::string&>().substr(0, 32) + "'");
+  }
+  const auto shape = e.find("shape");
+  if (shape == e.end()) corrupt(path, where + "missing 'shape'");
+  std::string why;
+  if (!detail::json_to_shape(*shape, &t.shape, &why)) corrupt(path, where + why);
+  uint64_t elements = 0;
+  try {
+    elements = shape_elements(t.shape);
+  } catch (const Error& err) {
+    corrupt(path, where + err.what());
+  }
+  read_tensor_extent(path, where, e, elements, data_area, data_size, t);
+  const auto quant = e.find("quant");
+  if (quant != e.end()) {
+    std::string error = parse_quant(*quant, &t.quant);
+    if (error.empty()) error = check_quant(t.quant, t.shape);
+    if (!error.empty()) corrupt(path, where + error);
+  }
+  return t;
+}
+
+// No two non-empty tensors share a byte (checked in offset order).
+void check_no_overlap(const std::string& path, const std::vector<ActbTensor>& tensors) {
   std::vector<const ActbTensor*> order;
-  order.reserve(f.tensors_.size());
-  for (const ActbTensor& t : f.tensors_) {
+  order.reserve(tensors.size());
+  for (const ActbTensor& t : tensors) {
     if (t.nbytes != 0) order.push_back(&t);
   }
   std::sort(order.begin(), order.end(), [](const ActbTensor* a, const ActbTensor* b) { return a->data < b->data; });
@@ -407,6 +430,29 @@ ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
     }
     if (furthest == nullptr || t->data + t->nbytes > furthest->data + furthest->nbytes) furthest = t;
   }
+}
+
+}  // namespace
+
+ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
+  ActbFile f;
+  f.mapping_ = FileMapping::open(path);
+  const uint8_t* base = f.mapping_.data();
+  const uint64_t size = f.mapping_.size();
+  const FixedHeader fixed = read_fixed_header(path, base, size);
+  f.version_ = fixed.version;
+  if (verify_checksum) verify_checksum_of(path, base, size, fixed.checksum);
+  JsonHeader header = read_json_header(path, base, fixed.header_size);
+  f.producer_ = std::move(header.producer);
+  f.config_ = std::move(header.config);
+  const uint8_t* data_area = base + fixed.data_offset;
+  f.tensors_.reserve(header.tensors.size());
+  for (size_t i = 0; i < header.tensors.size(); ++i) {
+    ActbTensor t = read_tensor_entry(path, header.tensors[i], i, f.index_, data_area, fixed.data_size);
+    f.index_.emplace(t.name, f.tensors_.size());
+    f.tensors_.push_back(std::move(t));
+  }
+  check_no_overlap(path, f.tensors_);
   return f;
 }
 

@@ -32,6 +32,9 @@ struct EngineOptions {
   bool verify_checksum = true;
   /// Time every stage of every inference (see Engine::last_timings); costs a clock read per op.
   bool profile = false;
+  /// Give every network value its own memory so Engine::intermediate() can read it after an
+  /// inference (to compare with LeRobot layer by layer); costs memory, never changes results.
+  bool keep_intermediates = false;
 };
 
 /// Wall time of one inference by stage, in milliseconds. "other" is what belongs to no stage: the
@@ -113,15 +116,26 @@ class Engine {
   /// Stage times of the last successful infer (all zero unless EngineOptions::profile is set).
   const InferenceTimings& last_timings() const;
 
-  class Impl;
-  Impl& impl() { return *impl_; }  ///< internal (tests and tools); not part of the stable API
+  /// The names of the network's values, in the order they are computed ("cam0.backbone.layer1",
+  /// "encoder_layer0_out", "actions_normalized", ...).
+  std::vector<std::string> intermediate_names() const;
+  /// One value of the last inference as floats, in the engine's layout (image features are
+  /// height x width x channels); int8 values dequantized. Needs EngineOptions::keep_intermediates.
+  /// kNotFound for an unknown name; kFailedPrecondition without keep_intermediates or before the
+  /// first inference; kUnimplemented for an int8 value quantized at run time (no scale is kept).
+  StatusOr<std::vector<float>> intermediate(const std::string& name) const;
+
+  class Impl;  ///< defined inside the library (engine/src); not part of the API
 
  private:
+  friend class Policy;  // un-normalises the actions it picks
   explicit Engine(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 
-/// LeRobot's select_action: returns one action per control step.
+/// LeRobot's select_action: returns one action per control step, inferring synchronously. A thin
+/// use of ChunkScheduler (actengine/scheduler.h), which also serves robots that keep acting while
+/// the next chunk is inferred.
 ///  - n_action_steps queue (temporal ensembling off): runs the network when the queue is empty and
 ///    queues the first n_action_steps rows of the chunk;
 ///  - temporal ensembling (coeff set, n_action_steps == 1): runs every step and averages all

@@ -46,6 +46,73 @@ LatencySummary summarize(std::vector<double> samples) {
 
 namespace {
 
+constexpr double kHistogramLow = 1e-3, kHistogramHigh = 1e6, kHistogramRatio = 1.01;
+const int kHistogramBins = static_cast<int>(std::ceil(std::log(kHistogramHigh / kHistogramLow) / std::log(kHistogramRatio))) + 2;
+
+}  // namespace
+
+LatencyHistogram::LatencyHistogram() : bins_(static_cast<size_t>(kHistogramBins), 0) {}
+
+int LatencyHistogram::bin_of(double value) {
+  // Bin 0 holds everything below kHistogramLow (and zero), the last bin everything above kHistogramHigh.
+  if (!(value > kHistogramLow)) return 0;
+  const int bin = 1 + static_cast<int>(std::log(value / kHistogramLow) / std::log(kHistogramRatio));
+  return std::min(bin, kHistogramBins - 1);
+}
+
+double LatencyHistogram::bin_center(int bin) {
+  if (bin == 0) return 0.0;
+  return kHistogramLow * std::pow(kHistogramRatio, bin - 0.5);
+}
+
+void LatencyHistogram::add(double value) {
+  if (std::isnan(value)) return;
+  ++bins_[static_cast<size_t>(bin_of(value))];
+  ++count_;
+  if (count_ == 1) {
+    min_ = max_ = value;
+  } else {
+    min_ = std::min(min_, value);
+    max_ = std::max(max_, value);
+  }
+  const double delta = value - mean_;
+  mean_ += delta / static_cast<double>(count_);
+  m2_ += delta * (value - mean_);
+}
+
+LatencySummary LatencyHistogram::summary() const {
+  LatencySummary s;
+  s.count = count_;
+  if (count_ == 0) return s;
+  s.mean = std::clamp(mean_, min_, max_);
+  s.stddev = count_ > 1 ? std::sqrt(m2_ / static_cast<double>(count_ - 1)) : 0.0;
+  s.min = min_;
+  s.max = max_;
+  // The value at order statistic round(p * (n - 1)): the center of the bin it falls in.
+  auto percentile = [&](double p) {
+    const auto rank = static_cast<uint64_t>(std::llround(p / 100.0 * static_cast<double>(count_ - 1)));
+    uint64_t seen = 0;
+    for (size_t b = 0; b < bins_.size(); ++b) {
+      seen += bins_[b];
+      if (seen > rank) return b + 1 == bins_.size() ? max_ : std::clamp(bin_center(static_cast<int>(b)), min_, max_);
+    }
+    return max_;
+  };
+  s.p50 = percentile(50);
+  s.p90 = percentile(90);
+  s.p95 = percentile(95);
+  s.p99 = percentile(99);
+  return s;
+}
+
+void LatencyHistogram::clear() {
+  std::fill(bins_.begin(), bins_.end(), 0);
+  count_ = 0;
+  mean_ = m2_ = min_ = max_ = 0;
+}
+
+namespace {
+
 std::string trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t");
   const auto e = s.find_last_not_of(" \t\r\n");

@@ -20,13 +20,13 @@ double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
-// Latency samples of one stage: all of them for the exit summary, and a mark for periodic stats.
+// Latency statistics of one stage, in constant memory however long the rover drives: the whole run
+// for the exit summary, and what came since the last periodic report.
 struct StageSamples {
-  std::vector<double> all;
-  size_t reported = 0;
-  void add(double v) { all.push_back(v); }
-  LatencySummary since_report() const {
-    return summarize(std::vector<double>(all.begin() + static_cast<std::ptrdiff_t>(reported), all.end()));
+  LatencyHistogram whole_run, since_report;
+  void add(double v) {
+    whole_run.add(v);
+    since_report.add(v);
   }
 };
 
@@ -309,20 +309,22 @@ class ControlRun {
     last_stats_ = now;
     log_ << "act_drive: stats: " << summary_.ticks << " ticks, " << summary_.overrun_events << " overruns, "
          << summary_.inferences << " inferences\n"
-         << format_stage("capture age", capture_age_.since_report()) << format_stage("preprocess", preprocess_.since_report())
-         << format_stage("infer", infer_.since_report()) << format_stage("serial write", serial_write_.since_report())
-         << format_stage("tick jitter", jitter_.since_report());
-    for (StageSamples* s : {&capture_age_, &preprocess_, &infer_, &serial_write_, &jitter_}) s->reported = s->all.size();
+         << format_stage("capture age", capture_age_.since_report.summary())
+         << format_stage("preprocess", preprocess_.since_report.summary())
+         << format_stage("infer", infer_.since_report.summary())
+         << format_stage("serial write", serial_write_.since_report.summary())
+         << format_stage("tick jitter", jitter_.since_report.summary());
+    for (StageSamples* s : {&capture_age_, &preprocess_, &infer_, &serial_write_, &jitter_}) s->since_report.clear();
   }
 
   DriveSummary finish() {
     link_.shutdown(safe_);  // neutral on every way out of the loop
     summary_.elapsed_s = std::chrono::duration<double>(Clock::now() - start_).count();
-    summary_.capture_age_ms = summarize(capture_age_.all);
-    summary_.preprocess_ms = summarize(preprocess_.all);
-    summary_.infer_ms = summarize(infer_.all);
-    summary_.serial_write_ms = summarize(serial_write_.all);
-    summary_.jitter_ms = summarize(jitter_.all);
+    summary_.capture_age_ms = capture_age_.whole_run.summary();
+    summary_.preprocess_ms = preprocess_.whole_run.summary();
+    summary_.infer_ms = infer_.whole_run.summary();
+    summary_.serial_write_ms = serial_write_.whole_run.summary();
+    summary_.jitter_ms = jitter_.whole_run.summary();
     summary_.link_summary = link_.summary();
     return std::move(summary_);
   }

@@ -2,6 +2,8 @@
 // the model (never asserted against wall-clock limits).
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include <filesystem>
 #include <fstream>
 
@@ -168,6 +170,40 @@ TEST(LatencySummary, PercentilesInterpolateAndOrder) {
   EXPECT_DOUBLE_EQ(one.p99, 7);
   EXPECT_DOUBLE_EQ(one.stddev, 0);
   EXPECT_EQ(summarize({}).count, 0u);
+}
+
+TEST(LatencyHistogram, MatchesTheExactSummaryInConstantMemory) {
+  // act_drive once kept every latency sample (about 2 MB an hour at 30 Hz): the histogram must give
+  // the same summary without them. Log-normal latencies around 20 ms, with a few 1-second outliers.
+  std::mt19937 rng(7);
+  std::lognormal_distribution<double> latency(std::log(20.0), 0.4);
+  std::vector<double> samples;
+  LatencyHistogram histogram;
+  for (int i = 0; i < 100000; ++i) {
+    const double v = i % 5000 == 0 ? 1000.0 : latency(rng);
+    samples.push_back(v);
+    histogram.add(v);
+  }
+  const LatencySummary exact = summarize(samples), approx = histogram.summary();
+  EXPECT_EQ(approx.count, exact.count);
+  EXPECT_DOUBLE_EQ(approx.min, exact.min);
+  EXPECT_DOUBLE_EQ(approx.max, exact.max);
+  EXPECT_NEAR(approx.mean, exact.mean, 1e-9 * exact.mean);
+  EXPECT_NEAR(approx.stddev, exact.stddev, 1e-6 * exact.stddev);
+  for (const auto& [a, e] : {std::pair{approx.p50, exact.p50}, std::pair{approx.p90, exact.p90},
+                             std::pair{approx.p95, exact.p95}, std::pair{approx.p99, exact.p99}}) {
+    EXPECT_NEAR(a, e, 0.01 * e);
+  }
+  EXPECT_LE(approx.p50, approx.p90);
+  EXPECT_LE(approx.p99, approx.max);
+  histogram.clear();
+  EXPECT_EQ(histogram.summary().count, 0u);
+  histogram.add(0.0);  // below the first bin edge: still counted, percentiles clamped to [min, max]
+  histogram.add(0.0);
+  histogram.add(5e7);  // above the last one
+  EXPECT_EQ(histogram.summary().count, 3u);
+  EXPECT_DOUBLE_EQ(histogram.summary().p99, 5e7);
+  EXPECT_DOUBLE_EQ(histogram.summary().p50, 0.0);
 }
 
 }  // namespace

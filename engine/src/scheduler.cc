@@ -5,6 +5,8 @@
 #include <cmath>
 #include <string>
 
+#include "weights/blob/model_config.h"
+
 namespace act {
 
 StatusOr<ChunkScheduler> ChunkScheduler::create(const ModelInfo& info) {
@@ -14,6 +16,10 @@ StatusOr<ChunkScheduler> ChunkScheduler::create(const ModelInfo& info) {
   if (!info.temporal_ensembling && (info.n_action_steps < 1 || info.n_action_steps > info.chunk_size)) {
     return invalid("n_action_steps " + std::to_string(info.n_action_steps) + " must be in [1, chunk_size " +
                    std::to_string(info.chunk_size) + "]");
+  }
+  if (info.temporal_ensembling) {
+    const std::string problem = ModelConfig::ensemble_coeff_problem(info.temporal_ensemble_coeff, info.chunk_size);
+    if (!problem.empty()) return invalid(problem);
   }
   return ChunkScheduler(info);
 }
@@ -99,6 +105,13 @@ Status ChunkScheduler::action_at(int64_t tick, std::span<float> action) const {
     ++count;
   }
   if (count == 0) return Status(StatusCode::kNotFound, "no chunk covers tick " + std::to_string(tick));
+  // The last check before an action leaves the scheduler: never hand out a non-finite number.
+  for (size_t i = 0; i < action_dim_; ++i) {
+    if (!std::isfinite(action[i])) {
+      return Status(StatusCode::kInternal, "the action for tick " + std::to_string(tick) + " is not finite (value " +
+                                               std::to_string(i) + ")");
+    }
+  }
   return Status();
 }
 

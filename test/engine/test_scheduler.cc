@@ -181,6 +181,13 @@ TEST(ChunkScheduler, RejectsBadInput) {
     EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
     EXPECT_NE(s.message().find("n_action_steps"), std::string::npos) << s.message();
   }
+  // An ensemble coefficient whose weights overflow float32 (it once gave NaN from the second step on).
+  for (const double coeff : {-100.0, -1.0, 1.0 / 0.0}) {
+    const Status overflow = ChunkScheduler::create(info(true, 100, 1, coeff)).status();
+    EXPECT_EQ(overflow.code(), StatusCode::kInvalidArgument) << coeff;
+    EXPECT_NE(overflow.message().find("temporal_ensemble_coeff"), std::string::npos) << overflow.message();
+  }
+  EXPECT_TRUE(ChunkScheduler::create(info(true, 100, 1, -0.8)).ok());  // 0.8 * 99 = 79.2 still fits
   ChunkScheduler s = make(info(true, 4, 1, 0.01, 2));
   EXPECT_EQ(s.add(std::vector<float>(7), 0).code(), StatusCode::kInvalidArgument);
   std::vector<float> chunk(8, 1.0f);

@@ -104,6 +104,8 @@ TEST_F(ImportTest, RefusesUnsupportedOrInconsistentConfigs) {
   expect_error(patched(R"({"n_heads": 5})"), ErrorCode::kInvalidArgument, "n_heads");
   expect_error(patched(R"({"n_action_steps": 11})"), ErrorCode::kInvalidArgument, "n_action_steps");
   expect_error(patched(R"({"temporal_ensemble_coeff": 0.01})"), ErrorCode::kInvalidArgument, "n_action_steps == 1");
+  expect_error(patched(R"({"temporal_ensemble_coeff": -100, "n_action_steps": 1})"), ErrorCode::kInvalidArgument,
+               "ensemble weights exp(-coeff * i) overflow float32");
   expect_error(patched(R"({"replace_final_stride_with_dilation": 1})"), ErrorCode::kUnimplemented, "Bottleneck");
   expect_error(patched(R"({"n_obs_steps": 2})"), ErrorCode::kUnimplemented, "n_obs_steps");
   expect_error(patched(R"({"dim_model": "big"})"), ErrorCode::kDataLoss, "dim_model");

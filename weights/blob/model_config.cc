@@ -1,5 +1,9 @@
 #include "weights/blob/model_config.h"
 
+#include <cstdio>
+
+#include <algorithm>
+
 #include <cmath>
 #include <sstream>
 
@@ -153,6 +157,19 @@ std::string ModelConfig::summary() const {
   return s.str();
 }
 
+std::string ModelConfig::ensemble_coeff_problem(double coeff, int chunk_size) {
+  if (!std::isfinite(coeff)) return "temporal_ensemble_coeff is not finite";
+  if (std::fabs(coeff) * std::max(chunk_size - 1, 0) > kMaxEnsembleExponent) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "temporal_ensemble_coeff %g with chunk_size %d: the ensemble weights exp(-coeff * i) overflow "
+                  "float32 (|coeff| * (chunk_size - 1) must stay <= %g)",
+                  coeff, chunk_size, kMaxEnsembleExponent);
+    return text;
+  }
+  return "";
+}
+
 void ModelConfig::validate() const {
   auto bad = [](const std::string& msg) { fail(ErrorCode::kInvalidArgument, "invalid model config: " + msg); };
   if (backbone_blocks.size() != 4) bad("backbone must have 4 stages");
@@ -189,7 +206,9 @@ void ModelConfig::validate() const {
         std::to_string(chunk_size) + "]");
   }
   if (temporal_ensemble_coeff) {
-    if (!std::isfinite(*temporal_ensemble_coeff)) bad("temporal_ensemble_coeff is not finite");
+    if (const std::string problem = ensemble_coeff_problem(*temporal_ensemble_coeff, chunk_size); !problem.empty()) {
+      bad(problem);
+    }
     if (n_action_steps != 1) {
       bad("temporal ensembling needs n_action_steps == 1 (LeRobot's rule), got " + std::to_string(n_action_steps));
     }

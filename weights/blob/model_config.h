@@ -98,6 +98,13 @@ struct ModelConfig {
   /// "resnet18, D 512, 8 heads, FFN 3200 relu, 4+1 layers post-norm, chunk 100, 1 camera 480x640, state 6, action 6"
   std::string summary() const;
 
+  /// Largest |temporal_ensemble_coeff| * (chunk_size - 1): beyond it LeRobot's ensemble weights
+  /// exp(-coeff * i) overflow float32 (at 88.7) and every ensembled action becomes NaN.
+  static constexpr double kMaxEnsembleExponent = 80.0;
+  /// Why `coeff` cannot weight a chunk of `chunk_size` rows, or "" when it can (finite, and within
+  /// kMaxEnsembleExponent). One rule for the blob, the importer and the chunk scheduler.
+  static std::string ensemble_coeff_problem(double coeff, int chunk_size);
+
   /// Checks every invariant (positive dims, D % n_heads, D % 4, n_action_steps <= chunk_size,
   /// ensembling needs n_action_steps == 1, ...). Throws act::Error(kInvalidArgument / kUnimplemented).
   void validate() const;

@@ -1,5 +1,7 @@
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <new>
 
 #include "engine/src/engine_impl.h"
@@ -14,6 +16,25 @@ namespace bn = blob_names;
 const char* version() { return "0.1.0"; }
 
 // ---------------------------------------------------------------------------------------- Impl
+
+namespace {
+
+// Float images hold [0, 1]; a resampling filter may overshoot a little, a 0-255 image does not fit.
+constexpr float kFloatImageSlack = 0.05f;
+// A normalised state value beyond this (a million standard deviations, or ranges) is no observation.
+constexpr float kMaxNormalizedInput = 1e6f;
+
+// An inference that succeeds hands out finite numbers only.
+void check_finite(std::span<const float> values, const char* what) {
+  const size_t bad = static_cast<size_t>(std::count_if(values.begin(), values.end(), [](float v) { return !std::isfinite(v); }));
+  if (bad > 0) {
+    fail(ErrorCode::kInvalidArgument, std::string(what) + " is not finite (" + std::to_string(bad) + " of " +
+         std::to_string(values.size()) + " values NaN or infinite): is the observation far outside what the model " +
+         "was trained on, or are the weights damaged?");
+  }
+}
+
+}  // namespace
 
 float Engine::Impl::InputNorm::apply(float x, size_t i) const {
   switch (mode) {
@@ -117,6 +138,11 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
       for (size_t i = 0; i < h * w; ++i) {
         const float v = src[c * h * w + i];
         if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contains NaN or Inf");
+        if (v < -kFloatImageSlack || v > 1.0f + kFloatImageSlack) {
+          fail(ErrorCode::kInvalidArgument, what + " has the value " + std::to_string(v) + " (channel " +
+               std::to_string(c) + ", pixel " + std::to_string(i) + "): float images hold [0, 1]" +
+               (v > 2.0f ? " (a 0-255 image? divide it by 255, or pass it as uint8)" : ""));
+        }
         dst[i * 3 + c] = norm.apply(v, c);
       }
     }
@@ -130,8 +156,15 @@ void Engine::Impl::load_vector(const char* what, std::span<const float> values, 
          " values, the model expects " + std::to_string(expected));
   }
   for (size_t i = 0; i < expected; ++i) {
-    if (!std::isfinite(values[i])) fail(ErrorCode::kInvalidArgument, std::string(what) + "[" + std::to_string(i) + "] is not finite");
+    const std::string name = std::string(what) + "[" + std::to_string(i) + "]";
+    if (!std::isfinite(values[i])) fail(ErrorCode::kInvalidArgument, name + " is not finite");
     dst[i] = norm.apply(values[i], i);
+    if (!(std::fabs(dst[i]) <= kMaxNormalizedInput)) {
+      char text[160];
+      std::snprintf(text, sizeof text, " = %g is %g after normalisation: far outside anything the model was trained on",
+                    values[i], dst[i]);
+      fail(ErrorCode::kInvalidArgument, name + text);
+    }
   }
 }
 
@@ -163,6 +196,7 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
   network_->run(pool_, profile_ ? &stages : nullptr);
   const float* out = network_->actions_normalized();
   std::copy(out, out + actions_normalized.size(), actions_normalized.begin());
+  check_finite(actions_normalized, "the network's output");
   has_run_ = true;
   if (profile_) {
     const auto ms = [](double seconds) { return seconds * 1e3; };
@@ -229,6 +263,7 @@ Status Engine::infer(const Observation& observation, std::span<float> actions) {
     const auto start = std::chrono::steady_clock::now();
     impl_->run(observation, actions);
     impl_->unnormalize(actions, actions, static_cast<size_t>(impl_->info().chunk_size));
+    check_finite(actions, "the un-normalised actions");
     if (impl_->profiling()) {
       InferenceTimings& t = impl_->timings();
       const double total = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

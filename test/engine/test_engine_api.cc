@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -12,6 +13,8 @@
 #include "actengine/engine.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
+#include "weights/blob/actb.h"
+#include "weights/blob/blob_names.h"
 #include "weights/import/lerobot_import.h"
 #include "weights/quantize/quantize_model.h"
 
@@ -112,9 +115,57 @@ TEST_F(EngineApiTest, BadObservationsAreNamed) {
     expect_invalid(obs, "NaN or Inf");
   }
   {
+    // A 0-255 float image, and one far outside any range: refused, not turned into NaN actions.
+    for (const float value : {255.0f, 1e30f, -0.5f}) {
+      std::vector<float> chw(3 * static_cast<size_t>(cam.height) * cam.width, 0.5f);
+      chw[chw.size() / 2] = value;
+      Observation obs = observation();
+      obs.images = {ImageView::rgb_f32_chw(chw.data(), cam.height, cam.width)};
+      expect_invalid(obs, "float images hold [0, 1]");
+    }
+    std::vector<float> scaled(3 * static_cast<size_t>(cam.height) * cam.width, 200.0f);
+    Observation obs = observation();
+    obs.images = {ImageView::rgb_f32_chw(scaled.data(), cam.height, cam.width)};
+    expect_invalid(obs, "a 0-255 image?");
+  }
+  {
+    // A finite but absurd state once gave NaN actions with an OK status.
+    Observation obs = observation();
+    const std::vector<float> huge_state = {1.0f, 3e38f};
+    obs.state = huge_state;
+    expect_invalid(obs, "state[1] = 3e+38");
+  }
+  {
     std::vector<float> too_small(3);
     EXPECT_EQ(engine_->infer(observation(), too_small).code(), StatusCode::kInvalidArgument);
   }
+}
+
+TEST_F(EngineApiTest, NonFiniteOutputIsAnErrorNotAnAnswer) {
+  // Damaged weights (finite, 3e38, in the action head) overflows the output: infer must say so
+  // instead of returning OK with infinities (act_eval once wrote -inf and exited 0).
+  const ActbFile original = ActbFile::open(blob_);
+  ActbWriter writer;
+  writer.set_config(original.config());
+  bool damaged = false;
+  for (const ActbTensor& t : original.tensors()) {
+    std::vector<uint8_t> bytes(t.data, t.data + t.nbytes);
+    if (t.name == blob_names::kHeadWeight) {
+      const std::vector<float> huge(t.elements(), 3e38f);
+      std::memcpy(bytes.data(), huge.data(), bytes.size());
+      damaged = true;
+    }
+    writer.add_tensor(t.name, t.dtype, t.shape, bytes.data(), bytes.size(), t.quant);
+  }
+  ASSERT_TRUE(damaged) << "no action head weight in " << blob_;
+  const std::string path = scratch_ + "/damaged.actb";
+  writer.write(path);
+  auto engine = Engine::open(path, {.threads = 1});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  auto out = chunk();
+  const Status s = (*engine)->infer(observation(), out);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << s.to_string();
+  EXPECT_NE(s.message().find("is not finite"), std::string::npos) << s.message();
 }
 
 TEST_F(EngineApiTest, RowStrideIsHonoured) {

@@ -172,6 +172,15 @@ void ActbWriter::add_f32(const std::string& name, std::vector<int64_t> shape, co
 }
 
 size_t ActbWriter::write(const std::string& path) const {
+  detail::AtomicFileWriter out(path);
+  write_to(out);
+  const size_t total = out.bytes_written();
+  out.commit();
+  return total;
+}
+
+void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
+  const std::string& path = out.path();
   // The reader insists on an object; refuse to produce a file it would reject.
   if (!config_.is_object()) {
     fail(ErrorCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
@@ -232,7 +241,6 @@ size_t ActbWriter::write(const std::string& path) const {
   put_le64(data_size, fixed + 32);
   put_le64(crc, fixed + 40);
 
-  detail::AtomicFileWriter out(path);
   out.write(fixed, sizeof fixed);
   out.write(text.data(), text.size());
   out.write_zeros(data_offset - kFixedHeaderSize - text.size());
@@ -241,9 +249,6 @@ size_t ActbWriter::write(const std::string& path) const {
     out.write(tensors_[i].bytes.data(), tensors_[i].bytes.size());
     out.write_zeros(end - offsets[i] - tensors_[i].bytes.size());
   }
-  const size_t total = out.bytes_written();
-  out.commit();
-  return total;
 }
 
 // ---------------------------------------------------------------------------------------------- reader

@@ -65,12 +65,11 @@ class Converter {
     if (opt_.mode == Int8Mode::kMixed && !opt_.target_mse) {
       fail(ErrorCode::kInvalidArgument, "mixed mode needs a target MSE (held-out, normalised units)");
     }
+    choose_frames(calibration);
     const ScratchBlob fp32(fp32_blob(model_), output_);
     EngineOptions eo;
     eo.threads = opt_.threads;
     fp32_ = std::make_unique<Engine::Impl>(fp32.path(), eo, true);
-
-    choose_frames(calibration);
     compute_reference();
 
     QuantConfig quant;

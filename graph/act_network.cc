@@ -216,10 +216,11 @@ ValueId ActNetwork::backbone(size_t camera) {
   const std::string pool_name = p + "backbone.maxpool";
   const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, x.s8 ? DataType::kS8 : DataType::kF32);
   if (x.s8) graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
+  auto pool = std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.s8, x.id, pooled);
   if (x.s8) {
-    add_int8(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, true, x.id, pooled), pool_name, pooled);
+    add_int8(std::move(pool), pool_name, pooled);
   } else {
-    add(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, false, x.id, pooled), pool_name);
+    add(std::move(pool), pool_name);
     calibration_point(CalibrationRole::kMaxPoolOutput, pooled);
   }
   x.id = pooled;

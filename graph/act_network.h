@@ -30,7 +30,8 @@ enum class CalibrationRole {
 };
 
 /// A float value of a camera branch whose range a static INT8 blob records. Its parameters are
-/// stored in the blob's quantization section under the value's name (quant_config.h).
+/// stored in the blob's quantization section under the value's name (quant_config.h), which is
+/// where the builder of the INT8 network looks them up.
 struct CalibrationPoint {
   CalibrationRole role;
   size_t camera;
@@ -61,8 +62,8 @@ class ActNetwork {
   const ModelConfig& config() const { return config_; }
   /// The INT8 kernels in use (null for an FP32 blob).
   const kernels::GemmS8Kernels* gemm_s8() const { return gemm_s8_; }
-  /// The float values of the camera branches, in graph order (in an FP32 network: every value a
-  /// static INT8 blob of the model needs parameters for).
+  /// The float values of the camera branches, in graph order. Calibration reads them from an FP32
+  /// network, where every value of the branches is float: a static INT8 blob records them all.
   const std::vector<CalibrationPoint>& calibration_points() const { return calibration_points_; }
   /// The int8 layers, in graph order (empty for an FP32 network).
   const std::vector<Int8Layer>& int8_layers() const { return int8_layers_; }

@@ -80,10 +80,9 @@ class PthPlan {
 
   const PthExplanation& explanation() const { return explanation_; }
 
-  class Impl;
-  const Impl& impl() const { return *impl_; }  ///< internal
-
  private:
+  class Impl;
+  friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const PthPlan&);
   explicit PthPlan(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
   PthExplanation explanation_;
@@ -222,10 +221,8 @@ class ImportedCheckpoint {
   /// statistics: enough to time an INT8 model, not to judge its accuracy (the set's note says so).
   StatusOr<CalibrationSet> synthetic_calibration_set(size_t count, uint64_t seed) const;
 
-  class Impl;
-  const Impl& impl() const { return *impl_; }  ///< internal
-
  private:
+  class Impl;
   friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string&, const PthOptions&);
   friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const PthPlan&);
   friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_synthetic_model(const std::string&, uint32_t);

@@ -162,9 +162,9 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const PthPlan& p
   std::unique_ptr<ImportedCheckpoint> out;
   const Status s = guarded([&] {
     auto impl = std::make_unique<ImportedCheckpoint::Impl>();
-    impl->model = import_pytorch_conversion(plan.impl().plan);
+    impl->model = import_pytorch_conversion(plan.impl_->plan);
     out.reset(new ImportedCheckpoint(std::move(impl)));
-    out->summary_ = import_summary(out->impl_->model, pth_source(plan.impl().plan));
+    out->summary_ = import_summary(out->impl_->model, pth_source(plan.impl_->plan));
   });
   if (!s.ok()) return s;
   return out;

@@ -4,8 +4,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <memory>
-#include <optional>
+#include <span>
+#include <tuple>
+#include <utility>
 
 #include "engine/src/convert/calibration_frames.h"
 #include "engine/src/engine_impl.h"

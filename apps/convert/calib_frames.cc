@@ -4,8 +4,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <map>
-#include <random>
 #include <set>
 
 #include <nlohmann/json.hpp>

@@ -37,7 +37,7 @@ Converted convert_int8(const std::string& fixture, const std::string& out, const
   return c;
 }
 
-// Leftovers of a conversion in a folder: temporary blobs, scratch folders.
+// Leftovers of a conversion in a folder: named temporary blobs (there should never be any).
 std::vector<std::string> leftovers(const std::string& dir) {
   std::vector<std::string> out;
   for (const auto& e : fs::directory_iterator(dir)) {

@@ -68,6 +68,10 @@ class Converter {
     if (opt_.mode == Int8Mode::kMixed && !opt_.target_mse) {
       fail(ErrorCode::kInvalidArgument, "mixed mode needs a target MSE (held-out, normalised units)");
     }
+    if (!(opt_.percentile >= 50.0 && opt_.percentile <= 100.0)) {
+      fail(ErrorCode::kInvalidArgument, "percentile " + fmt(opt_.percentile) + " is outside [50, 100]");
+    }
+    if (opt_.calib_samples == 0) fail(ErrorCode::kInvalidArgument, "calib_samples must be at least 1");
     choose_frames(calibration);
     const ScratchBlob fp32(fp32_blob(model_), output_);
     EngineOptions eo;

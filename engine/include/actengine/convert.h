@@ -2,7 +2,7 @@
 //
 //   auto model = act::import_checkpoint("outputs/train/act_so100/checkpoints/last/pretrained_model");
 //   if (!model.ok()) { std::cerr << model.status().to_string(); ... }
-//   act::Status s = (*model)->write_fp32("model.actb");
+//   auto bytes = (*model)->write_fp32("model.actb");   // StatusOr<uint64_t>
 //
 //   act::CalibrationSet calibration;             // frames at the model's input size, e.g. from
 //   calibration.frames = ...;                    // actengine/vision.h's frame_to_model_rgb

@@ -16,9 +16,9 @@
 #include <iostream>
 #include <random>
 
+#include "actengine/convert.h"
 #include "actengine/engine.h"
 #include "apps/bench_support.h"
-#include "apps/convert/int8_conversion.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
@@ -27,7 +27,6 @@
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
 #include "weights/blob/model_config.h"
-#include "weights/import/synthetic_model.h"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -103,17 +102,18 @@ struct BuiltinBlobs {
 };
 
 void build_builtin(const Options& opt, bool want_int8, BuiltinBlobs& out) {
-  const act::ImportedModel model = act::make_synthetic_model(opt.config, opt.seed);
-  act::write_fp32_blob(model, out.fp32.path);
+  auto imported = act::import_synthetic_model(opt.config, opt.seed);
+  act::throw_if_failed(imported.status());
+  const act::ImportedCheckpoint& model = **imported;
+  act::throw_if_failed(model.write_fp32(out.fp32.path).status());
   if (!want_int8) return;
-  const act::ActbFile fp32 = act::ActbFile::open(out.fp32.path);
-  const act::CalibSet frames = act::synthetic_calibration_frames(model.config, fp32, 5, opt.seed);
+  auto frames = model.synthetic_calibration_set(5, opt.seed);
+  act::throw_if_failed(frames.status());
   act::Int8Options int8;
-  int8.mode = act::QuantMode::kStatic;
+  int8.mode = act::Int8Mode::kStatic;
   int8.holdout = 1;
   int8.threads = opt.threads;
   int8.layer_report = false;
-  int8.progress = false;
   std::fprintf(stderr, "act_bench: quantizing the built-in model to INT8 (static, calibrated on 4 synthetic frames) ...\n");
   // In a child process, so that the calibration's FP32 run and its buffers do not count in this
   // process's peak RSS. The child reports the held-out error through a pipe.
@@ -124,12 +124,12 @@ void build_builtin(const Options& opt, bool want_int8, BuiltinBlobs& out) {
   if (child == 0) {
     ::close(fds[0]);
     int code = 0;
-    try {
-      const act::Int8Result r = act::convert_to_int8(model, out.int8.path, int8, &frames);
-      const std::string mse = std::to_string(r.report["action_error"]["mse"].get<double>());
+    const act::StatusOr<act::Int8Report> r = model.write_int8(out.int8.path, *frames, int8);
+    if (r.ok()) {
+      const std::string mse = std::to_string(r->action_error.mse);
       code = ::write(fds[1], mse.data(), mse.size()) == static_cast<ssize_t>(mse.size()) ? 0 : 1;
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "act_bench: error: INT8 conversion failed: %s\n", e.what());
+    } else {
+      std::fprintf(stderr, "act_bench: error: INT8 conversion failed: %s\n", r.status().message().c_str());
       code = 1;
     }
     ::_exit(code);

@@ -23,7 +23,7 @@ void write_text(const fs::path& path, const std::string& text) {
 
 // act_drive's calibration file (apps/drive/calibration.h) with placeholder endpoints and a low
 // throttle cap, plus comments on what to measure and which act_drive flags set the rest.
-std::string calibration_template(const ModelConfig& m) {
+std::string calibration_template(const ModelInfo& m) {
   drive::Calibration calibration;
   calibration.max_forward = 0.3;
   calibration.max_reverse = 0.3;
@@ -35,7 +35,7 @@ std::string calibration_template(const ModelConfig& m) {
                       std::to_string(calibration.steering.action_index) + ", throttle = action " +
                       std::to_string(calibration.throttle.action_index) + "), n_action_steps " +
                       std::to_string(m.n_action_steps);
-  for (const CameraConfig& camera : m.cameras) {
+  for (const CameraInfo& camera : m.cameras) {
     const std::string size = std::to_string(camera.width) + "x" + std::to_string(camera.height);
     model += ", camera " + camera.key + " " + size + " (act_drive --camera-size " + size + ")";
   }
@@ -45,11 +45,11 @@ std::string calibration_template(const ModelConfig& m) {
   return j.dump(2) + "\n";
 }
 
-std::string readme(const ModelConfig& m, const std::string& source) {
+std::string readme(const ModelInfo& m, const std::string& source) {
   std::ostringstream r;
   r << "# ACT model for the robot\n\n"
     << "Converted by `act_convert` from `" << source << "`.\n\n"
-    << "- `" << kPackageBlobName << "`: the model (" << m.summary() << ")\n"
+    << "- `" << kPackageBlobName << "`: the model (" << m.summary << ")\n"
     << "- `drive_calibration.json`: how actions become actuator commands; a template, fill in your robot's values\n\n"
     << "## On the desktop\n\n"
     << "Build the Debian packages (amd64 and, cross-compiled, arm64 for the Raspberry Pi 5) from the actengine\n"
@@ -79,7 +79,7 @@ std::string prepare_package_dir(const std::string& dir) {
   return (fs::path(dir) / kPackageBlobName).string();
 }
 
-void write_deploy_package(const std::string& dir, const ModelConfig& model, const std::string& source) {
+void write_deploy_package(const std::string& dir, const ModelInfo& model, const std::string& source) {
   const fs::path calibration = fs::path(dir) / "drive_calibration.json";
   if (!fs::exists(calibration)) write_text(calibration, calibration_template(model));
   write_text(fs::path(dir) / "README.md", readme(model, source));

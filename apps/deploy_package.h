@@ -3,7 +3,7 @@
 
 #include <string>
 
-#include "weights/blob/model_config.h"
+#include "actengine/engine.h"
 
 namespace act {
 
@@ -17,6 +17,6 @@ std::string prepare_package_dir(const std::string& dir);
 /// DIR/README.md (how to install and run on the Raspberry Pi); the blob DIR/model.actb is written
 /// by the caller. `source` names the converted checkpoint. Existing calibration files are kept (they
 /// hold a robot's measured values); the README is rewritten. Throws act::Error(kIoError).
-void write_deploy_package(const std::string& dir, const ModelConfig& model, const std::string& source);
+void write_deploy_package(const std::string& dir, const ModelInfo& model, const std::string& source);
 
 }  // namespace act

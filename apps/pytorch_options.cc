@@ -17,7 +17,7 @@ constexpr const char* kOptionNames[] = {"--config", "--stats", "--image-size", "
 
 }  // namespace
 
-void add_pytorch_options(CLI::App& app, ConfigSources& s) {
+void add_pytorch_options(CLI::App& app, PthOptions& s) {
   app.add_option("--config", s.config_path, "LeRobot config.json of the trained policy (the weights must agree with it)")
       ->check(CLI::ExistingFile)->group(kGroup);
   app.add_option("--stats", s.stats_paths,
@@ -62,17 +62,16 @@ bool any_pytorch_option(const CLI::App& app) {
   return false;
 }
 
-void print_explanation(std::ostream& out, const PyTorchConversion& plan) {
-  const PyTorchCheckpoint& c = plan.checkpoint;
-  out << "checkpoint   " << c.state_dict.origin() << " (torch.save " << c.format << " format), state dict: " << c.location
-      << ", " << c.state_dict.names().size() << " tensors\n";
-  for (const auto& e : c.other_entries) out << "  also saved  " << e << "  (not used)\n";
+void print_explanation(std::ostream& out, const PthExplanation& plan) {
+  out << "checkpoint   " << plan.origin << " (torch.save " << plan.format << " format), state dict: " << plan.location
+      << ", " << plan.tensors << " tensors\n";
+  for (const auto& e : plan.other_entries) out << "  also saved  " << e << "  (not used)\n";
   for (const auto& n : plan.notes) out << "keys         " << n << "\n";
   out << "statistics   " << (plan.statistics_source.empty() ? "(none found)" : plan.statistics_source) << "\n";
   out << "config       (value <- where it comes from)\n";
   size_t width = 0;
-  for (const auto& f : plan.facts) width = std::max(width, f.field.size() + 2 + std::min<size_t>(f.value.size(), 40));
-  for (const auto& f : plan.facts) {
+  for (const auto& f : plan.config) width = std::max(width, f.field.size() + 2 + std::min<size_t>(f.value.size(), 40));
+  for (const auto& f : plan.config) {
     std::string value = f.value.size() > 40 ? f.value.substr(0, 37) + "..." : f.value;
     std::string left = f.field + "  " + value;
     out << "  " << left << std::string(width - left.size() + 2, ' ') << "<- " << f.source << "\n";

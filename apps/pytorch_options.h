@@ -4,7 +4,7 @@
 #include <iosfwd>
 #include <string>
 
-#include "weights/import/config_inference.h"
+#include "actengine/convert.h"
 
 namespace CLI {
 class App;
@@ -13,13 +13,13 @@ class App;
 namespace act {
 
 /// Registers --config, --stats, --image-size, --n-action-steps, --n-heads, --activation, --camera,
-/// --assume-lerobot-defaults, --no-normalization and --state-dict-key, filling `sources`.
-void add_pytorch_options(CLI::App& app, ConfigSources& sources);
+/// --assume-lerobot-defaults, --no-normalization and --state-dict-key, filling `options`.
+void add_pytorch_options(CLI::App& app, PthOptions& options);
 
 /// True when any of those options was given (they only apply to a .pth input).
 bool any_pytorch_option(const CLI::App& app);
 
 /// What was read, every config value with its source, and what cannot be known.
-void print_explanation(std::ostream& out, const PyTorchConversion& plan);
+void print_explanation(std::ostream& out, const PthExplanation& plan);
 
 }  // namespace act

@@ -117,6 +117,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     const ValueId res = residual ? as_f32(*residual).id : kNoValue;
     const ValueId y = graph_.add_value(name, y_shape);
     add(std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name);
+    calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
   ConvS8Spec spec;
@@ -132,7 +133,8 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     spec.s8_out = false;
     if (residual) spec.residual = as_f32(*residual).id;
     const ValueId y = graph_.add_value(name, y_shape);
-    add(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name);
+    add_int8(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name, y);
+    calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
   const Tensor xq = as_s8(x);
@@ -146,7 +148,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
   }
   const ValueId y = graph_.add_value(name, y_shape, DataType::kS8);
   graph_.value(y).quant = spec.output_q;
-  add(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name);
+  add_int8(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name, y);
   return Tensor{y, true, spec.output_q, kNoValue};
 }
 
@@ -156,6 +158,15 @@ void ActNetwork::add(std::unique_ptr<Op> op, const std::string& name) {
   graph_.add_op(std::move(op));
 }
 
+void ActNetwork::add_int8(std::unique_ptr<Op> op, const std::string& name, ValueId output) {
+  int8_layers_.push_back({op.get(), output});
+  add(std::move(op), name);
+}
+
+void ActNetwork::calibration_point(CalibrationRole role, ValueId value) {
+  if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value});
+}
+
 ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                            MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
   const ValueId y = graph_.add_value(out_name, {rows, out});
@@ -163,9 +174,10 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
     const ValueId qx = graph_.add_value(out_name + ".x_s8", {rows, in}, DataType::kS8);
     const ValueId row_scale = graph_.add_value(out_name + ".x_scale", {rows});
     const ValueId row_zero_point = graph_.add_value(out_name + ".x_zero_point", {rows}, DataType::kS32);
-    add(std::make_unique<LinearS8Op>(*gemm_s8_, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
-                                     q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale, row_zero_point),
-        out_name);
+    add_int8(std::make_unique<LinearS8Op>(*gemm_s8_, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
+                                          q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale,
+                                          row_zero_point),
+             out_name, y);
     return y;
   }
   auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
@@ -194,6 +206,8 @@ ValueId ActNetwork::backbone(size_t camera) {
   const std::string p = cam_prefix(camera);
   const ValueId image = graph_.add_input(p + "image", {cam.height, cam.width, 3});
   camera_inputs_.push_back(image);
+  camera_ = camera;
+  calibration_point(CalibrationRole::kCameraImage, image);
 
   int h = cam.height, w = cam.width;
   Tensor x = conv(config_.stem(), Tensor{image, false, {}, kNoValue}, h, w, true, nullptr, p + "backbone.stem");
@@ -202,7 +216,13 @@ ValueId ActNetwork::backbone(size_t camera) {
   const std::string pool_name = p + "backbone.maxpool";
   const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, x.s8 ? DataType::kS8 : DataType::kF32);
   if (x.s8) graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
-  add(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.s8, x.id, pooled), pool_name);
+  auto pool = std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.s8, x.id, pooled);
+  if (x.s8) {
+    add_int8(std::move(pool), pool_name, pooled);
+  } else {
+    add(std::move(pool), pool_name);
+    calibration_point(CalibrationRole::kMaxPoolOutput, pooled);
+  }
   x.id = pooled;
   h = pooled_h;
   w = pooled_w;
@@ -243,11 +263,14 @@ ValueId ActNetwork::backbone(size_t camera) {
     spec.input_q = x.q;
     spec.s8_out = false;
     const ValueId y = graph_.add_value(proj_name, {h * w, D});
-    add(std::make_unique<ConvS8Op>(*gemm_s8_, spec, x.id, y), proj_name);
+    add_int8(std::make_unique<ConvS8Op>(*gemm_s8_, spec, x.id, y), proj_name, y);
+    calibration_point(CalibrationRole::kImageProjection, y);
     return y;
   }
-  return linear(proj_name, h * w, C, D, MatrixRef::of(as_f32(x).id, static_cast<size_t>(C)), bn::kImgProjWeight,
-                MatrixRef::of_constant(proj_bias, 0));
+  const ValueId y = linear(proj_name, h * w, C, D, MatrixRef::of(as_f32(x).id, static_cast<size_t>(C)), bn::kImgProjWeight,
+                           MatrixRef::of_constant(proj_bias, 0));
+  calibration_point(CalibrationRole::kImageProjection, y);
+  return y;
 }
 
 ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name) {

@@ -21,6 +21,29 @@
 
 namespace act::graph {
 
+/// What a calibration point is: the value's place in a camera branch.
+enum class CalibrationRole {
+  kCameraImage,      ///< the normalised input image (its range is known exactly: never clipped)
+  kConvOutput,       ///< a backbone conv (after its fused residual and ReLU)
+  kMaxPoolOutput,    ///< the stem's max pool
+  kImageProjection,  ///< the 1x1 projection of the backbone features to tokens
+};
+
+/// A float value of a camera branch whose range a static INT8 blob records. Its parameters are
+/// stored in the blob's quantization section under the value's name (quant_config.h), which is
+/// where the builder of the INT8 network looks them up.
+struct CalibrationPoint {
+  CalibrationRole role;
+  size_t camera;
+  ValueId value;
+};
+
+/// An op that computes in int8 (conv, max pool, linear) and its output, for the accuracy report.
+struct Int8Layer {
+  const Op* op;
+  ValueId output;
+};
+
 class ActNetwork {
  public:
   /// Builds the graph. Throws act::Error(kDataLoss) when a blob tensor is missing or has a shape
@@ -39,6 +62,11 @@ class ActNetwork {
   const ModelConfig& config() const { return config_; }
   /// The INT8 kernels in use (null for an FP32 blob).
   const kernels::GemmS8Kernels* gemm_s8() const { return gemm_s8_; }
+  /// The float values of the camera branches, in graph order. Calibration reads them from an FP32
+  /// network, where every value of the branches is float: a static INT8 blob records them all.
+  const std::vector<CalibrationPoint>& calibration_points() const { return calibration_points_; }
+  /// The int8 layers, in graph order (empty for an FP32 network).
+  const std::vector<Int8Layer>& int8_layers() const { return int8_layers_; }
 
  private:
   /// A backbone value as the builder tracks it: float, or int8 with static or run-time parameters.
@@ -61,6 +89,10 @@ class ActNetwork {
   Tensor conv(const ConvSpec& c, const Tensor& x, int& h, int& w, bool relu, const Tensor* residual, const std::string& name);
   /// Appends an op to the graph, named and tagged with the stage being built.
   void add(std::unique_ptr<Op> op, const std::string& name);
+  /// add() for an op computing in int8 (recorded in int8_layers_).
+  void add_int8(std::unique_ptr<Op> op, const std::string& name, ValueId output);
+  /// Records a float value of camera `camera_` (the branch being built) as a calibration point.
+  void calibration_point(CalibrationRole role, ValueId value);
   ValueId backbone(size_t camera);
   /// [LayerNorm1 (pre-norm)] -> fused qkv projection -> attention -> out projection + residual x
   /// [-> LayerNorm1 (post-norm)]. Weights under `w` ("in_proj.*", "out_proj.*", "norm1.*").
@@ -86,6 +118,9 @@ class ActNetwork {
   ValueId env_input_ = kNoValue;
   ValueId actions_ = kNoValue;
   Stage stage_ = Stage::kOther;  // the stage the builder is in (state tokens count as "other")
+  size_t camera_ = 0;            // the camera branch being built (backbone stage)
+  std::vector<CalibrationPoint> calibration_points_;
+  std::vector<Int8Layer> int8_layers_;
 };
 
 }  // namespace act::graph

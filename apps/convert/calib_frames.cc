@@ -4,8 +4,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <map>
-#include <random>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -13,15 +11,14 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "apps/image_preprocess.h"
+#include "actengine/vision.h"
 #include "apps/observation_file.h"
-#include "weights/blob/blob_names.h"
+#include "apps/status_error.h"
 #include "weights/blob/error.h"
 
 namespace act {
 
 namespace fs = std::filesystem;
-namespace bn = blob_names;
 
 namespace {
 
@@ -54,10 +51,9 @@ std::vector<size_t> spread(size_t n, size_t count) {
 
 class Loader {
  public:
-  Loader(const ModelConfig& config, const ModelInfo& info, const ActbFile& blob, uint64_t seed)
-      : config_(config), info_(info), blob_(blob), states_(config, blob, seed) {}
+  explicit Loader(const ModelInfo& model) : model_(model) {}
 
-  CalibSet take() { return std::move(set_); }
+  CalibrationSet take() { return std::move(set_); }
 
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
@@ -80,32 +76,21 @@ class Loader {
     if (std::find(set_.notes.begin(), set_.notes.end(), n) == set_.notes.end()) set_.notes.push_back(n);
   }
 
-  // A frame whose cameras all see `image`, with sampled states.
-  void add_frame_all_cameras(const cv::Mat& image, const std::string& origin, const std::vector<float>* state = nullptr) {
-    CalibFrame f;
-    for (const auto& cam : config_.cameras) {
-      f.images.emplace_back();
-      frame_to_model_rgb(image, cam.height, cam.width, f.images.back());
-    }
-    if (config_.cameras.size() > 1) note("single-view source: every camera was given the same frame");
-    fill_states(f, state);
-    f.origin = origin;
-    set_.frames.push_back(std::move(f));
+  static void to_model_rgb(const cv::Mat& image, const CameraInfo& cam, std::vector<uint8_t>& rgb) {
+    throw_if_failed(frame_to_model_rgb(image, cam.height, cam.width, rgb));
   }
 
-  void fill_states(CalibFrame& f, const std::vector<float>* state) {
-    if (config_.state_dim > 0) {
-      if (state && state->size() == static_cast<size_t>(config_.state_dim)) {
-        f.state = *state;
-      } else {
-        f.state = states_.sample(config_.state_key, config_.state_dim);
-        note("robot states were sampled from the checkpoint's normalisation statistics (the source has none)");
-      }
+  // A frame whose cameras all see `image`. The states the source lacks (or has with the wrong
+  // length) stay empty: the conversion samples them.
+  void add_frame_all_cameras(const cv::Mat& image, const std::vector<float>* state = nullptr) {
+    CalibrationFrame f;
+    for (const auto& cam : model_.cameras) {
+      f.images.emplace_back();
+      to_model_rgb(image, cam, f.images.back());
     }
-    if (config_.env_state_dim > 0) {
-      f.env_state = states_.sample(config_.env_state_key, config_.env_state_dim);
-      note("environment states were sampled from the checkpoint's normalisation statistics");
-    }
+    if (model_.cameras.size() > 1) note("single-view source: every camera was given the same frame");
+    if (state && state->size() == static_cast<size_t>(model_.state_dim)) f.state = *state;
+    set_.frames.push_back(std::move(f));
   }
 
   void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
@@ -113,7 +98,7 @@ class Loader {
     for (size_t i : spread(files.size(), max_frames)) {
       const cv::Mat image = cv::imread(files[i].string(), cv::IMREAD_COLOR);
       if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + files[i].string());
-      add_frame_all_cameras(image, files[i].string());
+      add_frame_all_cameras(image);
     }
   }
 
@@ -161,13 +146,13 @@ class Loader {
     const std::vector<size_t> wanted = spread(n, max_frames);
     const std::vector<cv::Mat> frames = video_frames(p, wanted);
     if (frames.empty()) fail(ErrorCode::kDataLoss, "could not decode any frame of " + p.string());
-    for (size_t i = 0; i < frames.size(); ++i) add_frame_all_cameras(frames[i], p.string() + "#" + std::to_string(wanted[i]));
+    for (const cv::Mat& frame : frames) add_frame_all_cameras(frame);
   }
 
   // LeRobot dataset: videos/**/<camera key>/**.mp4, one file per episode (or chunk file) per camera.
   void add_lerobot_dataset(const fs::path& dir, size_t max_frames) {
     std::vector<std::vector<fs::path>> per_camera;
-    for (const auto& cam : config_.cameras) {
+    for (const auto& cam : model_.cameras) {
       std::vector<fs::path> files;
       for (const auto& f : files_with(dir / "videos", kVideoExtensions)) {
         for (const auto& part : f) {
@@ -193,19 +178,17 @@ class Loader {
       std::vector<std::vector<cv::Mat>> frames;
       for (const auto& files : per_camera) frames.push_back(video_frames(files[f], wanted));
       for (size_t i = 0; i < wanted.size(); ++i) {
-        CalibFrame frame;
+        CalibrationFrame frame;
         bool complete = true;
-        for (size_t c = 0; c < config_.cameras.size(); ++c) {
+        for (size_t c = 0; c < model_.cameras.size(); ++c) {
           if (i >= frames[c].size()) {
             complete = false;
             break;
           }
           frame.images.emplace_back();
-          frame_to_model_rgb(frames[c][i], config_.cameras[c].height, config_.cameras[c].width, frame.images.back());
+          to_model_rgb(frames[c][i], model_.cameras[c], frame.images.back());
         }
         if (!complete) break;
-        fill_states(frame, nullptr);
-        frame.origin = per_camera[0][f].string() + "#" + std::to_string(wanted[i]);
         set_.frames.push_back(std::move(frame));
         ++added;
       }
@@ -237,15 +220,15 @@ class Loader {
     for (size_t i : spread(entries.size(), max_frames)) {
       const cv::Mat image = cv::imread(entries[i].first.string(), cv::IMREAD_COLOR);
       if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
-      add_frame_all_cameras(image, entries[i].first.string(), &entries[i].second);
+      add_frame_all_cameras(image, &entries[i].second);
     }
   }
 
   void add_observation_file(const fs::path& p, size_t max_frames) {
-    const ObservationBatch batch = ObservationBatch::read(p.string(), info_);
+    const ObservationBatch batch = ObservationBatch::read(p.string(), model_);
     for (size_t i : spread(batch.size(), max_frames)) {
       const Observation obs = batch.at(i);
-      CalibFrame f;
+      CalibrationFrame f;
       for (size_t c = 0; c < obs.images.size(); ++c) {
         const ImageView& v = obs.images[c];
         std::vector<uint8_t> rgb(static_cast<size_t>(v.height) * v.width * 3);
@@ -266,32 +249,27 @@ class Loader {
       }
       f.state.assign(obs.state.begin(), obs.state.end());
       f.env_state.assign(obs.env_state.begin(), obs.env_state.end());
-      f.origin = p.string() + "#" + std::to_string(i);
       set_.frames.push_back(std::move(f));
     }
   }
 
  private:
-  const ModelConfig& config_;
-  const ModelInfo& info_;
-  const ActbFile& blob_;
-  StateSampler states_;
-  CalibSet set_;
+  const ModelInfo& model_;
+  CalibrationSet set_;
 };
 
 }  // namespace
 
-CalibSet load_calibration_frames(const std::vector<std::string>& sources, const ModelConfig& config, const ModelInfo& info,
-                                 const ActbFile& blob, size_t max_frames, uint64_t seed) {
+CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames) {
   if (sources.empty()) fail(ErrorCode::kInvalidArgument, "no calibration sources given");
-  Loader loader(config, info, blob, seed);
+  Loader loader(model);
   // Every source contributes its share of the frames.
   const size_t share = std::max<size_t>(1, (max_frames + sources.size() - 1) / sources.size());
   for (const auto& s : sources) loader.add_source(s, share);
-  CalibSet set = loader.take();
+  CalibrationSet set = loader.take();
   if (set.frames.size() > max_frames) set.frames.resize(max_frames);
-  if (!config.cameras.empty()) {
-    set.preprocessing = model_preprocessing_description(config.cameras[0].height, config.cameras[0].width);
+  if (!model.cameras.empty()) {
+    set.preprocessing = model_preprocessing_description(model.cameras[0].height, model.cameras[0].width);
   }
   return set;
 }

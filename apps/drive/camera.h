@@ -1,5 +1,5 @@
 // Frames for act_drive: an OpenCV capture thread that keeps only the newest frame. Frames become
-// model inputs through act::frame_to_model_rgb (apps/image_preprocess.h), the conversion
+// model inputs through act::frame_to_model_rgb (actengine/vision.h), the conversion
 // act_convert's INT8 calibration uses too.
 #pragma once
 

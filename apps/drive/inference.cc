@@ -5,7 +5,7 @@
 
 #include <cstring>
 
-#include "apps/image_preprocess.h"
+#include "actengine/vision.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
 
@@ -158,7 +158,7 @@ InferenceResult InferenceWorker::infer_once(ChunkModel& model, std::vector<float
   result.frame_age_ms = ms_between(frame->captured, start);
 
   const CameraInfo& camera = info_.cameras.front();
-  frame_to_model_rgb(frame->bgr, camera.height, camera.width, result.model_input);
+  throw_if_failed(frame_to_model_rgb(frame->bgr, camera.height, camera.width, result.model_input));
   const auto preprocessed = Clock::now();
   result.preprocess_ms = ms_between(start, preprocessed);
 

@@ -5,12 +5,10 @@
 
 #include <filesystem>
 
-#include "actengine/engine.h"
+#include "actengine/convert.h"
 #include "apps/convert/calib_frames.h"
-#include "apps/convert/int8_conversion.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
-#include "weights/import/lerobot_import.h"
 
 namespace fs = std::filesystem;
 
@@ -19,7 +17,7 @@ namespace {
 
 struct Case {
   const char* preset;
-  QuantMode mode;
+  Int8Mode mode;
   double max_mse, max_abs;  // held-out, normalised units
 };
 
@@ -27,18 +25,18 @@ struct Case {
 // deeper random-weight backbones lose more per layer (README: "INT8 accuracy"); for them the test
 // catches breakage, and mixed mode is the answer.
 const Case kCases[] = {
-    {"default-480x640", QuantMode::kStatic, 1e-3, 0.05},
-    {"default-480x640", QuantMode::kDynamic, 1e-3, 0.05},
-    {"default-360x640-legacy", QuantMode::kStatic, 1e-3, 0.05},
+    {"default-480x640", Int8Mode::kStatic, 1e-3, 0.05},
+    {"default-480x640", Int8Mode::kDynamic, 1e-3, 0.05},
+    {"default-360x640-legacy", Int8Mode::kStatic, 1e-3, 0.05},
     // Two cameras calibrated mostly on single-view frames (both cameras see the same image): the
     // MSE target holds, the worst single value is measured at 0.053.
-    {"multicam-prenorm-gelu", QuantMode::kStatic, 1e-3, 0.06},
-    {"minmax-legacy-env", QuantMode::kStatic, 1e-3, 0.05},
+    {"multicam-prenorm-gelu", Int8Mode::kStatic, 1e-3, 0.06},
+    {"minmax-legacy-env", Int8Mode::kStatic, 1e-3, 0.05},
     // Its worst single value sits at the limit: 0.048 with the AVX-512 float kernels, 0.053 with
     // AVX2's (calibration runs the float path, which rounds differently per ISA).
-    {"quantiles-identity", QuantMode::kStatic, 1e-3, 0.06},
-    {"resnet34-novae", QuantMode::kStatic, 5e-3, 0.2},
-    {"resnet50-dilation", QuantMode::kStatic, 5e-3, 0.2},
+    {"quantiles-identity", Int8Mode::kStatic, 1e-3, 0.06},
+    {"resnet34-novae", Int8Mode::kStatic, 5e-3, 0.2},
+    {"resnet50-dilation", Int8Mode::kStatic, 5e-3, 0.2},
 };
 
 class GeneratedInt8Test : public ::testing::TestWithParam<Case> {};
@@ -51,28 +49,30 @@ TEST_P(GeneratedInt8Test, Int8StaysNearFp32) {
   const std::string blob = test::scratch_dir() + "/int8.actb";
   Int8Options opt;
   opt.mode = c.mode;
-  opt.calib_sources = {test::fixture_dir("act-tiny"), test::fixture_dir("act-tiny-legacy"), dir + "/reference.safetensors"};
-  opt.frame_loader = load_calibration_frames;
   opt.calib_samples = 8;
   opt.holdout = 3;
   opt.threads = 2;
-  opt.progress = false;
   opt.layer_report = false;
-  const Int8Result r = convert_to_int8(import_lerobot_checkpoint(dir), blob, opt);
-  const auto& e = r.report["action_error"];
-  EXPECT_LE(e["mse"].get<double>(), c.max_mse) << r.text;
-  EXPECT_LE(e["max_abs"].get<double>(), c.max_abs) << r.text;
-  EXPECT_LE(r.report["int8_bytes"].get<double>(), 0.28 * r.report["fp32_bytes"].get<double>());
+  auto model = import_checkpoint(dir);
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  const CalibrationSet frames = load_calibration_frames(
+      {test::fixture_dir("act-tiny"), test::fixture_dir("act-tiny-legacy"), dir + "/reference.safetensors"},
+      (*model)->summary().model, calibration_frames_wanted(opt));
+  const StatusOr<Int8Report> r = (*model)->write_int8(blob, frames, opt);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_LE(r->action_error.mse, c.max_mse) << r->to_text();
+  EXPECT_LE(r->action_error.max_abs, c.max_abs) << r->to_text();
+  EXPECT_LE(static_cast<double>(r->int8_bytes), 0.28 * static_cast<double>(r->fp32_bytes));
 
   // The engine reads the precision from the blob; the public API runs it unchanged.
   auto engine = Engine::open(blob, {.threads = 2});
   ASSERT_TRUE(engine.ok()) << engine.status().to_string();
-  EXPECT_EQ((*engine)->model_info().precision, std::string("int8 ") + quant_mode_name(c.mode));
+  EXPECT_EQ((*engine)->model_info().precision, std::string("int8 ") + int8_mode_name(c.mode));
   EXPECT_NE((*engine)->model_info().kernels.find("gemm_s8"), std::string::npos);
 }
 
 std::string case_name(const ::testing::TestParamInfo<Case>& info) {
-  std::string name = std::string(info.param.preset) + "_" + quant_mode_name(info.param.mode);
+  std::string name = std::string(info.param.preset) + "_" + int8_mode_name(info.param.mode);
   for (char& ch : name) {
     if (ch == '-') ch = '_';
   }

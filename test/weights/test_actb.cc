@@ -677,7 +677,7 @@ TEST_F(ActbBad, TensorEntryFields) {
 TEST_F(ActbBad, UnknownDtype) {
   EXPECT_TRUE(rejects_entries(entry("a", "Q4_0", "[2]", 0, 1), 64, {"tensor 'a'", "unknown dtype 'Q4_0'"}));
   EXPECT_TRUE(rejects_entries(R"({"name":"a","dtype":4,"shape":[1],"offset":0,"nbytes":1})", 64,
-                              {"tensor 'a'", "'dtype' string"}));
+                              {"tensor 'a'", "'dtype' must be a string", "number"}));
 }
 
 TEST_F(ActbBad, BadShapes) {
@@ -691,7 +691,8 @@ TEST_F(ActbBad, NbytesMismatch) {
   EXPECT_TRUE(rejects_entries(entry("a", "F32", "[4]", 0, 12), 64,
                               {"tensor 'a'", "nbytes 12 does not match shape [4] with dtype F32"}));
   EXPECT_TRUE(rejects_entries(entry("a", "F32", "[]", 0, 0), 64, {"nbytes 0 does not match shape []"}));
-  EXPECT_TRUE(rejects_entries(entry("a", "F32", "[4611686018427387904]", 0, 0), 64, {"does not match"}));
+  // The element count fits in 64 bits, the byte count does not.
+  EXPECT_TRUE(rejects_entries(entry("a", "F32", "[4611686018427387904]", 0, 0), 64, {"tensor 'a'", "too large"}));
 }
 
 TEST_F(ActbBad, OffsetsOutOfBounds) {

@@ -11,6 +11,7 @@
 
 #include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
+#include "weights/blob/tensor_header.h"
 
 namespace act {
 
@@ -18,30 +19,18 @@ namespace {
 
 constexpr char kMagic[8] = {'A', 'C', 'T', 'B', 'L', 'O', 'B', '\0'};
 constexpr size_t kFixedHeaderSize = 64;
-// A real header is a few hundred KB; anything near this is corrupt.
-constexpr uint64_t kMaxHeaderSize = 100'000'000;
-
-[[noreturn]] void corrupt(const std::string& path, const std::string& what) {
-  fail(ErrorCode::kDataLoss, "'" + path + "': " + what);
-}
+using detail::fail_corrupt;
+using detail::put_le64;
+using detail::read_le64;
+constexpr uint64_t kMaxHeaderSize = detail::kMaxJsonHeaderSize;
 
 uint32_t read_le32(const uint8_t* p) {
   return static_cast<uint32_t>(p[0]) | static_cast<uint32_t>(p[1]) << 8 | static_cast<uint32_t>(p[2]) << 16 |
          static_cast<uint32_t>(p[3]) << 24;
 }
 
-uint64_t read_le64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-
 void put_le32(uint32_t v, uint8_t* p) {
   for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
-
-void put_le64(uint64_t v, uint8_t* p) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
 }
 
 std::string hex32(uint32_t v) {
@@ -172,6 +161,15 @@ void ActbWriter::add_f32(const std::string& name, std::vector<int64_t> shape, co
 }
 
 size_t ActbWriter::write(const std::string& path) const {
+  detail::AtomicFileWriter out(path);
+  write_to(out);
+  const size_t total = out.bytes_written();
+  out.commit();
+  return total;
+}
+
+void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
+  const std::string& path = out.path();
   // The reader insists on an object; refuse to produce a file it would reject.
   if (!config_.is_object()) {
     fail(ErrorCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
@@ -232,7 +230,6 @@ size_t ActbWriter::write(const std::string& path) const {
   put_le64(data_size, fixed + 32);
   put_le64(crc, fixed + 40);
 
-  detail::AtomicFileWriter out(path);
   out.write(fixed, sizeof fixed);
   out.write(text.data(), text.size());
   out.write_zeros(data_offset - kFixedHeaderSize - text.size());
@@ -241,9 +238,6 @@ size_t ActbWriter::write(const std::string& path) const {
     out.write(tensors_[i].bytes.data(), tensors_[i].bytes.size());
     out.write_zeros(end - offsets[i] - tensors_[i].bytes.size());
   }
-  const size_t total = out.bytes_written();
-  out.commit();
-  return total;
 }
 
 // ---------------------------------------------------------------------------------------------- reader
@@ -258,12 +252,12 @@ struct FixedHeader {
 
 FixedHeader read_fixed_header(const std::string& path, const uint8_t* base, uint64_t size) {
   if (size < sizeof kMagic) {
-    corrupt(path, "truncated or not an .actb file: file has " + std::to_string(size) +
+    fail_corrupt(path, "truncated or not an .actb file: file has " + std::to_string(size) +
                       " bytes, too short for the magic");
   }
-  if (std::memcmp(base, kMagic, sizeof kMagic) != 0) corrupt(path, "not an .actb file (bad magic)");
+  if (std::memcmp(base, kMagic, sizeof kMagic) != 0) fail_corrupt(path, "not an .actb file (bad magic)");
   if (size < kFixedHeaderSize) {
-    corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, the fixed header needs " +
+    fail_corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, the fixed header needs " +
                       std::to_string(kFixedHeaderSize));
   }
   FixedHeader h;
@@ -279,34 +273,34 @@ FixedHeader read_fixed_header(const std::string& path, const uint8_t* base, uint
   h.checksum = read_le64(base + 40);
   bool reserved_zero = reserved0 == 0;
   for (size_t i = 48; i < kFixedHeaderSize; ++i) reserved_zero = reserved_zero && base[i] == 0;
-  if (!reserved_zero) corrupt(path, "reserved fixed-header bytes are not zero");
+  if (!reserved_zero) fail_corrupt(path, "reserved fixed-header bytes are not zero");
 
   uint64_t expected_size = 0;
   if (!detail::checked_add(h.data_offset, h.data_size, &expected_size)) {
-    corrupt(path, "data_offset " + std::to_string(h.data_offset) + " + data_size " + std::to_string(h.data_size) +
+    fail_corrupt(path, "data_offset " + std::to_string(h.data_offset) + " + data_size " + std::to_string(h.data_size) +
                       " overflows");
   }
   if (expected_size > size) {
-    corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, header says " +
+    fail_corrupt(path, "truncated: file has " + std::to_string(size) + " bytes, header says " +
                       std::to_string(expected_size));
   }
   if (expected_size < size) {
-    corrupt(path, "file has " + std::to_string(size) + " bytes, header says " + std::to_string(expected_size) +
+    fail_corrupt(path, "file has " + std::to_string(size) + " bytes, header says " + std::to_string(expected_size) +
                       " (trailing garbage)");
   }
   if (h.header_size > kMaxHeaderSize) {
-    corrupt(path, "header_size " + std::to_string(h.header_size) + " exceeds the limit of " +
+    fail_corrupt(path, "header_size " + std::to_string(h.header_size) + " exceeds the limit of " +
                       std::to_string(kMaxHeaderSize));
   }
   if (h.data_offset % kActbAlignment != 0) {
-    corrupt(path, "data_offset " + std::to_string(h.data_offset) + " is not 64-byte aligned");
+    fail_corrupt(path, "data_offset " + std::to_string(h.data_offset) + " is not 64-byte aligned");
   }
   if (h.data_offset < kFixedHeaderSize + h.header_size) {
-    corrupt(path, "JSON header of " + std::to_string(h.header_size) + " bytes at offset 64 overruns data_offset " +
+    fail_corrupt(path, "JSON header of " + std::to_string(h.header_size) + " bytes at offset 64 overruns data_offset " +
                       std::to_string(h.data_offset));
   }
   if (h.checksum > std::numeric_limits<uint32_t>::max()) {
-    corrupt(path, "checksum field " + std::to_string(h.checksum) + " is not a zero-extended CRC-32");
+    fail_corrupt(path, "checksum field " + std::to_string(h.checksum) + " is not a zero-extended CRC-32");
   }
   return h;
 }
@@ -316,7 +310,7 @@ void verify_checksum_of(const std::string& path, const uint8_t* base, uint64_t s
   uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
   crc = crc_update(crc, base + kFixedHeaderSize, static_cast<size_t>(size - kFixedHeaderSize));
   if (crc != checksum) {
-    corrupt(path, "checksum mismatch (stored " + hex32(static_cast<uint32_t>(checksum)) + ", computed " +
+    fail_corrupt(path, "checksum mismatch (stored " + hex32(static_cast<uint32_t>(checksum)) + ", computed " +
                       hex32(crc) + "): the file is corrupt");
   }
 }
@@ -330,46 +324,44 @@ struct JsonHeader {
 
 JsonHeader read_json_header(const std::string& path, const uint8_t* base, uint64_t header_size) {
   nlohmann::json header =
-      detail::parse_json_header(path, base + kFixedHeaderSize, static_cast<size_t>(header_size));
-  if (!header.is_object()) corrupt(path, std::string("JSON header must be an object, got ") + header.type_name());
+      detail::parse_json_object_header(path, base + kFixedHeaderSize, static_cast<size_t>(header_size));
   JsonHeader h;
   const auto producer = header.find("producer");
-  if (producer == header.end() || !producer->is_string()) corrupt(path, "JSON header needs a 'producer' string");
+  if (producer == header.end() || !producer->is_string()) fail_corrupt(path, "JSON header needs a 'producer' string");
   h.producer = producer->get<std::string>();
   const auto config = header.find("config");
-  if (config == header.end() || !config->is_object()) corrupt(path, "JSON header needs a 'config' object");
+  if (config == header.end() || !config->is_object()) fail_corrupt(path, "JSON header needs a 'config' object");
   h.config = std::move(*config);
   const auto tensors = header.find("tensors");
-  if (tensors == header.end() || !tensors->is_array()) corrupt(path, "JSON header needs a 'tensors' array");
+  if (tensors == header.end() || !tensors->is_array()) fail_corrupt(path, "JSON header needs a 'tensors' array");
   h.tensors = std::move(*tensors);
   return h;
 }
 
-// Where tensor `t` (its dtype and shape read) lies: 'offset' and 'nbytes', which must match the shape
-// and dtype and lie inside the data area. `where` names the tensor in errors.
-void read_tensor_extent(const std::string& path, const std::string& where, const nlohmann::json& e, uint64_t elements,
-                        const uint8_t* data_area, uint64_t data_size, ActbTensor& t) {
+// Where tensor `t` lies: 'offset' and 'nbytes', which must match the `expected_nbytes` of its dtype and
+// shape and lie inside the data area. `where` names the tensor in errors.
+void read_tensor_extent(const std::string& path, const std::string& where, const nlohmann::json& e,
+                        uint64_t expected_nbytes, const uint8_t* data_area, uint64_t data_size, ActbTensor& t) {
   const auto offset_it = e.find("offset");
   const auto nbytes_it = e.find("nbytes");
   uint64_t offset = 0;
   uint64_t nbytes = 0;
   if (offset_it == e.end() || !detail::json_to_u64(*offset_it, &offset)) {
-    corrupt(path, where + "needs a non-negative integer 'offset'");
+    fail_corrupt(path, where + "needs a non-negative integer 'offset'");
   }
   if (nbytes_it == e.end() || !detail::json_to_u64(*nbytes_it, &nbytes)) {
-    corrupt(path, where + "needs a non-negative integer 'nbytes'");
+    fail_corrupt(path, where + "needs a non-negative integer 'nbytes'");
   }
-  uint64_t expected = 0;
-  if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected) || expected != nbytes) {
-    corrupt(path, where + "nbytes " + std::to_string(nbytes) + " does not match shape " + shape_string(t.shape) +
+  if (expected_nbytes != nbytes) {
+    fail_corrupt(path, where + "nbytes " + std::to_string(nbytes) + " does not match shape " + shape_string(t.shape) +
                       " with dtype " + dtype_name(t.dtype));
   }
   if (offset % kActbAlignment != 0) {
-    corrupt(path, where + "offset " + std::to_string(offset) + " is not 64-byte aligned");
+    fail_corrupt(path, where + "offset " + std::to_string(offset) + " is not 64-byte aligned");
   }
   uint64_t end = 0;
   if (!detail::checked_add(offset, nbytes, &end) || end > data_size) {
-    corrupt(path, where + "bytes [" + std::to_string(offset) + ", +" + std::to_string(nbytes) +
+    fail_corrupt(path, where + "bytes [" + std::to_string(offset) + ", +" + std::to_string(nbytes) +
                       ") are out of bounds of the data area of " + std::to_string(data_size) + " bytes");
   }
   t.data = data_area + offset;
@@ -380,37 +372,25 @@ void read_tensor_extent(const std::string& path, const std::string& where, const
 ActbTensor read_tensor_entry(const std::string& path, const nlohmann::json& e, size_t i,
                              const std::map<std::string, size_t>& index, const uint8_t* data_area, uint64_t data_size) {
   std::string where = "tensors[" + std::to_string(i) + "]: ";
-  if (!e.is_object()) corrupt(path, where + "must be an object, got " + e.type_name());
+  if (!e.is_object()) fail_corrupt(path, where + "must be an object, got " + e.type_name());
   const auto name = e.find("name");
   if (name == e.end() || !name->is_string() || name->get_ref<const std::string&>().empty()) {
-    corrupt(path, where + "needs a non-empty 'name' string");
+    fail_corrupt(path, where + "needs a non-empty 'name' string");
   }
   ActbTensor t;
   t.name = name->get<std::string>();
   where = "tensor '" + t.name + "': ";
-  if (index.count(t.name) != 0) corrupt(path, where + "duplicate tensor name");
+  if (index.count(t.name) != 0) fail_corrupt(path, where + "duplicate tensor name");
 
-  const auto dtype = e.find("dtype");
-  if (dtype == e.end() || !dtype->is_string()) corrupt(path, where + "needs a 'dtype' string");
-  if (!parse_dtype(dtype->get_ref<const std::string&>(), &t.dtype)) {
-    corrupt(path, where + "unknown dtype '" + dtype->get_ref<const std::string&>().substr(0, 32) + "'");
-  }
-  const auto shape = e.find("shape");
-  if (shape == e.end()) corrupt(path, where + "missing 'shape'");
-  std::string why;
-  if (!detail::json_to_shape(*shape, &t.shape, &why)) corrupt(path, where + why);
-  uint64_t elements = 0;
-  try {
-    elements = shape_elements(t.shape);
-  } catch (const Error& err) {
-    corrupt(path, where + err.what());
-  }
-  read_tensor_extent(path, where, e, elements, data_area, data_size, t);
+  detail::TensorEntryType type = detail::parse_tensor_entry_type(path, where, e);
+  t.dtype = type.dtype;
+  t.shape = std::move(type.shape);
+  read_tensor_extent(path, where, e, type.nbytes, data_area, data_size, t);
   const auto quant = e.find("quant");
   if (quant != e.end()) {
     std::string error = parse_quant(*quant, &t.quant);
     if (error.empty()) error = check_quant(t.quant, t.shape);
-    if (!error.empty()) corrupt(path, where + error);
+    if (!error.empty()) fail_corrupt(path, where + error);
   }
   return t;
 }
@@ -426,7 +406,7 @@ void check_no_overlap(const std::string& path, const std::vector<ActbTensor>& te
   const ActbTensor* furthest = nullptr;
   for (const ActbTensor* t : order) {
     if (furthest != nullptr && t->data < furthest->data + furthest->nbytes) {
-      corrupt(path, "tensors '" + furthest->name + "' and '" + t->name + "' overlap");
+      fail_corrupt(path, "tensors '" + furthest->name + "' and '" + t->name + "' overlap");
     }
     if (furthest == nullptr || t->data + t->nbytes > furthest->data + furthest->nbytes) furthest = t;
   }

@@ -28,6 +28,10 @@
 #include "weights/blob/file_mapping.h"
 #include "weights/blob/tensor_types.h"
 
+namespace act::detail {
+class AtomicFileWriter;
+}
+
 namespace act {
 
 inline constexpr uint32_t kActbFormatVersion = 1;
@@ -65,6 +69,9 @@ class ActbWriter {
   /// Writes atomically: a temporary file next to `path`, fsync, rename. On any failure the temporary
   /// file is removed and no file appears at `path`. Returns the number of bytes written.
   size_t write(const std::string& path) const;
+  /// Writes the whole blob into `file` without committing it (the caller decides whether it gets
+  /// its name; the converter opens uncommitted blobs through AtomicFileWriter::readable_path).
+  void write_to(detail::AtomicFileWriter& file) const;
 
  private:
   struct Pending {

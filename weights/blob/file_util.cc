@@ -71,6 +71,10 @@ std::string AtomicFileWriter::describe_target() const {
   return "'" + path_ + "'" + (temp_path_.empty() ? std::string() : " (via '" + temp_path_ + "')");
 }
 
+std::string AtomicFileWriter::readable_path() const {
+  return temp_path_.empty() ? "/proc/self/fd/" + std::to_string(fd_) : temp_path_;
+}
+
 void AtomicFileWriter::write(const void* data, size_t size) {
   const auto* p = static_cast<const uint8_t*>(data);
   size_t left = size;

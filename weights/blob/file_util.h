@@ -30,6 +30,11 @@ class AtomicFileWriter {
   void commit();
 
   size_t bytes_written() const { return written_; }
+  /// The path being written (the target, not the temporary file).
+  const std::string& path() const { return path_; }
+  /// A path that opens the data written so far, before commit(): "/proc/self/fd/N" for the unnamed
+  /// file (or the named temporary file on a file system without O_TMPFILE).
+  std::string readable_path() const;
 
  private:
   void name_unnamed_file();

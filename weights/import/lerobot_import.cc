@@ -890,14 +890,16 @@ ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, co
   return Importer(stats).run(config, state_dict.origin() + " config", [&]() -> const TensorSet& { return state_dict; });
 }
 
-size_t write_fp32_blob(const ImportedModel& model, const std::string& path) {
+ActbWriter fp32_blob(const ImportedModel& model) {
   ActbWriter writer;
   writer.set_producer(std::string("act_convert (actengine) from a ") + model.layout + "-layout LeRobot checkpoint");
   nlohmann::json config = model.config.to_json();
   config["precision"] = "fp32";
   writer.set_config(config);
   for (const auto& t : model.tensors) writer.add_f32(t.name, t.shape, t.values);
-  return writer.write(path);
+  return writer;
 }
+
+size_t write_fp32_blob(const ImportedModel& model, const std::string& path) { return fp32_blob(model).write(path); }
 
 }  // namespace act

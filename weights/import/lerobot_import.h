@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "weights/blob/actb.h"
 #include "weights/blob/model_config.h"
 #include "weights/import/safetensors.h"
 
@@ -72,7 +73,9 @@ struct ProcessorStep {
 ProcessorStep parse_processor_step(const nlohmann::ordered_json& pipeline, const std::string& registry_name,
                                    const std::string& where);
 
-/// Writes the imported model as an FP32 .actb blob (atomically). Returns the file size in bytes.
+/// The imported model as an FP32 .actb blob, ready to write.
+ActbWriter fp32_blob(const ImportedModel& model);
+/// Writes fp32_blob(model) (atomically). Returns the file size in bytes.
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path);
 
 }  // namespace act

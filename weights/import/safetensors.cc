@@ -8,28 +8,15 @@
 
 #include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
+#include "weights/blob/tensor_header.h"
 
 namespace act {
 
 namespace {
 
-// Same bound as the reference implementation: a larger header is corrupt or hostile, and parsing it
-// would cost far more memory than the text itself.
-constexpr uint64_t kMaxHeaderSize = 100'000'000;
-
-[[noreturn]] void corrupt(const std::string& path, const std::string& what) {
-  fail(ErrorCode::kDataLoss, "'" + path + "': " + what);
-}
-
-uint64_t read_le64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-
-void put_le64(uint64_t v, uint8_t* p) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
+using detail::fail_corrupt;
+// The same bound as the reference implementation.
+constexpr uint64_t kMaxHeaderSize = detail::kMaxJsonHeaderSize;
 
 std::string range_string(uint64_t begin, uint64_t end) {
   // Appending (rather than "[" + to_string(...)) avoids a GCC 12 -Wrestrict false positive.
@@ -51,49 +38,30 @@ struct Range {
 SafetensorsTensor parse_entry(const std::string& path, const std::string& name, const nlohmann::json& entry,
                               uint64_t data_size, Range* range) {
   const std::string where = "tensor '" + name + "': ";
-  if (!entry.is_object()) corrupt(path, where + "entry must be an object, got " + entry.type_name());
+  if (!entry.is_object()) fail_corrupt(path, where + "entry must be an object, got " + entry.type_name());
 
   SafetensorsTensor t;
   t.name = name;
-
-  const auto dtype_it = entry.find("dtype");
-  if (dtype_it == entry.end()) corrupt(path, where + "missing 'dtype'");
-  if (!dtype_it->is_string()) corrupt(path, where + "'dtype' must be a string, got " + dtype_it->type_name());
-  const auto& dtype_str = dtype_it->get_ref<const std::string&>();
-  if (!parse_dtype(dtype_str, &t.dtype)) {
-    corrupt(path, where + "unknown dtype '" + dtype_str.substr(0, 32) + "'");
-  }
-
-  const auto shape_it = entry.find("shape");
-  if (shape_it == entry.end()) corrupt(path, where + "missing 'shape'");
-  std::string why;
-  if (!detail::json_to_shape(*shape_it, &t.shape, &why)) corrupt(path, where + why);
-  uint64_t elements = 0;
-  try {
-    elements = shape_elements(t.shape);
-  } catch (const Error& e) {
-    corrupt(path, where + e.what());
-  }
-  uint64_t expected_bytes = 0;
-  if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected_bytes)) {
-    corrupt(path, where + "shape " + shape_string(t.shape) + " is too large");
-  }
+  detail::TensorEntryType type = detail::parse_tensor_entry_type(path, where, entry);
+  t.dtype = type.dtype;
+  t.shape = std::move(type.shape);
+  const uint64_t expected_bytes = type.nbytes;
 
   const auto offsets_it = entry.find("data_offsets");
-  if (offsets_it == entry.end()) corrupt(path, where + "missing 'data_offsets'");
+  if (offsets_it == entry.end()) fail_corrupt(path, where + "missing 'data_offsets'");
   uint64_t begin = 0;
   uint64_t end = 0;
   if (!offsets_it->is_array() || offsets_it->size() != 2 || !detail::json_to_u64((*offsets_it)[0], &begin) ||
       !detail::json_to_u64((*offsets_it)[1], &end)) {
-    corrupt(path, where + "'data_offsets' must be an array of 2 non-negative integers");
+    fail_corrupt(path, where + "'data_offsets' must be an array of 2 non-negative integers");
   }
-  if (begin > end) corrupt(path, where + "data_offsets " + range_string(begin, end) + " are reversed");
+  if (begin > end) fail_corrupt(path, where + "data_offsets " + range_string(begin, end) + " are reversed");
   if (end > data_size) {
-    corrupt(path, where + "data_offsets " + range_string(begin, end) + " are out of bounds of the data area of " +
+    fail_corrupt(path, where + "data_offsets " + range_string(begin, end) + " are out of bounds of the data area of " +
                       std::to_string(data_size) + " bytes (file truncated?)");
   }
   if (end - begin != expected_bytes) {
-    corrupt(path, where + "shape " + shape_string(t.shape) + " with dtype " + dtype_name(t.dtype) + " needs " +
+    fail_corrupt(path, where + "shape " + shape_string(t.shape) + " with dtype " + dtype_name(t.dtype) + " needs " +
                       std::to_string(expected_bytes) + " bytes, data_offsets " + range_string(begin, end) +
                       " hold " + std::to_string(end - begin));
   }
@@ -127,23 +95,20 @@ SafetensorsFile SafetensorsFile::open(const std::string& path) {
   const uint8_t* base = f.mapping_.data();
   const size_t size = f.mapping_.size();
 
-  if (size == 0) corrupt(path, "file is empty, not a safetensors file");
+  if (size == 0) fail_corrupt(path, "file is empty, not a safetensors file");
   if (size < 8) {
-    corrupt(path, "file has " + std::to_string(size) + " bytes, too short for the 8-byte header length");
+    fail_corrupt(path, "file has " + std::to_string(size) + " bytes, too short for the 8-byte header length");
   }
-  const uint64_t header_size = read_le64(base);
+  const uint64_t header_size = detail::read_le64(base);
   if (header_size > kMaxHeaderSize) {
-    corrupt(path, "header length " + std::to_string(header_size) + " exceeds the limit of " +
+    fail_corrupt(path, "header length " + std::to_string(header_size) + " exceeds the limit of " +
                       std::to_string(kMaxHeaderSize) + " bytes");
   }
   if (header_size > size - 8) {
-    corrupt(path, "header length " + std::to_string(header_size) + " exceeds file size " + std::to_string(size));
+    fail_corrupt(path, "header length " + std::to_string(header_size) + " exceeds file size " + std::to_string(size));
   }
 
-  const nlohmann::json header = detail::parse_json_header(path, base + 8, static_cast<size_t>(header_size));
-  if (!header.is_object()) {
-    corrupt(path, std::string("JSON header must be an object, got ") + header.type_name());
-  }
+  const nlohmann::json header = detail::parse_json_object_header(path, base + 8, static_cast<size_t>(header_size));
 
   const uint8_t* data_area = base + 8 + header_size;
   const uint64_t data_size = size - 8 - header_size;
@@ -152,17 +117,17 @@ SafetensorsFile SafetensorsFile::open(const std::string& path) {
   for (const auto& [key, value] : header.items()) {
     if (key == "__metadata__") {
       if (!value.is_object()) {
-        corrupt(path, std::string("__metadata__ must be an object of strings, got ") + value.type_name());
+        fail_corrupt(path, std::string("__metadata__ must be an object of strings, got ") + value.type_name());
       }
       for (const auto& [mkey, mvalue] : value.items()) {
         if (!mvalue.is_string()) {
-          corrupt(path, "__metadata__ value of '" + mkey + "' must be a string, got " + mvalue.type_name());
+          fail_corrupt(path, "__metadata__ value of '" + mkey + "' must be a string, got " + mvalue.type_name());
         }
         f.metadata_.emplace(mkey, mvalue.get<std::string>());
       }
       continue;
     }
-    if (key.empty()) corrupt(path, "tensor with an empty name");
+    if (key.empty()) fail_corrupt(path, "tensor with an empty name");
     Range range{};
     SafetensorsTensor t = parse_entry(path, key, value, data_size, &range);
     t.data = data_area + range.begin;
@@ -180,7 +145,7 @@ SafetensorsFile SafetensorsFile::open(const std::string& path) {
   for (const Range& r : ranges) {
     if (r.begin == r.end) continue;
     if (furthest != nullptr && r.begin < furthest->end) {
-      corrupt(path, "tensors '" + *furthest->name + "' " + range_string(furthest->begin, furthest->end) + " and '" +
+      fail_corrupt(path, "tensors '" + *furthest->name + "' " + range_string(furthest->begin, furthest->end) + " and '" +
                         *r.name + "' " + range_string(r.begin, r.end) + " overlap");
     }
     if (furthest == nullptr || r.end > furthest->end) furthest = &r;
@@ -306,7 +271,7 @@ void write_safetensors(const std::string& path, const std::vector<SafetensorsWri
 
   detail::AtomicFileWriter out(path);
   uint8_t len[8];
-  put_le64(text.size(), len);
+  detail::put_le64(text.size(), len);
   out.write(len, sizeof len);
   out.write(text.data(), text.size());
   for (const SafetensorsWriteTensor& t : tensors) {

@@ -45,7 +45,7 @@ void quantize_weight_per_row(const std::vector<float>& w, size_t rows, size_t co
   }
 }
 
-size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, const std::string& path) {
+ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant) {
   const std::vector<std::string> layers = quantizable_layers(model);
   const std::set<std::string> quantize(layers.begin(), layers.end());
   for (const auto& name : quant.float_layers) {
@@ -83,7 +83,11 @@ size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, con
     params.axis = 0;
     writer.add_tensor(t.name, DType::kI8, t.shape, q.data(), q.size(), params);
   }
-  return writer.write(path);
+  return writer;
+}
+
+size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, const std::string& path) {
+  return int8_blob(model, quant).write(path);
 }
 
 }  // namespace act

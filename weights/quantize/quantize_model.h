@@ -22,8 +22,10 @@ std::vector<std::string> quantizable_layers(const ImportedModel& model);
 void quantize_weight_per_row(const std::vector<float>& w, size_t rows, size_t cols, std::vector<int8_t>& q,
                              std::vector<float>& scales);
 
-/// Writes the INT8 blob: quantizable layers not in quant.float_layers as int8, the rest float32, and
-/// `quant` in the config. Atomic like every blob write. Returns the bytes written.
+/// The INT8 blob: quantizable layers not in quant.float_layers as int8, the rest float32, and
+/// `quant` in the config. Throws kInvalidArgument for a float layer that is not quantizable.
+ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant);
+/// Writes int8_blob(model, quant), atomically like every blob write. Returns the bytes written.
 size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, const std::string& path);
 
 }  // namespace act

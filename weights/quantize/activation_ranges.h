@@ -1,21 +1,15 @@
-// Calibration of activation ranges: each observed backbone value gets its min/max (pass 1) and a
-// histogram over that range (pass 2), from which a calibration method picks the int8 scale and
-// zero point.
+// Calibration of activation ranges, pure math over the values seen (no graph, no model): each
+// observed value gets its min/max (pass 1) and a histogram over that range (pass 2), from which a
+// calibration method (minmax, percentile or mse) picks the int8 scale and zero point.
 #pragma once
 
 #include <cstddef>
 #include <span>
-#include <string>
 #include <vector>
 
 #include "weights/blob/quant_config.h"
 
 namespace act {
-
-enum class CalibrationMethod { kMinMax, kPercentile, kMse };
-const char* calibration_method_name(CalibrationMethod m);
-/// "minmax", "percentile" or "mse"; throws kInvalidArgument otherwise.
-CalibrationMethod parse_calibration_method(const std::string& name);
 
 class RangeObserver {
  public:
@@ -30,10 +24,13 @@ class RangeObserver {
   float max() const { return hi_; }
   bool has_histogram() const { return total_ > 0; }
 
-  /// The parameters the method chooses. minmax needs pass 1 only; percentile clips the tails at
-  /// `percentile` (e.g. 99.99) and mse minimizes the expected squared quantization error (rounding
-  /// and clipping) over the histogram; both need pass 2.
-  ActivationQuant choose(CalibrationMethod method, double percentile = 99.99) const;
+  /// The parameters of the three methods. minmax covers [min, max] and needs pass 1 only;
+  /// percentile clips the tails at `percentile` (e.g. 99.99) and mse minimizes the expected squared
+  /// quantization error (rounding and clipping) over the histogram. Without a histogram (or for a
+  /// constant value) the last two fall back to minmax.
+  ActivationQuant choose_minmax() const;
+  ActivationQuant choose_percentile(double percentile) const;
+  ActivationQuant choose_mse() const;
 
   /// Expected squared error per value of quantizing this histogram with q.
   double expected_squared_error(const ActivationQuant& q) const;

@@ -1,28 +1,11 @@
-#include "apps/convert/activation_stats.h"
+#include "weights/quantize/activation_ranges.h"
 
 #include <algorithm>
 #include <cmath>
 
 #include "kernels/quant/quant_s8.h"
-#include "weights/blob/error.h"
 
 namespace act {
-
-const char* calibration_method_name(CalibrationMethod m) {
-  switch (m) {
-    case CalibrationMethod::kMinMax: return "minmax";
-    case CalibrationMethod::kPercentile: return "percentile";
-    case CalibrationMethod::kMse: return "mse";
-  }
-  return "?";
-}
-
-CalibrationMethod parse_calibration_method(const std::string& name) {
-  if (name == "minmax") return CalibrationMethod::kMinMax;
-  if (name == "percentile") return CalibrationMethod::kPercentile;
-  if (name == "mse") return CalibrationMethod::kMse;
-  fail(ErrorCode::kInvalidArgument, "unknown calibration method \"" + name + "\" (minmax, percentile, mse)");
-}
 
 namespace {
 
@@ -88,31 +71,35 @@ double RangeObserver::expected_squared_error(const ActivationQuant& q) const {
   return total_ > 0 ? err / total_ : 0.0;
 }
 
-ActivationQuant RangeObserver::choose(CalibrationMethod method, double percentile) const {
+ActivationQuant RangeObserver::choose_minmax() const {
   if (!seen_) return {};
-  if (method == CalibrationMethod::kMinMax || !has_histogram() || !(hi_ > lo_)) {
-    return to_activation(kernels::choose_quant_s8(lo_, hi_));
+  return to_activation(kernels::choose_quant_s8(lo_, hi_));
+}
+
+ActivationQuant RangeObserver::choose_percentile(double percentile) const {
+  if (!seen_ || !has_histogram() || !(hi_ > lo_)) return choose_minmax();
+  const double tail = total_ * (100.0 - percentile) / 100.0;
+  double acc = 0.0;
+  int top = kBins - 1;
+  for (; top > 0; --top) {
+    acc += hist_[static_cast<size_t>(top)];
+    if (acc > tail) break;
   }
-  if (method == CalibrationMethod::kPercentile) {
-    const double tail = total_ * (100.0 - percentile) / 100.0;
-    double acc = 0.0;
-    int top = kBins - 1;
-    for (; top > 0; --top) {
-      acc += hist_[static_cast<size_t>(top)];
-      if (acc > tail) break;
-    }
-    acc = 0.0;
-    int bottom = 0;
-    for (; bottom < kBins - 1; ++bottom) {
-      acc += hist_[static_cast<size_t>(bottom)];
-      if (acc > tail) break;
-    }
-    const float step = (hi_ - lo_) / kBins;
-    const float hi = lo_ + step * static_cast<float>(top + 1);
-    const float lo = lo_ + step * static_cast<float>(bottom);
-    return to_activation(kernels::choose_quant_s8(lo_ < 0.0f ? lo : lo_, hi));
+  acc = 0.0;
+  int bottom = 0;
+  for (; bottom < kBins - 1; ++bottom) {
+    acc += hist_[static_cast<size_t>(bottom)];
+    if (acc > tail) break;
   }
-  // mse: shrink the range from both ends in 1/256 steps, keep the best.
+  const float step = (hi_ - lo_) / kBins;
+  const float hi = lo_ + step * static_cast<float>(top + 1);
+  const float lo = lo_ + step * static_cast<float>(bottom);
+  return to_activation(kernels::choose_quant_s8(lo_ < 0.0f ? lo : lo_, hi));
+}
+
+ActivationQuant RangeObserver::choose_mse() const {
+  if (!seen_ || !has_histogram() || !(hi_ > lo_)) return choose_minmax();
+  // Shrink the range from both ends in 1/256 steps, keep the best.
   ActivationQuant best = to_activation(kernels::choose_quant_s8(lo_, hi_));
   double best_err = expected_squared_error(best);
   for (int i = 255; i >= 16; --i) {

@@ -1,0 +1,210 @@
+// The public conversion API (actengine/convert.h) over the importers, the weight quantizer and the
+// INT8 converter: every act::Error becomes the Status of the same code.
+#include <algorithm>
+#include <filesystem>
+
+#include "engine/src/convert/calibration_frames.h"
+#include "engine/src/convert/convert_impl.h"
+#include "engine/src/convert/int8_converter.h"
+#include "engine/src/engine_impl.h"
+#include "weights/import/synthetic_model.h"
+
+namespace act {
+
+namespace {
+
+ConfigSources config_sources(const PthOptions& o) {
+  ConfigSources s;
+  s.config_path = o.config_path;
+  s.stats_paths = o.stats_paths;
+  s.image_size = o.image_size;
+  s.n_action_steps = o.n_action_steps;
+  s.n_heads = o.n_heads;
+  s.activation = o.activation;
+  s.cameras = o.cameras;
+  s.lerobot_defaults = o.lerobot_defaults;
+  s.no_normalization = o.no_normalization;
+  s.state_dict_key = o.state_dict_key;
+  return s;
+}
+
+bool any_pth_option(const PthOptions& o) {
+  return !o.config_path.empty() || !o.stats_paths.empty() || o.image_size || o.n_action_steps || o.n_heads || o.activation ||
+         !o.cameras.empty() || o.lerobot_defaults || o.no_normalization || !o.state_dict_key.empty();
+}
+
+PthExplanation explain(const PyTorchConversion& plan) {
+  PthExplanation e;
+  const PyTorchCheckpoint& c = plan.checkpoint;
+  e.origin = c.state_dict.origin();
+  e.format = c.format;
+  e.location = c.location;
+  e.tensors = c.state_dict.names().size();
+  e.other_entries = c.other_entries;
+  e.notes = plan.notes;
+  e.statistics_source = plan.statistics_source;
+  for (const ConfigFact& f : plan.facts) e.config.push_back({f.field, f.value, f.source});
+  e.missing = plan.missing;
+  return e;
+}
+
+ModelInfo model_info(const ModelConfig& c) {
+  ModelInfo info;
+  for (const auto& cam : c.cameras) info.cameras.push_back({cam.key, cam.height, cam.width});
+  info.state_dim = c.state_dim;
+  info.env_state_dim = c.env_state_dim;
+  info.env_state_key = c.env_state_key;
+  info.action_dim = c.action_dim;
+  info.chunk_size = c.chunk_size;
+  info.n_action_steps = c.n_action_steps;
+  info.temporal_ensembling = c.temporal_ensemble_coeff.has_value();
+  info.temporal_ensemble_coeff = c.temporal_ensemble_coeff.value_or(0.0);
+  info.precision = "fp32";
+  info.summary = c.summary();
+  return info;
+}
+
+ImportSummary import_summary(const ImportedModel& model, std::string source) {
+  ImportSummary s;
+  s.source = std::move(source);
+  s.model = model_info(model.config);
+  s.encoder_tokens = model.config.n_tokens();
+  s.checkpoint_values = model.checkpoint_values;
+  s.checkpoint_tensors = model.checkpoint_tensors;
+  s.training_only_values = model.training_only_values;
+  s.training_only_tensors = model.training_only_tensors;
+  s.blob_values = model.blob_values();
+  const ModelConfig::Macs macs = model.config.macs();
+  s.macs = macs.total();
+  s.backbone_macs = macs.backbone;
+  s.encoder_macs = macs.encoder;
+  s.decoder_macs = macs.decoder;
+  s.notes = model.notes;
+  return s;
+}
+
+std::string pth_source(const PyTorchConversion& plan) {
+  return "PyTorch " + plan.checkpoint.format + " .pth, " + plan.checkpoint.location + ", statistics from " +
+         plan.statistics_source;
+}
+
+}  // namespace
+
+const char* int8_mode_name(Int8Mode mode) {
+  switch (mode) {
+    case Int8Mode::kDynamic: return "dynamic";
+    case Int8Mode::kStatic: return "static";
+    case Int8Mode::kMixed: return "mixed";
+  }
+  return "?";
+}
+
+const char* calibration_method_name(CalibrationMethod method) {
+  switch (method) {
+    case CalibrationMethod::kMinMax: return "minmax";
+    case CalibrationMethod::kPercentile: return "percentile";
+    case CalibrationMethod::kMse: return "mse";
+  }
+  return "?";
+}
+
+StatusOr<CalibrationMethod> parse_calibration_method(std::string_view name) {
+  for (CalibrationMethod m : {CalibrationMethod::kMinMax, CalibrationMethod::kPercentile, CalibrationMethod::kMse}) {
+    if (name == calibration_method_name(m)) return m;
+  }
+  return Status(StatusCode::kInvalidArgument,
+                "unknown calibration method \"" + std::string(name) + "\" (minmax, percentile, mse)");
+}
+
+size_t calibration_frames_wanted(const Int8Options& options) {
+  return options.calib_samples + options.holdout.value_or(std::clamp<size_t>(options.calib_samples / 4, 1, 16));
+}
+
+PthPlan::PthPlan(std::unique_ptr<Impl> impl) : impl_(std::move(impl)), explanation_(explain(impl_->plan)) {}
+PthPlan::~PthPlan() = default;
+
+StatusOr<std::unique_ptr<PthPlan>> PthPlan::read(const std::string& pth_path, const PthOptions& options) {
+  std::unique_ptr<PthPlan> plan;
+  const Status s = guarded([&] {
+    auto impl = std::make_unique<Impl>();
+    impl->plan = plan_pytorch_conversion(pth_path, config_sources(options));
+    plan.reset(new PthPlan(std::move(impl)));
+  });
+  if (!s.ok()) return s;
+  return plan;
+}
+
+ImportedCheckpoint::ImportedCheckpoint(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ImportedCheckpoint::~ImportedCheckpoint() = default;
+
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& path, const PthOptions& pth) {
+  if (std::filesystem::is_directory(path) && any_pth_option(pth)) {
+    return Status(StatusCode::kInvalidArgument, "the .pth options do not apply to a LeRobot checkpoint folder (" + path +
+                  "): its config.json and statistics are in the folder");
+  }
+  if (!std::filesystem::is_directory(path)) {
+    StatusOr<std::unique_ptr<PthPlan>> plan = PthPlan::read(path, pth);
+    if (!plan.ok()) return plan.status();
+    return import_checkpoint(**plan);
+  }
+  std::unique_ptr<ImportedCheckpoint> out;
+  const Status s = guarded([&] {
+    auto impl = std::make_unique<ImportedCheckpoint::Impl>();
+    impl->model = import_lerobot_checkpoint(path);
+    out.reset(new ImportedCheckpoint(std::move(impl)));
+    out->summary_ = import_summary(out->impl_->model, out->impl_->model.layout + " LeRobot layout");
+  });
+  if (!s.ok()) return s;
+  return out;
+}
+
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const PthPlan& plan) {
+  std::unique_ptr<ImportedCheckpoint> out;
+  const Status s = guarded([&] {
+    auto impl = std::make_unique<ImportedCheckpoint::Impl>();
+    impl->model = import_pytorch_conversion(plan.impl_->plan);
+    out.reset(new ImportedCheckpoint(std::move(impl)));
+    out->summary_ = import_summary(out->impl_->model, pth_source(plan.impl_->plan));
+  });
+  if (!s.ok()) return s;
+  return out;
+}
+
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_synthetic_model(const std::string& preset, uint32_t seed) {
+  std::unique_ptr<ImportedCheckpoint> out;
+  const Status s = guarded([&] {
+    auto impl = std::make_unique<ImportedCheckpoint::Impl>();
+    impl->model = make_synthetic_model(preset, seed);
+    out.reset(new ImportedCheckpoint(std::move(impl)));
+    out->summary_ = import_summary(out->impl_->model, "built-in \"" + preset + "\" model (synthetic weights)");
+  });
+  if (!s.ok()) return s;
+  return out;
+}
+
+StatusOr<uint64_t> ImportedCheckpoint::write_fp32(const std::string& path) const {
+  uint64_t bytes = 0;
+  const Status s = guarded([&] { bytes = write_fp32_blob(impl_->model, path); });
+  if (!s.ok()) return s;
+  return bytes;
+}
+
+StatusOr<Int8Report> ImportedCheckpoint::write_int8(const std::string& path, const CalibrationSet& calibration,
+                                                    const Int8Options& options) const {
+  Int8Report report;
+  const Status s = guarded([&] { report = convert_to_int8(impl_->model, path, calibration, options); });
+  if (!s.ok()) return s;
+  return report;
+}
+
+StatusOr<CalibrationSet> ImportedCheckpoint::synthetic_calibration_set(size_t count, uint64_t seed) const {
+  CalibrationSet set;
+  const Status s = guarded([&] {
+    StateSampler states(impl_->model, seed);
+    set = synthetic_calibration_frames(states, count, seed);
+  });
+  if (!s.ok()) return s;
+  return set;
+}
+
+}  // namespace act

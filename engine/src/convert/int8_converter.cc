@@ -1,0 +1,364 @@
+#include "engine/src/convert/int8_converter.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <span>
+#include <tuple>
+#include <utility>
+
+#include "engine/src/convert/calibration_frames.h"
+#include "engine/src/engine_impl.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
+#include "weights/quantize/activation_ranges.h"
+#include "weights/quantize/quantize_model.h"
+
+namespace act {
+
+namespace {
+
+// A blob in an unnamed file beside the output (same file system, so commit() can give it the
+// output's name atomically). An Engine opens it through /proc/self/fd/N; dropped without commit()
+// it leaves nothing, even when the process is killed.
+class ScratchBlob {
+ public:
+  ScratchBlob(const ActbWriter& blob, const std::string& output) : file_(output) { blob.write_to(file_); }
+  std::string path() const { return file_.readable_path(); }
+  uint64_t bytes() const { return file_.bytes_written(); }
+  void commit() { file_.commit(); }
+
+ private:
+  detail::AtomicFileWriter file_;
+};
+
+QuantMode quant_mode(Int8Mode mode) {
+  switch (mode) {
+    case Int8Mode::kDynamic: return QuantMode::kDynamic;
+    case Int8Mode::kStatic: return QuantMode::kStatic;
+    case Int8Mode::kMixed: return QuantMode::kMixed;
+  }
+  fail(ErrorCode::kInvalidArgument, "unknown INT8 mode");
+}
+
+// The FP32 model's chunks on the evaluation frames, computed once.
+struct Reference {
+  std::vector<std::vector<float>> normalized, raw;
+};
+
+std::string fmt(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.3g", v);
+  return buf;
+}
+
+// The held-out frames when none is asked for: one per four calibration frames, 1 to 16.
+size_t default_holdout(size_t calibration_frames) { return std::clamp<size_t>(calibration_frames / 4, 1, 16); }
+
+class Converter {
+ public:
+  Converter(const ImportedModel& model, const std::string& output, const Int8Options& options)
+      : model_(model), output_(output), opt_(options), states_(model, options.seed) {}
+
+  Int8Report run(const CalibrationSet& calibration) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (opt_.mode == Int8Mode::kMixed && !opt_.target_mse) {
+      fail(ErrorCode::kInvalidArgument, "mixed mode needs a target MSE (held-out, normalised units)");
+    }
+    if (!(opt_.percentile >= 50.0 && opt_.percentile <= 100.0)) {
+      fail(ErrorCode::kInvalidArgument, "percentile " + fmt(opt_.percentile) + " is outside [50, 100]");
+    }
+    if (opt_.calib_samples == 0) fail(ErrorCode::kInvalidArgument, "calib_samples must be at least 1");
+    choose_frames(calibration);
+    const ScratchBlob fp32(fp32_blob(model_), output_);
+    EngineOptions eo;
+    eo.threads = opt_.threads;
+    fp32_ = std::make_unique<Engine::Impl>(fp32.path(), eo, true);
+    compute_reference();
+
+    QuantConfig quant;
+    quant.mode = quant_mode(opt_.mode);
+    if (opt_.mode != Int8Mode::kDynamic) {
+      quant.calibration = calibration_method_name(opt_.method);
+      quant.activations = calibrate();
+    }
+    auto [blob, err] = write_and_evaluate(quant);
+    std::vector<LayerSensitivity> sensitivity;
+    if (opt_.mode == Int8Mode::kMixed) choose_float_layers(quant, blob, err, sensitivity);
+
+    Int8Report r = report(quant, *blob, err, std::move(sensitivity), fp32.bytes());
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (opt_.max_mse && !(err.mse <= *opt_.max_mse)) {
+      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses the maximum held-out MSE: " + fmt(err.mse) + " > " +
+           fmt(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
+    }
+    blob->commit();
+    return r;
+  }
+
+ private:
+  void progress(const std::string& line) const {
+    if (opt_.progress) opt_.progress(line);
+  }
+
+  void choose_frames(const CalibrationSet& given) {
+    if (!given.frames.empty()) {
+      frames_ = given;
+    } else if (opt_.mode == Int8Mode::kDynamic) {
+      frames_ = synthetic_calibration_frames(states_, opt_.holdout.value_or(8), opt_.seed);
+    } else {
+      fail(ErrorCode::kInvalidArgument, std::string(int8_mode_name(opt_.mode)) +
+           " quantization needs calibration frames (dynamic mode needs none)");
+    }
+    complete_calibration_frames(frames_, states_);
+    const size_t n = frames_.frames.size();
+    // Held-out frames interleaved through the set, so both sets cover all of it.
+    size_t holdout = opt_.holdout.value_or(n >= 2 ? default_holdout(n - n / 5) : 0);  // about a fifth
+    holdout = std::min(holdout, n - 1);
+    const size_t stride = holdout ? n / holdout : 0;
+    for (size_t i = 0; i < n; ++i) {
+      const bool held = holdout && i % stride == stride - 1 && eval_.size() < holdout;
+      if (held) {
+        eval_.push_back(i);
+      } else if (calib_.size() < opt_.calib_samples) {
+        calib_.push_back(i);
+      }
+    }
+    if (eval_.empty()) {
+      eval_ = calib_;
+      frames_.notes.push_back("only one frame: the accuracy below is measured on the calibration frame itself");
+    }
+    progress(std::to_string(calib_.size()) + " calibration frames, " + std::to_string(eval_.size()) + " held out");
+  }
+
+  Observation obs(size_t i) const { return calibration_observation(frames_.frames[i], fp32_->config()); }
+  size_t chunk_values() const { return fp32_->info().chunk_values(); }
+
+  void compute_reference() {
+    for (size_t i : eval_) {
+      std::vector<float> norm(chunk_values()), raw(chunk_values());
+      fp32_->run(obs(i), norm);
+      fp32_->unnormalize(norm, raw, static_cast<size_t>(fp32_->config().chunk_size));
+      ref_.normalized.push_back(std::move(norm));
+      ref_.raw.push_back(std::move(raw));
+    }
+  }
+
+  ActivationQuant choose(const RangeObserver& observer, graph::CalibrationRole role) const {
+    // The input image's range is known exactly: never clip it.
+    if (role == graph::CalibrationRole::kCameraImage) return observer.choose_minmax();
+    switch (opt_.method) {
+      case CalibrationMethod::kMinMax: return observer.choose_minmax();
+      case CalibrationMethod::kPercentile: return observer.choose_percentile(opt_.percentile);
+      case CalibrationMethod::kMse: return observer.choose_mse();
+    }
+    fail(ErrorCode::kInvalidArgument, "unknown calibration method");
+  }
+
+  // The calibration points' ranges over the calibration frames -> their parameters, by value name.
+  std::map<std::string, ActivationQuant> calibrate() {
+    graph::ActNetwork& network = fp32_->network();
+    graph::Graph& g = network.graph();
+    const std::vector<graph::CalibrationPoint>& points = network.calibration_points();
+    std::vector<RangeObserver> observers(points.size());
+    const bool histograms = opt_.method != CalibrationMethod::kMinMax;
+    const int passes = histograms ? 2 : 1;
+    std::vector<float> normalized(chunk_values());
+    for (int pass = 1; pass <= passes; ++pass) {
+      for (size_t f = 0; f < calib_.size(); ++f) {
+        progress("calibrating (" + std::string(calibration_method_name(opt_.method)) + "): pass " + std::to_string(pass) +
+                 "/" + std::to_string(passes) + ", frame " + std::to_string(f + 1) + "/" + std::to_string(calib_.size()));
+        fp32_->run(obs(calib_[f]), normalized);
+        for (size_t k = 0; k < points.size(); ++k) {
+          const std::span<const float> values(g.data(points[k].value), g.value(points[k].value).elements);
+          if (pass == 1) {
+            observers[k].observe_range(values);
+          } else {
+            observers[k].observe_histogram(values);
+          }
+        }
+      }
+    }
+    std::map<std::string, ActivationQuant> out;
+    for (size_t k = 0; k < points.size(); ++k) out[g.value(points[k].value).name] = choose(observers[k], points[k].role);
+    return out;
+  }
+
+  ActionError evaluate(const std::string& blob_path) {
+    EngineOptions eo;
+    eo.threads = opt_.threads;
+    Engine::Impl int8(blob_path, eo, false);
+    const size_t T = static_cast<size_t>(fp32_->config().chunk_size), A = static_cast<size_t>(fp32_->config().action_dim);
+    ActionError e;
+    e.per_dim_mse.assign(A, 0.0);
+    e.per_dim_max_abs.assign(A, 0.0);
+    e.per_dim_mse_physical.assign(A, 0.0);
+    e.per_dim_max_abs_physical.assign(A, 0.0);
+    std::vector<float> norm(chunk_values()), raw(chunk_values());
+    for (size_t f = 0; f < eval_.size(); ++f) {
+      int8.run(obs(eval_[f]), norm);
+      int8.unnormalize(norm, raw, T);
+      for (size_t i = 0; i < norm.size(); ++i) {
+        const double d = static_cast<double>(norm[i]) - ref_.normalized[f][i];
+        const double dr = static_cast<double>(raw[i]) - ref_.raw[f][i];
+        const size_t a = i % A;
+        e.per_dim_mse[a] += d * d;
+        e.per_dim_max_abs[a] = std::max(e.per_dim_max_abs[a], std::fabs(d));
+        e.per_dim_mse_physical[a] += dr * dr;
+        e.per_dim_max_abs_physical[a] = std::max(e.per_dim_max_abs_physical[a], std::fabs(dr));
+        if (!std::isfinite(d)) e.per_dim_mse[a] = INFINITY;
+      }
+    }
+    const double per_dim = static_cast<double>(eval_.size() * T);
+    for (size_t a = 0; a < A; ++a) {
+      e.per_dim_mse[a] /= per_dim;
+      e.per_dim_mse_physical[a] /= per_dim;
+      e.mse += e.per_dim_mse[a] / static_cast<double>(A);
+      e.mse_physical += e.per_dim_mse_physical[a] / static_cast<double>(A);
+      e.max_abs = std::max(e.max_abs, e.per_dim_max_abs[a]);
+      e.max_abs_physical = std::max(e.max_abs_physical, e.per_dim_max_abs_physical[a]);
+    }
+    return e;
+  }
+
+  std::pair<std::unique_ptr<ScratchBlob>, ActionError> write_and_evaluate(const QuantConfig& quant) {
+    auto blob = std::make_unique<ScratchBlob>(int8_blob(model_, quant), output_);
+    const ActionError e = evaluate(blob->path());
+    return {std::move(blob), e};
+  }
+
+  // Mixed: the fewest float layers (most sensitive first) that meet the target.
+  void choose_float_layers(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err,
+                           std::vector<LayerSensitivity>& sensitivity) {
+    const double target = *opt_.target_mse;
+    progress("all layers int8: held-out MSE " + fmt(err.mse) + " (target " + fmt(target) + ")");
+    if (err.mse <= target) return;
+    const std::vector<std::string> layers = quantizable_layers(model_);
+    for (size_t i = 0; i < layers.size(); ++i) {
+      QuantConfig one = quant;
+      one.float_layers.clear();
+      for (const auto& l : layers) {
+        if (l != layers[i]) one.float_layers.push_back(l);
+      }
+      const double mse = write_and_evaluate(one).second.mse;
+      sensitivity.push_back({layers[i], mse});
+      progress("sensitivity " + std::to_string(i + 1) + "/" + std::to_string(layers.size()) + ": " + layers[i] +
+               " alone in int8 -> MSE " + fmt(mse));
+    }
+    std::stable_sort(sensitivity.begin(), sensitivity.end(),
+                     [](const auto& a, const auto& b) { return a.mse_alone_int8 > b.mse_alone_int8; });
+    // Smallest prefix of the most sensitive layers whose return to float meets the target (binary
+    // search: the error shrinks as layers go back to float; all of them in float is the FP32 model).
+    const auto try_prefix = [&](size_t count) {
+      QuantConfig q = quant;
+      for (size_t i = 0; i < count; ++i) q.float_layers.push_back(sensitivity[i].layer);
+      auto [candidate, e] = write_and_evaluate(q);
+      progress(std::to_string(count) + " most sensitive layers in float -> MSE " + fmt(e.mse));
+      return std::tuple{q, std::move(candidate), e};
+    };
+    auto [best, best_blob, best_err] = try_prefix(layers.size());
+    if (!(best_err.mse <= target)) {
+      fail(ErrorCode::kFailedPrecondition, "the target MSE " + fmt(target) + " cannot be met: even with every layer in "
+           "float the held-out MSE is " + fmt(best_err.mse));
+    }
+    size_t lo = 1, hi = layers.size();
+    while (lo < hi) {
+      const size_t mid = (lo + hi) / 2;
+      auto [q, candidate, e] = try_prefix(mid);
+      if (e.mse <= target) {
+        hi = mid;
+        best = std::move(q);
+        best_blob = std::move(candidate);
+        best_err = e;
+      } else {
+        lo = mid + 1;
+      }
+    }
+    quant = std::move(best);
+    blob = std::move(best_blob);
+    err = best_err;
+  }
+
+  Int8Report report(const QuantConfig& quant, const ScratchBlob& blob, const ActionError& err,
+                    std::vector<LayerSensitivity> sensitivity, uint64_t fp32_bytes) {
+    Int8Report r;
+    r.mode = opt_.mode;
+    r.calibration = quant.calibration;
+    r.calibration_frames = calib_.size();
+    r.holdout_frames = eval_.size();
+    r.preprocessing = frames_.preprocessing;
+    r.notes = frames_.notes;
+    r.fp32_bytes = fp32_bytes;
+    r.int8_bytes = blob.bytes();
+    r.float_layers = quant.float_layers;
+    r.action_error = err;
+    r.action_keys = fp32_->config().action_dim;
+    r.sensitivity = std::move(sensitivity);
+    if (opt_.layer_report) r.layers = layer_sqnr(blob.path());
+    return r;
+  }
+
+  // SQNR of every int8 layer's output against the FP32 network's value of the same name (both
+  // networks are built from one config, so a layer's output has one name in both), over (up to 4)
+  // held-out frames.
+  std::vector<LayerSqnr> layer_sqnr(const std::string& blob) {
+    EngineOptions eo;
+    eo.threads = opt_.threads;
+    Engine::Impl int8(blob, eo, true);
+    graph::Graph& gq = int8.network().graph();
+    graph::Graph& gf = fp32_->network().graph();
+    struct Acc {
+      LayerSqnr layer;
+      graph::ValueId q, f;
+      double signal = 0, noise = 0;
+    };
+    std::vector<Acc> acc;
+    for (const graph::Int8Layer& l : int8.network().int8_layers()) {
+      const graph::ValueId f = gf.find(gq.value(l.output).name);
+      check(f != graph::kNoValue, ErrorCode::kInternal, "int8 layer " + gq.value(l.output).name + " has no FP32 twin");
+      acc.push_back({{gq.value(l.output).name, l.op->type(), 0.0}, l.output, f});
+    }
+    std::vector<float> tmp(chunk_values());
+    for (size_t k = 0; k < std::min<size_t>(4, eval_.size()); ++k) {
+      fp32_->run(obs(eval_[k]), tmp);
+      int8.run(obs(eval_[k]), tmp);
+      for (auto& a : acc) {
+        const std::vector<float> qv = gq.read_f32(a.q);
+        const float* fv = gf.data(a.f);
+        for (size_t i = 0; i < qv.size(); ++i) {
+          a.signal += static_cast<double>(fv[i]) * fv[i];
+          const double d = static_cast<double>(qv[i]) - fv[i];
+          a.noise += d * d;
+        }
+      }
+    }
+    std::vector<LayerSqnr> out;
+    for (auto& a : acc) {
+      a.layer.sqnr_db = a.noise > 0 ? 10.0 * std::log10(a.signal / a.noise) : 200.0;
+      out.push_back(std::move(a.layer));
+    }
+    return out;
+  }
+
+  const ImportedModel& model_;
+  std::string output_;
+  Int8Options opt_;
+  StateSampler states_;
+  std::unique_ptr<Engine::Impl> fp32_;
+  CalibrationSet frames_;
+  std::vector<size_t> calib_, eval_;
+  Reference ref_;
+};
+
+}  // namespace
+
+Int8Report convert_to_int8(const ImportedModel& model, const std::string& output, const CalibrationSet& calibration,
+                           const Int8Options& options) {
+  Converter converter(model, output, options);
+  return converter.run(calibration);
+}
+
+}  // namespace act

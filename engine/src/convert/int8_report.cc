@@ -1,0 +1,81 @@
+// Int8Report as JSON (act_convert --report) and as the text act_convert prints.
+#include <cstdio>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "actengine/convert.h"
+
+namespace act {
+
+namespace {
+
+std::string fmt(double v, const char* f = "%.3g") {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+nlohmann::json action_error_json(const ActionError& e) {
+  return {{"mse", e.mse},
+          {"max_abs", e.max_abs},
+          {"mse_physical", e.mse_physical},
+          {"max_abs_physical", e.max_abs_physical},
+          {"per_dim_mse", e.per_dim_mse},
+          {"per_dim_max_abs", e.per_dim_max_abs},
+          {"per_dim_mse_physical", e.per_dim_mse_physical},
+          {"per_dim_max_abs_physical", e.per_dim_max_abs_physical}};
+}
+
+}  // namespace
+
+std::string Int8Report::to_json() const {
+  nlohmann::json r;
+  r["mode"] = int8_mode_name(mode);
+  r["calibration"] = calibration;
+  r["calibration_frames"] = calibration_frames;
+  r["holdout_frames"] = holdout_frames;
+  r["preprocessing"] = preprocessing;
+  r["notes"] = notes;
+  r["fp32_bytes"] = fp32_bytes;
+  r["int8_bytes"] = int8_bytes;
+  r["float_layers"] = float_layers;
+  r["action_error"] = action_error_json(action_error);
+  r["action_keys"] = action_keys;
+  if (!sensitivity.empty()) {
+    r["sensitivity"] = nlohmann::json::array();
+    for (const auto& s : sensitivity) r["sensitivity"].push_back({{"layer", s.layer}, {"mse_alone_int8", s.mse_alone_int8}});
+  }
+  r["layers"] = nlohmann::json::array();
+  for (const auto& l : layers) r["layers"].push_back({{"value", l.value}, {"op", l.op}, {"sqnr_db", l.sqnr_db}});
+  r["seconds"] = seconds;
+  return r.dump(2);
+}
+
+std::string Int8Report::to_text() const {
+  std::ostringstream s;
+  s << "INT8 " << int8_mode_name(mode);
+  if (!calibration.empty()) s << ", calibration " << calibration;
+  s << ": " << calibration_frames << " calibration frames, " << holdout_frames << " held out\n";
+  s << "preprocessing  " << preprocessing << "\n";
+  const double fp = static_cast<double>(fp32_bytes), q = static_cast<double>(int8_bytes);
+  s << "size           fp32 " << fmt(fp / 1e6, "%.1f") << " MB -> int8 " << fmt(q / 1e6, "%.1f") << " MB ("
+    << fmt(100.0 * q / fp, "%.1f") << " %)\n";
+  const ActionError& e = action_error;
+  s << "held-out error normalised: MSE " << fmt(e.mse) << ", max |err| " << fmt(e.max_abs) << "; physical: MSE "
+    << fmt(e.mse_physical) << ", max |err| " << fmt(e.max_abs_physical) << "\n";
+  s << "per action dim (normalised MSE / max | physical MSE / max):\n";
+  for (size_t a = 0; a < e.per_dim_mse.size(); ++a) {
+    s << "  [" << a << "] " << fmt(e.per_dim_mse[a]) << " / " << fmt(e.per_dim_max_abs[a]) << " | "
+      << fmt(e.per_dim_mse_physical[a]) << " / " << fmt(e.per_dim_max_abs_physical[a]) << "\n";
+  }
+  s << "layers in float " << (float_layers.empty() ? "none (besides the action head and state projections, always float)" : "")
+    << "\n";
+  for (const auto& l : float_layers) s << "  " << l << "\n";
+  s << "per-layer SQNR (dB, int8 vs fp32 output):\n";
+  for (const auto& l : layers) s << "  " << fmt(l.sqnr_db, "%6.1f") << "  " << l.value << " (" << l.op << ")\n";
+  for (const auto& n : notes) s << "note: " << n << "\n";
+  return s.str();
+}
+
+}  // namespace act

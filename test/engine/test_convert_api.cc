@@ -1,0 +1,202 @@
+// The conversion API (actengine/convert.h) through its public types only: bad inputs are named,
+// blobs appear only when complete, and the report struct says what its JSON says.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "actengine/convert.h"
+#include "actengine/engine.h"
+#include "support/test_paths.h"
+
+namespace fs = std::filesystem;
+
+namespace act {
+namespace {
+
+std::unique_ptr<ImportedCheckpoint> import_tiny() {
+  auto model = import_checkpoint(test::fixture_dir("act-tiny"));
+  EXPECT_TRUE(model.ok()) << model.status().to_string();
+  return model.ok() ? std::move(model).value() : nullptr;
+}
+
+Int8Options quick_options() {
+  Int8Options o;
+  o.threads = 2;
+  o.holdout = 2;
+  return o;
+}
+
+// Files in `dir` (a conversion must leave only its output).
+std::vector<std::string> files_in(const std::string& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : fs::directory_iterator(dir)) out.push_back(e.path().filename().string());
+  return out;
+}
+
+TEST(ConvertApi, MissingCheckpointIsNamed) {
+  const std::string missing = test::scratch_dir() + "/no-such-checkpoint";
+  auto model = import_checkpoint(missing);
+  ASSERT_FALSE(model.ok());
+  EXPECT_EQ(model.status().code(), StatusCode::kNotFound) << model.status().to_string();
+  EXPECT_NE(model.status().message().find(missing), std::string::npos) << model.status().to_string();
+}
+
+TEST(ConvertApi, PthOptionsOnAFolderAreRefused) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  PthOptions pth;
+  pth.n_heads = 4;
+  auto model = import_checkpoint(test::fixture_dir("act-tiny"), pth);
+  ASSERT_FALSE(model.ok());
+  EXPECT_EQ(model.status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(ConvertApi, ImportSummaryDescribesTheModel) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  const ImportSummary& s = model->summary();
+  EXPECT_EQ(s.source, "current LeRobot layout");
+  ASSERT_EQ(s.model.cameras.size(), 1u);
+  EXPECT_GT(s.model.action_dim, 0);
+  EXPECT_GT(s.blob_values, 0u);
+  EXPECT_LT(s.blob_values, s.checkpoint_values);  // the VAE encoder is dropped
+  EXPECT_GT(s.macs, s.backbone_macs + s.encoder_macs);
+}
+
+TEST(ConvertApi, StaticWithoutFramesWritesNothing) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  const std::string dir = test::scratch_dir();
+  const auto r = model->write_int8(dir + "/s.actb", CalibrationSet{}, quick_options());
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("calibration frames"), std::string::npos) << r.status().to_string();
+  EXPECT_TRUE(files_in(dir).empty());
+}
+
+TEST(ConvertApi, WrongFrameSizeIsNamed) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  auto frames = model->synthetic_calibration_set(4, 1);
+  ASSERT_TRUE(frames.ok()) << frames.status().to_string();
+  frames->frames[2].images[0].resize(10);
+  const std::string dir = test::scratch_dir();
+  const auto r = model->write_int8(dir + "/w.actb", *frames, quick_options());
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("calibration frame 2"), std::string::npos) << r.status().to_string();
+  EXPECT_TRUE(files_in(dir).empty());
+
+  frames = model->synthetic_calibration_set(4, 1);
+  ASSERT_TRUE(frames.ok());
+  frames->frames[1].state.push_back(0.0f);
+  const auto bad_state = model->write_int8(dir + "/w.actb", *frames, quick_options());
+  ASSERT_FALSE(bad_state.ok());
+  EXPECT_NE(bad_state.status().message().find("state"), std::string::npos) << bad_state.status().to_string();
+}
+
+TEST(ConvertApi, MixedNeedsATarget) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  auto frames = model->synthetic_calibration_set(4, 1);
+  ASSERT_TRUE(frames.ok());
+  Int8Options o = quick_options();
+  o.mode = Int8Mode::kMixed;
+  const auto r = model->write_int8(test::scratch_dir() + "/m.actb", *frames, o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(ConvertApi, MissedMaxMseWritesNothing) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  Int8Options o = quick_options();
+  o.mode = Int8Mode::kDynamic;
+  o.max_mse = 1e-300;
+  const std::string dir = test::scratch_dir();
+  const auto r = model->write_int8(dir + "/d.actb", CalibrationSet{}, o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(r.status().message().find("held-out error"), std::string::npos) << "the message holds the report";
+  EXPECT_TRUE(files_in(dir).empty()) << testing::PrintToString(files_in(dir));
+}
+
+TEST(ConvertApi, ReportStructMatchesItsJson) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  auto frames = model->synthetic_calibration_set(6, 3);
+  ASSERT_TRUE(frames.ok());
+  std::vector<std::string> progress;
+  Int8Options o = quick_options();
+  o.method = CalibrationMethod::kPercentile;
+  o.progress = [&](const std::string& line) { progress.push_back(line); };
+  const std::string dir = test::scratch_dir();
+  const std::string blob = dir + "/p.actb";
+  const auto r = model->write_int8(blob, *frames, o);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_EQ(files_in(dir), std::vector<std::string>{"p.actb"});
+  EXPECT_EQ(r->int8_bytes, fs::file_size(blob));
+  EXPECT_FALSE(progress.empty());
+
+  const nlohmann::json j = nlohmann::json::parse(r->to_json());
+  EXPECT_EQ(j["mode"], "static");
+  EXPECT_EQ(j["calibration"], "percentile");
+  EXPECT_EQ(j["calibration_frames"], r->calibration_frames);
+  EXPECT_EQ(j["holdout_frames"], 2);
+  EXPECT_EQ(j["holdout_frames"], r->holdout_frames);
+  EXPECT_EQ(j["fp32_bytes"], r->fp32_bytes);
+  EXPECT_EQ(j["int8_bytes"], r->int8_bytes);
+  EXPECT_EQ(j["notes"], r->notes);
+  EXPECT_EQ(j["preprocessing"], r->preprocessing);
+  EXPECT_EQ(j["action_keys"], r->action_keys);
+  EXPECT_EQ(j["action_error"]["mse"].get<double>(), r->action_error.mse);
+  EXPECT_EQ(j["action_error"]["max_abs_physical"].get<double>(), r->action_error.max_abs_physical);
+  EXPECT_EQ(j["action_error"]["per_dim_mse"].get<std::vector<double>>(), r->action_error.per_dim_mse);
+  EXPECT_EQ(j["action_error"]["per_dim_max_abs"].size(), static_cast<size_t>(r->action_keys));
+  ASSERT_EQ(j["layers"].size(), r->layers.size());
+  ASSERT_FALSE(r->layers.empty());
+  for (size_t i = 0; i < r->layers.size(); ++i) {
+    EXPECT_EQ(j["layers"][i]["value"], r->layers[i].value);
+    EXPECT_EQ(j["layers"][i]["op"], r->layers[i].op);
+    EXPECT_EQ(j["layers"][i]["sqnr_db"].get<double>(), r->layers[i].sqnr_db);
+  }
+  EXPECT_FALSE(j.contains("sensitivity"));  // no mixed search ran
+  EXPECT_TRUE(std::isfinite(r->action_error.mse));
+  EXPECT_NE(r->to_text().find("per-layer SQNR"), std::string::npos);
+
+  // The blob runs unchanged through the public Engine.
+  auto engine = Engine::open(blob, {.threads = 2});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  EXPECT_EQ((*engine)->model_info().precision, "int8 static");
+}
+
+TEST(ConvertApi, CalibrationMethodNames) {
+  for (CalibrationMethod m : {CalibrationMethod::kMinMax, CalibrationMethod::kPercentile, CalibrationMethod::kMse}) {
+    const auto parsed = parse_calibration_method(calibration_method_name(m));
+    ASSERT_TRUE(parsed.ok());
+    EXPECT_EQ(parsed.value(), m);
+  }
+  const auto unknown = parse_calibration_method("kl");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(unknown.status().message().find("kl"), std::string::npos);
+}
+
+TEST(ConvertApi, FramesWantedCoverCalibrationAndHoldout) {
+  Int8Options o;
+  o.calib_samples = 64;
+  EXPECT_EQ(calibration_frames_wanted(o), 80u);  // a fifth held out, 16 at most
+  o.holdout = 3;
+  EXPECT_EQ(calibration_frames_wanted(o), 67u);
+}
+
+}  // namespace
+}  // namespace act

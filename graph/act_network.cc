@@ -331,7 +331,7 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
 }
 
 ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob) : config_(config), blob_(blob) {
-  int8_ = blob_.config().value("precision", "") == "int8";
+  int8_ = config_.precision == Precision::kInt8;
   if (int8_) {
     if (!blob_.config().contains("quantization")) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 blob without a quantization section");
     quant_ = QuantConfig::from_json(blob_.config()["quantization"]);

@@ -45,10 +45,6 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
   // A bad ACT_ISA (unknown, or an ISA this CPU lacks) is an error here, never a silent fallback.
   const kernels::GemmF32Selection gemm = kernels::gemm_f32_select();
   if (!gemm.error.empty()) fail(ErrorCode::kInvalidArgument, gemm.error);
-  const std::string precision = blob_.config().value("precision", "");
-  if (precision != "fp32" && precision != "int8") {
-    fail(ErrorCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32, int8)");
-  }
   network_ = std::make_unique<graph::ActNetwork>(config_, blob_);
   network_->plan(pool_.threads(), keep_intermediates);
 
@@ -75,13 +71,13 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
   info_.n_action_steps = config_.n_action_steps;
   info_.temporal_ensembling = config_.temporal_ensemble_coeff.has_value();
   info_.temporal_ensemble_coeff = config_.temporal_ensemble_coeff.value_or(0.0);
-  info_.precision = precision;
+  info_.precision = precision_name(config_.precision);
   info_.kernels = gemm.kernels->name;
   if (const kernels::GemmS8Kernels* s8 = network_->gemm_s8()) {
     info_.kernels = std::string("gemm_s8 ") + kernels::isa_name(s8->isa) + " " + std::to_string(s8->mr) + "x" +
                     std::to_string(s8->nr) + "c" + std::to_string(s8->kr) + ", " + info_.kernels;
   }
-  if (precision == "int8") info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
+  if (config_.precision == Precision::kInt8) info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
   info_.summary = config_.summary();
 }
 

@@ -266,7 +266,7 @@ int run(const Options& opt) {
   // by the same register-only probe as act_kernel_bench; the achieved rate is compared with it
   // times the threads.
   const bool int8 = info.precision.rfind("int8", 0) == 0;
-  const act::kernels::Isa isa = int8 ? act::kernels::gemm_s8_select().kernels->isa : act::kernels::gemm_f32_select().kernels->isa;
+  const act::kernels::Isa isa = act::kernels::parse_isa(info.isa).value_or(act::kernels::Isa::kRef);
   const act::kernels::PeakProbe* probe =
       act::kernels::isa_peak_probe(isa, int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
   const double peak_gmacs = probe ? act::kernels::measure_peak_gmacs(*probe) : 0.0;

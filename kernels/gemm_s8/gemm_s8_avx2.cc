@@ -1,5 +1,5 @@
 // gemm_s8 on AVX2: the 2x8c8 micro-kernel. Compiled with -mavx2 -mfma on x86-64 targets only;
-// elsewhere this file is just the has_built stub.
+// elsewhere this file is just the null table.
 //
 // Why vpmaddwd and not vpmaddubsw: vpmaddubsw adds two u8 x s8 products into a *saturating* int16,
 // which clips for full-range operands (2 x 255 x 127 > 32767). Sign-extending both operands to
@@ -274,14 +274,11 @@ const GemmS8Kernels* gemm_s8_table_avx2() {
   return &kTable;
 }
 
-bool gemm_s8_has_built_avx2() { return true; }
-
 }  // namespace act::kernels
 
 #else  // not x86-64: nothing to build
 
 namespace act::kernels {
-bool gemm_s8_has_built_avx2() { return false; }
 const GemmS8Kernels* gemm_s8_table_avx2() { return nullptr; }
 }  // namespace act::kernels
 

@@ -1,5 +1,5 @@
 // gemm_s8 on AVX-512 VNNI: the 6x64c4 micro-kernel. Compiled with -mavx512f/bw/vl/vnni on x86-64
-// targets only; elsewhere this file is just the has_built stub.
+// targets only; elsewhere this file is just the null table.
 //
 // vpdpbusd multiplies 4 unsigned bytes by 4 signed bytes per int32 lane and adds the 4 products to
 // the accumulator without intermediate saturation (64 MACs per zmm instruction). The weights take
@@ -289,14 +289,11 @@ const GemmS8Kernels* gemm_s8_table_avx512vnni() {
   return &kTable;
 }
 
-bool gemm_s8_has_built_avx512vnni() { return true; }
-
 }  // namespace act::kernels
 
 #else  // not x86-64: nothing to build
 
 namespace act::kernels {
-bool gemm_s8_has_built_avx512vnni() { return false; }
 const GemmS8Kernels* gemm_s8_table_avx512vnni() { return nullptr; }
 }  // namespace act::kernels
 

@@ -1,6 +1,6 @@
 // gemm_s8 on AArch64 with the dot-product extension: the 4x16c4 SDOT micro-kernel and the 1x16c4
 // kernel for the last M % 4 rows. Compiled with -march=armv8.2-a+dotprod on AArch64 targets only;
-// elsewhere this file is just the has_built stub.
+// elsewhere this file is just the null table.
 //
 // sdot v.4s, w.16b, a.4b[l] multiplies, per int32 lane, 4 signed weight bytes by the 4 activation
 // bytes of lane l and adds the sum to the accumulator (16 MACs per instruction). A rows are read in
@@ -307,14 +307,11 @@ const GemmS8Kernels* gemm_s8_table_neondot() {
   return &kTable;
 }
 
-bool gemm_s8_has_built_neondot() { return true; }
-
 }  // namespace act::kernels
 
 #else  // not AArch64: nothing to build
 
 namespace act::kernels {
-bool gemm_s8_has_built_neondot() { return false; }
 const GemmS8Kernels* gemm_s8_table_neondot() { return nullptr; }
 }  // namespace act::kernels
 

@@ -1,8 +1,6 @@
 #include "kernels/fp32/fp32_kernels.h"
 
 #include <algorithm>
-#include <cmath>
-#include <cstring>
 #include <limits>
 
 namespace act::kernels {

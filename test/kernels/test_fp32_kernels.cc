@@ -59,52 +59,56 @@ TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
       {1, 1, 3, 2, 3, 1, 1, 1},     // a single pixel: everything but the centre tap is padding
       {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
   };
-  for (const ConvCase& c : cases) for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
+  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
-    const Conv2dShape s = Conv2dShape::square(c.h, c.w, c.cin, c.cout, c.kernel, c.stride, c.pad, c.dilation);
-    const auto x = random_vector(static_cast<size_t>(c.h) * c.w * c.cin, rng);
-    const auto w = random_vector(static_cast<size_t>(c.cout) * s.patch_size(), rng);
-    const auto expected = conv_naive(s, x, w);
-    const int pixels = s.out_h * s.out_w;
-    std::vector<float> y(static_cast<size_t>(pixels) * c.cout, NAN);
-    // Ragged tiles: 5 pixels at a time.
-    for (int p0 = 0; p0 < pixels; p0 += 5) {
-      const int count = std::min(5, pixels - p0);
-      std::vector<float> patches(static_cast<size_t>(count) * s.patch_size(), NAN);
-      im2col_nhwc_f32(s, x.data(), p0, count, patches.data());
-      gemm.nt(count, c.cout, s.patch_size(), patches.data(), static_cast<size_t>(s.patch_size()), w.data(),
-                  static_cast<size_t>(s.patch_size()), y.data() + static_cast<size_t>(p0) * c.cout, static_cast<size_t>(c.cout));
-    }
-    for (size_t i = 0; i < y.size(); ++i) {
-      ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
-          << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
+    for (const ConvCase& c : cases) {
+      const Conv2dShape s = Conv2dShape::square(c.h, c.w, c.cin, c.cout, c.kernel, c.stride, c.pad, c.dilation);
+      const auto x = random_vector(static_cast<size_t>(c.h) * c.w * c.cin, rng);
+      const auto w = random_vector(static_cast<size_t>(c.cout) * s.patch_size(), rng);
+      const auto expected = conv_naive(s, x, w);
+      const int pixels = s.out_h * s.out_w;
+      std::vector<float> y(static_cast<size_t>(pixels) * c.cout, NAN);
+      // Ragged tiles: 5 pixels at a time.
+      for (int p0 = 0; p0 < pixels; p0 += 5) {
+        const int count = std::min(5, pixels - p0);
+        std::vector<float> patches(static_cast<size_t>(count) * s.patch_size(), NAN);
+        im2col_nhwc_f32(s, x.data(), p0, count, patches.data());
+        gemm.nt(count, c.cout, s.patch_size(), patches.data(), static_cast<size_t>(s.patch_size()), w.data(),
+                static_cast<size_t>(s.patch_size()), y.data() + static_cast<size_t>(p0) * c.cout, static_cast<size_t>(c.cout));
+      }
+      for (size_t i = 0; i < y.size(); ++i) {
+        ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
+            << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
+      }
     }
   }
 }
 
 TEST(Fp32Kernels, GemmWithStridesMatchesNaive) {
   std::mt19937 rng(3);
-  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) for (int m : {1, 7, 33}) {
+  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
-    for (int n : {1, 5, 64}) {
-      for (int k : {1, 9, 100}) {
-        const size_t lda = k + 3, ldb = k + 1, ldc = n + 2;
-        const auto a = random_vector(m * lda, rng), b = random_vector(n * ldb, rng);
-        std::vector<float> c(m * ldc, 42.0f);
-        gemm.nt(m, n, k, a.data(), lda, b.data(), ldb, c.data(), ldc);
-        std::vector<float> bt(static_cast<size_t>(k) * (n + 4));  // B^T, row-major [k x n], ld n+4
-        for (int i = 0; i < n; ++i)
-          for (int j = 0; j < k; ++j) bt[j * (n + 4) + i] = b[i * ldb + j];
-        std::vector<float> c2(m * ldc, 42.0f);
-        gemm.nn(m, n, k, a.data(), lda, bt.data(), n + 4, c2.data(), ldc);
-        for (int i = 0; i < m; ++i) {
-          for (int j = 0; j < n; ++j) {
-            double acc = 0;
-            for (int t = 0; t < k; ++t) acc += static_cast<double>(a[i * lda + t]) * b[j * ldb + t];
-            ASSERT_NEAR(c[i * ldc + j], acc, 1e-5 * k) << gemm.name;
-            ASSERT_NEAR(c2[i * ldc + j], acc, 1e-5 * k) << gemm.name;
+    for (int m : {1, 7, 33}) {
+      for (int n : {1, 5, 64}) {
+        for (int k : {1, 9, 100}) {
+          const size_t lda = k + 3, ldb = k + 1, ldc = n + 2;
+          const auto a = random_vector(m * lda, rng), b = random_vector(n * ldb, rng);
+          std::vector<float> c(m * ldc, 42.0f);
+          gemm.nt(m, n, k, a.data(), lda, b.data(), ldb, c.data(), ldc);
+          std::vector<float> bt(static_cast<size_t>(k) * (n + 4));  // B^T, row-major [k x n], ld n+4
+          for (int i = 0; i < n; ++i)
+            for (int j = 0; j < k; ++j) bt[j * (n + 4) + i] = b[i * ldb + j];
+          std::vector<float> c2(m * ldc, 42.0f);
+          gemm.nn(m, n, k, a.data(), lda, bt.data(), n + 4, c2.data(), ldc);
+          for (int i = 0; i < m; ++i) {
+            for (int j = 0; j < n; ++j) {
+              double acc = 0;
+              for (int t = 0; t < k; ++t) acc += static_cast<double>(a[i * lda + t]) * b[j * ldb + t];
+              ASSERT_NEAR(c[i * ldc + j], acc, 1e-5 * k) << gemm.name;
+              ASSERT_NEAR(c2[i * ldc + j], acc, 1e-5 * k) << gemm.name;
+            }
+            for (size_t j = n; j < ldc; ++j) ASSERT_EQ(c[i * ldc + j], 42.0f) << "wrote past n";
           }
-          for (size_t j = n; j < ldc; ++j) ASSERT_EQ(c[i * ldc + j], 42.0f) << "wrote past n";
         }
       }
     }

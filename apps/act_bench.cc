@@ -197,7 +197,7 @@ struct Peak {
 Peak measure_peak(const act::ModelInfo& info) {
   Peak peak;
   peak.int8 = info.precision.rfind("int8", 0) == 0;
-  peak.isa = peak.int8 ? act::kernels::gemm_s8_select().kernels->isa : act::kernels::gemm_f32_select().kernels->isa;
+  peak.isa = act::kernels::parse_isa(info.isa).value_or(act::kernels::Isa::kRef);
   peak.probe = act::kernels::isa_peak_probe(peak.isa, peak.int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
   peak.gmacs_per_core = peak.probe ? act::kernels::measure_peak_gmacs(*peak.probe) : 0.0;
   return peak;

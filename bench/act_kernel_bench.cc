@@ -40,7 +40,7 @@
 #include "graph/thread_pool.h"
 #include "kernels/conv_s8/conv_s8.h"
 #include "kernels/fp32/elementwise_f32.h"
-#include "kernels/fp32/fp32_kernels.h"
+#include "kernels/config/kernel_config.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/pool_s8/maxpool_s8_variants.h"
@@ -348,7 +348,7 @@ void bm_quant_rows(benchmark::State& state, const kernels::QuantS8Kernels* k, in
   std::vector<float> sc(static_cast<size_t>(rows));
   std::vector<int32_t> zp(static_cast<size_t>(rows));
   for (auto _ : state) {
-    kernels::quantize_rows_dynamic_f32_s8_with(*k, rows, cols, x.data(), cols, y.data(), cols, sc.data(), zp.data());
+    kernels::quantize_rows_dynamic_f32_s8(*k, rows, cols, x.data(), cols, y.data(), cols, sc.data(), zp.data());
     benchmark::ClobberMemory();
   }
   state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size()) * 5);
@@ -371,7 +371,7 @@ void bm_maxpool(benchmark::State& state, const kernels::MaxPoolS8Kernels* k, int
   std::vector<int8_t> x(static_cast<size_t>(h) * w * c, 1), y(static_cast<size_t>(oh) * ow * c);
   for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<int8_t>(i * 7);
   for (auto _ : state) {
-    kernels::maxpool_nhwc_s8_with(*k, h, w, c, 3, 2, 1, ow, x.data(), y.data(), 0, oh);
+    kernels::maxpool_nhwc_s8(*k, h, w, c, 3, 2, 1, ow, x.data(), y.data(), 0, oh);
     benchmark::ClobberMemory();
   }
   state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size() + y.size()));
@@ -449,8 +449,12 @@ int main(int argc, char** argv) {
         ->ComputeStatistics("max", bench::stat_max)
         ->ComputeStatistics("min", bench::stat_min);
   };
-  for (kernels::Isa isa : kernels::gemm_s8_available_isas()) {
-    const kernels::GemmS8Kernels* v = kernels::gemm_s8_kernels(isa);
+  // Every variant of every family this CPU runs: each ISA's own tables (isa_tables), not the
+  // per-level configuration, so that no variant is measured twice.
+  const std::vector<kernels::Isa> isas = kernels::cpu_isas();
+  for (kernels::Isa isa : isas) {
+    const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
+    if (v == nullptr) continue;
     const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (const bench::Shape& s : shapes) {
       if (isa == kernels::Isa::kRef && &s != smallest) continue;
@@ -462,9 +466,9 @@ int main(int argc, char** argv) {
     }
   }
   // Convolutions: the SIMD variants only (the reference's GEMM is checked by the tests).
-  for (kernels::Isa isa : kernels::gemm_s8_available_isas()) {
-    if (isa == kernels::Isa::kRef) continue;
-    const kernels::GemmS8Kernels* v = kernels::gemm_s8_kernels(isa);
+  for (kernels::Isa isa : isas) {
+    const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
+    if (v == nullptr || isa == kernels::Isa::kRef) continue;
     const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
       for (const bench::ConvBench& cb : bench::resnet18_convs(h, w)) {
@@ -477,10 +481,11 @@ int main(int argc, char** argv) {
       }
     }
   }
-  for (kernels::Isa isa : kernels::elementwise_f32_available_isas()) {
-    const kernels::GemmF32Kernels* g = kernels::gemm_f32_kernels(isa);
-    if (g == nullptr) g = kernels::gemm_f32_table_ref();  // AArch64: the baseline Eigen is NEON already
-    const kernels::ElementwiseF32Kernels* e = kernels::elementwise_f32_kernels(isa);
+  for (kernels::Isa isa : isas) {
+    const kernels::ElementwiseF32Kernels* e = kernels::isa_tables(isa).elementwise;
+    if (e == nullptr) continue;
+    // Attention with the FP32 GEMM an Engine pairs with this element-wise variant.
+    const kernels::GemmF32Kernels* g = &kernels::kernel_config_for(isa).gemm_f32;
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_f32/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
       for (int t = 1; t <= max_threads; ++t) {
@@ -492,8 +497,9 @@ int main(int argc, char** argv) {
     reg(benchmark::RegisterBenchmark((ew + "/layernorm/302x512").c_str(), bench::bm_layernorm, e, 302, 512));
     reg(benchmark::RegisterBenchmark((ew + "/softmax/2416x302").c_str(), bench::bm_softmax, e, 8 * 302, 302));
   }
-  for (kernels::Isa isa : kernels::quant_s8_available_isas()) {
-    const kernels::QuantS8Kernels* k = kernels::quant_s8_kernels(isa);
+  for (kernels::Isa isa : isas) {
+    const kernels::QuantS8Kernels* k = kernels::isa_tables(isa).quant;
+    if (k == nullptr) continue;
     const std::string qn = std::string("quant/") + kernels::isa_name(isa);
     for (auto [rows, cols] : {std::pair{302, 512}, std::pair{302, 3200}}) {
       const std::string name = qn + "/rows_dynamic/" + std::to_string(rows) + "x" + std::to_string(cols);
@@ -501,14 +507,15 @@ int main(int argc, char** argv) {
     }
     reg(benchmark::RegisterBenchmark((qn + "/dequantize/154624").c_str(), bench::bm_dequant, k, size_t{302 * 512}));
   }
-  for (kernels::Isa isa : kernels::maxpool_s8_available_isas()) {
+  for (kernels::Isa isa : isas) {
+    const kernels::MaxPoolS8Kernels* k = kernels::isa_tables(isa).maxpool_s8;
+    if (k == nullptr) continue;
     const std::string name = std::string("pool/") + kernels::isa_name(isa) + "/maxpool_3x3s2/240x320x64";
-    reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_maxpool, kernels::maxpool_s8_kernels(isa), 240, 320));
+    reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_maxpool, k, 240, 320));
   }
   benchmark::AddCustomContext("cpu_model", bench::cpu_model());
   benchmark::AddCustomContext("threads", "1.." + std::to_string(max_threads) + " (see /threads:T)");
-  benchmark::AddCustomContext("gemm_s8_variants",
-                              kernels::isa_mask_names(kernels::gemm_s8_built_isas() & kernels::cpu_isa_mask()));
+  benchmark::AddCustomContext("isas", kernels::isa_mask_names(kernels::cpu_isa_mask()));
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;

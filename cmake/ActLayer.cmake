@@ -8,10 +8,6 @@ function(act_add_layer name)
     file(GLOB dir_sources CONFIGURE_DEPENDS ${dir}/*.cc)
     list(APPEND sources ${dir_sources})
   endforeach()
-  if(NOT sources)  # a layer still being written: keep the build configurable
-    set(sources ${CMAKE_CURRENT_BINARY_DIR}/${name}_empty.cc)
-    file(WRITE ${sources} "// no sources yet\n")
-  endif()
   add_library(${name} OBJECT ${sources})
   target_include_directories(${name} PUBLIC
     $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
@@ -22,13 +18,15 @@ function(act_add_layer name)
 endfunction()
 
 # act_set_isa_flags(source...): per-file instruction-set flags, chosen by the file name's suffix
-# (the kernel naming grammar's ISA suffix):
-#   *_avx2.cc        -mavx2 -mfma                                   (x86-64 targets)
-#   *_avx512vnni.cc  -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl -mavx512vnni  (x86-64 targets)
-#   *_neondot.cc     -march=armv8.2-a+dotprod                       (AArch64 targets)
-# On other targets the file gets no flags and compiles to nothing but its has_built_*() stub
-# (its body is guarded by #if defined(__x86_64__) / defined(__aarch64__)). Only these files see
-# the flags, so the rest of the library runs on any CPU of the target architecture.
+# (the kernel naming grammar's ISA suffix: the level the code needs, kernels/common/isa.h):
+#   *_avx2.cc        -mavx2 -mfma                                              (x86-64 targets)
+#   *_avx512.cc      -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl              (x86-64 targets)
+#   *_avx512vnni.cc  -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl -mavx512vnni (x86-64 targets)
+#   *_neon.cc        none: Advanced SIMD is part of the AArch64 baseline
+#   *_neondot.cc     -march=armv8.2-a+dotprod                                  (AArch64 targets)
+# On other targets the file compiles to nothing but its null table (its body is guarded by
+# #if defined(__x86_64__) / defined(__aarch64__)). Only these files see the flags, so the rest of the
+# library runs on any CPU of the target architecture.
 # Must be called from the directory that creates the target using the sources.
 function(act_set_isa_flags)
   if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")
@@ -40,6 +38,8 @@ function(act_set_isa_flags)
   foreach(src ${ARGN})
     if(act_x86 AND src MATCHES "_avx2\\.cc$")
       set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-mavx2;-mfma")
+    elseif(act_x86 AND src MATCHES "_avx512\\.cc$")
+      set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-mavx2;-mfma;-mavx512f;-mavx512bw;-mavx512vl")
     elseif(act_x86 AND src MATCHES "_avx512vnni\\.cc$")
       set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS
         "-mavx2;-mfma;-mavx512f;-mavx512bw;-mavx512vl;-mavx512vnni")

@@ -59,7 +59,7 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
     std::copy(f, f + w.size(), w.begin());
   }
   std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
-  kernels::gemm_f32_nt(rows, pos_cols, D, pos, static_cast<size_t>(D), w.data(), static_cast<size_t>(D), out.data(),
+  kernels_.gemm_f32.nt(rows, pos_cols, D, pos, static_cast<size_t>(D), w.data(), static_cast<size_t>(D), out.data(),
                        static_cast<size_t>(width));
   for (int r = 0; r < rows; ++r) {
     float* row = out.data() + static_cast<size_t>(r) * width;
@@ -133,7 +133,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     spec.s8_out = false;
     if (residual) spec.residual = as_f32(*residual).id;
     const ValueId y = graph_.add_value(name, y_shape);
-    add_int8(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name, y);
+    add_int8(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, xq.id, y), name, y);
     calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
@@ -148,7 +148,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
   }
   const ValueId y = graph_.add_value(name, y_shape, DataType::kS8);
   graph_.value(y).quant = spec.output_q;
-  add_int8(std::make_unique<ConvS8Op>(*gemm_s8_, spec, xq.id, y), name, y);
+  add_int8(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, xq.id, y), name, y);
   return Tensor{y, true, spec.output_q, kNoValue};
 }
 
@@ -174,7 +174,7 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
     const ValueId qx = graph_.add_value(out_name + ".x_s8", {rows, in}, DataType::kS8);
     const ValueId row_scale = graph_.add_value(out_name + ".x_scale", {rows});
     const ValueId row_zero_point = graph_.add_value(out_name + ".x_zero_point", {rows}, DataType::kS32);
-    add_int8(std::make_unique<LinearS8Op>(*gemm_s8_, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
+    add_int8(std::make_unique<LinearS8Op>(kernels_.gemm_s8, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
                                           q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale,
                                           row_zero_point),
              out_name, y);
@@ -263,7 +263,7 @@ ValueId ActNetwork::backbone(size_t camera) {
     spec.input_q = x.q;
     spec.s8_out = false;
     const ValueId y = graph_.add_value(proj_name, {h * w, D});
-    add_int8(std::make_unique<ConvS8Op>(*gemm_s8_, spec, x.id, y), proj_name, y);
+    add_int8(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, x.id, y), proj_name, y);
     calibration_point(CalibrationRole::kImageProjection, y);
     return y;
   }
@@ -353,14 +353,12 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
   return out;
 }
 
-ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob) : config_(config), blob_(blob) {
-  int8_ = blob_.config().value("precision", "") == "int8";
+ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob, const kernels::KernelConfig& kernels)
+    : config_(config), blob_(blob), kernels_(kernels) {
+  int8_ = config_.precision == Precision::kInt8;
   if (int8_) {
     if (!blob_.config().contains("quantization")) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 blob without a quantization section");
     quant_ = QuantConfig::from_json(blob_.config()["quantization"]);
-    const kernels::GemmS8Selection selection = kernels::gemm_s8_select();
-    if (selection.kernels == nullptr) fail(ErrorCode::kInvalidArgument, selection.error);
-    gemm_s8_ = selection.kernels;
   }
   const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;
   const size_t d = static_cast<size_t>(D);

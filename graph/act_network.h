@@ -46,12 +46,13 @@ struct Int8Layer {
 
 class ActNetwork {
  public:
-  /// Builds the graph. Throws act::Error(kDataLoss) when a blob tensor is missing or has a shape
-  /// that does not match the config.
-  ActNetwork(const ModelConfig& config, const ActbFile& blob);
+  /// Builds the graph for the kernels of `kernels` (int8 weights are packed for its gemm_s8 variant),
+  /// which must outlive the network. Throws act::Error(kDataLoss) when a blob tensor is missing or
+  /// has a shape that does not match the config.
+  ActNetwork(const ModelConfig& config, const ActbFile& blob, const kernels::KernelConfig& kernels);
 
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
-  void run(ThreadPool& pool, StageTimes* times = nullptr) { graph_.run(pool, times); }
+  void run(ThreadPool& pool, StageTimes* times = nullptr) { graph_.run(pool, kernels_, times); }
 
   float* camera_input(size_t camera) { return graph_.data(camera_inputs_.at(camera)); }  ///< [H, W, 3]
   float* state_input() { return graph_.data(state_input_); }                          ///< [state_dim]
@@ -60,8 +61,6 @@ class ActNetwork {
 
   Graph& graph() { return graph_; }
   const ModelConfig& config() const { return config_; }
-  /// The INT8 kernels in use (null for an FP32 blob).
-  const kernels::GemmS8Kernels* gemm_s8() const { return gemm_s8_; }
   /// The float values of the camera branches, in graph order. Calibration reads them from an FP32
   /// network, where every value of the branches is float: a static INT8 blob records them all.
   const std::vector<CalibrationPoint>& calibration_points() const { return calibration_points_; }
@@ -107,9 +106,9 @@ class ActNetwork {
 
   ModelConfig config_;
   const ActbFile& blob_;
+  const kernels::KernelConfig& kernels_;
   bool int8_ = false;
   QuantConfig quant_;
-  const kernels::GemmS8Kernels* gemm_s8_ = nullptr;
   std::map<ValueId, Tensor> converted_;  // float <-> int8 conversions already in the graph
   std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
   Graph graph_;

@@ -5,6 +5,7 @@
 #include <map>
 
 #include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/quant/quant_s8_variants.h"
 #include "weights/blob/error.h"
 
 namespace act::graph {
@@ -53,7 +54,7 @@ std::vector<float> Graph::read_f32(ValueId id) {
     out.assign(p, p + v.elements);
   } else if (v.dtype == DataType::kS8 && v.quant) {
     out.resize(v.elements);
-    kernels::dequantize_s8_f32(v.elements, data_s8(id), v.quant->scale, v.quant->zero_point, out.data());
+    kernels::quant_s8_table_ref()->dequantize(v.elements, data_s8(id), v.quant->scale, v.quant->zero_point, out.data());
   }
   return out;
 }
@@ -115,11 +116,11 @@ void Graph::plan(int threads, bool keep_all_values) {
   planned_ = true;
 }
 
-void Graph::run(ThreadPool& pool, StageTimes* times) {
+void Graph::run(ThreadPool& pool, const kernels::KernelConfig& kernels, StageTimes* times) {
   check(planned_, ErrorCode::kInternal, "Graph::run before plan");
   check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
         "graph planned for fewer threads than the pool has");
-  RunContext ctx(arena_.data(), values_, pool, arena_.data() + scratch_offset_, scratch_per_thread_);
+  RunContext ctx(arena_.data(), values_, pool, kernels, arena_.data() + scratch_offset_, scratch_per_thread_);
   if (times == nullptr) {
     for (const auto& op : ops_) op->run(ctx);
     return;

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "graph/thread_pool.h"
+#include "kernels/config/kernel_config.h"
 #include "kernels/quant/quant_s8.h"
 
 namespace act::graph {
@@ -38,15 +39,19 @@ struct Value {
   bool pinned = false; ///< inputs and outputs: alive for the whole run
 };
 
-/// What an op sees when it runs: the arena, the pool, per-thread scratch.
+/// What an op sees when it runs: the arena, the pool, per-thread scratch and the kernels to call (the
+/// Engine's one KernelConfig; ops never choose kernels themselves).
 class RunContext {
  public:
-  RunContext(float* arena, const std::vector<Value>& values, ThreadPool& pool, float* scratch, size_t scratch_per_thread)
-      : arena_(arena), values_(values), pool_(pool), scratch_(scratch), scratch_per_thread_(scratch_per_thread) {}
+  RunContext(float* arena, const std::vector<Value>& values, ThreadPool& pool, const kernels::KernelConfig& kernels,
+             float* scratch, size_t scratch_per_thread)
+      : arena_(arena), values_(values), pool_(pool), kernels_(kernels), scratch_(scratch),
+        scratch_per_thread_(scratch_per_thread) {}
   float* data(ValueId id) const { return arena_ + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) const { return reinterpret_cast<int8_t*>(data(id)); }
   int32_t* data_s32(ValueId id) const { return reinterpret_cast<int32_t*>(data(id)); }
   ThreadPool& pool() const { return pool_; }
+  const kernels::KernelConfig& kernels() const { return kernels_; }
   float* scratch(int thread) const { return scratch_ + static_cast<size_t>(thread) * scratch_per_thread_; }
   int8_t* scratch_s8(int thread) const { return reinterpret_cast<int8_t*>(scratch(thread)); }
 
@@ -54,6 +59,7 @@ class RunContext {
   float* arena_;
   const std::vector<Value>& values_;
   ThreadPool& pool_;
+  const kernels::KernelConfig& kernels_;
   float* scratch_;
   size_t scratch_per_thread_;
 };
@@ -118,14 +124,16 @@ class Graph {
   }
 
   void plan(int threads, bool keep_all_values);
-  /// Runs every op in order. With `times`, adds each op's wall time to its stage.
-  void run(ThreadPool& pool, StageTimes* times = nullptr);
+  /// Runs every op in order with `kernels` (the configuration int8 weights were packed for). With
+  /// `times`, adds each op's wall time to its stage.
+  void run(ThreadPool& pool, const kernels::KernelConfig& kernels, StageTimes* times = nullptr);
 
   float* data(ValueId id) { return arena_.data() + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) { return reinterpret_cast<int8_t*>(data(id)); }
   Value& value(ValueId id) { return values_[static_cast<size_t>(id)]; }
   /// The value as floats: a copy of an f32 value, or an int8 value dequantized with its static
-  /// parameters (empty when it has none, or for int32 values).
+  /// parameters by the reference kernel (every variant gives its bits); empty when it has none, or
+  /// for int32 values.
   std::vector<float> read_f32(ValueId id);
   const Value& value(ValueId id) const { return values_[static_cast<size_t>(id)]; }
   size_t value_count() const { return values_.size(); }

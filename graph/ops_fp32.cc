@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "kernels/common/im2col.h"
 #include "kernels/pool_s8/maxpool_s8.h"
 
 namespace act::graph {
@@ -17,8 +18,8 @@ constexpr int kLinearTileRows = 128;
 size_t ceil_div(size_t a, size_t b) { return (a + b - 1) / b; }
 
 // bias + residual + activation over a [rows, cols] tile of y (row stride ldy), rows from row0.
-void apply_epilogue(float* y, size_t ldy, int row0, int rows, int col0, int cols, const float* bias, size_t bias_ld,
-                    const float* residual, size_t residual_ld, Epilogue epilogue) {
+void apply_epilogue(const kernels::ElementwiseF32Kernels& k, float* y, size_t ldy, int row0, int rows, int col0, int cols,
+                    const float* bias, size_t bias_ld, const float* residual, size_t residual_ld, Epilogue epilogue) {
   for (int r = 0; r < rows; ++r) {
     float* yr = y + static_cast<size_t>(r) * ldy;
     const size_t row = static_cast<size_t>(row0 + r);
@@ -30,8 +31,8 @@ void apply_epilogue(float* y, size_t ldy, int row0, int rows, int col0, int cols
       const float* rr = residual + row * residual_ld + col0;
       for (int c = 0; c < cols; ++c) yr[c] += rr[c];
     }
-    if (epilogue == Epilogue::kRelu) kernels::relu_f32(static_cast<size_t>(cols), yr);
-    if (epilogue == Epilogue::kGelu) kernels::gelu_f32(static_cast<size_t>(cols), yr);
+    if (epilogue == Epilogue::kRelu) k.relu(static_cast<size_t>(cols), yr);
+    if (epilogue == Epilogue::kGelu) k.gelu(static_cast<size_t>(cols), yr);
   }
 }
 
@@ -74,8 +75,8 @@ void Conv2dOp::run(const RunContext& ctx) const {
       a = patches;
     }
     float* yt = y + static_cast<size_t>(p0) * n;
-    kernels::gemm_f32_nt(count, s_.out_c, k, a, static_cast<size_t>(k), weight_, static_cast<size_t>(k), yt, n);
-    apply_epilogue(yt, n, 0, count, 0, s_.out_c, bias_, 0, residual ? residual + static_cast<size_t>(p0) * n : nullptr, n,
+    ctx.kernels().gemm_f32.nt(count, s_.out_c, k, a, static_cast<size_t>(k), weight_, static_cast<size_t>(k), yt, n);
+    apply_epilogue(ctx.kernels().elementwise, yt, n, 0, count, 0, s_.out_c, bias_, 0, residual ? residual + static_cast<size_t>(p0) * n : nullptr, n,
                    relu_ ? Epilogue::kRelu : Epilogue::kNone);
   });
 }
@@ -97,7 +98,7 @@ void MaxPoolOp::run(const RunContext& ctx) const {
     const int r0 = static_cast<int>(task) * kRows;
     const int r1 = std::min(out_h_, r0 + kRows);
     if (s8_) {
-      kernels::maxpool_nhwc_s8(in_h_, in_w_, channels_, kernel_, stride_, pad_, out_w_, ctx.data_s8(inputs[0]),
+      kernels::maxpool_nhwc_s8(ctx.kernels().maxpool_s8, in_h_, in_w_, channels_, kernel_, stride_, pad_, out_w_, ctx.data_s8(inputs[0]),
                                ctx.data_s8(outputs[0]), r0, r1);
     } else {
       kernels::maxpool_nhwc_f32(in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_, ctx.data(inputs[0]),
@@ -133,9 +134,9 @@ void LinearOp::run(const RunContext& ctx) const {
     const int cols = std::min(kLinearTileCols, out_ - c0);
     const int rows = std::min(kLinearTileRows, rows_ - r0);
     float* yt = y + static_cast<size_t>(r0) * ldy + c0;
-    kernels::gemm_f32_nt(rows, cols, in_, x + static_cast<size_t>(r0) * x_.ld, x_.ld,
+    ctx.kernels().gemm_f32.nt(rows, cols, in_, x + static_cast<size_t>(r0) * x_.ld, x_.ld,
                          weight_ + static_cast<size_t>(c0) * in_, static_cast<size_t>(in_), yt, ldy);
-    apply_epilogue(yt, ldy, r0, rows, c0, cols, bias, bias_.ld, residual, residual_.ld, epilogue_);
+    apply_epilogue(ctx.kernels().elementwise, yt, ldy, r0, rows, c0, cols, bias, bias_.ld, residual, residual_.ld, epilogue_);
   });
 }
 
@@ -173,7 +174,7 @@ void LayerNormOp::run(const RunContext& ctx) const {
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kRows;
     const int rows = std::min(kRows, rows_ - r0);
-    kernels::layernorm_rows_f32(rows, cols_, x + r0 * ld, ld, gamma_, beta_, 1e-5f, y + r0 * ld, ld);
+    ctx.kernels().elementwise.layernorm_rows(rows, cols_, x + r0 * ld, ld, gamma_, beta_, 1e-5f, y + r0 * ld, ld);
   });
 }
 
@@ -215,10 +216,10 @@ void AttentionOp::run(const RunContext& ctx) const {
       const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
       for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
     }
-    kernels::gemm_f32_nt(rows, nk_, hd, q_scaled, static_cast<size_t>(hd), k + static_cast<size_t>(h) * hd, k_.ld, scores,
+    ctx.kernels().gemm_f32.nt(rows, nk_, hd, q_scaled, static_cast<size_t>(hd), k + static_cast<size_t>(h) * hd, k_.ld, scores,
                          static_cast<size_t>(nk_));
-    kernels::softmax_rows_f32(rows, nk_, scores, static_cast<size_t>(nk_));
-    kernels::gemm_f32_nn(rows, hd, nk_, scores, static_cast<size_t>(nk_), v + static_cast<size_t>(h) * hd, v_.ld,
+    ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
+    ctx.kernels().gemm_f32.nn(rows, hd, nk_, scores, static_cast<size_t>(nk_), v + static_cast<size_t>(h) * hd, v_.ld,
                          out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, static_cast<size_t>(dim_));
   });
 }

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "graph/graph.h"
+#include "kernels/common/conv2d_shape.h"
 #include "kernels/fp32/fp32_kernels.h"
 
 namespace act::graph {

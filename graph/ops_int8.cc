@@ -71,7 +71,7 @@ void QuantizeOp::run(const RunContext& ctx) const {
     ctx.pool().parallel_for(tasks, [&](size_t task, int thread) {
       const size_t begin = task * kElementwiseChunk;
       float lo, hi;
-      kernels::minmax_f32(std::min(kElementwiseChunk, elements_ - begin), x + begin, &lo, &hi);
+      ctx.kernels().quant.minmax(std::min(kElementwiseChunk, elements_ - begin), x + begin, &lo, &hi);
       float& absmax = ctx.scratch(thread)[0];
       absmax = std::max({absmax, -lo, hi});
     });
@@ -85,7 +85,7 @@ void QuantizeOp::run(const RunContext& ctx) const {
   const float inv_scale = 1.0f / q.scale;
   ctx.pool().parallel_for(tasks, [&](size_t task, int) {
     const size_t begin = task * kElementwiseChunk;
-    kernels::quantize_f32_s8(std::min(kElementwiseChunk, elements_ - begin), x + begin, inv_scale, q.zero_point, y + begin);
+    ctx.kernels().quant.quantize(std::min(kElementwiseChunk, elements_ - begin), x + begin, inv_scale, q.zero_point, y + begin);
   });
 }
 
@@ -100,7 +100,7 @@ void DequantizeOp::run(const RunContext& ctx) const {
   float* y = ctx.data(outputs[0]);
   ctx.pool().parallel_for(ceil_div(elements_, kElementwiseChunk), [&](size_t task, int) {
     const size_t begin = task * kElementwiseChunk;
-    kernels::dequantize_s8_f32(std::min(kElementwiseChunk, elements_ - begin), x + begin, q_.scale, q_.zero_point, y + begin);
+    ctx.kernels().quant.dequantize(std::min(kElementwiseChunk, elements_ - begin), x + begin, q_.scale, q_.zero_point, y + begin);
   });
 }
 
@@ -121,7 +121,7 @@ std::vector<int32_t> integer_bias(const ConvS8Spec& s) {
 }  // namespace
 
 ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec, ValueId input, ValueId output)
-    : kernels_(kernels), spec_(spec), tile_pixels_(kernels::conv_s8_tile_pixels(spec.shape)),
+    : spec_(spec), tile_pixels_(kernels::conv_s8_tile_pixels(spec.shape)),
       packed_(kernels, spec.shape.out_c, spec.shape.patch_size(), spec.weight,
               spec.s8_out ? integer_bias(spec).data() : nullptr, spec.input_params == kNoValue ? spec.input_q.zero_point : 0) {
   check(!spec.s8_out || spec.input_params == kNoValue, ErrorCode::kInternal, "an int8-out conv needs static input parameters");
@@ -151,7 +151,7 @@ void ConvS8Op::run(const RunContext& ctx) const {
     const float* params = ctx.data(spec_.input_params);
     in_q = {params[0], static_cast<int32_t>(params[1])};
   }
-  const kernels::ConvS8 conv{spec_.shape, &kernels_, packed_.data(), static_cast<int8_t>(in_q.zero_point)};
+  const kernels::ConvS8 conv{spec_.shape, &ctx.kernels().gemm_s8, packed_.data(), static_cast<int8_t>(in_q.zero_point)};
   const int8_t* x = ctx.data_s8(inputs[0]);
   const int pixels = spec_.shape.out_h * spec_.shape.out_w;
   const size_t n = static_cast<size_t>(spec_.shape.out_c);
@@ -214,7 +214,7 @@ void ConvS8Op::run(const RunContext& ctx) const {
 LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const int8_t* weight,
                        const float* w_scale, MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output,
                        ValueId quantized_x, ValueId row_scale, ValueId row_zero_point)
-    : kernels_(kernels), rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), w_scale_(w_scale),
+    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), w_scale_(w_scale),
       epilogue_(epilogue), packed_(kernels, out, in, weight, nullptr, 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
@@ -234,7 +234,7 @@ void LinearS8Op::run(const RunContext& ctx) const {
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kQuantizeTileRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kQuantizeTileRows;
     const int rows = std::min(kQuantizeTileRows, rows_ - r0);
-    kernels::quantize_rows_dynamic_f32_s8(rows, in_, x + static_cast<size_t>(r0) * x_.ld, x_.ld, qx + r0 * in, in,
+    kernels::quantize_rows_dynamic_f32_s8(ctx.kernels().quant, rows, in_, x + static_cast<size_t>(r0) * x_.ld, x_.ld, qx + r0 * in, in,
                                           row_scale + r0, row_zero_point + r0);
   });
 
@@ -271,9 +271,9 @@ void LinearS8Op::run(const RunContext& ctx) const {
     const int r0 = static_cast<int>(task / col_tiles) * kLinearTileRows;
     const int c1 = std::min(out_, c0 + kLinearTileCols);
     const int r1 = std::min(rows_, r0 + kLinearTileRows);
-    kernels_.f32out(args, o, r0, r1, c0, c1);
+    ctx.kernels().gemm_s8.f32out(args, o, r0, r1, c0, c1);
     if (epilogue_ == Epilogue::kGelu) {
-      for (int r = r0; r < r1; ++r) kernels::gelu_f32(static_cast<size_t>(c1 - c0), o.c + static_cast<size_t>(r) * o.ldc + c0);
+      for (int r = r0; r < r1; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), o.c + static_cast<size_t>(r) * o.ldc + c0);
     }
   });
 }

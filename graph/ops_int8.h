@@ -1,6 +1,7 @@
 // The INT8 ops of the ACT graph, over the kernels in kernels/gemm_s8, conv_s8, pool_s8 and quant.
 // Weights are int8 (symmetric, per output channel) and packed once, here, at graph build time for
-// the gemm_s8 variant in use.
+// the gemm_s8 variant of the KernelConfig the graph runs with (RunContext::kernels(); the kernels
+// check that the packed layout is their own).
 //
 // Two ways to quantize activations:
 //   static   the scale and zero point of every backbone value come from calibration (in the blob);
@@ -92,7 +93,6 @@ class ConvS8Op : public Op {
   double macs() const override;
 
  private:
-  const kernels::GemmS8Kernels& kernels_;
   ConvS8Spec spec_;
   int tile_pixels_;
   PackedWeights packed_;
@@ -113,7 +113,6 @@ class LinearS8Op : public Op {
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
 
  private:
-  const kernels::GemmS8Kernels& kernels_;
   int rows_, in_, out_;
   MatrixRef x_, bias_, residual_;
   const float* w_scale_;

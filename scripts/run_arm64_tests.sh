@@ -60,8 +60,8 @@ if [ -z "$emulator" ]; then
 fi
 # The emulated CPU's SIMD variants must really run (the host's requirement does not apply here).
 case "$emulator" in
-  *cortex-a72*) export ACT_TEST_REQUIRE_ISAS="" ;;
-  *) export ACT_TEST_REQUIRE_ISAS=neondot ;;
+  *cortex-a72*) export ACT_TEST_REQUIRE_ISAS=neon ;;
+  *) export ACT_TEST_REQUIRE_ISAS=neon,neondot ;;
 esac
 echo "kernel variants required under emulation: ${ACT_TEST_REQUIRE_ISAS:-none}"
 count() { ctest --test-dir "$build" -N "$@" | sed -n 's/^Total Tests: //p'; }

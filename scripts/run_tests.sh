@@ -41,12 +41,16 @@ run_ctest() {
 "$root/scripts/install_deps.sh"
 stage_done install
 
-# The SIMD kernel variants this CPU can run must really run in the tests (a test fails otherwise).
+# The SIMD kernel variants of every ISA level this CPU runs (kernels/common/isa.h) must really run in
+# the tests (a test fails otherwise).
 flags=$(grep -m1 -E '^(flags|Features)' /proc/cpuinfo || true)
+has() { for f in "$@"; do [[ " $flags " == *" $f "* ]] || return 1; done; }
 required=()
-[[ " $flags " == *" avx2 "* ]] && required+=(avx2)
-[[ " $flags " == *" avx512_vnni "* && " $flags " == *" avx512bw "* && " $flags " == *" avx512vl "* ]] && required+=(avx512vnni)
-[[ " $flags " == *" asimddp "* ]] && required+=(neondot)
+has avx2 fma && required+=(avx2)
+has avx2 fma avx512f avx512bw avx512vl && required+=(avx512)
+has avx2 fma avx512f avx512bw avx512vl avx512_vnni && required+=(avx512vnni)
+has asimd && required+=(neon)
+has asimd asimddp && required+=(neondot)
 ACT_TEST_REQUIRE_ISAS=$(IFS=,; echo "${required[*]}")
 export ACT_TEST_REQUIRE_ISAS
 echo "kernel variants required by the tests: ${ACT_TEST_REQUIRE_ISAS:-none}"

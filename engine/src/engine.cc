@@ -2,10 +2,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <new>
 
 #include "engine/src/engine_impl.h"
-#include "kernels/fp32/gemm_f32.h"
 #include "weights/blob/blob_names.h"
 #include "weights/blob/error.h"
 
@@ -32,6 +32,20 @@ void check_finite(std::span<const float> values, const char* what) {
          std::to_string(values.size()) + " values NaN or infinite): is the observation far outside what the model " +
          "was trained on, or are the weights damaged?");
   }
+}
+
+// The kernels of an Engine: EngineOptions::isa, or ACT_ISA's when the option is "auto" and ACT_ISA
+// is set. An ISA that is unknown or that this CPU lacks is an error, never a silent fallback.
+kernels::KernelConfig engine_kernels(const std::string& isa_option) {
+  std::string requested = isa_option;
+  std::string source = "EngineOptions::isa";
+  if (const char* env = std::getenv("ACT_ISA"); isa_option == "auto" && env != nullptr && env[0] != '\0') {
+    requested = env;
+    source = "ACT_ISA";
+  }
+  kernels::KernelConfigChoice choice = kernels::kernel_config(requested);
+  if (!choice.config) fail(ErrorCode::kInvalidArgument, source + ": " + choice.error);
+  return *choice.config;
 }
 
 }  // namespace
@@ -62,16 +76,10 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
     : blob_(ActbFile::open(blob_path, options.verify_checksum)),
       config_(ModelConfig::from_json(blob_.config())),
       pool_(options.threads),
+      kernels_(engine_kernels(options.isa)),
       profile_(options.profile),
       keep_intermediates_(keep_intermediates) {
-  // A bad ACT_ISA (unknown, or an ISA this CPU lacks) is an error here, never a silent fallback.
-  const kernels::GemmF32Selection gemm = kernels::gemm_f32_select();
-  if (!gemm.error.empty()) fail(ErrorCode::kInvalidArgument, gemm.error);
-  const std::string precision = blob_.config().value("precision", "");
-  if (precision != "fp32" && precision != "int8") {
-    fail(ErrorCode::kUnimplemented, blob_path + ": precision \"" + precision + "\" is not supported by this build (fp32, int8)");
-  }
-  network_ = std::make_unique<graph::ActNetwork>(config_, blob_);
+  network_ = std::make_unique<graph::ActNetwork>(config_, blob_, kernels_);
   network_->plan(pool_.threads(), keep_intermediates);
 
   for (const auto& cam : config_.cameras) {
@@ -97,13 +105,10 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
   info_.n_action_steps = config_.n_action_steps;
   info_.temporal_ensembling = config_.temporal_ensemble_coeff.has_value();
   info_.temporal_ensemble_coeff = config_.temporal_ensemble_coeff.value_or(0.0);
-  info_.precision = precision;
-  info_.kernels = gemm.kernels->name;
-  if (const kernels::GemmS8Kernels* s8 = network_->gemm_s8()) {
-    info_.kernels = std::string("gemm_s8 ") + kernels::isa_name(s8->isa) + " " + std::to_string(s8->mr) + "x" +
-                    std::to_string(s8->nr) + "c" + std::to_string(s8->kr) + ", " + info_.kernels;
-  }
-  if (precision == "int8") info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
+  info_.precision = precision_name(config_.precision);
+  info_.isa = kernels::isa_name(kernels_.isa);
+  info_.kernels = kernels_.describe();
+  if (config_.precision == Precision::kInt8) info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
   info_.summary = config_.summary();
 }
 

@@ -9,6 +9,7 @@
 #include "actengine/engine.h"
 #include "graph/act_network.h"
 #include "graph/thread_pool.h"
+#include "kernels/config/kernel_config.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/error.h"
 #include "weights/blob/model_config.h"
@@ -53,6 +54,7 @@ class Engine::Impl {
   ModelConfig config_;
   ModelInfo info_;
   ThreadPool pool_;
+  kernels::KernelConfig kernels_;  // before network_, which packs for it and runs with it
   std::unique_ptr<graph::ActNetwork> network_;
   std::vector<InputNorm> camera_norm_;
   InputNorm state_norm_, env_norm_;

@@ -1,7 +1,5 @@
 #include "kernels/common/isa.h"
 
-#include <cstdlib>
-
 #if defined(ACT_HAVE_CPUINFO)
 #include <cpuinfo.h>
 #endif
@@ -14,10 +12,10 @@ namespace act::kernels {
 
 namespace {
 
-constexpr const char* kIsaNames[kIsaCount] = {"ref", "avx2", "avx512vnni", "neondot"};
+constexpr const char* kIsaNames[kIsaCount] = {"ref", "avx2", "avx512", "avx512vnni", "neon", "neondot"};
 
-// Best first: the order choose_isa() prefers when there is no override.
-constexpr Isa kPreference[] = {Isa::kAvx512Vnni, Isa::kAvx2, Isa::kNeonDot, Isa::kRef};
+// Best first: the highest level of either chain that the CPU supports wins.
+constexpr Isa kPreference[] = {Isa::kAvx512Vnni, Isa::kAvx512, Isa::kAvx2, Isa::kNeonDot, Isa::kNeon, Isa::kRef};
 
 CpuFeatures detect() {
   CpuFeatures f;
@@ -98,12 +96,28 @@ const CpuFeatures& cpu_features() {
   return features;
 }
 
+std::optional<Isa> isa_below(Isa isa) {
+  switch (isa) {
+    case Isa::kRef: return std::nullopt;
+    case Isa::kAvx2: return Isa::kRef;
+    case Isa::kAvx512: return Isa::kAvx2;
+    case Isa::kAvx512Vnni: return Isa::kAvx512;
+    case Isa::kNeon: return Isa::kRef;
+    case Isa::kNeonDot: return Isa::kNeon;
+  }
+  return std::nullopt;
+}
+
 bool cpu_supports(Isa isa) {
   const CpuFeatures& f = cpu_features();
+  const bool avx2 = f.avx2 && f.fma;
+  const bool avx512 = avx2 && f.avx512f && f.avx512bw && f.avx512vl;
   switch (isa) {
     case Isa::kRef: return true;
-    case Isa::kAvx2: return f.avx2 && f.fma;
-    case Isa::kAvx512Vnni: return f.avx512f && f.avx512bw && f.avx512vl && f.avx512vnni;
+    case Isa::kAvx2: return avx2;
+    case Isa::kAvx512: return avx512;
+    case Isa::kAvx512Vnni: return avx512 && f.avx512vnni;
+    case Isa::kNeon: return f.neon;
     case Isa::kNeonDot: return f.neon && f.dotprod;
   }
   return false;
@@ -117,36 +131,19 @@ IsaMask cpu_isa_mask() {
   return mask;
 }
 
-IsaChoice choose_isa(const char* override_value, IsaMask built, IsaMask detected) {
-  IsaChoice choice;
-  if (override_value != nullptr && override_value[0] != '\0') {
-    const std::string value(override_value);
-    const std::optional<Isa> isa = parse_isa(value);
-    if (!isa) {
-      choice.error = "ACT_ISA=" + value + ": unknown ISA (expected one of ref, avx2, avx512vnni, neondot)";
-    } else if ((built & isa_bit(*isa)) == 0) {
-      choice.error = "ACT_ISA=" + value + ": this build has no " + value +
-                     " kernels (built for this target: " + isa_mask_names(built) + ")";
-    } else if ((detected & isa_bit(*isa)) == 0) {
-      choice.error = "ACT_ISA=" + value + ": this CPU does not support " + value +
-                     " (supported: " + isa_mask_names(built & detected) + ")";
-    } else {
-      choice.isa = *isa;
-    }
-    return choice;
+std::vector<Isa> cpu_isas() {
+  std::vector<Isa> out;
+  for (int i = 0; i < kIsaCount; ++i) {
+    if (cpu_supports(static_cast<Isa>(i))) out.push_back(static_cast<Isa>(i));
   }
-  for (Isa isa : kPreference) {
-    if ((built & detected & isa_bit(isa)) != 0) {
-      choice.isa = isa;
-      return choice;
-    }
-  }
-  choice.error = "no kernel variant is both built and supported (built: " + isa_mask_names(built) + ")";
-  return choice;
+  return out;
 }
 
-IsaChoice choose_isa_from_env(IsaMask built) {
-  return choose_isa(std::getenv("ACT_ISA"), built, cpu_isa_mask());
+Isa best_cpu_isa() {
+  for (Isa isa : kPreference) {
+    if (cpu_supports(isa)) return isa;
+  }
+  return Isa::kRef;
 }
 
 }  // namespace act::kernels

@@ -1,29 +1,38 @@
-// Instruction-set variants of the kernels, CPU feature detection (done once per process) and the
-// ACT_ISA override. Each kernel family compiles some of these variants (per-ISA files, see
-// kernels/gemm_s8/README.md); a variant can run when it is both built and detected.
+// Instruction-set levels of the kernels and CPU feature detection (done once per process: the
+// hardware does not change). Each kernel family compiles a variant for some of these levels (per-ISA
+// files, see kernels/README.md); kernels/config/kernel_config.h chooses among them.
 #pragma once
 
 #include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace act::kernels {
 
-/// Kernel variants, one per instruction set. kRef is the portable scalar reference.
-enum class Isa : uint8_t { kRef = 0, kAvx2 = 1, kAvx512Vnni = 2, kNeonDot = 3 };
-inline constexpr int kIsaCount = 4;
+/// Instruction-set levels, one chain per architecture, each level a superset of the one below:
+///   x86-64   ref < avx2 (AVX2 + FMA) < avx512 (AVX-512 F/BW/VL) < avx512vnni (+ VNNI)
+///   AArch64  ref < neon (Advanced SIMD) < neondot (+ the ARMv8.2 dot product)
+/// A kernel variant is named by the level it needs; a family's variant for a level is its best
+/// variant at or below it (kernels/config/kernel_config.h). kRef is the portable scalar reference.
+enum class Isa : uint8_t { kRef = 0, kAvx2 = 1, kAvx512 = 2, kAvx512Vnni = 3, kNeon = 4, kNeonDot = 5 };
+inline constexpr int kIsaCount = 6;
 
 /// A set of Isa values: bit i stands for Isa(i).
 using IsaMask = uint32_t;
 constexpr IsaMask isa_bit(Isa isa) { return IsaMask{1} << static_cast<unsigned>(isa); }
 
-/// "ref", "avx2", "avx512vnni" or "neondot" (the spelling ACT_ISA accepts and kernel names use).
+/// "ref", "avx2", "avx512", "avx512vnni", "neon" or "neondot" (the spelling EngineOptions::isa,
+/// ACT_ISA and kernel names use).
 const char* isa_name(Isa isa);
 /// The inverse of isa_name; nullopt for anything else (case-sensitive).
 std::optional<Isa> parse_isa(std::string_view name);
 /// Comma-separated names of the set, in Isa order, e.g. "ref, avx2".
 std::string isa_mask_names(IsaMask mask);
+/// The level directly below `isa` in its chain (avx512vnni -> avx512 -> avx2 -> ref,
+/// neondot -> neon -> ref); nullopt for kRef.
+std::optional<Isa> isa_below(Isa isa);
 
 /// What this CPU (and its OS) supports, detected once per process.
 struct CpuFeatures {
@@ -35,26 +44,15 @@ struct CpuFeatures {
 };
 const CpuFeatures& cpu_features();
 
-/// True when the CPU can run `isa`: avx2 needs AVX2+FMA; avx512vnni needs AVX-512 F/BW/VL/VNNI;
-/// neondot needs the ARMv8.2 dot-product extension. kRef is always supported.
+/// True when the CPU can run `isa` (which implies every level below it): avx2 needs AVX2 + FMA;
+/// avx512 needs that and AVX-512 F/BW/VL; avx512vnni also AVX-512 VNNI; neon needs Advanced SIMD;
+/// neondot also the dot-product extension. kRef is always supported.
 bool cpu_supports(Isa isa);
 /// The set of ISAs cpu_supports() accepts.
 IsaMask cpu_isa_mask();
-
-/// The result of choosing a variant: the ISA, or an error that says what is wrong.
-struct IsaChoice {
-  Isa isa = Isa::kRef;
-  std::string error;  ///< empty when ok
-  bool ok() const { return error.empty(); }
-};
-
-/// Chooses the ISA a kernel family runs with. `override_value` is the ACT_ISA value (nullptr or ""
-/// when unset): it must name an ISA that the family built (`built`) and the CPU supports
-/// (`detected`), otherwise the choice is an error (never a silent fallback). Without an override
-/// the best ISA in built & detected wins (avx512vnni > avx2 > ref, neondot > ref).
-IsaChoice choose_isa(const char* override_value, IsaMask built, IsaMask detected);
-
-/// choose_isa() with the ACT_ISA environment variable (read at each call) and cpu_isa_mask().
-IsaChoice choose_isa_from_env(IsaMask built);
+/// The same as a list, in Isa order (what tests and benchmarks walk to reach every variant).
+std::vector<Isa> cpu_isas();
+/// The highest level this CPU runs (its chain's best supported ISA).
+Isa best_cpu_isa();
 
 }  // namespace act::kernels

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "kernels/common/im2col.h"
+
 namespace act::kernels {
 
 namespace {

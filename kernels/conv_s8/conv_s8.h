@@ -7,7 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "kernels/conv_s8/im2col_s8.h"
+#include "kernels/common/conv2d_shape.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 
 namespace act::kernels {
@@ -44,7 +44,7 @@ struct ConvChannels {
 /// kGemmS8ReadSlack addressable bytes.
 void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
                    int8_t* scratch, ConvChannels channels = {});
-/// The same with f32 out (dequantized, + bias, residual, ReLU). `a_scale` is the input scale.
+/// The same with f32 out (dequantized, + bias, residual, ReLU; out.a_scale is the input's scale).
 void conv_s8_f32out(const ConvS8& conv, const int8_t* input, const GemmS8OutF32& out, int pixel_begin, int count,
                     int8_t* scratch, ConvChannels channels = {});
 

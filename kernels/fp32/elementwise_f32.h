@@ -1,6 +1,5 @@
-// The float element-wise family (LayerNorm, softmax, ReLU, GELU, add) per ISA, behind the public
-// functions of fp32_kernels.h, which run the variant chosen once per process (ACT_ISA, else the
-// best). The SIMD variants are one xsimd implementation (elementwise_f32_xsimd.inc) instantiated
+// The float element-wise family (LayerNorm, softmax, ReLU, GELU, add) per ISA, one table each; an
+// Engine runs the table its KernelConfig chose (kernels/config/kernel_config.h). The SIMD variants are one xsimd implementation (elementwise_f32_xsimd.inc) instantiated
 // for each ISA's xsimd architecture in that ISA's own file; the reference is scalar C++.
 //
 // Agreement with the reference (test/kernels/test_elementwise_f32.cc checks these bounds):
@@ -14,7 +13,6 @@
 #pragma once
 
 #include <cstddef>
-#include <vector>
 
 #include "kernels/common/isa.h"
 
@@ -27,22 +25,22 @@ struct ElementwiseF32Kernels {
   const char* relu_name;
   const char* gelu_name;
   const char* add_name;
+  /// Row-wise LayerNorm over `cols` values: (x - mean) / sqrt(biased var + eps) * gamma + beta.
   void (*layernorm_rows)(int rows, int cols, const float* x, size_t ldx, const float* gamma, const float* beta,
                          float eps, float* y, size_t ldy);
+  /// In-place numerically stable softmax of each row.
   void (*softmax_rows)(int rows, int cols, float* x, size_t ldx);
   void (*relu)(size_t n, float* x);
+  /// Exact (erf) GELU, as torch.nn.functional.gelu with approximate="none".
   void (*gelu)(size_t n, float* x);
+  /// y[i] = a[i] + b[i]; y may be a or b.
   void (*add)(size_t n, const float* a, const float* b, float* y);
 };
 
+/// The table compiled for each ISA (nullptr when that file compiled to nothing on this target).
 const ElementwiseF32Kernels* elementwise_f32_table_ref();
-const ElementwiseF32Kernels* elementwise_f32_table_avx2();        ///< xsimd fma3<avx2>
-const ElementwiseF32Kernels* elementwise_f32_table_avx512vnni();  ///< xsimd avx512bw
-const ElementwiseF32Kernels* elementwise_f32_table_neondot();     ///< xsimd neon64
-
-IsaMask elementwise_f32_built_isas();
-const ElementwiseF32Kernels* elementwise_f32_kernels(Isa isa);
-std::vector<Isa> elementwise_f32_available_isas();
-const ElementwiseF32Kernels& elementwise_f32_active();
+const ElementwiseF32Kernels* elementwise_f32_table_avx2();    ///< xsimd fma3<avx2>
+const ElementwiseF32Kernels* elementwise_f32_table_avx512();  ///< xsimd avx512f (AVX-512 F/BW/VL flags)
+const ElementwiseF32Kernels* elementwise_f32_table_neon();    ///< xsimd neon64
 
 }  // namespace act::kernels

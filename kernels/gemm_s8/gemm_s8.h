@@ -20,8 +20,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <string>
-#include <vector>
 
 #include "kernels/common/covered_paths.h"
 #include "kernels/common/isa.h"
@@ -139,19 +137,5 @@ struct GemmS8Kernels {
   GemmS8F32OutFn f32out;
   GemmS8S32OutFn s32out;
 };
-
-/// ISAs whose gemm_s8 kernels this binary contains (kRef always).
-IsaMask gemm_s8_built_isas();
-/// ISAs both built and supported by this CPU, in Isa order.
-std::vector<Isa> gemm_s8_available_isas();
-/// The table of `isa`, or nullptr when it is not built or the CPU cannot run it.
-const GemmS8Kernels* gemm_s8_kernels(Isa isa);
-
-/// The table chosen for this process: ACT_ISA when set, else the best available variant.
-struct GemmS8Selection {
-  const GemmS8Kernels* kernels = nullptr;  ///< null on error
-  std::string error;                       ///< why ACT_ISA could not be honoured
-};
-GemmS8Selection gemm_s8_select();
 
 }  // namespace act::kernels

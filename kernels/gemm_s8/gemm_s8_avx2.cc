@@ -1,5 +1,5 @@
 // gemm_s8 on AVX2: the 2x8c8 micro-kernel. Compiled with -mavx2 -mfma on x86-64 targets only;
-// elsewhere this file is just the has_built stub.
+// elsewhere this file is just the null table.
 //
 // Why vpmaddwd and not vpmaddubsw: vpmaddubsw adds two u8 x s8 products into a *saturating* int16,
 // which clips for full-range operands (2 x 255 x 127 > 32767). Sign-extending both operands to
@@ -36,6 +36,8 @@ namespace {
 constexpr int kMR = 2;
 constexpr int kNR = 8;
 constexpr int kKR = 8;
+constexpr Isa kIsa = Isa::kAvx2;
+constexpr GemmS8Layout kLayout = GemmS8Layout::kAvx2_8x8;
 // Weight panels processed per sweep over the rows: keep them in L2 while every row block reuses them.
 constexpr size_t kPanelBlockBytes = size_t{512} << 10;
 
@@ -197,43 +199,19 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel
   for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
 
-template <class Epi>
-void run(const GemmS8Args& g, size_t ldc, Epi& epi, int m0, int m1, int n0, int n1) {
-  const GemmS8PackedHeader& h = *static_cast<const GemmS8PackedHeader*>(g.packed_w);
-  ACT_DCHECK(h.magic == kGemmS8PackedMagic && h.layout == GemmS8Layout::kAvx2_8x8,
-             "packed_w was not written by pack_w_s8_8x8_goi_pair4");
-  ACT_DCHECK(h.n == g.n && h.k == g.k, "packed_w has another shape");
-  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK && g.lda >= static_cast<size_t>(g.k), "bad k or lda");
-  ACT_DCHECK(ldc >= static_cast<size_t>(g.n), "ldc < n");
-  ACT_DCHECK(0 <= m0 && m0 <= m1 && m1 <= g.m && 0 <= n0 && n0 <= n1 && n1 <= g.n, "rectangle outside C");
-  (void)ldc;
-  if (m0 >= m1 || n0 >= n1) return;
-  const uint8_t* panels = static_cast<const uint8_t*>(g.packed_w) + sizeof(GemmS8PackedHeader);
-  const int p0 = n0 / kNR, p1 = (n1 + kNR - 1) / kNR;
-  const int block = static_cast<int>(kPanelBlockBytes / h.panel_bytes) > 1
-                        ? static_cast<int>(kPanelBlockBytes / h.panel_bytes)
-                        : 1;
-  uint32_t paths = g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u;
-  for (int pb = p0; pb < p1; pb += block) {
-    const int pe = pb + block < p1 ? pb + block : p1;
-    for (int m = m0; m < m1; m += kMR) {
-      const int rows = m1 - m < kMR ? m1 - m : kMR;
-      paths |= rows == kMR ? kPathFullTile : kPathRowTail;
-      for (int p = pb; p < pe; ++p) {
-        const int n = p * kNR;
-        const int lo = n0 > n ? n0 - n : 0;
-        const int hi = n1 - n < kNR ? n1 - n : kNR;
-        if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
-        const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-        switch (rows) {
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
 
-          case 2: tile<2>(g, h, panel, m, n, lo, hi, epi); break;
-          default: tile<1>(g, h, panel, m, n, lo, hi, epi); break;
-        }
-      }
+template <class Epi>
+void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
+               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
+  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
+    const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
+    if (rows == kMR) {
+      tile<kMR>(g, h, panel, m, n, lo, hi, epi);
+    } else {
+      tile<1>(g, h, panel, m, n, lo, hi, epi);
     }
-  }
-  if (g.covered != nullptr) g.covered->record(Isa::kAvx2, paths);
+  });
 }
 
 }  // namespace
@@ -256,8 +234,8 @@ void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutS32& o, int
 
 const GemmS8Kernels* gemm_s8_table_avx2() {
   static constexpr GemmS8Kernels kTable = {
-      Isa::kAvx2,
-      GemmS8Layout::kAvx2_8x8,
+      kIsa,
+      kLayout,
       kMR,
       kNR,
       kKR,
@@ -274,14 +252,11 @@ const GemmS8Kernels* gemm_s8_table_avx2() {
   return &kTable;
 }
 
-bool gemm_s8_has_built_avx2() { return true; }
-
 }  // namespace act::kernels
 
 #else  // not x86-64: nothing to build
 
 namespace act::kernels {
-bool gemm_s8_has_built_avx2() { return false; }
 const GemmS8Kernels* gemm_s8_table_avx2() { return nullptr; }
 }  // namespace act::kernels
 

@@ -1,5 +1,5 @@
 // gemm_s8 on AVX-512 VNNI: the 6x64c4 micro-kernel. Compiled with -mavx512f/bw/vl/vnni on x86-64
-// targets only; elsewhere this file is just the has_built stub.
+// targets only; elsewhere this file is just the null table.
 //
 // vpdpbusd multiplies 4 unsigned bytes by 4 signed bytes per int32 lane and adds the 4 products to
 // the accumulator without intermediate saturation (64 MACs per zmm instruction). The weights take
@@ -21,9 +21,11 @@
 #if defined(__x86_64__)
 
 // GCC 12's _mm512_undefined_*() initialise a variable with itself, which -O3 reports as
-// -Wmaybe-uninitialized at the header's lines (fixed in GCC 13); silence it for the header only.
+// -Wmaybe-uninitialized or -Wuninitialized at the header's lines, depending on where it is inlined
+// (fixed in GCC 13); silence it for the header only.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 #include <immintrin.h>
 #pragma GCC diagnostic pop
 
@@ -38,6 +40,8 @@ namespace {
 constexpr int kMR = 6;
 constexpr int kNR = 64;
 constexpr int kKR = 4;
+constexpr Isa kIsa = Isa::kAvx512Vnni;
+constexpr GemmS8Layout kLayout = GemmS8Layout::kVnni64x4;
 constexpr int kVecs = kNR / 16;
 constexpr size_t kPanelBlockBytes = size_t{1} << 20;  // weight panels kept in L2 per sweep
 
@@ -200,53 +204,30 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
 }
 
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
+
 // The rows [m, m + R) against panels [pb, pe): the row sums once, then every panel.
 template <int R, class Epi>
 void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int pb, int pe, int n0,
               int n1, Epi& epi, uint32_t& paths) {
   int32_t corr[R];
   row_corrections<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, g.k, corr);
-  for (int p = pb; p < pe; ++p) {
-    const int n = p * kNR;
-    const int lo = n0 > n ? n0 - n : 0;
-    const int hi = n1 - n < kNR ? n1 - n : kNR;
-    if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
+  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
     tile<R>(g, h, corr, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi);
-  }
+  });
 }
 
 template <class Epi>
-void run(const GemmS8Args& g, size_t ldc, Epi& epi, int m0, int m1, int n0, int n1) {
-  const GemmS8PackedHeader& h = *static_cast<const GemmS8PackedHeader*>(g.packed_w);
-  ACT_DCHECK(h.magic == kGemmS8PackedMagic && h.layout == GemmS8Layout::kVnni64x4,
-             "packed_w was not written by pack_w_s8_64x4_goi_x80");
-  ACT_DCHECK(h.n == g.n && h.k == g.k, "packed_w has another shape");
-  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK && g.lda >= static_cast<size_t>(g.k), "bad k or lda");
-  ACT_DCHECK(ldc >= static_cast<size_t>(g.n), "ldc < n");
-  ACT_DCHECK(0 <= m0 && m0 <= m1 && m1 <= g.m && 0 <= n0 && n0 <= n1 && n1 <= g.n, "rectangle outside C");
-  (void)ldc;
-  if (m0 >= m1 || n0 >= n1) return;
-  const uint8_t* panels = static_cast<const uint8_t*>(g.packed_w) + sizeof(GemmS8PackedHeader);
-  const int p0 = n0 / kNR, p1 = (n1 + kNR - 1) / kNR;
-  const int fit = static_cast<int>(kPanelBlockBytes / h.panel_bytes);
-  const int block = fit > 1 ? fit : 1;
-  uint32_t paths = g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u;
-  for (int pb = p0; pb < p1; pb += block) {
-    const int pe = pb + block < p1 ? pb + block : p1;
-    for (int m = m0; m < m1; m += kMR) {
-      const int rows = m1 - m < kMR ? m1 - m : kMR;
-      paths |= rows == kMR ? kPathFullTile : kPathRowTail;
-      switch (rows) {
-        case 6: row_tile<6>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-        case 5: row_tile<5>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-        case 4: row_tile<4>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-        case 3: row_tile<3>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-        case 2: row_tile<2>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-        default: row_tile<1>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-      }
-    }
+void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
+               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
+  switch (rows) {
+    case 6: row_tile<6>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 5: row_tile<5>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 4: row_tile<4>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 3: row_tile<3>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 2: row_tile<2>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    default: row_tile<1>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
   }
-  if (g.covered != nullptr) g.covered->record(Isa::kAvx512Vnni, paths);
 }
 
 }  // namespace
@@ -271,8 +252,8 @@ void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutS32&
 
 const GemmS8Kernels* gemm_s8_table_avx512vnni() {
   static constexpr GemmS8Kernels kTable = {
-      Isa::kAvx512Vnni,
-      GemmS8Layout::kVnni64x4,
+      kIsa,
+      kLayout,
       kMR,
       kNR,
       kKR,
@@ -289,14 +270,11 @@ const GemmS8Kernels* gemm_s8_table_avx512vnni() {
   return &kTable;
 }
 
-bool gemm_s8_has_built_avx512vnni() { return true; }
-
 }  // namespace act::kernels
 
 #else  // not x86-64: nothing to build
 
 namespace act::kernels {
-bool gemm_s8_has_built_avx512vnni() { return false; }
 const GemmS8Kernels* gemm_s8_table_avx512vnni() { return nullptr; }
 }  // namespace act::kernels
 

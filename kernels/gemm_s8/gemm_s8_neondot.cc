@@ -1,6 +1,6 @@
 // gemm_s8 on AArch64 with the dot-product extension: the 4x16c4 SDOT micro-kernel and the 1x16c4
 // kernel for the last M % 4 rows. Compiled with -march=armv8.2-a+dotprod on AArch64 targets only;
-// elsewhere this file is just the has_built stub.
+// elsewhere this file is just the null table.
 //
 // sdot v.4s, w.16b, a.4b[l] multiplies, per int32 lane, 4 signed weight bytes by the 4 activation
 // bytes of lane l and adds the sum to the accumulator (16 MACs per instruction). A rows are read in
@@ -30,6 +30,8 @@ namespace {
 constexpr int kMR = 4;
 constexpr int kNR = 16;
 constexpr int kKR = 4;
+constexpr Isa kIsa = Isa::kNeonDot;
+constexpr GemmS8Layout kLayout = GemmS8Layout::kNeon16x4;
 constexpr size_t kPanelBlockBytes = size_t{256} << 10;  // half the A76's 512 KB L2
 
 // One k-group (16 columns x 4 bytes) against lane L of each row's 16-byte A chunk.
@@ -231,42 +233,19 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel
   for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
 
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
+
 template <class Epi>
-void run(const GemmS8Args& g, size_t ldc, Epi& epi, int m0, int m1, int n0, int n1) {
-  const GemmS8PackedHeader& h = *static_cast<const GemmS8PackedHeader*>(g.packed_w);
-  ACT_DCHECK(h.magic == kGemmS8PackedMagic && h.layout == GemmS8Layout::kNeon16x4,
-             "packed_w was not written by pack_w_s8_16x4_goi");
-  ACT_DCHECK(h.n == g.n && h.k == g.k, "packed_w has another shape");
-  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK && g.lda >= static_cast<size_t>(g.k), "bad k or lda");
-  ACT_DCHECK(ldc >= static_cast<size_t>(g.n), "ldc < n");
-  ACT_DCHECK(0 <= m0 && m0 <= m1 && m1 <= g.m && 0 <= n0 && n0 <= n1 && n1 <= g.n, "rectangle outside C");
-  (void)ldc;
-  if (m0 >= m1 || n0 >= n1) return;
-  const uint8_t* panels = static_cast<const uint8_t*>(g.packed_w) + sizeof(GemmS8PackedHeader);
-  const int p0 = n0 / kNR, p1 = (n1 + kNR - 1) / kNR;
-  const int fit = static_cast<int>(kPanelBlockBytes / h.panel_bytes);
-  const int block = fit > 1 ? fit : 1;
-  uint32_t paths = g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u;
-  for (int pb = p0; pb < p1; pb += block) {
-    const int pe = pb + block < p1 ? pb + block : p1;
-    for (int m = m0; m < m1; m += kMR) {
-      const int rows = m1 - m < kMR ? m1 - m : kMR;
-      paths |= rows == kMR ? kPathFullTile : kPathRowTail;
-      for (int p = pb; p < pe; ++p) {
-        const int n = p * kNR;
-        const int lo = n0 > n ? n0 - n : 0;
-        const int hi = n1 - n < kNR ? n1 - n : kNR;
-        if (lo != 0 || hi != kNR) paths |= kPathPartialCols;
-        const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-        if (rows == kMR) {
-          tile<kMR>(g, h, panel, m, n, lo, hi, epi);
-        } else {
-          for (int r = 0; r < rows; ++r) tile<1>(g, h, panel, m + r, n, lo, hi, epi);  // 1x16c4
-        }
-      }
+void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
+               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
+  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
+    const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
+    if (rows == kMR) {
+      tile<kMR>(g, h, panel, m, n, lo, hi, epi);
+    } else {
+      for (int r = 0; r < rows; ++r) tile<1>(g, h, panel, m + r, n, lo, hi, epi);  // 1x16c4
     }
-  }
-  if (g.covered != nullptr) g.covered->record(Isa::kNeonDot, paths);
+  });
 }
 
 }  // namespace
@@ -289,8 +268,8 @@ void gemm_s8s8_s32out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutS32& o,
 
 const GemmS8Kernels* gemm_s8_table_neondot() {
   static constexpr GemmS8Kernels kTable = {
-      Isa::kNeonDot,
-      GemmS8Layout::kNeon16x4,
+      kIsa,
+      kLayout,
       kMR,
       kNR,
       kKR,
@@ -307,14 +286,11 @@ const GemmS8Kernels* gemm_s8_table_neondot() {
   return &kTable;
 }
 
-bool gemm_s8_has_built_neondot() { return true; }
-
 }  // namespace act::kernels
 
 #else  // not AArch64: nothing to build
 
 namespace act::kernels {
-bool gemm_s8_has_built_neondot() { return false; }
 const GemmS8Kernels* gemm_s8_table_neondot() { return nullptr; }
 }  // namespace act::kernels
 

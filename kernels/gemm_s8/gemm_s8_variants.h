@@ -1,6 +1,7 @@
 // Every gemm_s8 variant's kernels and packers by name (<family>_<dtypes>_<tile>_<isa>), and the
-// per-ISA tables that dispatch.cc combines. Callers normally go through gemm_s8.h's dispatch
-// (gemm_s8_kernels / gemm_s8_select); the names are here for tests and benchmarks.
+// per-ISA tables (nullptr when that ISA's file compiled to nothing on this target). An Engine runs
+// the table its KernelConfig chose (kernels/config/kernel_config.h); tests and benchmarks use the
+// tables directly.
 //
 // Common preconditions of every kernel below (checked with ACT_DCHECK):
 //   - args.packed_w was written by the packer of the same table for [args.n x args.k];
@@ -56,8 +57,6 @@ const GemmS8Kernels* gemm_s8_table_ref();
 // 2x8c8: A and W sign-extended to int16 and multiplied with vpmaddwd (exact; no vpmaddubsw
 // saturation). Packed by pack_w_s8_8x8_goi_pair4. Needs cpu_supports(Isa::kAvx2).
 
-/// True when this binary contains the AVX2 kernels (x86-64 builds).
-bool gemm_s8_has_built_avx2();
 /// The AVX2 table, or nullptr when not built.
 const GemmS8Kernels* gemm_s8_table_avx2();
 #if defined(__x86_64__)
@@ -73,7 +72,6 @@ void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS32& out
 // 6x64c4: vpdpbusd on (W + 128) as u8 x A as s8; each row tile subtracts 128 * rowsum(A).
 // Packed by pack_w_s8_64x4_goi_x80. Needs cpu_supports(Isa::kAvx512Vnni).
 
-bool gemm_s8_has_built_avx512vnni();
 const GemmS8Kernels* gemm_s8_table_avx512vnni();
 #if defined(__x86_64__)
 /// AVX-512 VNNI 6x64c4, s8 output.
@@ -92,7 +90,6 @@ void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutS
 // vdotq_laneq_s32) plus a 1x16c4 kernel for the last M % 4 rows. Packed by pack_w_s8_16x4_goi.
 // Needs cpu_supports(Isa::kNeonDot).
 
-bool gemm_s8_has_built_neondot();
 const GemmS8Kernels* gemm_s8_table_neondot();
 #if defined(__aarch64__)
 /// NEON SDOT 4x16c4 (+1x16c4 row tail), s8 output.

@@ -3,6 +3,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <optional>
 
 namespace act::kernels {
 
@@ -11,15 +12,17 @@ const PeakProbe kPeakProbes[] = {
     {"vpmaddwd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_ymm, true},
     {"vpmaddwd+vpaddd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_vpaddd_ymm, false},
     {"sdot", Isa::kNeonDot, PeakKind::kInt8, peak_sdot, true},
-    {"vfmadd231ps_zmm", Isa::kAvx512Vnni, PeakKind::kFp32, peak_vfmadd_f32_zmm, true},
+    {"vfmadd231ps_zmm", Isa::kAvx512, PeakKind::kFp32, peak_vfmadd_f32_zmm, true},
     {"vfmadd231ps_ymm", Isa::kAvx2, PeakKind::kFp32, peak_vfmadd_f32_ymm, true},
-    {"fmla_4s", Isa::kNeonDot, PeakKind::kFp32, peak_fmla_f32, true},
+    {"fmla_4s", Isa::kNeon, PeakKind::kFp32, peak_fmla_f32, true},
 };
 const int kPeakProbeCount = static_cast<int>(sizeof(kPeakProbes) / sizeof(kPeakProbes[0]));
 
 const PeakProbe* isa_peak_probe(Isa isa, PeakKind kind) {
-  for (const PeakProbe& p : kPeakProbes) {
-    if (p.isa == isa && p.kind == kind && p.is_isa_peak) return &p;
+  for (std::optional<Isa> level = isa; level; level = isa_below(*level)) {
+    for (const PeakProbe& p : kPeakProbes) {
+      if (p.isa == *level && p.kind == kind && p.is_isa_peak) return &p;
+    }
   }
   return nullptr;
 }

@@ -38,8 +38,9 @@ struct PeakProbe {
 extern const PeakProbe kPeakProbes[];
 extern const int kPeakProbeCount;
 
-/// The probe "% of peak" refers to for kernels of `isa` and `kind` (null when there is none, e.g.
-/// the scalar reference).
+/// The probe "% of peak" refers to for kernels of `isa` and `kind`: the probe of the highest level
+/// at or below `isa` (the same rule that picks a family's variant for a level, so for an Engine's
+/// level it bounds the GEMM that level runs); null when there is none (the scalar reference).
 const PeakProbe* isa_peak_probe(Isa isa, PeakKind kind);
 
 /// CPU time of the calling thread (seconds): unlike the wall clock, it does not count time the thread

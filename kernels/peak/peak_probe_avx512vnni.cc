@@ -36,33 +36,7 @@ uint64_t peak_vpdpbusd_zmm(uint64_t iterations) {
         "xmm13", "xmm14", "xmm15", "xmm30", "xmm31", "cc");
   return iterations * 16 * 64;
 }
-uint64_t peak_vfmadd_f32_zmm(uint64_t iterations) {
-  uint64_t n = iterations;
-  __asm__ volatile(
-      "vpxord %%zmm14, %%zmm14, %%zmm14\n\tvpxord %%zmm15, %%zmm15, %%zmm15\n\t"
-      "1:\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm0\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm1\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm2\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm3\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm4\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm5\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm6\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm7\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm8\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm9\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm10\n\t"
-      "vfmadd231ps %%zmm14, %%zmm15, %%zmm11\n\t"
-      "dec %0\n\t"
-      "jnz 1b\n\t"
-      "vzeroupper\n\t"
-      : "+r"(n)
-      :
-      : "xmm0", "xmm1", "xmm2", "xmm3", "xmm4", "xmm5", "xmm6", "xmm7", "xmm8", "xmm9", "xmm10", "xmm11", "xmm14", "xmm15", "cc");
-  return iterations * 12 * 16;
-}
 #else
-uint64_t peak_vfmadd_f32_zmm(uint64_t) { return 0; }
 uint64_t peak_vpdpbusd_zmm(uint64_t) { return 0; }
 #endif
 

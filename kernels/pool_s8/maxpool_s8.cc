@@ -1,9 +1,8 @@
-// The portable max-pool driver, the reference channel-max primitive and the dispatch.
+// The portable max-pool driver and the reference channel-max primitive.
 #include "kernels/pool_s8/maxpool_s8.h"
 
 #include <cstring>
 
-#include "kernels/common/variant_tables.h"
 #include "kernels/pool_s8/maxpool_s8_variants.h"
 
 namespace act::kernels {
@@ -18,12 +17,6 @@ void max_taps_s8_ref(const int8_t* const* taps, int ntaps, int channels, int8_t*
   }
 }
 
-const VariantTables<MaxPoolS8Kernels>& tables() {
-  static const VariantTables<MaxPoolS8Kernels> t({maxpool_s8_table_ref(), maxpool_s8_table_avx2(),
-                                                  maxpool_s8_table_avx512vnni(), maxpool_s8_table_neondot()});
-  return t;
-}
-
 }  // namespace
 
 const MaxPoolS8Kernels* maxpool_s8_table_ref() {
@@ -31,16 +24,8 @@ const MaxPoolS8Kernels* maxpool_s8_table_ref() {
   return &kTable;
 }
 
-IsaMask maxpool_s8_built_isas() { return tables().built_isas(); }
-const MaxPoolS8Kernels* maxpool_s8_kernels(Isa isa) { return tables().available(isa); }
-std::vector<Isa> maxpool_s8_available_isas() { return tables().available_isas(); }
-const MaxPoolS8Kernels& maxpool_s8_active() {
-  static const MaxPoolS8Kernels& active = tables().choose();
-  return active;
-}
-
-void maxpool_nhwc_s8_with(const MaxPoolS8Kernels& k, int in_h, int in_w, int channels, int kernel, int stride,
-                          int pad, int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end) {
+void maxpool_nhwc_s8(const MaxPoolS8Kernels& k, int in_h, int in_w, int channels, int kernel, int stride, int pad,
+                     int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end) {
   // Taps are gathered in batches; a window larger than one batch folds the running max (dst) in
   // as the first tap of the next batch.
   constexpr int kBatch = 32;
@@ -72,12 +57,6 @@ void maxpool_nhwc_s8_with(const MaxPoolS8Kernels& k, int in_h, int in_w, int cha
       }
     }
   }
-}
-
-void maxpool_nhwc_s8(int in_h, int in_w, int channels, int kernel, int stride, int pad, int out_w,
-                     const int8_t* input, int8_t* output, int row_begin, int row_end) {
-  maxpool_nhwc_s8_with(maxpool_s8_active(), in_h, in_w, channels, kernel, stride, pad, out_w, input, output,
-                       row_begin, row_end);
 }
 
 }  // namespace act::kernels

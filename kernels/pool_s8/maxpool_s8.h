@@ -1,14 +1,31 @@
 // 2-D max-pool over NHWC int8. Max commutes with the (monotonic) affine quantization, so the
 // output has the input's scale and zero point and the result is exact.
+//
+// One portable driver (maxpool_s8.cc) walks the pooling window once, in one place, and hands each
+// output pixel's in-image taps (pointers to channel vectors, as XNNPACK's indirection buffers) to a
+// per-ISA channel-max primitive, so padding and geometry are never re-implemented per ISA.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 
+#include "kernels/common/isa.h"
+
 namespace act::kernels {
 
-/// Output rows [row_begin, row_end). Padding never wins (it is skipped).
-void maxpool_nhwc_s8(int in_h, int in_w, int channels, int kernel, int stride, int pad, int out_w,
-                     const int8_t* input, int8_t* output, int row_begin, int row_end);
+/// dst[c] = max over t < ntaps of taps[t][c], for c < channels. ntaps >= 1; dst may be one of the
+/// taps (same address), never a partial overlap. Reads exactly `channels` bytes of each tap.
+using MaxS8TapsFn = void (*)(const int8_t* const* taps, int ntaps, int channels, int8_t* dst);
+
+/// One variant of the family (maxpool_s8_variants.h lists them; an Engine runs its KernelConfig's).
+struct MaxPoolS8Kernels {
+  Isa isa;
+  const char* max_taps_name;  ///< max_taps_s8_<isa>
+  MaxS8TapsFn max_taps;
+};
+
+/// Output rows [row_begin, row_end) with the variant `k`. Padding never wins (it is skipped).
+void maxpool_nhwc_s8(const MaxPoolS8Kernels& k, int in_h, int in_w, int channels, int kernel, int stride, int pad,
+                     int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end);
 
 }  // namespace act::kernels

@@ -13,6 +13,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "kernels/common/isa.h"
+
 namespace act::kernels {
 
 struct QuantS8 {
@@ -27,20 +29,25 @@ struct QuantS8 {
 /// widened to FLT_MIN).
 QuantS8 choose_quant_s8(float lo, float hi);
 
-/// y[i] = quantize(x[i]) by the rule above.
-void quantize_f32_s8(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y);
+/// One variant of the family (quant_s8_variants.h lists them; an Engine runs its KernelConfig's).
+struct QuantS8Kernels {
+  Isa isa;
+  const char* quantize_name;    ///< quantize_f32_s8_<isa>
+  const char* dequantize_name;  ///< dequantize_s8_f32_<isa>
+  const char* minmax_name;      ///< minmax_f32_<isa>
+  /// y[i] = quantize(x[i]) by the rule above.
+  void (*quantize)(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y);
+  /// y[i] = scale * (float(q[i]) - float(zero_point)).
+  void (*dequantize)(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y);
+  /// Smallest and largest value of x[0..n) (n >= 1; NaNs are ignored, all-NaN gives +inf/-inf).
+  void (*minmax)(size_t n, const float* x, float* lo, float* hi);
+};
 
-/// y[i] = scale * (float(q[i]) - float(zero_point)).
-void dequantize_s8_f32(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y);
-
-/// Smallest and largest value of x[0..n) (n >= 1; NaNs are ignored, all-NaN gives +inf/-inf).
-void minmax_f32(size_t n, const float* x, float* lo, float* hi);
-
-/// Dynamic per-row quantization: for each of `rows` rows of `cols` values, the parameters
-/// choose_quant_s8(row min, row max) and the row quantized with them. row_scale[r] and
+/// Dynamic per-row quantization with the variant `k`: for each of `rows` rows of `cols` values, the
+/// parameters choose_quant_s8(row min, row max) and the row quantized with them. row_scale[r] and
 /// row_zero_point[r] receive the parameters (what the gemm_s8 f32-out epilogue and per-row zero
 /// points take).
-void quantize_rows_dynamic_f32_s8(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
-                                  float* row_scale, int32_t* row_zero_point);
+void quantize_rows_dynamic_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
+                                  size_t ldy, float* row_scale, int32_t* row_zero_point);
 
 }  // namespace act::kernels

@@ -54,8 +54,8 @@ const QuantS8Kernels* quant_s8_table_ref() {
   return &kTable;
 }
 
-void quantize_rows_dynamic_f32_s8_with(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx,
-                                       int8_t* y, size_t ldy, float* row_scale, int32_t* row_zero_point) {
+void quantize_rows_dynamic_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
+                                  size_t ldy, float* row_scale, int32_t* row_zero_point) {
   for (int r = 0; r < rows; ++r) {
     const float* xr = x + static_cast<size_t>(r) * ldx;
     float lo, hi;

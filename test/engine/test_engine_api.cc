@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "actengine/engine.h"
+#include "kernels/common/isa.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
 #include "weights/blob/actb.h"
@@ -256,20 +257,82 @@ TEST_F(EngineApiTest, EnginesOpenAndRunConcurrently) {
   }
 }
 
+// Sets ACT_ISA for one scope (nullptr: unset), restoring the previous value.
+class ScopedActIsa {
+ public:
+  explicit ScopedActIsa(const char* value) {
+    const char* old = std::getenv("ACT_ISA");
+    had_ = old != nullptr;
+    if (had_) old_ = old;
+    if (value != nullptr) {
+      setenv("ACT_ISA", value, 1);
+    } else {
+      unsetenv("ACT_ISA");
+    }
+  }
+  ~ScopedActIsa() {
+    if (had_) {
+      setenv("ACT_ISA", old_.c_str(), 1);
+    } else {
+      unsetenv("ACT_ISA");
+    }
+  }
+
+ private:
+  bool had_ = false;
+  std::string old_;
+};
+
+// "x86-64 runs ref, avx2, ...": the list every ISA error ends with.
+std::string isas_this_cpu_runs() { return "this CPU runs " + kernels::isa_mask_names(kernels::cpu_isa_mask()); }
+
 TEST_F(EngineApiTest, BadIsaOverrideIsAnError) {
-  const char* saved = std::getenv("ACT_ISA");
-  const std::string saved_value = saved ? saved : "";
-  setenv("ACT_ISA", "sse9", 1);
+  ScopedActIsa env("sse9");
   auto e = Engine::open(blob_);
   EXPECT_EQ(e.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(e.status().message().find("sse9"), std::string::npos) << e.status().message();
-  setenv("ACT_ISA", "ref", 1);
-  auto ref = Engine::open(blob_, {.threads = 2});
+  EXPECT_EQ(e.status().message(), "ACT_ISA: unknown ISA 'sse9': " + isas_this_cpu_runs());
+  // An explicit option is not overridden.
+  auto ref = Engine::open(blob_, {.threads = 2, .isa = "ref"});
   ASSERT_TRUE(ref.ok()) << ref.status().to_string();
-  if (saved) {
-    setenv("ACT_ISA", saved_value.c_str(), 1);
-  } else {
-    unsetenv("ACT_ISA");
+  EXPECT_EQ((*ref)->model_info().isa, "ref");
+  ScopedActIsa ref_env("ref");
+  auto from_env = Engine::open(blob_, {.threads = 2});
+  ASSERT_TRUE(from_env.ok()) << from_env.status().to_string();
+  EXPECT_EQ((*from_env)->model_info().isa, "ref");
+}
+
+TEST_F(EngineApiTest, BadIsaOptionIsAnError) {
+  ScopedActIsa env(nullptr);
+  auto bogus = Engine::open(blob_, {.isa = "bogus"});
+  EXPECT_EQ(bogus.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(bogus.status().message(), "EngineOptions::isa: unknown ISA 'bogus': " + isas_this_cpu_runs());
+#if defined(__x86_64__)
+  const std::string foreign = "neondot";
+#else
+  const std::string foreign = "avx2";
+#endif
+  auto lacking = Engine::open(blob_, {.isa = foreign});
+  EXPECT_EQ(lacking.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(lacking.status().message(),
+            "EngineOptions::isa: ISA '" + foreign + "' is not supported by this CPU: " + isas_this_cpu_runs());
+}
+
+// Every ISA this CPU runs gives an Engine of that level, describing its kernels, whose actions agree
+// with the default Engine's (FP32: the GEMMs may sum in another order).
+TEST_F(EngineApiTest, EveryIsaThisCpuRunsGivesTheSameActions) {
+  ScopedActIsa env(nullptr);
+  auto want = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), want).ok());
+  EXPECT_EQ(engine_->model_info().isa, kernels::isa_name(kernels::best_cpu_isa()));
+  for (kernels::Isa isa : kernels::cpu_isas()) {
+    const std::string name = kernels::isa_name(isa);
+    auto e = Engine::open(blob_, {.threads = 2, .isa = name});
+    ASSERT_TRUE(e.ok()) << e.status().to_string();
+    EXPECT_EQ((*e)->model_info().isa, name);
+    EXPECT_EQ((*e)->model_info().kernels.rfind(name + ": gemm_s8 ", 0), 0u) << (*e)->model_info().kernels;
+    auto got = chunk();
+    ASSERT_TRUE((*e)->infer(observation(), got).ok());
+    for (size_t i = 0; i < got.size(); ++i) EXPECT_NEAR(got[i], want[i], 1e-4 * (1 + std::fabs(want[i]))) << name << " " << i;
   }
 }
 

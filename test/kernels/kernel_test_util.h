@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "kernels/common/isa.h"
+#include "kernels/config/kernel_config.h"
 
 namespace act::kernels::test {
 
@@ -27,18 +28,33 @@ inline int64_t ulp_distance(float a, float b) {
   return la > lb ? la - lb : lb - la;
 }
 
-/// The variants a family's tests run: ACT_ISA's alone when it is set (none when the family cannot
-/// honour it: the gemm_s8 ActIsa test reports the bad value), else every available one.
-inline std::vector<Isa> isas_under_test(const std::vector<Isa>& available, IsaMask built) {
+/// The variants of a family the tests run, by ISA: every ISA this CPU runs that has its own variant
+/// of the family, or, when ACT_ISA is set, only the variant an Engine at that level runs (none when
+/// ACT_ISA is invalid: KernelConfig.ActIsaOfThisRunIsValid reports it).
+template <class Table>
+std::vector<Isa> isas_under_test(const Table* IsaTables::*family) {
   const char* forced = std::getenv("ACT_ISA");
-  if (forced == nullptr || forced[0] == '\0') return available;
-  const IsaChoice c = choose_isa_from_env(built);
-  if (!c.ok()) return {};
-  return {c.isa};
+  if (forced != nullptr && forced[0] != '\0') {
+    const std::optional<Isa> level = parse_isa(forced);
+    if (!level || !cpu_supports(*level)) return {};
+    return {variant_for(*level, family).isa};
+  }
+  std::vector<Isa> out;
+  for (Isa isa : cpu_isas()) {
+    if (isa_tables(isa).*family != nullptr) out.push_back(isa);
+  }
+  return out;
 }
 
-/// ACT_TEST_REQUIRE_ISAS (comma-separated, set by CI to the variants its machine must run); an
-/// unknown name is returned as nullopt so that the caller fails on it.
+/// The family's own table for `isa` (one that isas_under_test returned).
+template <class Table>
+const Table& table_of(Isa isa, const Table* IsaTables::*family) {
+  return *(isa_tables(isa).*family);
+}
+
+/// ACT_TEST_REQUIRE_ISAS (comma-separated, set by CI to the ISA levels its machine must run: each
+/// family's own variant for such a level must exist and not be the reference's); an unknown name
+/// is returned as nullopt so that the caller fails on it.
 inline std::vector<std::optional<Isa>> required_isas() {
   std::vector<std::optional<Isa>> out;
   const char* env = std::getenv("ACT_TEST_REQUIRE_ISAS");

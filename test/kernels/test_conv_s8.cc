@@ -15,7 +15,7 @@
 
 #include "kernels/common/requant_ref.h"
 #include "kernels/conv_s8/conv_s8.h"
-#include "kernels/conv_s8/im2col_s8.h"
+#include "kernels/common/im2col.h"
 #include "test/kernels/kernel_test_util.h"
 
 namespace act::kernels {
@@ -136,7 +136,7 @@ std::vector<int8_t> run_s8(const GemmS8Kernels& v, const Problem& p, const GemmS
 
 std::string variant_names() {
   std::string s;
-  for (Isa isa : gemm_s8_available_isas()) s += std::string(isa_name(isa)) + " ";
+  for (Isa isa : test::isas_under_test(&IsaTables::gemm_s8)) s += std::string(isa_name(isa)) + " ";
   return s;
 }
 
@@ -165,8 +165,8 @@ TEST(ConvS8, EqualsDirectIntegerConvolutionForEveryVariant) {
           want[i] = residual ? ref::requantize_s8_residual(acc[i], p.scale[n], p.residual[i], 4, 0.75f, -7, -7, 127)
                              : ref::requantize_s8(acc[i], p.scale[n], -7, -128, 127);
         }
-        for (Isa isa : gemm_s8_available_isas()) {
-          const GemmS8Kernels& v = *gemm_s8_kernels(isa);
+        for (Isa isa : test::isas_under_test(&IsaTables::gemm_s8)) {
+          const GemmS8Kernels& v = test::table_of(isa, &IsaTables::gemm_s8);
           // The conv's own tiles, and ragged ones (1 pixel; 7 = not a multiple of any MR).
           // Channel blocks of 16 (ragged against 64-wide panels) and 64, as threads split deep layers.
           for (const auto& [tile, block] : {std::pair{0, 0}, {1, 0}, {7, 0}, {0, 16}, {7, 64}}) {
@@ -191,8 +191,8 @@ TEST(ConvS8, F32OutEqualsDequantizedDirectConvolution) {
     const Conv2dShape& s = p.s;
     const std::vector<int32_t> acc = conv_naive_acc(s, p.x, zp, p.w, p.bias);
     const int pixels = s.out_h * s.out_w;
-    for (Isa isa : gemm_s8_available_isas()) {
-      const GemmS8Kernels& v = *gemm_s8_kernels(isa);
+    for (Isa isa : test::isas_under_test(&IsaTables::gemm_s8)) {
+      const GemmS8Kernels& v = test::table_of(isa, &IsaTables::gemm_s8);
       std::unique_ptr<uint8_t, FreeDeleter> packed(
           static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, v.packed_size(s.out_c, s.patch_size()))));
       v.pack(s.out_c, s.patch_size(), p.w.data(), static_cast<size_t>(s.patch_size()), p.bias.data(), zp, packed.get());

@@ -3,7 +3,9 @@
 // within a stated tolerance. Sizes cover every vector width and ragged tail, rows are strided.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <optional>
@@ -12,7 +14,6 @@
 #include <vector>
 
 #include "kernels/fp32/elementwise_f32.h"
-#include "kernels/fp32/fp32_kernels.h"
 #include "test/kernels/kernel_test_util.h"
 
 namespace act::kernels {
@@ -36,7 +37,7 @@ std::vector<int> col_sizes() {
 
 class ElementwiseF32Variant : public ::testing::TestWithParam<Isa> {
  protected:
-  const ElementwiseF32Kernels& v() const { return *elementwise_f32_kernels(GetParam()); }
+  const ElementwiseF32Kernels& v() const { return test::table_of(GetParam(), &IsaTables::elementwise); }
   const ElementwiseF32Kernels& ref() const { return *elementwise_f32_table_ref(); }
 };
 
@@ -135,29 +136,27 @@ TEST_P(ElementwiseF32Variant, GeluWithinTolerance) {
 std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
 
 INSTANTIATE_TEST_SUITE_P(Available, ElementwiseF32Variant,
-                         ::testing::ValuesIn(test::isas_under_test(elementwise_f32_available_isas(),
-                                                                   elementwise_f32_built_isas())),
+                         ::testing::ValuesIn(test::isas_under_test(&IsaTables::elementwise)),
                          isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(ElementwiseF32Variant);
 
-TEST(ElementwiseF32Dispatch, RequiredVariantsAreTheirOwnAndActiveIsTheChoice) {
+// At every level CI requires, an Engine runs a SIMD element-wise variant (its own functions, not
+// the reference's), and it is among the variants tested above.
+TEST(ElementwiseF32Variants, RequiredLevelsRunSimdVariants) {
   const ElementwiseF32Kernels& ref = *elementwise_f32_table_ref();
+  const std::vector<Isa> tested = test::isas_under_test(&IsaTables::elementwise);
   for (const std::optional<Isa>& isa : test::required_isas()) {
     ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA";
-    const ElementwiseF32Kernels* v = elementwise_f32_kernels(*isa);
-    ASSERT_NE(v, nullptr) << isa_name(*isa) << " element-wise kernels are required but not available";
-    EXPECT_EQ(v->isa, *isa);
-    EXPECT_NE(v->layernorm_rows, ref.layernorm_rows);
-    EXPECT_NE(v->softmax_rows, ref.softmax_rows);
-    EXPECT_NE(v->gelu, ref.gelu);
+    ASSERT_TRUE(cpu_supports(*isa)) << isa_name(*isa) << " is required but this CPU does not run it";
+    const ElementwiseF32Kernels& v = variant_for(*isa, &IsaTables::elementwise);
+    EXPECT_NE(v.isa, Isa::kRef) << "no SIMD element-wise variant at " << isa_name(*isa);
+    EXPECT_NE(v.layernorm_rows, ref.layernorm_rows);
+    EXPECT_NE(v.softmax_rows, ref.softmax_rows);
+    EXPECT_NE(v.gelu, ref.gelu);
+    if (std::getenv("ACT_ISA") == nullptr) {
+      EXPECT_NE(std::find(tested.begin(), tested.end(), v.isa), tested.end()) << isa_name(v.isa) << " was not tested";
+    }
   }
-  const IsaChoice choice = choose_isa_from_env(elementwise_f32_built_isas());
-  if (choice.ok()) {
-    EXPECT_EQ(elementwise_f32_active().isa, choice.isa);
-  }
-  std::vector<float> a = {1.0f, 2.0f, 3.0f}, b = {0.5f, -2.0f, 4.0f}, y(3);
-  add_f32(3, a.data(), b.data(), y.data());
-  EXPECT_EQ(y, (std::vector<float>{1.5f, 0.0f, 7.0f}));
 }
 
 }  // namespace

@@ -1,10 +1,11 @@
 // The INT8 GEMM family: every variant this CPU can run (built and detected) against the scalar
 // reference, on the XNNPACK-style case lists (sizes around the tile, ragged K, strides, zero
-// points, clamps, scales, saturating operands) with MLAS-style sentinels, plus the dispatch, the
-// ACT_ISA override and the kernel naming grammar.
+// points, clamps, scales, saturating operands) with MLAS-style sentinels, plus the kernel naming
+// grammar.
 //
-// ACT_ISA=<isa> restricts the variant tests to that variant. ACT_TEST_REQUIRE_ISAS=avx2,avx512vnni
-// (CI) makes the run fail unless those variants are available and ran.
+// ACT_ISA=<isa> restricts the variant tests to the variant an Engine at that level runs.
+// ACT_TEST_REQUIRE_ISAS=avx2,avx512,avx512vnni (CI) makes the run fail unless those levels' variants
+// are available and ran.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -13,28 +14,18 @@
 #include <cstring>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
 
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/gemm_s8/gemm_s8_variants.h"
+#include "test/kernels/kernel_test_util.h"
 #include "test/kernels/gemm_s8_tester.h"
 
 namespace act::kernels::test {
 namespace {
-
-// The variants under test: ACT_ISA's when set (an invalid value fails GemmS8Dispatch.ActIsa), else
-// every available one.
-std::vector<Isa> variants_under_test() {
-  const char* forced = std::getenv("ACT_ISA");
-  if (forced != nullptr && forced[0] != '\0') {
-    const IsaChoice c = choose_isa_from_env(gemm_s8_built_isas());
-    if (!c.ok()) return {};
-    return {c.isa};
-  }
-  return gemm_s8_available_isas();
-}
 
 std::vector<int> dedup_positive(std::vector<int> v) {
   std::set<int> s;
@@ -46,7 +37,7 @@ std::vector<int> dedup_positive(std::vector<int> v) {
 
 class GemmS8Variant : public ::testing::TestWithParam<Isa> {
  protected:
-  const GemmS8Kernels& variant() const { return *gemm_s8_kernels(GetParam()); }
+  const GemmS8Kernels& variant() const { return test::table_of(GetParam(), &IsaTables::gemm_s8); }
   int mr() const { return variant().mr; }
   int nr() const { return variant().nr; }
   int kr() const { return variant().kr; }
@@ -273,7 +264,7 @@ TEST_P(GemmS8Variant, EmptyRectangleWritesNothing) {
 
 std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
 
-INSTANTIATE_TEST_SUITE_P(Available, GemmS8Variant, ::testing::ValuesIn(variants_under_test()), isa_param_name);
+INSTANTIATE_TEST_SUITE_P(Available, GemmS8Variant, ::testing::ValuesIn(test::isas_under_test(&IsaTables::gemm_s8)), isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(GemmS8Variant);
 
 // ---- dispatch, detection, override, naming -----------------------------------------------------
@@ -282,9 +273,7 @@ TEST(GemmS8Dispatch, DetectedVariantsAreBuiltAndRun) {
   const CpuFeatures& f = cpu_features();
   std::cout << "cpu features (" << f.source << "): avx2=" << f.avx2 << " fma=" << f.fma << " avx512f=" << f.avx512f
             << " avx512bw=" << f.avx512bw << " avx512vl=" << f.avx512vl << " avx512vnni=" << f.avx512vnni
-            << " neon=" << f.neon << " dotprod=" << f.dotprod << "\n"
-            << "gemm_s8 built: " << isa_mask_names(gemm_s8_built_isas())
-            << "; available: " << isa_mask_names(gemm_s8_built_isas() & cpu_isa_mask()) << "\n";
+            << " neon=" << f.neon << " dotprod=" << f.dotprod << "; runs " << isa_mask_names(cpu_isa_mask()) << "\n";
 #if defined(__x86_64__)
   const Isa simd[] = {Isa::kAvx2, Isa::kAvx512Vnni};
 #elif defined(__aarch64__)
@@ -295,11 +284,10 @@ TEST(GemmS8Dispatch, DetectedVariantsAreBuiltAndRun) {
   // Every SIMD variant of this architecture must be compiled in, and must run when the CPU has it.
   bool any_simd = false;
   for (Isa isa : simd) {
-    EXPECT_NE(gemm_s8_built_isas() & isa_bit(isa), 0u) << isa_name(isa) << " kernels are not compiled in";
+    const GemmS8Kernels* v = isa_tables(isa).gemm_s8;
+    ASSERT_NE(v, nullptr) << isa_name(isa) << " kernels are not compiled in";
     if (!cpu_supports(isa)) continue;
     any_simd = any_simd || isa != Isa::kRef;
-    const GemmS8Kernels* v = gemm_s8_kernels(isa);
-    ASSERT_NE(v, nullptr) << isa_name(isa) << " is detected but has no table";
     GemmS8Tester().m(v->mr + 1).n(v->nr + 1).k(33).out(GemmOut::kS8).test(*v);  // asserts it ran
   }
 #if defined(__x86_64__)
@@ -307,114 +295,20 @@ TEST(GemmS8Dispatch, DetectedVariantsAreBuiltAndRun) {
     EXPECT_TRUE(any_simd) << "an AVX2 CPU ran no SIMD gemm_s8 variant";
   }
 #endif
-  EXPECT_NE(gemm_s8_kernels(Isa::kRef), nullptr);
+  EXPECT_NE(isa_tables(Isa::kRef).gemm_s8, nullptr);
 }
 
-// CI sets ACT_TEST_REQUIRE_ISAS (comma-separated) to the variants its machine must run.
+// CI sets ACT_TEST_REQUIRE_ISAS (comma-separated) to the ISA levels its machine must run: the
+// gemm_s8 variant an Engine runs at each of them must run here (the tester checks what ran).
 TEST(GemmS8Dispatch, RequiredVariantsRun) {
-  const char* required = std::getenv("ACT_TEST_REQUIRE_ISAS");
-  if (required == nullptr || required[0] == '\0') GTEST_SKIP() << "ACT_TEST_REQUIRE_ISAS is not set";
-  std::string list(required);
-  size_t start = 0;
-  while (start <= list.size()) {
-    const size_t comma = list.find(',', start);
-    const std::string name = list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    start = comma == std::string::npos ? list.size() + 1 : comma + 1;
-    if (name.empty()) continue;
-    const std::optional<Isa> isa = parse_isa(name);
-    ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA: " << name;
-    const GemmS8Kernels* v = gemm_s8_kernels(*isa);
-    ASSERT_NE(v, nullptr) << name << " is required but not available (built: "
-                          << isa_mask_names(gemm_s8_built_isas()) << ", cpu: " << isa_mask_names(cpu_isa_mask()) << ")";
-    GemmS8Tester().m(v->mr + 1).n(v->nr + 1).k(19).out(GemmOut::kS32).test(*v);
-  }
-}
-
-TEST(GemmS8Dispatch, ChooseIsa) {
-  const IsaMask x86 = isa_bit(Isa::kRef) | isa_bit(Isa::kAvx2) | isa_bit(Isa::kAvx512Vnni);
-  // No override: the best built & detected variant.
-  EXPECT_EQ(choose_isa(nullptr, x86, x86).isa, Isa::kAvx512Vnni);
-  EXPECT_EQ(choose_isa("", x86, isa_bit(Isa::kRef) | isa_bit(Isa::kAvx2)).isa, Isa::kAvx2);
-  EXPECT_EQ(choose_isa(nullptr, x86, isa_bit(Isa::kRef)).isa, Isa::kRef);
-  const IsaMask arm = isa_bit(Isa::kRef) | isa_bit(Isa::kNeonDot);
-  EXPECT_EQ(choose_isa(nullptr, arm, arm).isa, Isa::kNeonDot);
-  // A valid override wins, even when a better one exists.
-  const IsaChoice ref = choose_isa("ref", x86, x86);
-  EXPECT_TRUE(ref.ok());
-  EXPECT_EQ(ref.isa, Isa::kRef);
-  EXPECT_EQ(choose_isa("avx2", x86, x86).isa, Isa::kAvx2);
-  // Unknown, not built, not supported: clear errors, never a silent fallback.
-  const IsaChoice unknown = choose_isa("avx3", x86, x86);
-  EXPECT_FALSE(unknown.ok());
-  EXPECT_NE(unknown.error.find("unknown ISA"), std::string::npos) << unknown.error;
-  EXPECT_NE(unknown.error.find("avx3"), std::string::npos) << unknown.error;
-  const IsaChoice not_built = choose_isa("neondot", x86, x86 | arm);
-  EXPECT_FALSE(not_built.ok());
-  EXPECT_NE(not_built.error.find("this build has no neondot"), std::string::npos) << not_built.error;
-  const IsaChoice not_cpu = choose_isa("avx512vnni", x86, isa_bit(Isa::kRef) | isa_bit(Isa::kAvx2));
-  EXPECT_FALSE(not_cpu.ok());
-  EXPECT_NE(not_cpu.error.find("does not support avx512vnni"), std::string::npos) << not_cpu.error;
-  EXPECT_FALSE(choose_isa("AVX2", x86, x86).ok()) << "names are case-sensitive";
-}
-
-// Sets ACT_ISA for one scope, restoring the previous value.
-class ScopedActIsa {
- public:
-  explicit ScopedActIsa(const char* value) {
-    const char* old = std::getenv("ACT_ISA");
-    had_ = old != nullptr;
-    if (had_) old_ = old;
-    if (value != nullptr) {
-      setenv("ACT_ISA", value, 1);
-    } else {
-      unsetenv("ACT_ISA");
-    }
-  }
-  ~ScopedActIsa() {
-    if (had_) {
-      setenv("ACT_ISA", old_.c_str(), 1);
-    } else {
-      unsetenv("ACT_ISA");
-    }
-  }
-
- private:
-  bool had_ = false;
-  std::string old_;
-};
-
-TEST(GemmS8Dispatch, ActIsa) {
-  {
-    // Whatever the run was started with must be valid here.
-    const GemmS8Selection s = gemm_s8_select();
-    EXPECT_TRUE(s.error.empty()) << s.error;
-    ASSERT_NE(s.kernels, nullptr);
-  }
-  {
-    ScopedActIsa env(nullptr);
-    const GemmS8Selection s = gemm_s8_select();
-    ASSERT_NE(s.kernels, nullptr) << s.error;
-    EXPECT_EQ(s.kernels, gemm_s8_kernels(gemm_s8_available_isas().back())) << "not the best available variant";
-  }
-  for (Isa isa : gemm_s8_available_isas()) {
-    ScopedActIsa env(isa_name(isa));
-    const GemmS8Selection s = gemm_s8_select();
-    ASSERT_NE(s.kernels, nullptr) << s.error;
-    EXPECT_EQ(s.kernels->isa, isa);
-  }
-  {
-    ScopedActIsa env("avx3");
-    const GemmS8Selection s = gemm_s8_select();
-    EXPECT_EQ(s.kernels, nullptr);
-    EXPECT_NE(s.error.find("ACT_ISA=avx3"), std::string::npos) << s.error;
-  }
-  for (int i = 0; i < kIsaCount; ++i) {
-    const Isa isa = static_cast<Isa>(i);
-    if (gemm_s8_kernels(isa) != nullptr) continue;
-    ScopedActIsa env(isa_name(isa));
-    const GemmS8Selection s = gemm_s8_select();
-    EXPECT_EQ(s.kernels, nullptr) << isa_name(isa) << " is unavailable but was selected";
-    EXPECT_FALSE(s.error.empty());
+  const std::vector<std::optional<Isa>> required = test::required_isas();
+  if (required.empty()) GTEST_SKIP() << "ACT_TEST_REQUIRE_ISAS is not set";
+  for (const std::optional<Isa>& isa : required) {
+    ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA";
+    ASSERT_TRUE(cpu_supports(*isa)) << isa_name(*isa) << " is required but this CPU runs only "
+                                    << isa_mask_names(cpu_isa_mask());
+    const GemmS8Kernels& v = variant_for(*isa, &IsaTables::gemm_s8);
+    GemmS8Tester().m(v.mr + 1).n(v.nr + 1).k(19).out(GemmOut::kS32).test(v);
   }
 }
 
@@ -441,7 +335,7 @@ bool parse_tile(const std::string& s, bool with_kr, int* a, int* b, int* c) {
 // <family>_<dtypes>_<tile>_<isa> (kernels-and-style.md 2.4), with the tile matching the table.
 // (A hand parser: std::regex trips GCC 12's -Wmaybe-uninitialized under ASan.)
 TEST(GemmS8Dispatch, KernelNamesFollowTheGrammar) {
-  const std::set<std::string> isa_suffixes = {"ref", "neon", "neondot", "neoni8mm", "avx2", "avxvnni", "avx512vnni"};
+  const std::set<std::string> isa_suffixes = {"ref", "neon", "neondot", "neoni8mm", "avx2", "avxvnni", "avx512", "avx512vnni"};
   const GemmS8Kernels* tables[] = {gemm_s8_table_ref(), gemm_s8_table_avx2(), gemm_s8_table_avx512vnni(),
                                    gemm_s8_table_neondot()};
   int checked = 0;

@@ -3,12 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <optional>
 #include <random>
 #include <string>
 #include <vector>
 
-#include "kernels/fp32/fp32_kernels.h"  // Conv2dShape::out_dim
+#include "kernels/common/conv2d_shape.h"  // Conv2dShape::out_dim
 #include "kernels/pool_s8/maxpool_s8.h"
 #include "kernels/pool_s8/maxpool_s8_variants.h"
 #include "test/kernels/kernel_test_util.h"
@@ -40,10 +41,10 @@ struct PoolCase {
 
 class MaxPoolS8Variant : public ::testing::TestWithParam<Isa> {};
 
-// The public function runs the chosen variant; _with runs each one. 7x7 windows (49 taps) cross the
-// driver's 32-tap batches.
+// Each variant against the naive definition. 7x7 windows (49 taps) cross the driver's 32-tap
+// batches.
 TEST_P(MaxPoolS8Variant, MatchesNaiveDefinition) {
-  const MaxPoolS8Kernels& k = *maxpool_s8_kernels(GetParam());
+  const MaxPoolS8Kernels& k = test::table_of(GetParam(), &IsaTables::maxpool_s8);
   std::mt19937 rng(21);
   const PoolCase cases[] = {{12, 16, 3, 2, 1}, {11, 9, 3, 2, 1}, {1, 1, 3, 2, 1}, {2, 3, 3, 2, 1},
                             {7, 7, 2, 2, 0},   {6, 5, 3, 1, 1},  {9, 8, 5, 3, 2}, {9, 10, 7, 1, 3}};
@@ -60,7 +61,7 @@ TEST_P(MaxPoolS8Variant, MatchesNaiveDefinition) {
         // Rows in uneven ranges: [0, 1), [1, oh/2), [oh/2, oh).
         const int splits[] = {0, std::min(1, oh), std::max(std::min(1, oh), oh / 2), oh};
         for (int i = 0; i < 3; ++i) {
-          maxpool_nhwc_s8_with(k, pc.h, pc.w, c, pc.kernel, pc.stride, pc.pad, ow, x.data(), y.data(), splits[i],
+          maxpool_nhwc_s8(k, pc.h, pc.w, c, pc.kernel, pc.stride, pc.pad, ow, x.data(), y.data(), splits[i],
                           splits[i + 1]);
         }
         for (size_t i = 0; i < want.size(); ++i) {
@@ -76,31 +77,23 @@ TEST_P(MaxPoolS8Variant, MatchesNaiveDefinition) {
 std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
 
 INSTANTIATE_TEST_SUITE_P(Available, MaxPoolS8Variant,
-                         ::testing::ValuesIn(test::isas_under_test(maxpool_s8_available_isas(),
-                                                                   maxpool_s8_built_isas())),
+                         ::testing::ValuesIn(test::isas_under_test(&IsaTables::maxpool_s8)),
                          isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(MaxPoolS8Variant);
 
-TEST(MaxPoolS8, PublicFunctionRunsTheChosenVariant) {
-  const IsaChoice choice = choose_isa_from_env(maxpool_s8_built_isas());
-  if (choice.ok()) {
-    EXPECT_EQ(maxpool_s8_active().isa, choice.isa);
-  }
-  const int h = 5, w = 6, c = 67;
-  std::vector<int8_t> x(static_cast<size_t>(h) * w * c);
-  for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<int8_t>(i * 37);
-  std::vector<int8_t> y(static_cast<size_t>(3) * 3 * c);
-  maxpool_nhwc_s8(h, w, c, 3, 2, 1, 3, x.data(), y.data(), 0, 3);
-  EXPECT_EQ(y, maxpool_naive(h, w, c, 3, 2, 1, 3, 3, x));
-}
-
-TEST(MaxPoolS8, RequiredVariantsAreTheirOwn) {
+// At every level CI requires, an Engine runs a SIMD channel-max (its own, not the reference's),
+// and it is among the variants tested above.
+TEST(MaxPoolS8Variants, RequiredLevelsRunSimdVariants) {
+  const std::vector<Isa> tested = test::isas_under_test(&IsaTables::maxpool_s8);
   for (const std::optional<Isa>& isa : test::required_isas()) {
     ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA";
-    const MaxPoolS8Kernels* v = maxpool_s8_kernels(*isa);
-    ASSERT_NE(v, nullptr) << isa_name(*isa) << " max-pool kernels are required but not available";
-    EXPECT_EQ(v->isa, *isa);
-    EXPECT_NE(v->max_taps, maxpool_s8_table_ref()->max_taps);
+    ASSERT_TRUE(cpu_supports(*isa)) << isa_name(*isa) << " is required but this CPU does not run it";
+    const MaxPoolS8Kernels& v = variant_for(*isa, &IsaTables::maxpool_s8);
+    EXPECT_NE(v.isa, Isa::kRef) << "no SIMD max-pool variant at " << isa_name(*isa);
+    EXPECT_NE(v.max_taps, maxpool_s8_table_ref()->max_taps);
+    if (std::getenv("ACT_ISA") == nullptr) {
+      EXPECT_NE(std::find(tested.begin(), tested.end(), v.isa), tested.end()) << isa_name(v.isa) << " was not tested";
+    }
   }
 }
 

@@ -1,9 +1,10 @@
-// Float <-> int8 conversions (kernels/quant/quant_s8.h): the public functions against naive
-// definitions written here from the header's rule, on edge cases (ties, NaN, infinities,
-// saturation, constant / all-negative / huge / tiny rows).
+// Float <-> int8 conversions (kernels/quant/quant_s8.h): the reference against naive definitions
+// written here from the header's rule, on edge cases (ties, NaN, infinities, saturation, constant /
+// all-negative / huge / tiny rows); then every variant bit for bit against the reference.
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cfloat>
 #include <cmath>
 #include <cstring>
@@ -22,6 +23,9 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// The normative variant, which the rule tests check; the SIMD variants must give its bits.
+const QuantS8Kernels& reference() { return *quant_s8_table_ref(); }
 
 // The header's rule, one float operation per line (the kernels build without FMA contraction and
 // so does this test: volatile stops the compiler from fusing the multiply and the add).
@@ -55,14 +59,14 @@ TEST(QuantS8, ChooseCoversTheRangeAndKeepsZeroExact) {
     const float inv = 1.0f / q.scale;
     const float zero_f = 0.0f;
     int8_t zero;
-    quantize_f32_s8(1, &zero_f, inv, q.zero_point, &zero);
+    reference().quantize(1, &zero_f, inv, q.zero_point, &zero);
     EXPECT_EQ(zero, q.zero_point) << "0.0 must be exact for range " << lo << ".." << hi;
     // Both ends (and 0) are representable within half a step (plus float rounding).
     for (float x : {std::min(lo, 0.0f), std::max(hi, 0.0f)}) {
       int8_t c;
-      quantize_f32_s8(1, &x, inv, q.zero_point, &c);
+      reference().quantize(1, &x, inv, q.zero_point, &c);
       float back;
-      dequantize_s8_f32(1, &c, q.scale, q.zero_point, &back);
+      reference().dequantize(1, &c, q.scale, q.zero_point, &back);
       EXPECT_LE(std::fabs(back - x), 0.5f * q.scale * 1.001f + 1e-30f) << lo << ".." << hi << " at " << x;
     }
   }
@@ -92,7 +96,7 @@ TEST(QuantS8, QuantizeMatchesTheRule) {
       auto x = random_floats(131, rng, -300.0f / inv, 300.0f / inv);
       x.insert(x.end(), {0.0f, -0.0f, kInf, -kInf, kNaN, -kNaN, FLT_MAX, -FLT_MAX, FLT_MIN, 1e-45f});
       std::vector<int8_t> y(x.size() + 1, 99);
-      quantize_f32_s8(x.size(), x.data(), inv, zp, y.data());
+      reference().quantize(x.size(), x.data(), inv, zp, y.data());
       for (size_t i = 0; i < x.size(); ++i) {
         ASSERT_EQ(y[i], quantize_naive(x[i], inv, zp)) << "x=" << x[i] << " inv=" << inv << " zp=" << zp;
       }
@@ -105,7 +109,7 @@ TEST(QuantS8, QuantizeTiesToEvenNaNAndSaturation) {
   const float x[] = {0.5f, 1.5f, 2.5f, -0.5f, -1.5f, -2.5f, 126.5f, -127.5f, 1e9f, -1e9f, kInf, -kInf, kNaN};
   const int8_t want[] = {0, 2, 2, 0, -2, -2, 126, -128, 127, -128, 127, -128, -128};
   int8_t y[std::size(x)];
-  quantize_f32_s8(std::size(x), x, 1.0f, 0, y);
+  reference().quantize(std::size(x), x, 1.0f, 0, y);
   for (size_t i = 0; i < std::size(x); ++i) EXPECT_EQ(y[i], want[i]) << "x=" << x[i];
 }
 
@@ -115,7 +119,7 @@ TEST(QuantS8, DequantizeIsExact) {
   for (float scale : {1.0f, 0.013f, 3e-30f, 1e30f}) {
     for (int32_t zp : {-128, 0, 17, 127}) {
       std::vector<float> y(q.size());
-      dequantize_s8_f32(q.size(), q.data(), scale, zp, y.data());
+      reference().dequantize(q.size(), q.data(), scale, zp, y.data());
       for (size_t i = 0; i < q.size(); ++i) {
         const float d = static_cast<float>(q[i]) - static_cast<float>(zp);  // exact: small integers
         ASSERT_EQ(y[i], d * scale) << "q=" << int{q[i]} << " scale=" << scale << " zp=" << zp;
@@ -127,19 +131,19 @@ TEST(QuantS8, DequantizeIsExact) {
 TEST(QuantS8, MinMaxIgnoresNaN) {
   float lo, hi;
   const float a[] = {kNaN, 3.0f, -2.0f, kNaN, 7.5f, -0.5f};
-  minmax_f32(std::size(a), a, &lo, &hi);
+  reference().minmax(std::size(a), a, &lo, &hi);
   EXPECT_EQ(lo, -2.0f);
   EXPECT_EQ(hi, 7.5f);
   const float all_nan[] = {kNaN, kNaN, kNaN};
-  minmax_f32(std::size(all_nan), all_nan, &lo, &hi);
+  reference().minmax(std::size(all_nan), all_nan, &lo, &hi);
   EXPECT_EQ(lo, kInf);
   EXPECT_EQ(hi, -kInf);
   const float one = -4.0f;
-  minmax_f32(1, &one, &lo, &hi);
+  reference().minmax(1, &one, &lo, &hi);
   EXPECT_EQ(lo, -4.0f);
   EXPECT_EQ(hi, -4.0f);
   const float inf[] = {1.0f, kInf, -kInf};
-  minmax_f32(std::size(inf), inf, &lo, &hi);
+  reference().minmax(std::size(inf), inf, &lo, &hi);
   EXPECT_EQ(lo, -kInf);
   EXPECT_EQ(hi, kInf);
 }
@@ -151,7 +155,7 @@ void check_rows_dynamic(int rows, int cols, const std::vector<float>& x, size_t 
   std::vector<int8_t> y(rows * ldy, 99);
   std::vector<float> scale(rows, -1.0f);
   std::vector<int32_t> zp(rows, 1000);
-  quantize_rows_dynamic_f32_s8(rows, cols, x.data(), ldx, y.data(), ldy, scale.data(), zp.data());
+  quantize_rows_dynamic_f32_s8(reference(), rows, cols, x.data(), ldx, y.data(), ldy, scale.data(), zp.data());
   for (int r = 0; r < rows; ++r) {
     const float* xr = x.data() + r * ldx;
     float lo = kInf, hi = -kInf;
@@ -202,7 +206,7 @@ TEST(QuantS8, RowsDynamicEdgeRows) {
   std::vector<float> scale(rows.size());
   std::vector<int32_t> zp(rows.size());
   std::vector<int8_t> y(x.size());
-  quantize_rows_dynamic_f32_s8(static_cast<int>(rows.size()), cols, x.data(), cols, y.data(), cols, scale.data(),
+  quantize_rows_dynamic_f32_s8(reference(), static_cast<int>(rows.size()), cols, x.data(), cols, y.data(), cols, scale.data(),
                                zp.data());
   EXPECT_EQ(scale[0], 1.0f);
   EXPECT_EQ(zp[0], 0);
@@ -230,7 +234,7 @@ std::vector<float> edge_values(size_t n, std::mt19937& rng, float span) {
 
 class QuantS8Variant : public ::testing::TestWithParam<Isa> {
  protected:
-  const QuantS8Kernels& v() const { return *quant_s8_kernels(GetParam()); }
+  const QuantS8Kernels& v() const { return test::table_of(GetParam(), &IsaTables::quant); }
   const QuantS8Kernels& ref() const { return *quant_s8_table_ref(); }
 };
 
@@ -307,8 +311,8 @@ TEST_P(QuantS8Variant, RowsDynamicIsBitExact) {
     std::vector<int8_t> yw(rows * ldy, 99), y(rows * ldy, 99);
     std::vector<float> sw(rows), s(rows);
     std::vector<int32_t> zw(rows), z(rows);
-    quantize_rows_dynamic_f32_s8_with(ref(), rows, cols, x.data(), ldx, yw.data(), ldy, sw.data(), zw.data());
-    quantize_rows_dynamic_f32_s8_with(v(), rows, cols, x.data(), ldx, y.data(), ldy, s.data(), z.data());
+    quantize_rows_dynamic_f32_s8(ref(), rows, cols, x.data(), ldx, yw.data(), ldy, sw.data(), zw.data());
+    quantize_rows_dynamic_f32_s8(v(), rows, cols, x.data(), ldx, y.data(), ldy, s.data(), z.data());
     ASSERT_EQ(y, yw) << isa_name(GetParam()) << " cols=" << cols;
     ASSERT_EQ(s, sw);
     ASSERT_EQ(z, zw);
@@ -318,27 +322,27 @@ TEST_P(QuantS8Variant, RowsDynamicIsBitExact) {
 std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
 
 INSTANTIATE_TEST_SUITE_P(Available, QuantS8Variant,
-                         ::testing::ValuesIn(test::isas_under_test(quant_s8_available_isas(), quant_s8_built_isas())),
+                         ::testing::ValuesIn(test::isas_under_test(&IsaTables::quant)),
                          isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(QuantS8Variant);
 
-// The variants CI requires exist, are this ISA's own functions (not the reference's), and the
-// public functions run the best one (or ACT_ISA's).
-TEST(QuantS8Dispatch, RequiredVariantsAreTheirOwnAndActiveIsTheChoice) {
+// At every level CI requires, an Engine runs a SIMD quant variant (its own functions, not the
+// reference's), and it is among the variants tested above.
+TEST(QuantS8Variants, RequiredLevelsRunSimdVariants) {
   const QuantS8Kernels& ref = *quant_s8_table_ref();
+  const std::vector<Isa> tested = test::isas_under_test(&IsaTables::quant);
   for (const std::optional<Isa>& isa : test::required_isas()) {
     ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA";
-    const QuantS8Kernels* v = quant_s8_kernels(*isa);
-    ASSERT_NE(v, nullptr) << isa_name(*isa) << " quant kernels are required but not available";
-    EXPECT_EQ(v->isa, *isa);
-    EXPECT_NE(v->quantize, ref.quantize);
-    EXPECT_NE(v->dequantize, ref.dequantize);
-    EXPECT_NE(v->minmax, ref.minmax);
-    EXPECT_NE(std::string(v->quantize_name).find(isa_name(*isa)), std::string::npos);
-  }
-  const IsaChoice choice = choose_isa_from_env(quant_s8_built_isas());
-  if (choice.ok()) {
-    EXPECT_EQ(quant_s8_active().isa, choice.isa);
+    ASSERT_TRUE(cpu_supports(*isa)) << isa_name(*isa) << " is required but this CPU does not run it";
+    const QuantS8Kernels& v = variant_for(*isa, &IsaTables::quant);
+    EXPECT_NE(v.isa, Isa::kRef) << "no SIMD quant variant at " << isa_name(*isa);
+    EXPECT_NE(v.quantize, ref.quantize);
+    EXPECT_NE(v.dequantize, ref.dequantize);
+    EXPECT_NE(v.minmax, ref.minmax);
+    EXPECT_NE(std::string(v.quantize_name).find(isa_name(v.isa)), std::string::npos);
+    if (std::getenv("ACT_ISA") == nullptr) {
+      EXPECT_NE(std::find(tested.begin(), tested.end(), v.isa), tested.end()) << isa_name(v.isa) << " was not tested";
+    }
   }
 }
 

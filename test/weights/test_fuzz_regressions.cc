@@ -67,6 +67,25 @@ TEST(FuzzRegressions, BlobModelConfigIntegersAreRangeChecked) {
   EXPECT_ERROR(ModelConfig::from_json(bad_blocks), ErrorCode::kDataLoss, "backbone_blocks");
 }
 
+// The blob's precision is parsed once, into ModelConfig: fp32 or int8, anything else is an error.
+TEST(FuzzRegressions, BlobModelConfigPrecisionIsValidated) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  std::ifstream config_file(fixture + "/config.json");
+  ModelConfig config = lerobot_model_config(nlohmann::ordered_json::parse(config_file), "config.json");
+  EXPECT_EQ(config.precision, Precision::kFp32) << "an imported checkpoint is float";
+  config.precision = Precision::kInt8;
+  const nlohmann::json int8 = config.to_json();
+  EXPECT_EQ(int8["precision"], "int8");
+  EXPECT_EQ(ModelConfig::from_json(int8).precision, Precision::kInt8);
+  nlohmann::json fp16 = int8;
+  fp16["precision"] = "fp16";
+  EXPECT_ERROR(ModelConfig::from_json(fp16), ErrorCode::kUnimplemented, "precision 'fp16' is not supported");
+  nlohmann::json missing = int8;
+  missing.erase("precision");
+  EXPECT_ERROR(ModelConfig::from_json(missing), ErrorCode::kDataLoss, "precision");
+}
+
 TEST(FuzzRegressions, BlobQuantizationParametersAreRangeChecked) {
   const auto quant = [](const std::string& activation) {
     return nlohmann::json::parse(R"({"mode": "static", "activations": {"conv1": )" + activation +

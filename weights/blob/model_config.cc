@@ -21,6 +21,8 @@ const char* activation_name(Activation a) {
   return "?";
 }
 
+const char* precision_name(Precision p) { return p == Precision::kInt8 ? "int8" : "fp32"; }
+
 const char* norm_mode_name(NormMode m) {
   switch (m) {
     case NormMode::kIdentity: return "IDENTITY";
@@ -234,6 +236,13 @@ Activation activation_from_string(const std::string& s) {
   fail(ErrorCode::kDataLoss, "unknown activation '" + s + "'");
 }
 
+// A precision this build cannot run is kUnimplemented (a newer converter's blob), not data loss.
+Precision precision_from_string(const std::string& s) {
+  if (s == "fp32") return Precision::kFp32;
+  if (s == "int8") return Precision::kInt8;
+  fail(ErrorCode::kUnimplemented, "model config: precision '" + s + "' is not supported by this build (fp32, int8)");
+}
+
 }  // namespace
 
 nlohmann::json ModelConfig::to_json() const {
@@ -262,6 +271,7 @@ nlohmann::json ModelConfig::to_json() const {
   j["input_norm"] = nlohmann::json::array();
   for (const auto& [key, mode] : input_norm) j["input_norm"].push_back({{"key", key}, {"mode", norm_to_json(mode)}});
   j["action_norm"] = norm_to_json(action_norm);
+  j["precision"] = precision_name(precision);
   return j;
 }
 
@@ -310,6 +320,7 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     if (!j.at("temporal_ensemble_coeff").is_null()) c.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
     for (const auto& e : j.at("input_norm")) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
     c.action_norm = norm_from_json(j.at("action_norm"));
+    c.precision = precision_from_string(j.at("precision").get<std::string>());
   } catch (const nlohmann::json::exception& e) {
     fail(ErrorCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
   }

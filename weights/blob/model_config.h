@@ -13,9 +13,13 @@ namespace act {
 
 enum class Activation { kRelu, kGelu, kGlu };
 enum class NormMode { kIdentity, kMeanStd, kMinMax };
+/// The precision of a blob's weights: all float, or int8 layers (with a "quantization" section).
+enum class Precision { kFp32, kInt8 };
 
 const char* activation_name(Activation a);
 const char* norm_mode_name(NormMode m);
+/// "fp32" or "int8", the blob config's spelling.
+const char* precision_name(Precision p);
 
 struct CameraConfig {
   std::string key;  ///< e.g. "observation.images.front"
@@ -75,6 +79,8 @@ struct ModelConfig {
   // Normalisation mode per input feature key (cameras, state, env) and for the action.
   std::vector<std::pair<std::string, NormMode>> input_norm;
   NormMode action_norm = NormMode::kIdentity;
+  // Weights.
+  Precision precision = Precision::kFp32;
 
   // Derived facts.
   /// The stem conv (7x7/2) and then, stage by stage, every residual block of the backbone.

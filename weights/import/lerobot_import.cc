@@ -893,9 +893,7 @@ ImportedModel import_lerobot_state_dict(const nlohmann::ordered_json& config, co
 ActbWriter fp32_blob(const ImportedModel& model) {
   ActbWriter writer;
   writer.set_producer(std::string("act_convert (actengine) from a ") + model.layout + "-layout LeRobot checkpoint");
-  nlohmann::json config = model.config.to_json();
-  config["precision"] = "fp32";
-  writer.set_config(config);
+  writer.set_config(model.config.to_json());
   for (const auto& t : model.tensors) writer.add_f32(t.name, t.shape, t.values);
   return writer;
 }

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "kernels/quant/quant_s8.h"
+#include "kernels/quant/quant_s8_variants.h"  // calibration uses the reference (every variant gives its bits)
 
 namespace act {
 
@@ -15,7 +16,7 @@ ActivationQuant to_activation(const kernels::QuantS8& q) { return {q.scale, q.ze
 
 void RangeObserver::observe_range(std::span<const float> values) {
   float lo, hi;
-  kernels::minmax_f32(values.size(), values.data(), &lo, &hi);
+  kernels::quant_s8_table_ref()->minmax(values.size(), values.data(), &lo, &hi);
   if (!std::isfinite(lo) || !std::isfinite(hi)) {
     // Drop infinities too: recompute over the finite values only.
     lo = INFINITY;
@@ -64,7 +65,7 @@ double RangeObserver::expected_squared_error(const ActivationQuant& q) const {
     if (c == 0.0) continue;
     const float x = bin_center(b);
     int8_t code;
-    kernels::quantize_f32_s8(1, &x, inv, q.zero_point, &code);
+    kernels::quant_s8_table_ref()->quantize(1, &x, inv, q.zero_point, &code);
     const double d = static_cast<double>(x) - static_cast<double>(q.scale) * (static_cast<int>(code) - q.zero_point);
     err += c * d * d;
   }

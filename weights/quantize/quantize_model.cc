@@ -56,8 +56,9 @@ ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant) {
   ActbWriter writer;
   writer.set_producer(std::string("act_convert (actengine) from a ") + model.layout + "-layout LeRobot checkpoint, int8 " +
                       quant_mode_name(quant.mode));
-  nlohmann::json config = model.config.to_json();
-  config["precision"] = "int8";
+  ModelConfig int8_config = model.config;
+  int8_config.precision = Precision::kInt8;
+  nlohmann::json config = int8_config.to_json();
   config["quantization"] = quant.to_json();
   writer.set_config(config);
   // Tables with a bias vector behind them are rebuilt at load (blob_names.h: bias_vector).

@@ -35,6 +35,11 @@ struct EngineOptions {
   /// Give every network value its own memory so Engine::intermediate() can read it after an
   /// inference (to compare with LeRobot layer by layer); costs memory, never changes results.
   bool keep_intermediates = false;
+  /// The instruction set the kernels use: "auto" (the best this CPU runs; the ACT_ISA environment
+  /// variable, when set, overrides it) or one of ref, avx2, avx512, avx512vnni (x86-64), neon,
+  /// neondot (AArch64). An unknown ISA, or one this CPU cannot run, fails Engine::open with a
+  /// message listing the ISAs this CPU runs.
+  std::string isa = "auto";
 };
 
 /// Wall time of one inference by stage, in milliseconds. "other" is what belongs to no stage: the
@@ -66,7 +71,8 @@ struct ModelInfo {
   bool temporal_ensembling = false;
   double temporal_ensemble_coeff = 0.0;
   std::string precision;  ///< "fp32", "int8 static", "int8 dynamic" or "int8 mixed"
-  std::string kernels;    ///< the kernel variants in use, e.g. "gemm_s8 avx512vnni 6x64c4, gemm_f32 eigen avx512vnni"
+  std::string isa;        ///< the instruction set the kernels were chosen for, e.g. "avx512vnni"
+  std::string kernels;    ///< the kernel variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32_eigen_avx512, ..."
   std::string summary;    ///< one line: backbone, dims, layers, cameras
   size_t chunk_values() const { return static_cast<size_t>(chunk_size) * action_dim; }
 };

@@ -1,4 +1,4 @@
-// Channel max of int8 taps on AArch64 NEON (the kNeonDot variant): 16 channels per q register
+// Channel max of int8 taps on AArch64 NEON (the kNeon variant): 16 channels per q register
 // (smax), then 8, then scalar.
 // Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
 #include "kernels/pool_s8/maxpool_s8_variants.h"
@@ -11,7 +11,7 @@ namespace act::kernels {
 
 namespace {
 
-void max_taps_s8_neondot(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
+void max_taps_s8_neon(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
   int c = 0;
   for (; c + 16 <= channels; c += 16) {
     int8x16_t m = vld1q_s8(taps[0] + c);
@@ -32,8 +32,8 @@ void max_taps_s8_neondot(const int8_t* const* taps, int ntaps, int channels, int
 
 }  // namespace
 
-const MaxPoolS8Kernels* maxpool_s8_table_neondot() {
-  static constexpr MaxPoolS8Kernels kTable = {Isa::kNeonDot, "max_taps_s8_neondot", max_taps_s8_neondot};
+const MaxPoolS8Kernels* maxpool_s8_table_neon() {
+  static constexpr MaxPoolS8Kernels kTable = {Isa::kNeon, "max_taps_s8_neon", max_taps_s8_neon};
   return &kTable;
 }
 
@@ -42,7 +42,7 @@ const MaxPoolS8Kernels* maxpool_s8_table_neondot() {
 #else  // not AArch64
 
 namespace act::kernels {
-const MaxPoolS8Kernels* maxpool_s8_table_neondot() { return nullptr; }
+const MaxPoolS8Kernels* maxpool_s8_table_neon() { return nullptr; }
 }  // namespace act::kernels
 
 #endif

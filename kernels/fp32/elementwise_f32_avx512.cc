@@ -1,4 +1,4 @@
-// The float element-wise kernels on AVX-512 (F/BW; the kAvx512Vnni variant): elementwise_f32_xsimd.inc instantiated for xsimd's
+// The float element-wise kernels on AVX-512 (F/BW; the kAvx512 variant): elementwise_f32_xsimd.inc instantiated for xsimd's
 // xsimd::avx512f. Rules for ISA files (kernels/gemm_s8/README.md): internal linkage only.
 #include "kernels/fp32/elementwise_f32.h"
 
@@ -18,10 +18,10 @@ namespace {
 using Arch = xsimd::avx512f;
 }  // namespace
 
-const ElementwiseF32Kernels* elementwise_f32_table_avx512vnni() {
+const ElementwiseF32Kernels* elementwise_f32_table_avx512() {
   static constexpr ElementwiseF32Kernels kTable = {
-      Isa::kAvx512Vnni,
-      "layernorm_rows_f32_avx512vnni", "softmax_rows_f32_avx512vnni", "relu_f32_avx512vnni", "gelu_f32_avx512vnni", "add_f32_avx512vnni",
+      Isa::kAvx512,
+      "layernorm_rows_f32_avx512", "softmax_rows_f32_avx512", "relu_f32_avx512", "gelu_f32_avx512", "add_f32_avx512",
       layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
   };
   return &kTable;
@@ -32,7 +32,7 @@ const ElementwiseF32Kernels* elementwise_f32_table_avx512vnni() {
 #else
 
 namespace act::kernels {
-const ElementwiseF32Kernels* elementwise_f32_table_avx512vnni() { return nullptr; }
+const ElementwiseF32Kernels* elementwise_f32_table_avx512() { return nullptr; }
 }  // namespace act::kernels
 
 #endif

@@ -1,4 +1,4 @@
-// Channel max of int8 taps on AVX-512 BW (the kAvx512Vnni variant): 64 channels per zmm; the ragged
+// Channel max of int8 taps on AVX-512 BW (the kAvx512 variant): 64 channels per zmm; the ragged
 // end uses masked loads and stores (masked-off bytes are neither read nor written).
 // Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
 #include "kernels/pool_s8/maxpool_s8_variants.h"
@@ -19,7 +19,7 @@ namespace act::kernels {
 
 namespace {
 
-void max_taps_s8_avx512vnni(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
+void max_taps_s8_avx512(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
   for (int c = 0; c < channels; c += 64) {
     const int left = channels - c;
     const __mmask64 k = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
@@ -31,8 +31,8 @@ void max_taps_s8_avx512vnni(const int8_t* const* taps, int ntaps, int channels, 
 
 }  // namespace
 
-const MaxPoolS8Kernels* maxpool_s8_table_avx512vnni() {
-  static constexpr MaxPoolS8Kernels kTable = {Isa::kAvx512Vnni, "max_taps_s8_avx512vnni", max_taps_s8_avx512vnni};
+const MaxPoolS8Kernels* maxpool_s8_table_avx512() {
+  static constexpr MaxPoolS8Kernels kTable = {Isa::kAvx512, "max_taps_s8_avx512", max_taps_s8_avx512};
   return &kTable;
 }
 
@@ -41,7 +41,7 @@ const MaxPoolS8Kernels* maxpool_s8_table_avx512vnni() {
 #else  // not x86-64
 
 namespace act::kernels {
-const MaxPoolS8Kernels* maxpool_s8_table_avx512vnni() { return nullptr; }
+const MaxPoolS8Kernels* maxpool_s8_table_avx512() { return nullptr; }
 }  // namespace act::kernels
 
 #endif

@@ -1,4 +1,4 @@
-// quant on AArch64 NEON (the kNeonDot variant; nothing here needs dotprod). 16 floats per step:
+// quant on AArch64 NEON (the kNeon variant). 16 floats per step:
 // fmaxnm/fminnm clamp (NaN -> -128, like the reference), fcvtns rounds half to even, sqxtn narrows.
 // Ragged tails go through a stack buffer and the same vector code.
 // Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
@@ -29,7 +29,7 @@ void quantize16(const float* x, float32x4_t inv, float32x4_t z, float32x4_t lo, 
   vst1q_s8(y, vcombine_s8(vqmovn_s16(a), vqmovn_s16(b)));
 }
 
-void quantize_f32_s8_neondot(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
+void quantize_f32_s8_neon(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
   const float32x4_t inv = vdupq_n_f32(inv_scale), z = vdupq_n_f32(static_cast<float>(zero_point));
   const float32x4_t lo = vdupq_n_f32(-128.0f), hi = vdupq_n_f32(127.0f);
   size_t i = 0;
@@ -51,7 +51,7 @@ void dequantize16(const int8_t* q, float32x4_t z, float32x4_t s, float* y) {
   for (int j = 0; j < 4; ++j) vst1q_f32(y + 4 * j, vmulq_f32(vsubq_f32(vcvtq_f32_s32(w[j]), z), s));
 }
 
-void dequantize_s8_f32_neondot(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
+void dequantize_s8_f32_neon(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
   const float32x4_t z = vdupq_n_f32(static_cast<float>(zero_point)), s = vdupq_n_f32(scale);
   size_t i = 0;
   for (; i + 16 <= n; i += 16) dequantize16(q + i, z, s, y + i);
@@ -65,7 +65,7 @@ void dequantize_s8_f32_neondot(size_t n, const int8_t* q, float scale, int32_t z
 }
 
 // fminnm / fmaxnm ignore a NaN operand, as the reference's compare does; the tail is NaN-padded.
-void minmax_f32_neondot(size_t n, const float* x, float* lo, float* hi) {
+void minmax_f32_neon(size_t n, const float* x, float* lo, float* hi) {
   float32x4_t mn0 = vdupq_n_f32(__builtin_inff()), mn1 = mn0;
   float32x4_t mx0 = vdupq_n_f32(-__builtin_inff()), mx1 = mx0;
   size_t i = 0;
@@ -92,10 +92,10 @@ void minmax_f32_neondot(size_t n, const float* x, float* lo, float* hi) {
 
 }  // namespace
 
-const QuantS8Kernels* quant_s8_table_neondot() {
-  static constexpr QuantS8Kernels kTable = {Isa::kNeonDot,         "quantize_f32_s8_neondot", "dequantize_s8_f32_neondot",
-                                            "minmax_f32_neondot",  quantize_f32_s8_neondot,   dequantize_s8_f32_neondot,
-                                            minmax_f32_neondot};
+const QuantS8Kernels* quant_s8_table_neon() {
+  static constexpr QuantS8Kernels kTable = {Isa::kNeon,         "quantize_f32_s8_neon", "dequantize_s8_f32_neon",
+                                            "minmax_f32_neon",  quantize_f32_s8_neon,   dequantize_s8_f32_neon,
+                                            minmax_f32_neon};
   return &kTable;
 }
 
@@ -104,7 +104,7 @@ const QuantS8Kernels* quant_s8_table_neondot() {
 #else  // not AArch64
 
 namespace act::kernels {
-const QuantS8Kernels* quant_s8_table_neondot() { return nullptr; }
+const QuantS8Kernels* quant_s8_table_neon() { return nullptr; }
 }  // namespace act::kernels
 
 #endif

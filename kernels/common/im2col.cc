@@ -1,8 +1,30 @@
-#include "kernels/conv_s8/im2col_s8.h"
+#include "kernels/common/im2col.h"
 
 #include <cstring>
 
 namespace act::kernels {
+
+void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, int count, float* patches) {
+  const size_t patch = static_cast<size_t>(s.patch_size());
+  const size_t run = static_cast<size_t>(s.in_c);
+  for (int i = 0; i < count; ++i) {
+    const int pixel = pixel_begin + i;
+    const int oy = pixel / s.out_w;
+    const int ox = pixel % s.out_w;
+    float* dst = patches + static_cast<size_t>(i) * patch;
+    for (int ky = 0; ky < s.kernel_h; ++ky) {
+      const int iy = oy * s.stride - s.pad + ky * s.dilation;
+      for (int kx = 0; kx < s.kernel_w; ++kx, dst += run) {
+        const int ix = ox * s.stride - s.pad + kx * s.dilation;
+        if (iy < 0 || iy >= s.in_h || ix < 0 || ix >= s.in_w) {
+          std::memset(dst, 0, run * sizeof(float));
+        } else {
+          std::memcpy(dst, input + (static_cast<size_t>(iy) * s.in_w + ix) * run, run * sizeof(float));
+        }
+      }
+    }
+  }
+}
 
 void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value, int pixel_begin, int count,
                     int8_t* patches, size_t ld) {

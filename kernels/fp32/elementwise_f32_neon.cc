@@ -1,8 +1,8 @@
-// The float element-wise kernels on AArch64 NEON (the kNeonDot variant): elementwise_f32_xsimd.inc instantiated for xsimd's
+// The float element-wise kernels on AArch64 NEON (the kNeon variant): elementwise_f32_xsimd.inc instantiated for xsimd's
 // xsimd::neon64. Rules for ISA files (kernels/gemm_s8/README.md): internal linkage only.
 // (xsimd 8.1's NEON wrappers, e.g. xsimd::kernel::wrap::vreinterpretq_*, are plain inline functions
-// and so weak symbols here; harmless: no other file includes xsimd on AArch64, and they use only
-// baseline NEON, never the dotprod this file is compiled for.)
+// and so weak symbols here; harmless: no other file includes xsimd on AArch64, and this file has
+// the baseline flags.)
 #include "kernels/fp32/elementwise_f32.h"
 
 #if defined(__aarch64__)
@@ -17,10 +17,10 @@ namespace {
 using Arch = xsimd::neon64;
 }  // namespace
 
-const ElementwiseF32Kernels* elementwise_f32_table_neondot() {
+const ElementwiseF32Kernels* elementwise_f32_table_neon() {
   static constexpr ElementwiseF32Kernels kTable = {
-      Isa::kNeonDot,
-      "layernorm_rows_f32_neondot", "softmax_rows_f32_neondot", "relu_f32_neondot", "gelu_f32_neondot", "add_f32_neondot",
+      Isa::kNeon,
+      "layernorm_rows_f32_neon", "softmax_rows_f32_neon", "relu_f32_neon", "gelu_f32_neon", "add_f32_neon",
       layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
   };
   return &kTable;
@@ -31,7 +31,7 @@ const ElementwiseF32Kernels* elementwise_f32_table_neondot() {
 #else
 
 namespace act::kernels {
-const ElementwiseF32Kernels* elementwise_f32_table_neondot() { return nullptr; }
+const ElementwiseF32Kernels* elementwise_f32_table_neon() { return nullptr; }
 }  // namespace act::kernels
 
 #endif

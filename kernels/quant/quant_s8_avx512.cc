@@ -1,11 +1,11 @@
-// quant on AVX-512 (F/BW; the kAvx512Vnni variant): 16 floats per vector, narrowed with
+// quant on AVX-512 (F/BW; the kAvx512 variant): 16 floats per vector, narrowed with
 // vpmovsdb; ragged tails use masked loads and stores (masked-off lanes never fault).
 // Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
 #include "kernels/quant/quant_s8_variants.h"
 
 #if defined(__x86_64__)
 
-// GCC 12's _mm512_undefined_*() trip -Wmaybe-uninitialized at -O3 (see gemm_s8_avx512vnni.cc).
+// GCC 12's _mm512_undefined_*() trip -Wmaybe-uninitialized at -O3 (see gemm_s8_avx512.cc).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
@@ -31,7 +31,7 @@ __m128i quantize16(__m512 x, __m512 inv, __m512 z, __m512 lo, __m512 hi) {
   return _mm512_cvtsepi32_epi8(_mm512_cvtps_epi32(v));
 }
 
-void quantize_f32_s8_avx512vnni(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
+void quantize_f32_s8_avx512(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
   const __m512 inv = _mm512_set1_ps(inv_scale), z = _mm512_set1_ps(static_cast<float>(zero_point));
   const __m512 lo = _mm512_set1_ps(-128.0f), hi = _mm512_set1_ps(127.0f);
   size_t i = 0;
@@ -45,7 +45,7 @@ void quantize_f32_s8_avx512vnni(size_t n, const float* x, float inv_scale, int32
   }
 }
 
-void dequantize_s8_f32_avx512vnni(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
+void dequantize_s8_f32_avx512(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
   const __m512 z = _mm512_set1_ps(static_cast<float>(zero_point)), s = _mm512_set1_ps(scale);
   for (size_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
@@ -56,7 +56,7 @@ void dequantize_s8_f32_avx512vnni(size_t n, const int8_t* q, float scale, int32_
 
 // minps(x, acc) returns acc when x is NaN: NaNs are skipped like the reference's compare. Tail
 // lanes keep the accumulator (mask_min).
-void minmax_f32_avx512vnni(size_t n, const float* x, float* lo, float* hi) {
+void minmax_f32_avx512(size_t n, const float* x, float* lo, float* hi) {
   __m512 mn0 = _mm512_set1_ps(__builtin_inff()), mn1 = mn0;
   __m512 mx0 = _mm512_set1_ps(-__builtin_inff()), mx1 = mx0;
   size_t i = 0;
@@ -79,11 +79,11 @@ void minmax_f32_avx512vnni(size_t n, const float* x, float* lo, float* hi) {
 
 }  // namespace
 
-const QuantS8Kernels* quant_s8_table_avx512vnni() {
+const QuantS8Kernels* quant_s8_table_avx512() {
   static constexpr QuantS8Kernels kTable = {
-      Isa::kAvx512Vnni,           "quantize_f32_s8_avx512vnni", "dequantize_s8_f32_avx512vnni",
-      "minmax_f32_avx512vnni",    quantize_f32_s8_avx512vnni,   dequantize_s8_f32_avx512vnni,
-      minmax_f32_avx512vnni};
+      Isa::kAvx512,           "quantize_f32_s8_avx512", "dequantize_s8_f32_avx512",
+      "minmax_f32_avx512",    quantize_f32_s8_avx512,   dequantize_s8_f32_avx512,
+      minmax_f32_avx512};
   return &kTable;
 }
 
@@ -92,7 +92,7 @@ const QuantS8Kernels* quant_s8_table_avx512vnni() {
 #else  // not x86-64
 
 namespace act::kernels {
-const QuantS8Kernels* quant_s8_table_avx512vnni() { return nullptr; }
+const QuantS8Kernels* quant_s8_table_avx512() { return nullptr; }
 }  // namespace act::kernels
 
 #endif

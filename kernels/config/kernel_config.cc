@@ -1,0 +1,65 @@
+#include "kernels/config/kernel_config.h"
+
+#include "kernels/gemm_s8/gemm_s8_variants.h"
+#include "kernels/pool_s8/maxpool_s8_variants.h"
+#include "kernels/quant/quant_s8_variants.h"
+
+namespace act::kernels {
+
+IsaTables isa_tables(Isa isa) {
+  switch (isa) {
+    case Isa::kRef:
+      return {gemm_s8_table_ref(), gemm_f32_table_ref(), quant_s8_table_ref(), elementwise_f32_table_ref(),
+              maxpool_s8_table_ref()};
+    case Isa::kAvx2:
+      return {gemm_s8_table_avx2(), gemm_f32_table_avx2(), quant_s8_table_avx2(), elementwise_f32_table_avx2(),
+              maxpool_s8_table_avx2()};
+    case Isa::kAvx512:
+      return {nullptr, gemm_f32_table_avx512(), quant_s8_table_avx512(), elementwise_f32_table_avx512(),
+              maxpool_s8_table_avx512()};
+    case Isa::kAvx512Vnni:
+      return {gemm_s8_table_avx512vnni(), nullptr, nullptr, nullptr, nullptr};
+    case Isa::kNeon:
+      // AArch64's baseline (ref) Eigen GEMM is already NEON, so gemm_f32 has no separate variant.
+      return {nullptr, nullptr, quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
+    case Isa::kNeonDot:
+      return {gemm_s8_table_neondot(), nullptr, nullptr, nullptr, nullptr};
+  }
+  return {};
+}
+
+std::string KernelConfig::describe() const {
+  return std::string(isa_name(isa)) + ": gemm_s8 " + std::to_string(gemm_s8.mr) + "x" + std::to_string(gemm_s8.nr) +
+         "c" + std::to_string(gemm_s8.kr) + " " + isa_name(gemm_s8.isa) + ", " + gemm_f32.name + ", quant " +
+         isa_name(quant.isa) + ", elementwise " + isa_name(elementwise.isa) + ", maxpool_s8 " +
+         isa_name(maxpool_s8.isa);
+}
+
+KernelConfig kernel_config_for(Isa level) {
+  return {level,
+          variant_for(level, &IsaTables::gemm_s8),
+          variant_for(level, &IsaTables::gemm_f32),
+          variant_for(level, &IsaTables::quant),
+          variant_for(level, &IsaTables::elementwise),
+          variant_for(level, &IsaTables::maxpool_s8)};
+}
+
+KernelConfigChoice kernel_config(std::string_view requested) {
+  KernelConfigChoice choice;
+  if (requested == "auto") {
+    choice.config.emplace(kernel_config_for(best_cpu_isa()));
+    return choice;
+  }
+  const std::string runs = "this CPU runs " + isa_mask_names(cpu_isa_mask());
+  const std::optional<Isa> isa = parse_isa(requested);
+  if (!isa) {
+    choice.error = "unknown ISA '" + std::string(requested) + "': " + runs;
+  } else if (!cpu_supports(*isa)) {
+    choice.error = "ISA '" + std::string(requested) + "' is not supported by this CPU: " + runs;
+  } else {
+    choice.config.emplace(kernel_config_for(*isa));
+  }
+  return choice;
+}
+
+}  // namespace act::kernels

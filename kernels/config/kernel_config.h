@@ -1,0 +1,71 @@
+// The kernel configuration of one Engine (XNNPACK's configs/, MLAS's platform table): the variant of
+// every kernel family, chosen together, once, from the CPU's features and a requested ISA level.
+// Nothing else in the library chooses a kernel; ops receive the configuration through the graph's
+// RunContext, and weights are packed for its gemm_s8 variant.
+//
+// A family's variant for a level is its best variant at or below that level (kernels/common/isa.h):
+// at avx512, gemm_s8 (which has no AVX-512 variant without VNNI) runs avx2 while quant, element-wise,
+// max-pool and the FP32 GEMM run their avx512 variants.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "kernels/common/isa.h"
+#include "kernels/fp32/elementwise_f32.h"
+#include "kernels/fp32/gemm_f32.h"
+#include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/pool_s8/maxpool_s8.h"
+#include "kernels/quant/quant_s8.h"
+
+namespace act::kernels {
+
+/// Each family's variant compiled for exactly one ISA; null where the family has none for it (or
+/// this target did not build it). Tests and benchmarks walk these to reach every variant.
+struct IsaTables {
+  const GemmS8Kernels* gemm_s8 = nullptr;
+  const GemmF32Kernels* gemm_f32 = nullptr;
+  const QuantS8Kernels* quant = nullptr;
+  const ElementwiseF32Kernels* elementwise = nullptr;
+  const MaxPoolS8Kernels* maxpool_s8 = nullptr;
+};
+IsaTables isa_tables(Isa isa);
+
+/// A family's variant for `level`: its table for the highest ISA at or below `level` (every family
+/// has a reference, so there always is one). E.g. variant_for(Isa::kAvx512, &IsaTables::gemm_s8).
+template <class Table>
+const Table& variant_for(Isa level, const Table* IsaTables::*family) {
+  for (std::optional<Isa> isa = level; isa; isa = isa_below(*isa)) {
+    if (const Table* t = isa_tables(*isa).*family) return *t;
+  }
+  return *(isa_tables(Isa::kRef).*family);
+}
+
+struct KernelConfig {
+  Isa isa;  ///< the level the variants were chosen for
+  const GemmS8Kernels& gemm_s8;  ///< also decides how int8 weights are packed
+  const GemmF32Kernels& gemm_f32;
+  const QuantS8Kernels& quant;
+  const ElementwiseF32Kernels& elementwise;
+  const MaxPoolS8Kernels& maxpool_s8;
+
+  /// The variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32 eigen avx512, ...".
+  std::string describe() const;
+};
+
+/// The configuration of `level`: each family's best variant at or below it. The caller makes sure
+/// the CPU runs `level` (kernel_config() checks; tests pass a level from cpu_isa_mask()).
+KernelConfig kernel_config_for(Isa level);
+
+/// The configuration for a requested ISA: "auto" (the best level this CPU runs) or an ISA name.
+/// A name that is unknown, or a level this CPU cannot run, is an error — never a silent fallback:
+/// `error` then says so and lists the ISAs this CPU runs, e.g.
+///   unknown ISA 'bogus': this CPU runs ref, avx2, avx512, avx512vnni
+struct KernelConfigChoice {
+  std::optional<KernelConfig> config;  ///< empty on error
+  std::string error;
+};
+KernelConfigChoice kernel_config(std::string_view requested);
+
+}  // namespace act::kernels

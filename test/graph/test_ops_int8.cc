@@ -1,0 +1,283 @@
+// The INT8 ops against their float twins, and the float attention against a naive scalar
+// softmax(Q K^T / sqrt(d)) V, for every ISA level this CPU runs (each a KernelConfig, so every
+// gemm_s8, quant and element-wise variant an Engine can use is exercised through the ops).
+//
+// Tolerances are the quantization error itself, bounded per output: with |dx| <= s_x / 2 (input
+// rounding; the range covers the data, so nothing clips) and |dw| <= s_w[n] / 2 (weights, symmetric
+// per output channel), each product x w differs by at most |x| |dw| + |w| |dx| + |dx| |dw|; an int8
+// output adds its own rounding (s_out / 2) and the integer bias's (s_x s_w[n] / 2 per output).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "graph/graph.h"
+#include "graph/ops_fp32.h"
+#include "graph/ops_int8.h"
+#include "graph/thread_pool.h"
+#include "kernels/config/kernel_config.h"
+#include "kernels/quant/quant_s8.h"
+
+namespace act::graph {
+namespace {
+
+std::vector<float> uniform(size_t n, std::mt19937& rng, float lo, float hi) {
+  std::uniform_real_distribution<float> d(lo, hi);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
+}
+
+// Symmetric per-output-channel int8 weights of w [n x k], as the converter makes them.
+struct QuantizedWeights {
+  std::vector<int8_t> q;
+  std::vector<float> scale;
+  std::vector<float> dequantized;
+};
+
+QuantizedWeights quantize_weights(const std::vector<float>& w, int n, int k) {
+  QuantizedWeights out;
+  out.q.resize(w.size());
+  out.dequantized.resize(w.size());
+  out.scale.resize(static_cast<size_t>(n));
+  for (int o = 0; o < n; ++o) {
+    const float* row = w.data() + static_cast<size_t>(o) * k;
+    float absmax = 0.0f;
+    for (int i = 0; i < k; ++i) absmax = std::max(absmax, std::fabs(row[i]));
+    const float s = absmax > 0.0f ? absmax / 127.0f : 1.0f;
+    out.scale[static_cast<size_t>(o)] = s;
+    for (int i = 0; i < k; ++i) {
+      const size_t j = static_cast<size_t>(o) * k + i;
+      out.q[j] = static_cast<int8_t>(std::clamp(std::nearbyint(w[j] / s), -127.0f, 127.0f));
+      out.dequantized[j] = static_cast<float>(out.q[j]) * s;
+    }
+  }
+  return out;
+}
+
+// The bound on |sum_i x_i w_i - sum_i x~_i w~_i| for one output (see the file comment).
+double product_error_bound(const float* x, const float* w, int k, double s_x, double s_w) {
+  double bound = 0.0;
+  for (int i = 0; i < k; ++i) {
+    bound += std::fabs(x[i]) * s_w / 2 + std::fabs(w[i]) * s_x / 2 + s_x * s_w / 4;
+  }
+  return bound;
+}
+
+class OpsPerIsa : public ::testing::TestWithParam<kernels::Isa> {
+ protected:
+  kernels::KernelConfig config() const { return kernels::kernel_config_for(GetParam()); }
+  ThreadPool pool_{2};
+};
+
+// Conv2dShape patches of one output pixel: the im2col row, taps in the padding 0.
+std::vector<float> patch_of(const kernels::Conv2dShape& s, const std::vector<float>& x, int pixel) {
+  std::vector<float> patch(static_cast<size_t>(s.patch_size()), 0.0f);
+  const int oy = pixel / s.out_w, ox = pixel % s.out_w;
+  size_t j = 0;
+  for (int ky = 0; ky < s.kernel_h; ++ky) {
+    for (int kx = 0; kx < s.kernel_w; ++kx) {
+      const int iy = oy * s.stride - s.pad + ky * s.dilation, ix = ox * s.stride - s.pad + kx * s.dilation;
+      for (int c = 0; c < s.in_c; ++c, ++j) {
+        if (iy >= 0 && iy < s.in_h && ix >= 0 && ix < s.in_w) {
+          patch[j] = x[(static_cast<size_t>(iy) * s.in_w + ix) * s.in_c + c];
+        }
+      }
+    }
+  }
+  return patch;
+}
+
+// ConvS8Op (static input quantization, int8 weights) against Conv2dOp with the float weights, with
+// a float (dequantized) output and with an int8 output + ReLU, for the 3x3 and 1x1/2 shapes of a
+// ResNet block.
+TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(7);
+  for (const auto& s : {kernels::Conv2dShape::square(9, 11, 16, 40, 3, 1, 1),
+                        kernels::Conv2dShape::square(10, 7, 24, 70, 1, 2, 0),
+                        kernels::Conv2dShape::square(13, 12, 3, 64, 7, 2, 3)}) {
+    const int pixels = s.out_h * s.out_w, K = s.patch_size();
+    const std::vector<float> x = uniform(static_cast<size_t>(s.in_h) * s.in_w * s.in_c, rng, -1.0f, 3.0f);
+    const std::vector<float> w = uniform(static_cast<size_t>(s.out_c) * K, rng, -0.5f, 0.5f);
+    const std::vector<float> bias = uniform(static_cast<size_t>(s.out_c), rng, -1.0f, 1.0f);
+    const QuantizedWeights qw = quantize_weights(w, s.out_c, K);
+    const kernels::QuantS8 in_q = kernels::choose_quant_s8(-1.0f, 3.0f);
+    // The int8 output's range: the float outputs' (ReLU'd), with a margin for the error.
+    float out_max = 0.0f;
+    for (int p = 0; p < pixels; ++p) {
+      const std::vector<float> patch = patch_of(s, x, p);
+      for (int o = 0; o < s.out_c; ++o) {
+        float y = bias[static_cast<size_t>(o)];
+        for (int i = 0; i < K; ++i) y += patch[static_cast<size_t>(i)] * w[static_cast<size_t>(o) * K + i];
+        out_max = std::max(out_max, y);
+      }
+    }
+    const float out_range = 1.25f * out_max + 1.0f;
+
+    for (bool s8_out : {false, true}) {
+      Graph g;
+      const ValueId in = g.add_input("x", {s.in_h, s.in_w, s.in_c});
+      const ValueId in_s8 = g.add_value("x_s8", {s.in_h, s.in_w, s.in_c}, DataType::kS8);
+      const ValueId y_float = g.add_value("y_float", {pixels, s.out_c});
+      g.add_op(std::make_unique<QuantizeOp>(x.size(), in_q, in, in_s8));
+      g.add_op(std::make_unique<Conv2dOp>(s, w.data(), bias.data(), s8_out, in, kNoValue, y_float));
+      ConvS8Spec spec;
+      spec.shape = s;
+      spec.weight = qw.q.data();
+      spec.w_scale = qw.scale.data();
+      spec.bias = bias.data();
+      spec.input_q = in_q;
+      spec.s8_out = s8_out;
+      spec.relu = s8_out;
+      spec.output_q = kernels::choose_quant_s8(0.0f, out_range);
+      const ValueId y_q = g.add_value("y_q", {pixels, s.out_c}, s8_out ? DataType::kS8 : DataType::kF32);
+      g.add_op(std::make_unique<ConvS8Op>(k.gemm_s8, spec, in_s8, y_q));
+      g.mark_output(y_float);
+      g.mark_output(y_q);
+      g.plan(pool_.threads(), true);
+      std::copy(x.begin(), x.end(), g.data(in));
+      g.run(pool_, k);
+
+      const float* yf = g.data(y_float);
+      for (int p = 0; p < pixels; ++p) {
+        const std::vector<float> patch = patch_of(s, x, p);
+        for (int o = 0; o < s.out_c; ++o) {
+          const size_t i = static_cast<size_t>(p) * s.out_c + o;
+          const double s_w = qw.scale[static_cast<size_t>(o)];
+          double bound = product_error_bound(patch.data(), w.data() + static_cast<size_t>(o) * K, K, in_q.scale, s_w);
+          float got;
+          if (s8_out) {
+            ASSERT_LT(yf[i], out_range) << "the output range must cover the data";
+            got = spec.output_q.scale * (static_cast<float>(g.data_s8(y_q)[i]) - static_cast<float>(spec.output_q.zero_point));
+            bound += spec.output_q.scale / 2 + in_q.scale * s_w / 2;
+          } else {
+            got = g.data(y_q)[i];
+          }
+          ASSERT_NEAR(got, yf[i], bound + 1e-5 * (1 + std::fabs(yf[i])))
+              << kernels::isa_name(GetParam()) << " " << s.kernel_h << "x" << s.kernel_w << "/" << s.stride
+              << (s8_out ? " s8 out" : " f32 out") << " pixel " << p << " channel " << o;
+        }
+      }
+    }
+  }
+}
+
+// LinearS8Op (activations quantized per row at run time) against LinearOp with the float weights:
+// bias, a residual, ReLU; rows around the tile sizes.
+TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(8);
+  const int in = 96, out = 70;
+  for (int rows : {1, 7, 130}) {
+    for (Epilogue epilogue : {Epilogue::kNone, Epilogue::kRelu}) {
+      std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -2.0f, 2.0f);
+      for (int r = 0; r < rows; ++r) x[static_cast<size_t>(r) * in] = 8.0f * static_cast<float>(r % 3);  // row ranges differ
+      const std::vector<float> w = uniform(static_cast<size_t>(out) * in, rng, -0.3f, 0.3f);
+      const std::vector<float> bias = uniform(static_cast<size_t>(out), rng, -1.0f, 1.0f);
+      const std::vector<float> residual = uniform(static_cast<size_t>(rows) * out, rng, -1.0f, 1.0f);
+      const QuantizedWeights qw = quantize_weights(w, out, in);
+
+      Graph g;
+      const ValueId xv = g.add_input("x", {rows, in});
+      const ValueId rv = g.add_input("residual", {rows, out});
+      const ValueId y_float = g.add_value("y_float", {rows, out});
+      const ValueId y_q = g.add_value("y_q", {rows, out});
+      const ValueId x_s8 = g.add_value("x_s8", {rows, in}, DataType::kS8);
+      const ValueId row_scale = g.add_value("row_scale", {rows});
+      const ValueId row_zp = g.add_value("row_zero_point", {rows}, DataType::kS32);
+      const MatrixRef xr = MatrixRef::of(xv, in), br = MatrixRef::of_constant(bias.data(), 0), rr = MatrixRef::of(rv, out);
+      g.add_op(std::make_unique<LinearOp>(rows, in, out, xr, w.data(), br, rr, epilogue, y_float));
+      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, qw.q.data(), qw.scale.data(), br, rr, epilogue,
+                                            y_q, x_s8, row_scale, row_zp));
+      g.mark_output(y_float);
+      g.mark_output(y_q);
+      g.plan(pool_.threads(), true);
+      std::copy(x.begin(), x.end(), g.data(xv));
+      std::copy(residual.begin(), residual.end(), g.data(rv));
+      g.run(pool_, k);
+
+      for (int r = 0; r < rows; ++r) {
+        const double s_x = g.data(row_scale)[r];
+        for (int o = 0; o < out; ++o) {
+          const size_t i = static_cast<size_t>(r) * out + o;
+          const double bound = product_error_bound(x.data() + static_cast<size_t>(r) * in, w.data() + static_cast<size_t>(o) * in,
+                                                   in, s_x, qw.scale[static_cast<size_t>(o)]);
+          ASSERT_NEAR(g.data(y_q)[i], g.data(y_float)[i], bound + 1e-5 * (1 + std::fabs(g.data(y_float)[i])))
+              << kernels::isa_name(GetParam()) << " rows " << rows << " row " << r << " column " << o;
+        }
+      }
+    }
+  }
+}
+
+// softmax(Q K^T / sqrt(d)) V per head, in double.
+std::vector<double> attention_naive(const std::vector<float>& q, const std::vector<float>& k, const std::vector<float>& v,
+                                    int nq, int nk, int dim, int heads) {
+  const int hd = dim / heads;
+  std::vector<double> out(static_cast<size_t>(nq) * dim);
+  std::vector<double> p(static_cast<size_t>(nk));
+  for (int h = 0; h < heads; ++h) {
+    for (int i = 0; i < nq; ++i) {
+      double mx = -INFINITY;
+      for (int j = 0; j < nk; ++j) {
+        double dot = 0;
+        for (int c = 0; c < hd; ++c) dot += double{q[static_cast<size_t>(i) * dim + h * hd + c]} * k[static_cast<size_t>(j) * dim + h * hd + c];
+        p[static_cast<size_t>(j)] = dot / std::sqrt(static_cast<double>(hd));
+        mx = std::max(mx, p[static_cast<size_t>(j)]);
+      }
+      double sum = 0;
+      for (double& e : p) sum += (e = std::exp(e - mx));
+      for (int c = 0; c < hd; ++c) {
+        double acc = 0;
+        for (int j = 0; j < nk; ++j) acc += p[static_cast<size_t>(j)] / sum * v[static_cast<size_t>(j) * dim + h * hd + c];
+        out[static_cast<size_t>(i) * dim + h * hd + c] = acc;
+      }
+    }
+  }
+  return out;
+}
+
+// AttentionOp against the naive definition: self-attention over a fused qkv value (column slices,
+// as the encoder uses it) and cross-attention with fewer queries than keys; query counts that leave
+// a ragged tile.
+TEST_P(OpsPerIsa, AttentionMatchesNaiveSoftmaxAttention) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(9);
+  const int dim = 64, heads = 4;
+  for (auto [nq, nk] : {std::pair{37, 37}, std::pair{130, 45}, std::pair{1, 9}}) {
+    const std::vector<float> q = uniform(static_cast<size_t>(nq) * dim, rng, -2.0f, 2.0f);
+    const std::vector<float> kk = uniform(static_cast<size_t>(nk) * dim, rng, -2.0f, 2.0f);
+    const std::vector<float> v = uniform(static_cast<size_t>(nk) * dim, rng, -1.0f, 1.0f);
+    Graph g;
+    const ValueId qv = g.add_input("q", {nq, dim});
+    const ValueId kv = g.add_input("kv", {nk, 2 * dim});  // k and v side by side, as the fused projection
+    const ValueId out = g.add_value("out", {nq, dim});
+    g.add_op(std::make_unique<AttentionOp>(nq, nk, dim, heads, MatrixRef::of(qv, dim), MatrixRef::of(kv, 2 * dim, 0),
+                                           MatrixRef::of(kv, 2 * dim, dim), out));
+    g.mark_output(out);
+    g.plan(pool_.threads(), false);
+    std::copy(q.begin(), q.end(), g.data(qv));
+    for (int j = 0; j < nk; ++j) {
+      std::copy_n(kk.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim);
+      std::copy_n(v.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim + dim);
+    }
+    g.run(pool_, k);
+    const std::vector<double> want = attention_naive(q, kk, v, nq, nk, dim, heads);
+    for (size_t i = 0; i < want.size(); ++i) {
+      ASSERT_NEAR(g.data(out)[i], want[i], 2e-5 * (1 + std::fabs(want[i])))
+          << kernels::isa_name(GetParam()) << " " << nq << "x" << nk << " at " << i;
+    }
+  }
+}
+
+std::string isa_param_name(const ::testing::TestParamInfo<kernels::Isa>& info) { return kernels::isa_name(info.param); }
+
+INSTANTIATE_TEST_SUITE_P(CpuIsas, OpsPerIsa, ::testing::ValuesIn(kernels::cpu_isas()), isa_param_name);
+
+}  // namespace
+}  // namespace act::graph

@@ -1,0 +1,118 @@
+// The kernel configuration (kernels/config/kernel_config.h): one variant per family, chosen for an
+// ISA level ("auto" or a name), each the family's best variant at or below the level; an unknown ISA
+// or one this CPU cannot run is an error listing what it runs.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <optional>
+#include <string>
+
+#include "kernels/config/kernel_config.h"
+#include "test/kernels/kernel_test_util.h"
+
+namespace act::kernels {
+namespace {
+
+// True when `variant` is at or below `level` in level's chain.
+bool at_or_below(Isa variant, Isa level) {
+  for (std::optional<Isa> isa = level; isa; isa = isa_below(*isa)) {
+    if (*isa == variant) return true;
+  }
+  return false;
+}
+
+TEST(KernelConfig, AutoIsTheBestLevelThisCpuRuns) {
+  const KernelConfigChoice c = kernel_config("auto");
+  ASSERT_TRUE(c.config.has_value()) << c.error;
+  EXPECT_EQ(c.config->isa, best_cpu_isa());
+  EXPECT_TRUE(cpu_supports(c.config->isa));
+  const std::string described = c.config->describe();
+  EXPECT_EQ(described.rfind(std::string(isa_name(c.config->isa)) + ": gemm_s8 ", 0), 0u) << described;
+  EXPECT_NE(described.find(c.config->gemm_f32.name), std::string::npos) << described;
+#if defined(__x86_64__)
+  if (cpu_supports(Isa::kAvx2)) {
+    EXPECT_NE(c.config->isa, Isa::kRef) << "an AVX2 CPU chose the scalar reference";
+  }
+#elif defined(__aarch64__)
+  EXPECT_NE(c.config->isa, Isa::kRef) << "an AArch64 CPU chose the scalar reference";
+#endif
+}
+
+TEST(KernelConfig, EveryLevelTakesEachFamilysBestVariantAtOrBelowIt) {
+  for (Isa level : cpu_isas()) {
+    const KernelConfigChoice c = kernel_config(isa_name(level));
+    ASSERT_TRUE(c.config.has_value()) << c.error;
+    const KernelConfig& k = *c.config;
+    EXPECT_EQ(k.isa, level);
+    for (Isa family_isa : {k.gemm_s8.isa, k.gemm_f32.isa, k.quant.isa, k.elementwise.isa, k.maxpool_s8.isa}) {
+      EXPECT_TRUE(at_or_below(family_isa, level)) << isa_name(family_isa) << " chosen at " << isa_name(level);
+      EXPECT_TRUE(cpu_supports(family_isa));
+    }
+    EXPECT_EQ(&k.quant, &variant_for(level, &IsaTables::quant));
+    EXPECT_EQ(&k.gemm_s8, &variant_for(level, &IsaTables::gemm_s8));
+  }
+}
+
+#if defined(__x86_64__)
+// AVX-512 without VNNI: the families that need only F/BW/VL run their AVX-512 code, gemm_s8 (whose
+// AVX-512 kernel needs VNNI) its AVX2 one.
+TEST(KernelConfig, Avx512LevelUsesAvx2GemmS8AndAvx512ForTheRest) {
+  const KernelConfig k = kernel_config_for(Isa::kAvx512);
+  EXPECT_EQ(k.gemm_s8.isa, Isa::kAvx2);
+  EXPECT_EQ(k.gemm_f32.isa, Isa::kAvx512);
+  EXPECT_EQ(k.quant.isa, Isa::kAvx512);
+  EXPECT_EQ(k.elementwise.isa, Isa::kAvx512);
+  EXPECT_EQ(k.maxpool_s8.isa, Isa::kAvx512);
+  const KernelConfig vnni = kernel_config_for(Isa::kAvx512Vnni);
+  EXPECT_EQ(vnni.gemm_s8.isa, Isa::kAvx512Vnni);
+  EXPECT_EQ(vnni.quant.isa, Isa::kAvx512);
+}
+#endif
+
+#if defined(__aarch64__)
+// Plain NEON (no dot product): NEON quant / element-wise / max-pool, the reference gemm_s8.
+TEST(KernelConfig, NeonLevelUsesNeonForAllButGemmS8) {
+  const KernelConfig k = kernel_config_for(Isa::kNeon);
+  EXPECT_EQ(k.gemm_s8.isa, Isa::kRef);
+  EXPECT_EQ(k.quant.isa, Isa::kNeon);
+  EXPECT_EQ(k.elementwise.isa, Isa::kNeon);
+  EXPECT_EQ(k.maxpool_s8.isa, Isa::kNeon);
+  EXPECT_EQ(kernel_config_for(Isa::kNeonDot).gemm_s8.isa, Isa::kNeonDot);
+}
+#endif
+
+TEST(KernelConfig, UnknownIsaIsAnErrorListingWhatThisCpuRuns) {
+  const std::string runs = "this CPU runs " + isa_mask_names(cpu_isa_mask());
+  for (const char* bad : {"bogus", "AVX2", "", "avx512vnni "}) {
+    const KernelConfigChoice c = kernel_config(bad);
+    EXPECT_FALSE(c.config.has_value()) << bad;
+    EXPECT_EQ(c.error, "unknown ISA '" + std::string(bad) + "': " + runs);
+  }
+}
+
+TEST(KernelConfig, IsaThisCpuLacksIsAnError) {
+#if defined(__x86_64__)
+  const char* foreign = "neondot";
+#else
+  const char* foreign = "avx2";
+#endif
+  const KernelConfigChoice c = kernel_config(foreign);
+  EXPECT_FALSE(c.config.has_value());
+  EXPECT_EQ(c.error, std::string("ISA '") + foreign + "' is not supported by this CPU: this CPU runs " +
+                         isa_mask_names(cpu_isa_mask()));
+  for (int i = 0; i < kIsaCount; ++i) {
+    const Isa isa = static_cast<Isa>(i);
+    EXPECT_EQ(kernel_config(isa_name(isa)).config.has_value(), cpu_supports(isa)) << isa_name(isa);
+  }
+}
+
+// The kernel tests honour ACT_ISA (the variant an Engine at that level runs): it must be valid.
+TEST(KernelConfig, ActIsaOfThisRunIsValid) {
+  const char* forced = std::getenv("ACT_ISA");
+  if (forced == nullptr || forced[0] == '\0') GTEST_SKIP() << "ACT_ISA is not set";
+  const KernelConfigChoice c = kernel_config(forced);
+  EXPECT_TRUE(c.config.has_value()) << "ACT_ISA: " << c.error;
+}
+
+}  // namespace
+}  // namespace act::kernels

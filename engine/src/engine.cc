@@ -72,20 +72,33 @@ Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t 
   return n;
 }
 
-Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, bool keep_intermediates)
+ModelInfo model_info_of(const ModelConfig& config) {
+  ModelInfo info;
+  for (const auto& cam : config.cameras) info.cameras.push_back({cam.key, cam.height, cam.width});
+  info.state_dim = config.state_dim;
+  info.env_state_dim = config.env_state_dim;
+  info.env_state_key = config.env_state_key;
+  info.action_dim = config.action_dim;
+  info.chunk_size = config.chunk_size;
+  info.n_action_steps = config.n_action_steps;
+  info.temporal_ensembling = config.temporal_ensemble_coeff.has_value();
+  info.temporal_ensemble_coeff = config.temporal_ensemble_coeff.value_or(0.0);
+  info.precision = precision_name(config.precision);
+  info.summary = config.summary();
+  return info;
+}
+
+Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
     : blob_(ActbFile::open(blob_path, options.verify_checksum)),
       config_(ModelConfig::from_json(blob_.config())),
       pool_(options.threads),
       kernels_(engine_kernels(options.isa)),
       profile_(options.profile),
-      keep_intermediates_(keep_intermediates) {
+      keep_intermediates_(options.keep_intermediates) {
   network_ = std::make_unique<graph::ActNetwork>(config_, blob_, kernels_);
-  network_->plan(pool_.threads(), keep_intermediates);
+  network_->plan(pool_.threads(), keep_intermediates_);
 
-  for (const auto& cam : config_.cameras) {
-    info_.cameras.push_back({cam.key, cam.height, cam.width});
-    camera_norm_.push_back(input_norm(cam.key, 3));
-  }
+  for (const auto& cam : config_.cameras) camera_norm_.push_back(input_norm(cam.key, 3));
   if (config_.state_dim > 0) state_norm_ = input_norm(config_.state_key, static_cast<size_t>(config_.state_dim));
   if (config_.env_state_dim > 0) env_norm_ = input_norm(config_.env_state_key, static_cast<size_t>(config_.env_state_dim));
   if (config_.action_norm != NormMode::kIdentity) {
@@ -97,19 +110,10 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, b
       *ptr = t.f32();
     }
   }
-  info_.state_dim = config_.state_dim;
-  info_.env_state_dim = config_.env_state_dim;
-  info_.env_state_key = config_.env_state_key;
-  info_.action_dim = config_.action_dim;
-  info_.chunk_size = config_.chunk_size;
-  info_.n_action_steps = config_.n_action_steps;
-  info_.temporal_ensembling = config_.temporal_ensemble_coeff.has_value();
-  info_.temporal_ensemble_coeff = config_.temporal_ensemble_coeff.value_or(0.0);
-  info_.precision = precision_name(config_.precision);
+  info_ = model_info_of(config_);
   info_.isa = kernels::isa_name(kernels_.isa);
   info_.kernels = kernels_.describe();
   if (config_.precision == Precision::kInt8) info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
-  info_.summary = config_.summary();
 }
 
 void Engine::Impl::load_image(size_t camera, const ImageView& image) {
@@ -250,7 +254,7 @@ StatusOr<std::unique_ptr<Engine>> Engine::open(const std::string& blob_path, con
   std::unique_ptr<Engine> engine;
   Status s = guarded([&] {
     if (options.threads < 0) fail(ErrorCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
-    engine.reset(new Engine(std::make_unique<Impl>(blob_path, options, options.keep_intermediates)));
+    engine.reset(new Engine(std::make_unique<Impl>(blob_path, options)));
   });
   if (!s.ok()) return s;
   return engine;

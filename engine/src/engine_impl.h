@@ -16,12 +16,15 @@
 
 namespace act {
 
+/// What a model config says a model takes and gives (ModelInfo's shape fields, its precision and
+/// summary); an Engine adds the kernels it runs.
+ModelInfo model_info_of(const ModelConfig& config);
+
 class Engine::Impl {
  public:
-  /// Opens the blob and plans the network. keep_intermediates gives every graph value its own
-  /// memory so it can be read after infer (tests); it costs memory, never results.
-  /// Throws act::Error.
-  Impl(const std::string& blob_path, const EngineOptions& options, bool keep_intermediates);
+  /// Opens the blob and plans the network (EngineOptions::keep_intermediates gives every graph value
+  /// its own memory, so it can be read after a run). Throws act::Error.
+  Impl(const std::string& blob_path, const EngineOptions& options);
 
   const ModelInfo& info() const { return info_; }
   const ModelConfig& config() const { return config_; }

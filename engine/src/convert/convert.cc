@@ -48,26 +48,10 @@ PthExplanation explain(const PyTorchConversion& plan) {
   return e;
 }
 
-ModelInfo model_info(const ModelConfig& c) {
-  ModelInfo info;
-  for (const auto& cam : c.cameras) info.cameras.push_back({cam.key, cam.height, cam.width});
-  info.state_dim = c.state_dim;
-  info.env_state_dim = c.env_state_dim;
-  info.env_state_key = c.env_state_key;
-  info.action_dim = c.action_dim;
-  info.chunk_size = c.chunk_size;
-  info.n_action_steps = c.n_action_steps;
-  info.temporal_ensembling = c.temporal_ensemble_coeff.has_value();
-  info.temporal_ensemble_coeff = c.temporal_ensemble_coeff.value_or(0.0);
-  info.precision = "fp32";
-  info.summary = c.summary();
-  return info;
-}
-
 ImportSummary import_summary(const ImportedModel& model, std::string source) {
   ImportSummary s;
   s.source = std::move(source);
-  s.model = model_info(model.config);
+  s.model = model_info_of(model.config);
   s.encoder_tokens = model.config.n_tokens();
   s.checkpoint_values = model.checkpoint_values;
   s.checkpoint_tensors = model.checkpoint_tensors;

@@ -76,7 +76,8 @@ class Converter {
     const ScratchBlob fp32(fp32_blob(model_), output_);
     EngineOptions eo;
     eo.threads = opt_.threads;
-    fp32_ = std::make_unique<Engine::Impl>(fp32.path(), eo, true);
+    eo.keep_intermediates = true;
+    fp32_ = std::make_unique<Engine::Impl>(fp32.path(), eo);
     compute_reference();
 
     QuantConfig quant;
@@ -190,7 +191,7 @@ class Converter {
   ActionError evaluate(const std::string& blob_path) {
     EngineOptions eo;
     eo.threads = opt_.threads;
-    Engine::Impl int8(blob_path, eo, false);
+    Engine::Impl int8(blob_path, eo);
     const size_t T = static_cast<size_t>(fp32_->config().chunk_size), A = static_cast<size_t>(fp32_->config().action_dim);
     ActionError e;
     e.per_dim_mse.assign(A, 0.0);
@@ -307,7 +308,8 @@ class Converter {
   std::vector<LayerSqnr> layer_sqnr(const std::string& blob) {
     EngineOptions eo;
     eo.threads = opt_.threads;
-    Engine::Impl int8(blob, eo, true);
+    eo.keep_intermediates = true;
+    Engine::Impl int8(blob, eo);
     graph::Graph& gq = int8.network().graph();
     graph::Graph& gf = fp32_->network().graph();
     struct Acc {

@@ -89,7 +89,8 @@ ModelInfo model_info_of(const ModelConfig& config) {
 }
 
 Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
-    : blob_(ActbFile::open(blob_path, options.verify_checksum)),
+    : blob_(ActbFile::open(blob_path, options.verify_checksum,
+                           options.share_blob_pages ? FileMapping::Mode::kMap : FileMapping::Mode::kPrivateCopy)),
       config_(ModelConfig::from_json(blob_.config())),
       pool_(options.threads),
       kernels_(engine_kernels(options.isa)),

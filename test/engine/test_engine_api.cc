@@ -1,6 +1,7 @@
 // The public API: bad observations and blobs are clear errors; results do not depend on threads,
 // memory planning or which Engine runs them; Engines run side by side and can change threads.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,6 +14,7 @@
 #include "actengine/engine.h"
 #include "kernels/common/isa.h"
 #include "support/act_test_util.h"
+#include "support/file_test_util.h"
 #include "support/test_paths.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_names.h"
@@ -433,6 +435,30 @@ TEST_F(EngineApiTest, Int8IntermediatesAreDequantized) {
   ASSERT_NE(run_time, names.end());
   EXPECT_EQ((*dynamic)->intermediate(*run_time).status().code(), StatusCode::kUnimplemented);
   EXPECT_TRUE((*dynamic)->intermediate("cam0.backbone.layer1").ok());
+}
+
+TEST_F(EngineApiTest, TheRunningModelCannotChangeUnderIt) {
+  // Copying another model over the open blob (cp and scp rewrite the same inode) once changed the
+  // weights mid-run, and truncating it killed the process with SIGBUS: the Engine reads its own copy.
+  const std::string legacy = test::fixture_dir("act-tiny-legacy");
+  ACT_REQUIRE_PATH(legacy);
+  const std::string path = scratch_ + "/running.actb";
+  fs::copy_file(blob_, path);
+  auto running = Engine::open(path, {.threads = 1});
+  ASSERT_TRUE(running.ok()) << running.status().to_string();
+  auto before = chunk();
+  ASSERT_TRUE((*running)->infer(observation(), before).ok());
+
+  const std::vector<uint8_t> other = test::read_file(test::convert_checkpoint(legacy, scratch_, "other"));
+  test::write_file(path, other);  // in place: same inode, as cp does
+  auto after_rewrite = chunk();
+  ASSERT_TRUE((*running)->infer(observation(), after_rewrite).ok());
+  EXPECT_EQ(after_rewrite, before);
+
+  ASSERT_EQ(::truncate(path.c_str(), 100), 0);
+  auto after_truncation = chunk();
+  ASSERT_TRUE((*running)->infer(observation(), after_truncation).ok());
+  EXPECT_EQ(after_truncation, before);
 }
 
 TEST_F(EngineApiTest, CorruptBlobsAreClearErrors) {

@@ -414,9 +414,9 @@ void check_no_overlap(const std::string& path, const std::vector<ActbTensor>& te
 
 }  // namespace
 
-ActbFile ActbFile::open(const std::string& path, bool verify_checksum) {
+ActbFile ActbFile::open(const std::string& path, bool verify_checksum, FileMapping::Mode mode) {
   ActbFile f;
-  f.mapping_ = FileMapping::open(path);
+  f.mapping_ = FileMapping::open(path, mode);
   const uint8_t* base = f.mapping_.data();
   const uint64_t size = f.mapping_.size();
   const FixedHeader fixed = read_fixed_header(path, base, size);

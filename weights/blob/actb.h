@@ -90,8 +90,11 @@ class ActbWriter {
 class ActbFile {
  public:
   /// Opens, validates every header field and the tensor directory, and (when verify_checksum) the
-  /// checksum. Throws act::Error with kNotFound / kIoError / kDataLoss / kUnimplemented (version).
-  static ActbFile open(const std::string& path, bool verify_checksum = true);
+  /// checksum. `mode`: share the file's pages, or read a private copy that no later change of the
+  /// file can touch (file_mapping.h). Throws act::Error with kNotFound / kIoError / kDataLoss /
+  /// kUnimplemented (version).
+  static ActbFile open(const std::string& path, bool verify_checksum = true,
+                       FileMapping::Mode mode = FileMapping::Mode::kMap);
 
   const std::string& path() const { return mapping_.path(); }
   uint32_t format_version() const { return version_; }

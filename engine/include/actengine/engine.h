@@ -30,6 +30,12 @@ struct EngineOptions {
   int threads = 0;
   /// Verify the blob's checksum at open (reads the whole file once).
   bool verify_checksum = true;
+  /// The model an Engine runs never changes: by default open() reads the blob into memory of its
+  /// own, so copying a new model over the file (cp, scp), or truncating it, while the Engine runs
+  /// changes nothing. true shares the file's pages instead (no copy, less memory when several
+  /// processes run one blob); then the file must not change while the Engine is open: a rewrite
+  /// changes the weights under it, a truncation kills the process with SIGBUS.
+  bool share_blob_pages = false;
   /// Time every stage of every inference (see Engine::last_timings); costs a clock read per op.
   bool profile = false;
   /// Give every network value its own memory so Engine::intermediate() can read it after an
@@ -104,7 +110,8 @@ struct Observation {
 
 class Engine {
  public:
-  /// Opens an .actb blob (mmap, no copy), builds and plans the network, starts the thread pool.
+  /// Opens an .actb blob (a private copy, or shared pages: EngineOptions::share_blob_pages), builds
+  /// and plans the network, starts the thread pool.
   static StatusOr<std::unique_ptr<Engine>> open(const std::string& blob_path, const EngineOptions& options = {});
   ~Engine();
   Engine(const Engine&) = delete;

@@ -7,25 +7,27 @@
 
 #include <chrono>
 #include <cmath>
-#include <memory>
-#include <optional>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <memory>
+#include <optional>
 #include <random>
+#include <sstream>
 
 #include "actengine/convert.h"
 #include "actengine/engine.h"
 #include "apps/bench_support.h"
+#include "apps/observation_file.h"
+#include "apps/status_error.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
-#include "apps/observation_file.h"
 #include "weights/blob/actb.h"
-#include "apps/status_error.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 #include "weights/blob/model_config.h"
 
 namespace fs = std::filesystem;
@@ -220,6 +222,7 @@ class Benchmark {
   explicit Benchmark(const Options& opt) : opt_(opt) {}
 
   int run() {
+    open_outputs();
     choose_model();
     blob_file_.emplace(act::ActbFile::open(blob_path_));
     config_ = act::ModelConfig::from_json(blob_file_->config());
@@ -227,12 +230,19 @@ class Benchmark {
     time_runs(Observations(opt_.input_path, engine_->model_info()));
     summarize_runs();
     print_report();
-    if (!opt_.json_path.empty()) write_json();
-    if (!opt_.csv_path.empty()) write_csv();
+    if (json_file_) write_json();
+    if (csv_file_) write_csv();
     return 0;
   }
 
  private:
+  // The output files are created (unnamed until written) before the minutes of benchmarking, so a
+  // folder that does not exist or cannot be written fails at once, not silently at the end.
+  void open_outputs() {
+    if (!opt_.json_path.empty()) json_file_.emplace(opt_.json_path);
+    if (!opt_.csv_path.empty()) csv_file_.emplace(opt_.csv_path);
+  }
+
   // The model: a blob, or a built-in synthetic one written to a temporary blob.
   void choose_model() {
     if (opt_.compare && !opt_.model.empty() && opt_.compare_with.empty()) {
@@ -373,7 +383,7 @@ class Benchmark {
     }
   }
 
-  void write_json() const {
+  void write_json() {
     const act::ModelInfo& info = engine_->model_info();
     nlohmann::ordered_json j;
     j["actengine_version"] = act::version();
@@ -402,11 +412,12 @@ class Benchmark {
                  {"gmac_per_s_per_core", peak_.gmacs_per_core},
                  {"percent_of_peak", pct_peak_}};
     j["peak_rss_bytes"] = rss_;
-    std::ofstream(opt_.json_path) << j.dump(2) << "\n";
+    json_file_->write(j.dump(2) + "\n");
+    json_file_->commit();
   }
 
-  void write_csv() const {
-    std::ofstream csv(opt_.csv_path);
+  void write_csv() {
+    std::ostringstream csv;
     csv << std::fixed << std::setprecision(4);  // 0.1 us: the default 6 significant digits lose that on slow runs
     csv << "run,preprocess_ms,backbone_ms,encoder_ms,decoder_ms,other_ms,total_ms\n";
     for (size_t i = 0; i < timed_.runs.size(); ++i) {
@@ -414,9 +425,12 @@ class Benchmark {
       csv << i << "," << r.preprocess_ms << "," << r.backbone_ms << "," << r.encoder_ms << "," << r.decoder_ms << ","
           << r.other_ms << "," << r.total_ms << "\n";
     }
+    csv_file_->write(csv.str());
+    csv_file_->commit();
   }
 
   const Options& opt_;
+  std::optional<act::detail::AtomicFileWriter> json_file_, csv_file_;
   // The model.
   BuiltinBlobs builtin_;  // owns the built-in model's temporary blobs until the benchmark ends
   std::string blob_path_, model_label_, other_path_;

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 
 #include "actengine/convert.h"
 #include "apps/convert/calib_frames.h"
@@ -117,12 +118,6 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   return std::move(model).value();
 }
 
-void write_text_file(const std::string& path, const std::string& text) {
-  act::detail::AtomicFileWriter file(path);
-  file.write(text.data(), text.size());
-  file.commit();
-}
-
 // Writes the blob (INT8: calibrated on the --calib frames, its report printed). Returns its size.
 uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
   if (o.precision != "int8") {
@@ -135,13 +130,20 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
     if (!o.quiet) std::cerr << "act_convert: reading calibration frames from " << o.calib_sources.size() << " source(s) ...\n";
     frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(o.int8));
   }
+  // The report file is created (unnamed until written) before the conversion, so a folder that does
+  // not exist fails at once instead of after the blob was written.
+  std::optional<act::detail::AtomicFileWriter> report_file;
+  if (!o.report_path.empty()) report_file.emplace(o.report_path);
   auto report = model.write_int8(o.output, frames, o.int8);
   if (!report.ok() && report.status().code() == act::StatusCode::kFailedPrecondition && o.int8.max_mse) {
     std::cerr << "act_convert: --max-mse " << *o.int8.max_mse << " missed: try --mode mixed --target-mse "
               << *o.int8.max_mse << ", more calibration frames, or another --calib-method.\n";
   }
   act::throw_if_failed(report.status());
-  if (!o.report_path.empty()) write_text_file(o.report_path, report->to_json() + "\n");
+  if (report_file) {
+    report_file->write(report->to_json() + "\n");
+    report_file->commit();
+  }
   if (!o.quiet) std::cout << report->to_text();
   return report->int8_bytes;
 }

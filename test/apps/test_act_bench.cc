@@ -148,6 +148,13 @@ TEST(ActBench, BadArgumentsAreClearErrors) {
   r = run_command(std::string(ACT_BENCH_BIN) + " -m " + q(dir + "/none.actb"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("none.actb"), std::string::npos) << r.output;
+  // An output that cannot be written fails before the benchmark, not silently after it.
+  for (const char* flag : {"--json", "--csv"}) {
+    r = run_command(std::string(ACT_BENCH_BIN) + " --num_runs 1 " + flag + " " + q(dir + "/missing/out"));
+    EXPECT_EQ(r.exit_code, 1) << flag << "\n" << r.output;
+    EXPECT_NE(r.output.find(dir + "/missing/out"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("stage (ms)"), std::string::npos) << "benchmarked first:\n" << r.output;
+  }
   r = run_command(std::string(ACT_BENCH_BIN) + " --num_runs 0");
   EXPECT_NE(r.exit_code, 0);
   r = run_command(std::string(ACT_BENCH_BIN) + " --help");

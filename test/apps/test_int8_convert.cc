@@ -100,6 +100,18 @@ TEST(ActConvertInt8, StaticWithoutFramesSaysWhatItNeeds) {
   EXPECT_FALSE(fs::exists(dir + "/st.actb"));
 }
 
+TEST(ActConvertInt8, UnwritableReportFailsBeforeTheBlobIsWritten) {
+  const std::string src = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  const std::string dir = test::scratch_dir();
+  const auto r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/m.actb") +
+                             " --precision int8 --mode dynamic --report " + q(dir + "/missing/r.json"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find(dir + "/missing/r.json"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/m.actb"));
+  EXPECT_TRUE(leftovers(dir).empty());
+}
+
 TEST(ActConvertInt8, MissedMaxMseWritesNothing) {
   const std::string src = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(src);

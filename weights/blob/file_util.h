@@ -25,6 +25,7 @@ class AtomicFileWriter {
   AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
 
   void write(const void* data, size_t size);
+  void write(const std::string& text) { write(text.data(), text.size()); }
   void write_zeros(size_t size);
   /// fsync, close, rename into place, then (best effort) fsync the folder so the rename is durable.
   void commit();

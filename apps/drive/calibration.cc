@@ -124,19 +124,12 @@ Calibration Calibration::from_json(const nlohmann::json& json, const std::string
 }
 
 Calibration Calibration::load(const std::string& path) {
-  std::string text;
   try {
-    text = detail::read_regular_file(path);
+    return from_json(nlohmann::json(detail::read_json_file(path)), path);
   } catch (const Error& e) {
-    fail(e.code(), "calibration file " + path + " cannot be opened: " + e.what());
+    if (e.code() == ErrorCode::kNotFound) fail(e.code(), "calibration file " + path + " cannot be opened: " + e.what());
+    throw;
   }
-  nlohmann::json json;
-  try {
-    json = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::exception& e) {
-    fail(ErrorCode::kInvalidArgument, "calibration " + path + ": not valid JSON: " + e.what());
-  }
-  return from_json(json, path);
 }
 
 nlohmann::ordered_json Calibration::to_json() const {

@@ -114,6 +114,15 @@ TEST(Calibration, LoadReportsMissingAndInvalidFiles) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("not valid JSON"), std::string::npos);
   }
+  // A key given twice: nlohmann keeps the last one, so a later "invert": false could undo an earlier
+  // true without a word. Refused, naming the key.
+  std::ofstream(dir + "/twice.json") << R"({"action_units": "normalized", "action_units": "microseconds"})";
+  try {
+    Calibration::load(dir + "/twice.json");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("duplicate key 'action_units'"), std::string::npos) << e.what();
+  }
   std::ofstream(dir + "/good.json") << example().dump();
   const Calibration c = Calibration::load(dir + "/good.json");
   EXPECT_EQ(Calibration::from_json(c.to_json(), "round trip").to_json(), c.to_json());

@@ -115,6 +115,17 @@ TEST_F(ImportTest, RefusesUnsupportedOrInconsistentConfigs) {
   expect_error(patched(R"({"output_features": {}})"), ErrorCode::kInvalidArgument, "action");
 }
 
+TEST_F(ImportTest, DuplicateKeysInTheConfigAreRefused) {
+  // A key given twice in config.json used to take its last value silently.
+  const std::string dir = patched("{}");
+  const std::vector<uint8_t> bytes = test::read_file(dir + "/config.json");
+  std::string text(bytes.begin(), bytes.end());
+  const size_t brace = text.find('{');
+  text.insert(brace + 1, "\n  \"chunk_size\": 7,");
+  std::ofstream(dir + "/config.json", std::ios::trunc) << text;
+  expect_error(dir, ErrorCode::kDataLoss, "duplicate key 'chunk_size'");
+}
+
 TEST_F(ImportTest, OldStyleConfigIsNamed) {
   const std::string dir = scratch_ + "/old";
   fs::create_directories(dir);

@@ -155,15 +155,17 @@ std::string read_regular_file(const std::string& path) {
   return std::string(reinterpret_cast<const char*>(file.data()), file.size());
 }
 
-nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, size_t size) {
+template <class Json>
+Json parse_untrusted_json(const std::string& path, const char* begin, size_t size, const std::string& failure) {
+  const auto bad = [&](const std::string& why) { fail(ErrorCode::kDataLoss, "'" + path + "': " + failure + ": " + why); };
   // The key sets of the objects currently open, innermost last; keys only occur in the innermost one.
   std::vector<std::set<std::string>> open_objects;
   std::string duplicate;
   bool has_duplicate = false;
   size_t depth = 0;
   size_t max_depth = 0;
-  auto callback = [&](int /*depth*/, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
-    using Event = nlohmann::json::parse_event_t;
+  auto callback = [&](int /*depth*/, typename Json::parse_event_t event, Json& parsed) {
+    using Event = typename Json::parse_event_t;
     if (event == Event::object_start || event == Event::array_start) {
       max_depth = std::max(max_depth, ++depth);
     } else if ((event == Event::object_end || event == Event::array_end) && depth > 0) {
@@ -174,7 +176,7 @@ nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, s
     } else if (event == Event::object_end) {
       if (!open_objects.empty()) open_objects.pop_back();
     } else if (event == Event::key && !open_objects.empty() && parsed.is_string()) {
-      const auto& key = parsed.get_ref<const std::string&>();
+      const auto& key = parsed.template get_ref<const std::string&>();
       if (!open_objects.back().insert(key).second && !has_duplicate) {
         has_duplicate = true;
         duplicate = key;
@@ -183,29 +185,35 @@ nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, s
     return true;
   };
 
-  const char* begin = reinterpret_cast<const char*>(data);
   // nlohmann stops at a NUL byte as if the input ended there, which would let anything after it pass
   // unchecked. Valid JSON text never contains a raw NUL, so reject it up front.
   if (const void* nul = size == 0 ? nullptr : std::memchr(begin, 0, size); nul != nullptr) {
-    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: NUL byte at offset " +
-                                    std::to_string(static_cast<const char*>(nul) - begin));
+    bad("NUL byte at offset " + std::to_string(static_cast<const char*>(nul) - begin));
   }
-  nlohmann::json j;
+  Json j;
   try {
-    j = nlohmann::json::parse(begin, begin + size, callback);
+    j = Json::parse(begin, begin + size, callback);
   } catch (const nlohmann::json::exception& e) {
-    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: " + clip(e.what()));
+    bad(clip(e.what()));
   }
   // Parsing and destroying are iterative in nlohmann, but copying, comparing and dumping recurse: bound
-  // the depth so no later use of the header can overflow the stack.
-  if (max_depth > kMaxJsonDepth) {
-    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: nested deeper than " +
-                                    std::to_string(kMaxJsonDepth) + " levels");
-  }
-  if (has_duplicate) {
-    fail(ErrorCode::kDataLoss, "'" + path + "': malformed JSON header: duplicate key '" + clip(duplicate) + "'");
-  }
+  // the depth so no later use of the value can overflow the stack.
+  if (max_depth > kMaxJsonDepth) bad("nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+  // nlohmann would silently keep the last of two equal keys.
+  if (has_duplicate) bad("duplicate key '" + clip(duplicate) + "'");
   return j;
+}
+
+template nlohmann::json parse_untrusted_json(const std::string&, const char*, size_t, const std::string&);
+template nlohmann::ordered_json parse_untrusted_json(const std::string&, const char*, size_t, const std::string&);
+
+nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, size_t size) {
+  return parse_untrusted_json<nlohmann::json>(path, reinterpret_cast<const char*>(data), size, "malformed JSON header");
+}
+
+nlohmann::ordered_json read_json_file(const std::string& path) {
+  const std::string text = read_regular_file(path);
+  return parse_untrusted_json<nlohmann::ordered_json>(path, text.data(), text.size(), "not valid JSON");
 }
 
 void throw_dump_error(const std::string& what, const char* reason) {

@@ -59,10 +59,15 @@ inline bool checked_mul(uint64_t a, uint64_t b, uint64_t* out) { return !__built
 /// Deepest nesting of arrays/objects accepted in a file header (real headers use fewer than 10).
 inline constexpr size_t kMaxJsonDepth = 256;
 
-/// Parses `size` bytes of untrusted JSON. Throws act::Error(kDataLoss) starting with "'<path>': " on a
-/// syntax error, on nesting deeper than kMaxJsonDepth, or on a key that appears twice in one object
-/// (nlohmann would silently keep the last).
+/// Parses `size` bytes of untrusted JSON (Json: nlohmann::json or nlohmann::ordered_json). Throws
+/// act::Error(kDataLoss, "'<path>': <failure>: <why>") on a syntax error, a NUL byte, nesting deeper
+/// than kMaxJsonDepth, or a key that appears twice in one object (nlohmann would keep the last).
+template <class Json>
+Json parse_untrusted_json(const std::string& path, const char* data, size_t size, const std::string& failure);
+/// parse_untrusted_json of a file header ("malformed JSON header: ...").
 nlohmann::json parse_json_header(const std::string& path, const uint8_t* data, size_t size);
+/// A JSON file from outside, in key order (read_regular_file + parse_untrusted_json: "not valid JSON: ...").
+nlohmann::ordered_json read_json_file(const std::string& path);
 
 [[noreturn]] void throw_dump_error(const std::string& what, const char* reason);
 

@@ -61,14 +61,6 @@ void normalise_keys(PyTorchCheckpoint& ckpt, std::vector<std::string>& notes) {
   if (bare_act) notes.push_back("keys have no \"model.\" prefix (a saved policy.model): added it");
 }
 
-OrderedJson read_json(const std::string& path) {
-  const std::string text = detail::read_regular_file(path);
-  // Same untrusted-JSON rules as file headers (depth bound, duplicate keys), in file order.
-  const nlohmann::json checked = detail::parse_json_header(path, reinterpret_cast<const uint8_t*>(text.data()), text.size());
-  (void)checked;
-  return OrderedJson::parse(text);
-}
-
 // Numbers of a (nested) JSON array, flattened; false if anything else is inside.
 bool flatten_numbers(const OrderedJson& j, std::vector<float>& out) {
   if (j.is_number()) {
@@ -354,7 +346,7 @@ class Planner {
 
   // --config: LeRobot's config.json is the source; the weights must agree with it, flags override it.
   void merge_config_file() {
-    OrderedJson c = read_json(src_.config_path);
+    OrderedJson c = detail::read_json_file(src_.config_path);
     if (!c.is_object()) fail(ErrorCode::kDataLoss, src_.config_path + ": expected a JSON object");
     const std::string cfg = "config.json";
     for (const auto& [field, inferred] : inferred_) {
@@ -439,7 +431,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
   for (const auto& path : paths) {
     if (std::filesystem::path(path).extension() == ".json") {
       // LeRobot's meta/stats.json: {"<feature>": {"<stat>": [nested numbers], ...}, ...}
-      const OrderedJson j = read_json(path);
+      const OrderedJson j = detail::read_json_file(path);
       if (!j.is_object()) fail(ErrorCode::kDataLoss, path + ": expected {\"<feature>\": {\"<stat>\": [...]}}");
       for (const auto& [feature, stats] : j.items()) {
         if (!stats.is_object()) continue;

@@ -45,15 +45,6 @@ constexpr float kLegacyEps = 1e-8f;
 
 // ------------------------------------------------------------------------------------------ config
 
-OrderedJson read_json_file(const fs::path& path) {
-  const std::string text = detail::read_regular_file(path.string());
-  try {
-    return OrderedJson::parse(text);
-  } catch (const nlohmann::json::exception& e) {
-    fail(ErrorCode::kDataLoss, path.string() + " is not valid JSON: " + e.what());
-  }
-}
-
 // Typed access to config.json fields with errors that name the field and the file.
 class ConfigReader {
  public:
@@ -563,7 +554,7 @@ class Importer {
                       std::map<std::string, LeRobotMode>& modes, std::optional<SafetensorsFile>& state,
                       std::string& where) {
         const fs::path path = dir_ / pipeline_file;
-        const ProcessorStep parsed = parse_processor_step(read_json_file(path), registry_name, path.string());
+        const ProcessorStep parsed = parse_processor_step(detail::read_json_file(path.string()), registry_name, path.string());
         if (parsed.eps) eps = *parsed.eps;
         if (parsed.norm_map) {
           modes.clear();  // the step's own map is what LeRobot runs
@@ -863,7 +854,7 @@ ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir) {
   if (!fs::exists(config_path)) {
     fail(ErrorCode::kNotFound, "not a LeRobot checkpoint folder: " + config_path.string() + " is missing");
   }
-  const OrderedJson config = read_json_file(config_path);
+  const OrderedJson config = detail::read_json_file(config_path.string());
   std::optional<SafetensorsFile> weights;
   const auto open_weights = [&]() -> const TensorSet& {
     const fs::path path = dir / "model.safetensors";

@@ -200,7 +200,29 @@ int drive(const Options& opt) {
     std::cerr << "\n";
   }
   std::cerr << summary.to_string();
+  if (!camera.stop()) {
+    std::cerr << "act_drive: camera '" << opt.camera << "' is blocked in its backend and did not stop within "
+              << Camera::kStopTimeout.count() << " ms: exiting without waiting for it\n";
+  }
   return summary.exit_code;
+}
+
+// act_drive from the parsed options to its exit code: calibration, or driving.
+int run(const Options& opt) {
+  try {
+    if (opt.calibrate) {
+      return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
+    }
+    if (opt.model.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--model is required");
+    if (opt.camera.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--camera is required");
+    if (opt.serial.empty() && !opt.dry_run) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
+    }
+    return drive(opt);
+  } catch (const std::exception& e) {
+    std::cerr << "act_drive: error: " << e.what() << "\n";
+    return 1;
+  }
 }
 
 }  // namespace
@@ -253,18 +275,12 @@ int main(int argc, char** argv) {
   // act_drive names camera problems itself; OpenCV's backend chatter (GStreamer probing a file...)
   // only confuses. OPENCV_LOG_LEVEL still overrides.
   if (!std::getenv("OPENCV_LOG_LEVEL")) cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
-  try {
-    if (opt.calibrate) {
-      return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
-    }
-    if (opt.model.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--model is required");
-    if (opt.camera.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--camera is required");
-    if (opt.serial.empty() && !opt.dry_run) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
-    }
-    return drive(opt);
-  } catch (const std::exception& e) {
-    std::cerr << "act_drive: error: " << e.what() << "\n";
-    return 1;
+  const int exit_code = run(opt);
+  if (Camera::left_a_thread_behind()) {
+    // All of the way out is done (neutral, recording, summary or error) but a capture thread stuck
+    // in its backend: the process ends under it, without static destructors (see Camera::stop).
+    std::fflush(nullptr);  // std::cout writes through stdout's buffer, which _Exit drops
+    std::_Exit(exit_code);
   }
+  return exit_code;
 }

@@ -1,18 +1,18 @@
 #include "apps/drive/camera.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
+#include <vector>
 
 #include <opencv2/videoio.hpp>
 
 #include "weights/blob/error.h"
 
 namespace act::drive {
-
-struct Camera::Capture {
-  cv::VideoCapture video;
-};
 
 namespace {
 
@@ -44,14 +44,19 @@ SourceKind source_kind(const std::string& s) {
 
 // Files go through FFmpeg only, as act_convert's calibration reads them (no fallback to GStreamer,
 // which decodes differently and behaves differently from one machine's plugin set to another's).
+// FFmpeg opens get the timeouts, so a stalled stream fails its read instead of blocking the capture
+// thread for OpenCV's default 30 s. The other backends of OpenCV 4.6 do not take them; stop() does
+// not wait for those either.
 void open_capture(cv::VideoCapture& video, const CameraOptions& options, SourceKind kind) {
+  const std::vector<int> ffmpeg_timeouts{cv::CAP_PROP_OPEN_TIMEOUT_MSEC, static_cast<int>(options.open_timeout.count()),
+                                         cv::CAP_PROP_READ_TIMEOUT_MSEC, static_cast<int>(options.read_timeout.count())};
   switch (kind) {
     case SourceKind::kIndex: video.open(std::stoi(options.source), cv::CAP_ANY); break;
     case SourceKind::kDevice: video.open(options.source, cv::CAP_V4L2); break;
-    case SourceKind::kFile: video.open(options.source, cv::CAP_FFMPEG); break;
+    case SourceKind::kFile: video.open(options.source, cv::CAP_FFMPEG, ffmpeg_timeouts); break;
     case SourceKind::kGstreamerPipeline: video.open(options.source, cv::CAP_GSTREAMER); break;
-    case SourceKind::kUrl:  // FFmpeg first, then whatever else this OpenCV has
-      if (!video.open(options.source, cv::CAP_FFMPEG)) video.open(options.source, cv::CAP_ANY);
+    case SourceKind::kUrl:  // FFmpeg first, then GStreamer (CAP_ANY would try FFmpeg again, without the timeouts)
+      if (!video.open(options.source, cv::CAP_FFMPEG, ffmpeg_timeouts)) video.open(options.source, cv::CAP_GSTREAMER);
       break;
     case SourceKind::kImageSequence: video.open(options.source, cv::CAP_IMAGES); break;
     case SourceKind::kUnknown: break;
@@ -64,90 +69,148 @@ void open_capture(cv::VideoCapture& video, const CameraOptions& options, SourceK
   if (options.fps > 0) video.set(cv::CAP_PROP_FPS, options.fps);
 }
 
+// Set once a capture thread is left behind (Camera::stop); read when the process ends.
+std::atomic<bool> g_thread_left_behind{false};
+
 }  // namespace
 
-Camera::Camera(CameraOptions options) : options_(std::move(options)), capture_(std::make_unique<Capture>()) {
-  const SourceKind kind = source_kind(options_.source);
+struct Camera::Shared {
+  Shared(CameraOptions camera, SourceKind camera_kind) : options(std::move(camera)), kind(camera_kind) {}
+
+  // The capture thread's body: reads frames until stopped or, for a file, until its end.
+  void run();
+  // Waits until `deadline` or a stop request; true when stopping.
+  bool wait_for_stop(Clock::time_point deadline);
+  void set_problem(State new_state, const std::string& new_problem);
+
+  const CameraOptions options;
+  const SourceKind kind;
+  cv::VideoCapture video;  // the constructor's, then the capture thread's alone
+  std::mutex mutex;
+  std::condition_variable changed;      // a stop request, or the end of the thread
+  std::shared_ptr<const Frame> latest;  // guarded by mutex, as are the members below
+  State state = State::kRunning;
+  std::string problem;
+  bool stop_requested = false;
+  bool thread_ended = false;
+};
+
+Camera::Camera(CameraOptions options) {
+  const SourceKind kind = source_kind(options.source);
+  shared_ = std::make_shared<Shared>(std::move(options), kind);
+  const std::string& source = shared_->options.source;
+  cv::VideoCapture& video = shared_->video;
   is_file_ = kind == SourceKind::kFile;
-  open_capture(capture_->video, options_, kind);
-  if (!capture_->video.isOpened()) {
-    const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) &&
-                         !std::filesystem::exists(options_.source);
-    fail(ErrorCode::kNotFound, "cannot open camera '" + options_.source + "'" + (missing ? ": no such file" : "") +
+  open_capture(video, shared_->options, kind);
+  if (!video.isOpened()) {
+    const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) && !std::filesystem::exists(source);
+    fail(ErrorCode::kNotFound, "cannot open camera '" + source + "'" + (missing ? ": no such file" : "") +
                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
                                     "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
   }
   cv::Mat first;
-  if (!capture_->video.read(first) || first.empty()) {
-    fail(ErrorCode::kIoError, "camera '" + options_.source + "' opened but delivered no frame");
+  if (!video.read(first) || first.empty()) {
+    fail(ErrorCode::kIoError, "camera '" + source + "' opened but delivered no frame");
   }
   if (first.type() != CV_8UC3) {
-    fail(ErrorCode::kUnimplemented, "camera '" + options_.source + "' delivers " + std::to_string(first.channels()) +
+    fail(ErrorCode::kUnimplemented, "camera '" + source + "' delivers " + std::to_string(first.channels()) +
                                          "-channel frames; act_drive needs 8-bit colour (BGR)");
   }
   width_ = first.cols;
   height_ = first.rows;
-  latest_ = std::make_shared<const Frame>(Frame{first, Clock::now(), 0});
-  thread_ = std::thread([this] { run(); });
+  shared_->latest = std::make_shared<const Frame>(Frame{first, Clock::now(), 0});
+  thread_ = std::thread([shared = shared_] {
+    shared->run();
+    std::lock_guard lock(shared->mutex);
+    shared->thread_ended = true;
+    shared->changed.notify_all();
+  });
 }
 
-Camera::~Camera() {
-  stop_.store(true);
-  if (thread_.joinable()) thread_.join();
+Camera::~Camera() { stop(); }
+
+bool Camera::stop(std::chrono::milliseconds timeout) {
+  if (!thread_.joinable()) return !thread_left_behind_;
+  std::unique_lock lock(shared_->mutex);
+  shared_->stop_requested = true;
+  shared_->changed.notify_all();
+  const bool ended = shared_->changed.wait_for(lock, timeout, [&] { return shared_->thread_ended; });
+  lock.unlock();
+  if (ended) {
+    thread_.join();
+  } else {
+    thread_.detach();
+    thread_left_behind_ = true;
+    g_thread_left_behind.store(true);
+  }
+  return ended;
 }
+
+bool Camera::left_a_thread_behind() { return g_thread_left_behind.load(); }
 
 std::shared_ptr<const Frame> Camera::latest() const {
-  std::lock_guard lock(mutex_);
-  return latest_;
+  std::lock_guard lock(shared_->mutex);
+  return shared_->latest;
 }
 
 FrameSource::State Camera::state() const {
-  std::lock_guard lock(mutex_);
-  return state_;
+  std::lock_guard lock(shared_->mutex);
+  return shared_->state;
 }
 
 std::string Camera::problem() const {
-  std::lock_guard lock(mutex_);
-  return problem_;
+  std::lock_guard lock(shared_->mutex);
+  return shared_->problem;
 }
 
-void Camera::set_problem(State state, const std::string& problem) {
-  std::lock_guard lock(mutex_);
-  state_ = state;
-  problem_ = problem;
+void Camera::Shared::set_problem(State new_state, const std::string& new_problem) {
+  std::lock_guard lock(mutex);
+  state = new_state;
+  problem = new_problem;
 }
 
-void Camera::run() {
-  cv::VideoCapture& video = capture_->video;
+bool Camera::Shared::wait_for_stop(Clock::time_point deadline) {
+  std::unique_lock lock(mutex);
+  return changed.wait_until(lock, deadline, [this] { return stop_requested; });
+}
+
+void Camera::Shared::run() {
+  const bool is_file = kind == SourceKind::kFile;
   // A video file plays at its own rate (or --camera-fps), not as fast as it decodes.
-  double file_fps = options_.fps > 0 ? options_.fps : video.get(cv::CAP_PROP_FPS);
+  double file_fps = options.fps > 0 ? options.fps : video.get(cv::CAP_PROP_FPS);
   if (!(file_fps > 0 && file_fps < 1000)) file_fps = 30;
   const auto file_start = Clock::now();
+  const auto file_frame_due = [&](uint64_t i) {
+    return file_start +
+           std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(static_cast<double>(i) / file_fps));
+  };
   uint64_t index = 1;
-  while (!stop_.load()) {
-    if (is_file_) {
-      std::this_thread::sleep_until(file_start + std::chrono::duration_cast<Clock::duration>(
-                                                     std::chrono::duration<double>(static_cast<double>(index) / file_fps)));
-    }
+  // A live source is read at once, a file's frame when it is due; a stop request ends either wait.
+  while (!wait_for_stop(is_file ? file_frame_due(index) : Clock::time_point{})) {
     cv::Mat image;
+    const auto read_start = Clock::now();
     const bool ok = video.read(image) && !image.empty();
     if (ok) {
       auto frame = std::make_shared<const Frame>(Frame{std::move(image), Clock::now(), index++});
-      std::lock_guard lock(mutex_);
-      latest_ = std::move(frame);
-      state_ = State::kRunning;
-      problem_.clear();
+      std::lock_guard lock(mutex);
+      latest = std::move(frame);
+      state = State::kRunning;
+      problem.clear();
       continue;
     }
-    if (is_file_) {
-      set_problem(State::kEnded, "end of video file " + options_.source + " after " + std::to_string(index) + " frames");
+    if (is_file) {
+      set_problem(State::kEnded, "end of video file " + options.source + " after " + std::to_string(index) + " frames");
       return;
     }
-    // A live camera failed (unplugged, stream dropped): reopen it until it comes back.
-    set_problem(State::kReconnecting, "camera '" + options_.source + "' stopped delivering frames; reopening");
+    // A live camera failed (unplugged, stream dropped) or stalled (no frame within read_timeout):
+    // reopen it until it comes back.
+    std::string what = "camera '" + options.source + "' stopped delivering frames";
+    const auto waited = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - read_start);
+    if (waited >= options.read_timeout) what += " (stalled: no frame for " + std::to_string(waited.count()) + " ms)";
+    set_problem(State::kReconnecting, what + "; reopening");
     video.release();
-    for (int i = 0; i < 10 && !stop_.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    if (!stop_.load()) open_capture(video, options_, source_kind(options_.source));
+    if (wait_for_stop(Clock::now() + std::chrono::seconds(1))) return;
+    open_capture(video, options, kind);
   }
 }
 

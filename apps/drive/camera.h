@@ -3,14 +3,11 @@
 // act_convert's INT8 calibration uses too.
 #pragma once
 
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <thread>
-#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -47,15 +44,32 @@ struct CameraOptions {
   int width = 0;       ///< requested capture size; 0 = the driver's default
   int height = 0;
   double fps = 0;      ///< requested rate (a video file plays at its own rate when 0)
+  /// Sources read through FFmpeg (video files, URLs): how long opening may take, and how long a read
+  /// may wait for a frame before the stream counts as stalled and is reopened (OpenCV's default is
+  /// 30 s for each). Opening covers FFmpeg's probing, which can read a few seconds of a live stream.
+  std::chrono::milliseconds open_timeout{10000};
+  std::chrono::milliseconds read_timeout{2000};
 };
 
 class Camera : public FrameSource {
  public:
   /// Opens the source and starts the capture thread; throws act::Error when it cannot be opened.
   explicit Camera(CameraOptions options);
+  /// Stops the capture thread (see stop()).
   ~Camera() override;
   Camera(const Camera&) = delete;
   Camera& operator=(const Camera&) = delete;
+
+  /// How long stop() waits by default: a healthy capture thread ends within a frame interval.
+  static constexpr std::chrono::milliseconds kStopTimeout{500};
+  /// Ends the capture thread, waiting for it at most `timeout`: a backend can block for much longer
+  /// (FFmpeg on a pipe or on a stream while it opens, a hung V4L2 driver), and a rover that is told
+  /// to stop must not wait for it. False when the thread is still blocked: it is then left behind,
+  /// holding everything it uses, and frames stop. Calling it again returns the same answer at once.
+  bool stop(std::chrono::milliseconds timeout = kStopTimeout);
+  /// Whether any Camera of this process left its capture thread behind. The process should then end
+  /// with std::_Exit: static destructors must not run while that thread may still wake up in OpenCV.
+  static bool left_a_thread_behind();
 
   std::shared_ptr<const Frame> latest() const override;
   State state() const override;
@@ -66,20 +80,14 @@ class Camera : public FrameSource {
   bool is_file() const { return is_file_; }
 
  private:
-  struct Capture;
-  void run();
-  void set_problem(State state, const std::string& problem);
-
-  CameraOptions options_;
+  // The capture, the newest frame and the thread's state, owned jointly by the Camera and its
+  // thread: a thread left behind by stop() never touches freed memory.
+  struct Shared;
+  std::shared_ptr<Shared> shared_;
   bool is_file_ = false;
   int width_ = 0, height_ = 0;
-  std::unique_ptr<Capture> capture_;
-  mutable std::mutex mutex_;
-  std::shared_ptr<const Frame> latest_;  // guarded by mutex_
-  State state_ = State::kRunning;        // guarded by mutex_
-  std::string problem_;                  // guarded by mutex_
-  std::atomic<bool> stop_{false};
   std::thread thread_;
+  bool thread_left_behind_ = false;
 };
 
 }  // namespace act::drive

@@ -1,5 +1,6 @@
 // The act_drive binary as a user runs it: clear errors, --dry-run on the act-tiny fixture with a
-// video file for the camera, signals against a pseudo-terminal Arduino, and --record under SIGKILL.
+// video file for the camera, signals against a pseudo-terminal Arduino, a network camera that
+// stalls, and --record under SIGKILL.
 #include <gtest/gtest.h>
 #include <fcntl.h>
 #include <sys/resource.h>
@@ -10,7 +11,9 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -19,6 +22,7 @@
 #include "apps/drive/calibration.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
+#include "drive/stalling_stream.h"
 #include "support/command.h"
 #include "support/test_paths.h"
 
@@ -192,6 +196,62 @@ INSTANTIATE_TEST_SUITE_P(Signals, ActDriveSignal,
                          [](const ::testing::TestParamInfo<SignalCase>& info) {
                            return std::string(sigabbrev_np(info.param.signal));
                          });
+
+// Polls for the end of `pid` until `limit` passes (a hang detector): its wait status, or none.
+std::optional<int> wait_for_exit(pid_t pid, std::chrono::seconds limit) {
+  const auto deadline = Clock::now() + limit;
+  int status = 0;
+  while (::waitpid(pid, &status, WNOHANG) == 0) {
+    if (Clock::now() > deadline) return std::nullopt;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return status;
+}
+
+TEST(ActDriveCli, ExitsAtOnceWhenANetworkCameraStalls) {
+  // The camera streams 1.5 s of video, then stalls with its connection open. The stall is detected
+  // (FFmpeg's read timeout) and the camera is reopened; that open blocks in FFmpeg for seconds, and
+  // SIGTERM then must not wait for it.
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  StallingStreamServer camera(write_test_video(dir + "/v.avi", 45, 30, 128, 96), std::chrono::milliseconds(1500));
+  const std::string out_path = dir + "/out.txt", log_path = dir + "/log.txt";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    ::dup2(::open(out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), 1);
+    ::dup2(::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), 2);
+    ::execl(kDrive.c_str(), kDrive.c_str(), "-m", blob.c_str(), "--camera", camera.url().c_str(), "--dry-run", "--threads",
+            "1", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (camera.connections() < 2 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const bool reopening = camera.connections() >= 2;
+  ::kill(pid, SIGTERM);
+  const std::optional<int> status = wait_for_exit(pid, std::chrono::seconds(5));
+  if (!status) {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, nullptr, 0);
+  }
+  const std::string log = read_text(log_path);
+  ASSERT_TRUE(reopening) << "the stall was not detected within 20 s\n" << log;
+  ASSERT_TRUE(status) << "act_drive did not exit within 5 s of SIGTERM\n" << log;
+  ASSERT_TRUE(WIFEXITED(*status)) << log;
+  EXPECT_EQ(WEXITSTATUS(*status), 0) << log;
+  const std::string source = "camera '" + camera.url() + "'";
+  EXPECT_NE(log.find(source + " stopped delivering frames (stalled: no frame for "), std::string::npos) << log;
+  EXPECT_NE(log.find("stopped by a signal"), std::string::npos) << log;
+  EXPECT_NE(log.find(source + " is blocked in its backend and did not stop within"), std::string::npos) << log;
+  std::istringstream lines(read_text(out_path));
+  std::string time, line, last;
+  while (lines >> time >> line) last = line;
+  RoverMessage m{};
+  ASSERT_EQ(rover_parse(last.c_str(), last.size(), &m), ROVER_OK) << last;
+  EXPECT_EQ(m.fields[1], 1500);  // neutral: the summary and the exit came after it
+  EXPECT_EQ(m.fields[2], 1500);
+}
 
 TEST(ActDriveCli, RecordingSurvivesSigkill) {
   // --record flushes its rows after every batch and renames each frame into place, so a run killed

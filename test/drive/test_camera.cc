@@ -1,14 +1,19 @@
-// act_drive's camera: every kind of source opens through its backend, and each way of failing says
-// what it was given.
+// act_drive's camera: every kind of source opens through its backend, each way of failing says
+// what it was given, a stalled network stream is reopened, and stopping never waits for a backend
+// that blocks.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <fstream>
+#include <functional>
 #include <string>
+#include <thread>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "apps/drive/camera.h"
 #include "drive/drive_test_util.h"
+#include "drive/stalling_stream.h"
 #include "support/test_paths.h"
 #include "weights/blob/error.h"
 
@@ -60,6 +65,53 @@ TEST(Camera, EachFailureNamesTheSource) {
 
   error = open_error(dir + "/empty_%03d.png");  // a pattern that matches nothing
   EXPECT_NE(error.find("cannot open camera"), std::string::npos) << error;
+}
+
+// Polls `done` until it holds or `limit` passes (a hang detector, not a timing requirement).
+bool eventually(const std::function<bool()>& done, std::chrono::seconds limit = std::chrono::seconds(10)) {
+  const auto deadline = Clock::now() + limit;
+  while (!done()) {
+    if (Clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
+}
+
+TEST(Camera, ReopensANetworkStreamThatStalls) {
+  const std::string dir = act::test::scratch_dir();
+  StallingStreamServer server(write_test_video(dir + "/v.avi", 30, 30), std::chrono::milliseconds(0));
+  CameraOptions options{server.url(), 0, 0, 0};
+  options.read_timeout = std::chrono::milliseconds(300);
+  Camera camera(options);
+  EXPECT_FALSE(camera.is_file());
+  ASSERT_TRUE(eventually([&] { return server.connections() >= 2; })) << "the stall was never detected: " << camera.problem();
+  EXPECT_EQ(camera.state(), FrameSource::State::kReconnecting);
+  const std::string problem = camera.problem();
+  EXPECT_NE(problem.find("camera '" + server.url() + "' stopped delivering frames (stalled: no frame for "), std::string::npos)
+      << problem;
+}
+
+TEST(Camera, StopLeavesBehindACaptureThreadBlockedInItsBackend) {
+  const std::string dir = act::test::scratch_dir();
+  StallingStreamServer server(write_test_video(dir + "/v.avi", 30, 30), std::chrono::milliseconds(0));
+  CameraOptions options{server.url(), 0, 0, 0};
+  options.read_timeout = std::chrono::minutes(1);  // FFmpeg's read blocks for a minute once the frames run out
+  Camera camera(options);
+  ASSERT_TRUE(eventually([&] { return Clock::now() - camera.latest()->captured > std::chrono::milliseconds(300); }));
+  const auto start = Clock::now();
+  EXPECT_FALSE(camera.stop(std::chrono::milliseconds(200)));
+  EXPECT_LT(Clock::now() - start, std::chrono::seconds(5));
+  EXPECT_TRUE(Camera::left_a_thread_behind());
+  EXPECT_FALSE(camera.stop());  // the same answer again, at once
+  ASSERT_NE(camera.latest(), nullptr);  // what it captured stays readable
+}
+
+TEST(Camera, StopEndsAHealthyCaptureThreadWithoutWaitingForItsNextFrame) {
+  const std::string dir = act::test::scratch_dir();
+  // A file played at one frame every 20 s: the capture thread sleeps until then unless told to stop.
+  Camera camera(CameraOptions{write_test_video(dir + "/v.avi", 10, 30), 0, 0, 0.05});
+  EXPECT_TRUE(camera.stop(std::chrono::seconds(5)));
+  EXPECT_TRUE(camera.stop());
 }
 
 }  // namespace

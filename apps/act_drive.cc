@@ -113,6 +113,7 @@ void check_model(const act::ModelInfo& info, const Calibration& calibration, con
   act::check(calibration.max_action_index() < info.action_dim, ErrorCode::kInvalidArgument,
              "the calibration uses action index " + std::to_string(calibration.max_action_index()) + " but the model has " +
                  std::to_string(info.action_dim) + " action values");
+  calibration.check_units(info);
   act::check(opt.state != "last-action" || info.state_dim <= info.action_dim, ErrorCode::kInvalidArgument,
              "--state last-action: the model's state has " + std::to_string(info.state_dim) + " values but its action only " +
                  std::to_string(info.action_dim) + " (use --state zeros)");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <set>
 
@@ -143,6 +144,27 @@ nlohmann::ordered_json Calibration::to_json() const {
 
 PwmCommand Calibration::safe_command() const {
   return {static_cast<uint16_t>(steering.mid_us), static_cast<uint16_t>(throttle.mid_us)};
+}
+
+void Calibration::check_units(const ModelInfo& model) const {
+  // Pulse widths are hundreds to thousands of microseconds; normalised actions are a few units at most.
+  constexpr double kSmallestPulseScale = 100.0;
+  for (const auto* ch : {&steering, &throttle}) {
+    const size_t i = static_cast<size_t>(ch->action_index);
+    if (i >= model.action_low.size() || i >= model.action_high.size()) continue;
+    const double lo = model.action_low[i], hi = model.action_high[i];
+    const double scale = std::max(std::fabs(lo), std::fabs(hi));
+    char range[96];
+    std::snprintf(range, sizeof range, "action %zu of the model spans about [%.4g, %.4g]", i, lo, hi);
+    if (action_units == Units::kMicroseconds && scale < kSmallestPulseScale) {
+      fail(ErrorCode::kInvalidArgument, std::string("the calibration says \"action_units\": \"microseconds\", but ") +
+           range + ": set \"action_units\": \"normalized\"");
+    }
+    if (action_units == Units::kNormalized && scale >= kSmallestPulseScale) {
+      fail(ErrorCode::kInvalidArgument, std::string("the calibration says \"action_units\": \"normalized\", but ") +
+           range + " (pulse widths?): set \"action_units\": \"microseconds\"");
+    }
+  }
 }
 
 int Calibration::max_action_index() const { return std::max(steering.action_index, throttle.action_index); }

@@ -12,6 +12,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/engine.h"
+
 namespace act::drive {
 
 /// One command to the board: pulse widths in microseconds.
@@ -54,6 +56,10 @@ struct Calibration {
   PwmCommand map(std::span<const float> action) const;
   /// The largest action index used (to check against the model's action_dim).
   int max_action_index() const;
+  /// Throws act::Error(kInvalidArgument) when action_units cannot be the units of the model's
+  /// actions (ModelInfo::action_low/high): "microseconds" for a model whose actions span about
+  /// [-1, 1], or "normalized" for one whose actions are pulse widths. Either would drive at full lock.
+  void check_units(const ModelInfo& model) const;
 };
 
 /// Limits how fast each pulse width may change between control ticks (calibration rate limits).

@@ -112,6 +112,11 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
     }
   }
   info_ = model_info_of(config_);
+  const size_t action_dim = static_cast<size_t>(config_.action_dim);
+  info_.action_low.assign(action_dim, -1.0f);
+  info_.action_high.assign(action_dim, 1.0f);
+  unnormalize(info_.action_low, info_.action_low, 1);
+  unnormalize(info_.action_high, info_.action_high, 1);
   info_.isa = kernels::isa_name(kernels_.isa);
   info_.kernels = kernels_.describe();
   if (config_.precision == Precision::kInt8) info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");

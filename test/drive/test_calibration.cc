@@ -76,6 +76,33 @@ TEST(Calibration, NonFiniteActionsMapToTheSafeCommand) {
   }
 }
 
+TEST(Calibration, UnitsMustFitTheModelsActions) {
+  // "microseconds" on a model with normalised actions once drove at full lock and in reverse.
+  ModelInfo normalized_model, pulse_model;
+  normalized_model.action_low = {-0.8f, -0.3f};
+  normalized_model.action_high = {0.8f, 0.9f};
+  pulse_model.action_low = {1300.0f, 1400.0f};
+  pulse_model.action_high = {1700.0f, 1800.0f};
+  nlohmann::json j = example();
+  const Calibration normalized = Calibration::from_json(j, "test.json");
+  j["action_units"] = "microseconds";
+  const Calibration microseconds = Calibration::from_json(j, "test.json");
+  EXPECT_NO_THROW(normalized.check_units(normalized_model));
+  EXPECT_NO_THROW(microseconds.check_units(pulse_model));
+  const auto message = [](const Calibration& c, const ModelInfo& m) {
+    try {
+      c.check_units(m);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message(microseconds, normalized_model).find("set \"action_units\": \"normalized\""), std::string::npos)
+      << message(microseconds, normalized_model);
+  EXPECT_NE(message(normalized, pulse_model).find("set \"action_units\": \"microseconds\""), std::string::npos)
+      << message(normalized, pulse_model);
+}
+
 TEST(Calibration, ErrorsNameTheField) {
   auto with = [](const char* channel, const char* key, nlohmann::json value) {
     nlohmann::json j = example();

@@ -437,6 +437,18 @@ TEST_F(EngineApiTest, Int8IntermediatesAreDequantized) {
   EXPECT_TRUE((*dynamic)->intermediate("cam0.backbone.layer1").ok());
 }
 
+TEST_F(EngineApiTest, ActionRangeIsTheUnnormalisationOfMinusOneAndOne) {
+  const ModelInfo& info = engine_->model_info();
+  ASSERT_EQ(info.action_low.size(), static_cast<size_t>(info.action_dim));
+  ASSERT_EQ(info.action_high.size(), static_cast<size_t>(info.action_dim));
+  // act-tiny's actions are MEAN_STD: -1 and +1 stand for mean -/+ std, so the midpoint is the mean
+  // and both ends are finite and ordered.
+  for (int i = 0; i < info.action_dim; ++i) {
+    EXPECT_TRUE(std::isfinite(info.action_low[i]) && std::isfinite(info.action_high[i]));
+    EXPECT_LT(info.action_low[i], info.action_high[i]);
+  }
+}
+
 TEST_F(EngineApiTest, TheRunningModelCannotChangeUnderIt) {
   // Copying another model over the open blob (cp and scp rewrite the same inode) once changed the
   // weights mid-run, and truncating it killed the process with SIGBUS: the Engine reads its own copy.

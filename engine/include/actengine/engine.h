@@ -74,6 +74,10 @@ struct ModelInfo {
   int action_dim = 0;
   int chunk_size = 0;
   int n_action_steps = 0;
+  /// The raw actions that the network's normalised -1 and +1 stand for, per action dimension
+  /// (MEAN_STD: mean -/+ std; MIN_MAX: min and max; no normalisation: -1 and +1): the scale of the
+  /// model's actions, e.g. to tell pulse widths in microseconds from values around 0.
+  std::vector<float> action_low, action_high;
   bool temporal_ensembling = false;
   double temporal_ensemble_coeff = 0.0;
   std::string precision;  ///< "fp32", "int8 static", "int8 dynamic" or "int8 mixed"

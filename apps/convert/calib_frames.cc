@@ -15,6 +15,7 @@
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 
 namespace act {
 
@@ -82,6 +83,7 @@ class Loader {
 
   // A frame whose cameras all see `image`. The states the source lacks (or has with the wrong
   // length) stay empty: the conversion samples them.
+  // `state`: the robot state logged with the frame (a recording), or null for a source without any.
   void add_frame_all_cameras(const cv::Mat& image, const std::vector<float>* state = nullptr) {
     CalibrationFrame f;
     for (const auto& cam : model_.cameras) {
@@ -89,7 +91,7 @@ class Loader {
       to_model_rgb(image, cam, f.images.back());
     }
     if (model_.cameras.size() > 1) note("single-view source: every camera was given the same frame");
-    if (state && state->size() == static_cast<size_t>(model_.state_dim)) f.state = *state;
+    if (state && model_.state_dim > 0) f.state = *state;
     set_.frames.push_back(std::move(f));
   }
 
@@ -198,23 +200,34 @@ class Loader {
 
   // act_drive --record folder: log.jsonl lines {"frame": "<path relative to the folder>", "state": [...]}.
   void add_recording(const fs::path& dir, size_t max_frames) {
-    std::ifstream in(dir / "log.jsonl");
+    const std::string log_path = (dir / "log.jsonl").string();
+    std::ifstream in(log_path);
     std::vector<std::pair<fs::path, std::vector<float>>> entries;
     std::string line;
     size_t line_no = 0;
     while (std::getline(in, line)) {
       ++line_no;
       if (line.empty()) continue;
+      const std::string where = log_path + ":" + std::to_string(line_no);
+      std::vector<float> state;
+      std::string frame;
       try {
-        const auto j = nlohmann::json::parse(line);
+        const auto j = detail::parse_untrusted_json<nlohmann::json>(where, line.data(), line.size(), "not valid JSON");
         if (!j.contains("frame")) continue;
-        std::vector<float> state;
         if (j.contains("state") && j["state"].is_array()) state = j["state"].get<std::vector<float>>();
-        entries.emplace_back(dir / j["frame"].get<std::string>(), std::move(state));
-      } catch (const nlohmann::json::exception& e) {
+        frame = j["frame"].get<std::string>();
+      } catch (const std::exception&) {
         // A recording cut off by a crash may end in a partial line: skip it, say so.
-        note((dir / "log.jsonl").string() + ": skipped unreadable line " + std::to_string(line_no));
+        note(log_path + ": skipped unreadable line " + std::to_string(line_no));
+        continue;
       }
+      // States of another length belong to another model: calibrating on sampled states instead would
+      // hide that (and once did, with a note saying the source had none).
+      if (model_.state_dim > 0 && state.size() != static_cast<size_t>(model_.state_dim)) {
+        fail(ErrorCode::kInvalidArgument, where + ": the recording's state has " + std::to_string(state.size()) +
+             " values, the model's has " + std::to_string(model_.state_dim) + " (recorded with another model?)");
+      }
+      entries.emplace_back(dir / frame, std::move(state));
     }
     if (entries.empty()) return add_image_folder(dir, max_frames);
     for (size_t i : spread(entries.size(), max_frames)) {

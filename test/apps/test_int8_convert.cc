@@ -112,6 +112,40 @@ TEST(ActConvertInt8, UnwritableReportFailsBeforeTheBlobIsWritten) {
   EXPECT_TRUE(leftovers(dir).empty());
 }
 
+TEST(ActConvertInt8, RecordingStatesMustFitTheModel) {
+  // An act_drive recording made with another model logs states of another length: calibrating on
+  // sampled states instead once hid that behind a note saying the source had none.
+  const std::string src = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  const std::string dir = test::scratch_dir();
+  const auto make_recording = [&](const std::string& name, const std::string& state) {
+    const std::string rec = dir + "/" + name;
+    fs::create_directories(rec + "/frames");
+    std::ofstream log(rec + "/log.jsonl");
+    for (int i = 0; i < 4; ++i) {
+      const std::string frame = "frames/00000" + std::to_string(i) + ".png";
+      fs::copy_file(src + "/sample" + std::to_string(i) + ".observation.images.front.png", rec + "/" + frame);
+      log << R"({"frame": ")" << frame << R"(", "state": )" << state << "}\n";
+    }
+    return rec;
+  };
+  const std::string good = make_recording("good", "[0.1, -0.2]");
+  const std::string bad = make_recording("bad", "[0.1, -0.2, 0.3]");
+  const auto convert = [&](const std::string& rec) {
+    return run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/r.actb") +
+                       " --precision int8 --holdout 1 --calib " + q(rec));
+  };
+  const CommandResult ok = convert(good);
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_EQ(ok.output.find("sampled"), std::string::npos) << ok.output;
+  fs::remove(dir + "/r.actb");
+  const CommandResult refused = convert(bad);
+  EXPECT_EQ(refused.exit_code, 1) << refused.output;
+  EXPECT_NE(refused.output.find("the recording's state has 3 values, the model's has 2"), std::string::npos)
+      << refused.output;
+  EXPECT_FALSE(fs::exists(dir + "/r.actb"));
+}
+
 TEST(ActConvertInt8, MissedMaxMseWritesNothing) {
   const std::string src = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(src);

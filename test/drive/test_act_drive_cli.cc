@@ -193,8 +193,8 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
 INSTANTIATE_TEST_SUITE_P(Signals, ActDriveSignal,
                          ::testing::Values(SignalCase{SIGTERM, true}, SignalCase{SIGINT, true}, SignalCase{SIGHUP, true},
                                            SignalCase{SIGQUIT, false}, SignalCase{SIGUSR1, false}),
-                         [](const ::testing::TestParamInfo<SignalCase>& info) {
-                           return std::string(sigabbrev_np(info.param.signal));
+                         [](const ::testing::TestParamInfo<SignalCase>& case_info) {
+                           return std::string(sigabbrev_np(case_info.param.signal));
                          });
 
 // Polls for the end of `pid` until `limit` passes (a hang detector): its wait status, or none.

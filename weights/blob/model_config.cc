@@ -32,6 +32,28 @@ const char* norm_mode_name(NormMode m) {
   return "?";
 }
 
+const std::vector<ResNetArchitecture>& resnet_architectures() {
+  static const std::vector<ResNetArchitecture> kResNets = {{"resnet18", {2, 2, 2, 2}, false},
+                                                           {"resnet34", {3, 4, 6, 3}, false},
+                                                           {"resnet50", {3, 4, 6, 3}, true},
+                                                           {"resnet101", {3, 4, 23, 3}, true},
+                                                           {"resnet152", {3, 8, 36, 3}, true}};
+  return kResNets;
+}
+
+const ResNetArchitecture* find_resnet(const std::string& name) {
+  for (const ResNetArchitecture& a : resnet_architectures()) {
+    if (name == a.name) return &a;
+  }
+  return nullptr;
+}
+
+std::string resnet_names() {
+  std::string names;
+  for (const ResNetArchitecture& a : resnet_architectures()) names += (names.empty() ? "" : ", ") + std::string(a.name);
+  return names;
+}
+
 namespace {
 
 int ceil_half(int n) { return (n + 1) / 2; }

@@ -51,6 +51,20 @@ struct BlockSpec {
   ConvSpec downsample;
 };
 
+/// A torchvision ResNet this engine runs: its name, blocks per stage and block type.
+struct ResNetArchitecture {
+  const char* name;
+  std::vector<int> blocks;
+  bool bottleneck;
+};
+/// Every backbone this engine runs (resnet18 ... resnet152): the one list the importer, the
+/// config inference and the blob's checks share.
+const std::vector<ResNetArchitecture>& resnet_architectures();
+/// The architecture called `name`, or null.
+const ResNetArchitecture* find_resnet(const std::string& name);
+/// "resnet18, resnet34, resnet50, resnet101, resnet152", for messages.
+std::string resnet_names();
+
 struct ModelConfig {
   // Backbone.
   std::string backbone = "resnet18";    ///< resnet18/34/50/101/152

@@ -125,11 +125,17 @@ struct ModelConfig {
   /// kMaxEnsembleExponent). One rule for the blob, the importer and the chunk scheduler.
   static std::string ensemble_coeff_problem(double coeff, int chunk_size);
 
-  /// Checks every invariant (positive dims, D % n_heads, D % 4, n_action_steps <= chunk_size,
-  /// ensembling needs n_action_steps == 1, ...). Throws act::Error(kInvalidArgument / kUnimplemented).
+  /// Checks every invariant (a known backbone whose blocks match its name, positive dims, D % n_heads,
+  /// D % 4, n_action_steps <= chunk_size, ensembling needs n_action_steps == 1, ...). Throws
+  /// act::Error(kInvalidArgument / kUnimplemented).
   void validate() const;
   nlohmann::json to_json() const;
-  /// Parses and validates; throws act::Error(kDataLoss) naming the missing or malformed field.
+  /// The input feature keys, in token order: each camera's, then the state's and the environment
+  /// state's when the model takes them.
+  std::vector<std::string> input_keys() const;
+  /// Parses and validates (input_norm must name every input feature once, and nothing else: a
+  /// feature without an entry would silently go unnormalised); throws act::Error(kDataLoss) naming
+  /// the missing or malformed field.
   static ModelConfig from_json(const nlohmann::json& j);
 };
 

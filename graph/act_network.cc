@@ -1,7 +1,5 @@
 #include "graph/act_network.h"
 
-#include <cmath>
-
 #include "weights/blob/blob_names.h"
 #include "weights/blob/error.h"
 
@@ -13,36 +11,21 @@ namespace {
 std::string cam_prefix(size_t camera) { return "cam" + std::to_string(camera) + "."; }
 }  // namespace
 
-const float* ActNetwork::weight(const std::string& name, const std::vector<int64_t>& shape) const {
-  const ActbTensor* t = blob_.find(name);
-  if (!t) fail(ErrorCode::kDataLoss, blob_.path() + ": missing tensor \"" + name + "\"");
-  if (t->shape != shape) {
-    fail(ErrorCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
-         ", the model config implies " + shape_string(shape));
-  }
-  return t->f32();
+const float* ActNetwork::weight(const std::string& name, const std::vector<int64_t>& shape) {
+  return tensors_.f32(name, shape);
 }
 
-const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::vector<int64_t>& shape) const {
-  const ActbTensor* t = blob_.find(name);
-  if (!t || t->dtype != DType::kI8) return nullptr;
-  if (t->shape != shape) {
-    fail(ErrorCode::kDataLoss, blob_.path() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
-         ", the model config implies " + shape_string(shape));
-  }
-  if (!int8_) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" in a blob whose precision is not int8");
-  if (t->quant.scales.size() != static_cast<size_t>(shape[0]) || t->quant.axis != 0) {
-    fail(ErrorCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" needs one scale per output channel");
-  }
-  for (float s : t->quant.scales) {
-    if (!(s > 0.0f) || !std::isfinite(s)) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 tensor \"" + name + "\" has a bad scale");
-  }
-  return t;
+// Dtype, scales and zero points of int8 tensors were checked with the config (blob_model_config).
+const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::vector<int64_t>& shape) {
+  const ActbTensor* t = tensors_.find(name);
+  return t != nullptr && t->dtype == DType::kI8 ? &tensors_.get(name, shape) : nullptr;
 }
 
 const float* ActNetwork::bias_table(const std::string& table, int rows, int width, const std::string& weight_name,
                                     int pos_cols) {
-  if (blob_.find(table) != nullptr) {
+  if (tensors_.find(table) != nullptr) {
+    // FP32 blobs keep the bias vector beside the table, for inspection.
+    if (tensors_.find(bn::bias_vector(table)) != nullptr) weight(bn::bias_vector(table), {width});
     return weight(table, {rows, width});
   }
   // Rebuild: table[r][c] = bias[c] + (c < pos_cols ? W[c] . pos[r] : 0), with the weights the
@@ -330,6 +313,14 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
   MatrixRef y1;
   MatrixRef cross_q;
   if (l == 0) {
+    // The norms of its self-attention block (norm1, and pre-norm the queries' norm2) are folded into
+    // const_y and cross_q: present for inspection.
+    const std::vector<std::string> folded = config_.pre_norm ? std::vector<std::string>{"norm1", "norm2"}
+                                                             : std::vector<std::string>{"norm1"};
+    for (const std::string& norm : folded) {
+      weight(w + norm + ".weight", {D});
+      weight(w + norm + ".bias", {D});
+    }
     y1 = MatrixRef::of_constant(weight(w + "const_y", {D}), 0);
     cross_q = MatrixRef::of_constant(weight(w + "cross_q", {T, D}), d);
   } else {
@@ -353,13 +344,10 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
   return out;
 }
 
-ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob, const kernels::KernelConfig& kernels)
-    : config_(config), blob_(blob), kernels_(kernels) {
-  int8_ = config_.precision == Precision::kInt8;
-  if (int8_) {
-    if (!blob_.config().contains("quantization")) fail(ErrorCode::kDataLoss, blob_.path() + ": int8 blob without a quantization section");
-    quant_ = QuantConfig::from_json(blob_.config()["quantization"]);
-  }
+ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels)
+    : config_(config), tensors_(tensors), kernels_(kernels) {
+  // blob_model_config checked that an int8 blob has its quantization section.
+  if (config_.precision == Precision::kInt8) quant_ = QuantConfig::from_json(tensors_.blob().config().at("quantization"));
   const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;
   const size_t d = static_cast<size_t>(D);
 
@@ -398,6 +386,14 @@ ActNetwork::ActNetwork(const ModelConfig& config, const ActbFile& blob, const ke
   actions_ = linear("actions_normalized", T, D, config_.action_dim, MatrixRef::of(out, d), bn::kHeadWeight,
                     MatrixRef::of_constant(weight(bn::kHeadBias, {config_.action_dim}), 0));
   graph_.mark_output(actions_);
+
+  // Activation parameters are looked up by value name: one naming no value would never be used.
+  for (const auto& [name, q] : quant_.activations) {
+    if (graph_.find(name) == kNoValue) {
+      fail(ErrorCode::kDataLoss, "'" + tensors_.blob().path() + "': quantization parameters for \"" + name +
+           "\", which is no value of the network");
+    }
+  }
 }
 
 }  // namespace act::graph

@@ -16,6 +16,7 @@
 #include "graph/ops_fp32.h"
 #include "graph/ops_int8.h"
 #include "weights/blob/actb.h"
+#include "weights/blob/blob_tensors.h"
 #include "weights/blob/model_config.h"
 #include "weights/blob/quant_config.h"
 
@@ -46,10 +47,12 @@ struct Int8Layer {
 
 class ActNetwork {
  public:
-  /// Builds the graph for the kernels of `kernels` (int8 weights are packed for its gemm_s8 variant),
-  /// which must outlive the network. Throws act::Error(kDataLoss) when a blob tensor is missing or
-  /// has a shape that does not match the config.
-  ActNetwork(const ModelConfig& config, const ActbFile& blob, const kernels::KernelConfig& kernels);
+  /// Builds the graph from `tensors` (of a blob whose config blob_model_config checked; every tensor
+  /// the network uses is read through it) for the kernels of `kernels` (int8 weights are packed for
+  /// its gemm_s8 variant). Both must outlive the network. Throws act::Error(kDataLoss) when a blob
+  /// tensor is missing or has a shape that does not match the config, or when activation parameters
+  /// name no value of the network.
+  ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels);
 
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
   void run(ThreadPool& pool, StageTimes* times = nullptr) { graph_.run(pool, kernels_, times); }
@@ -75,9 +78,9 @@ class ActNetwork {
     kernels::QuantS8 q;             ///< static parameters of an int8 value
     ValueId params = kNoValue;      ///< run-time parameters of an int8 value (dynamic mode)
   };
-  const float* weight(const std::string& name, const std::vector<int64_t>& shape) const;
+  const float* weight(const std::string& name, const std::vector<int64_t>& shape);
   /// The tensor, checked against the shape, when it is int8 (per-channel scales along axis 0); else null.
-  const ActbTensor* int8_weight(const std::string& name, const std::vector<int64_t>& shape) const;
+  const ActbTensor* int8_weight(const std::string& name, const std::vector<int64_t>& shape);
   /// A per-token bias table: from the blob, or rebuilt from its bias vector (blob_names.h).
   const float* bias_table(const std::string& table, int rows, int width, const std::string& weight_name, int pos_cols);
   Tensor as_f32(const Tensor& t);
@@ -105,10 +108,9 @@ class ActNetwork {
   ValueId attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v);
 
   ModelConfig config_;
-  const ActbFile& blob_;
+  BlobTensors& tensors_;
   const kernels::KernelConfig& kernels_;
-  bool int8_ = false;
-  QuantConfig quant_;
+  QuantConfig quant_;  // empty for an FP32 network
   std::map<ValueId, Tensor> converted_;  // float <-> int8 conversions already in the graph
   std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
   Graph graph_;

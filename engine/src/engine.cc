@@ -59,16 +59,13 @@ float Engine::Impl::InputNorm::apply(float x, size_t i) const {
   return x;
 }
 
-Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t size) const {
+Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t size) {
   InputNorm n;
   n.mode = config_.input_norm_mode(key);
   if (n.mode == NormMode::kIdentity) return n;
   const std::vector<int64_t> shape = {static_cast<int64_t>(size)};
-  for (const auto& [name, ptr] : {std::pair{bn::norm_sub(key), &n.sub}, std::pair{bn::norm_div(key), &n.div}}) {
-    const ActbTensor& t = blob_.get(name);
-    if (t.shape != shape) fail(ErrorCode::kDataLoss, blob_.path() + ": \"" + name + "\" has shape " + shape_string(t.shape));
-    *ptr = t.f32();
-  }
+  n.sub = blob_tensors_.f32(bn::norm_sub(key), shape);
+  n.div = blob_tensors_.f32(bn::norm_div(key), shape);
   return n;
 }
 
@@ -91,26 +88,26 @@ ModelInfo model_info_of(const ModelConfig& config) {
 Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
     : blob_(ActbFile::open(blob_path, options.verify_checksum,
                            options.share_blob_pages ? FileMapping::Mode::kMap : FileMapping::Mode::kPrivateCopy)),
-      config_(ModelConfig::from_json(blob_.config())),
+      blob_tensors_(blob_),
+      config_(blob_model_config(blob_)),
       pool_(options.threads),
       kernels_(engine_kernels(options.isa)),
       profile_(options.profile),
       keep_intermediates_(options.keep_intermediates) {
-  network_ = std::make_unique<graph::ActNetwork>(config_, blob_, kernels_);
-  network_->plan(pool_.threads(), keep_intermediates_);
+  network_ = std::make_unique<graph::ActNetwork>(config_, blob_tensors_, kernels_);
 
   for (const auto& cam : config_.cameras) camera_norm_.push_back(input_norm(cam.key, 3));
   if (config_.state_dim > 0) state_norm_ = input_norm(config_.state_key, static_cast<size_t>(config_.state_dim));
   if (config_.env_state_dim > 0) env_norm_ = input_norm(config_.env_state_key, static_cast<size_t>(config_.env_state_dim));
   if (config_.action_norm != NormMode::kIdentity) {
     const std::vector<int64_t> shape = {config_.action_dim};
-    for (const auto& [name, ptr] : {std::pair{bn::kUnnormShift, &unnorm_shift_}, std::pair{bn::kUnnormScale, &unnorm_scale_},
-                                    std::pair{bn::kUnnormOffset, &unnorm_offset_}}) {
-      const ActbTensor& t = blob_.get(name);
-      if (t.shape != shape) fail(ErrorCode::kDataLoss, blob_.path() + ": \"" + std::string(name) + "\" has the wrong shape");
-      *ptr = t.f32();
-    }
+    unnorm_shift_ = blob_tensors_.f32(bn::kUnnormShift, shape);
+    unnorm_scale_ = blob_tensors_.f32(bn::kUnnormScale, shape);
+    unnorm_offset_ = blob_tensors_.f32(bn::kUnnormOffset, shape);
   }
+  // Everything the model reads has been read: a tensor left over means the config does not describe the blob.
+  blob_tensors_.check_all_read();
+  network_->plan(pool_.threads(), keep_intermediates_);
   info_ = model_info_of(config_);
   const size_t action_dim = static_cast<size_t>(config_.action_dim);
   info_.action_low.assign(action_dim, -1.0f);

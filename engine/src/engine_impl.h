@@ -11,6 +11,7 @@
 #include "graph/thread_pool.h"
 #include "kernels/config/kernel_config.h"
 #include "weights/blob/actb.h"
+#include "weights/blob/blob_tensors.h"
 #include "weights/blob/error.h"
 #include "weights/blob/model_config.h"
 
@@ -49,11 +50,13 @@ class Engine::Impl {
     const float* div = nullptr;
     float apply(float x, size_t i) const;
   };
-  InputNorm input_norm(const std::string& key, size_t size) const;
+  /// The statistics of input feature `key` (`size` values), read at open.
+  InputNorm input_norm(const std::string& key, size_t size);
   void load_image(size_t camera, const ImageView& image);
   void load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm, float* dst);
 
   ActbFile blob_;
+  BlobTensors blob_tensors_;  // records what open() reads of blob_
   ModelConfig config_;
   ModelInfo info_;
   ThreadPool pool_;

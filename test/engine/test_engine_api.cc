@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <thread>
 
 #include "actengine/engine.h"
@@ -25,6 +26,38 @@ namespace fs = std::filesystem;
 
 namespace act {
 namespace {
+
+// A blob's tensor, copied out so that a test can change it and write another blob.
+struct TensorCopy {
+  std::string name;
+  DType dtype;
+  std::vector<int64_t> shape;
+  std::vector<uint8_t> bytes;
+  QuantParams quant;
+};
+
+// Writes `path`: the blob at `source` with `edit` applied to its config and tensors (the checksum
+// is recomputed, so only the semantic checks can catch the change).
+void rewrite_blob(const std::string& source, const std::string& path,
+                  const std::function<void(nlohmann::json& config, std::vector<TensorCopy>& tensors)>& edit) {
+  const ActbFile original = ActbFile::open(source);
+  nlohmann::json config = original.config();
+  std::vector<TensorCopy> tensors;
+  for (const ActbTensor& t : original.tensors()) {
+    tensors.push_back({t.name, t.dtype, t.shape, std::vector<uint8_t>(t.data, t.data + t.nbytes), t.quant});
+  }
+  edit(config, tensors);
+  ActbWriter writer;
+  writer.set_config(config);
+  for (const TensorCopy& t : tensors) writer.add_tensor(t.name, t.dtype, t.shape, t.bytes.data(), t.bytes.size(), t.quant);
+  writer.write(path);
+}
+
+TensorCopy& tensor_named(std::vector<TensorCopy>& tensors, const std::string& name) {
+  const auto it = std::find_if(tensors.begin(), tensors.end(), [&](const TensorCopy& t) { return t.name == name; });
+  if (it == tensors.end()) throw std::runtime_error("no tensor " + name);
+  return *it;
+}
 
 class EngineApiTest : public ::testing::Test {
  protected:
@@ -147,22 +180,12 @@ TEST_F(EngineApiTest, BadObservationsAreNamed) {
 TEST_F(EngineApiTest, NonFiniteOutputIsAnErrorNotAnAnswer) {
   // Damaged weights (finite, 3e38, in the action head) overflows the output: infer must say so
   // instead of returning OK with infinities (act_eval once wrote -inf and exited 0).
-  const ActbFile original = ActbFile::open(blob_);
-  ActbWriter writer;
-  writer.set_config(original.config());
-  bool damaged = false;
-  for (const ActbTensor& t : original.tensors()) {
-    std::vector<uint8_t> bytes(t.data, t.data + t.nbytes);
-    if (t.name == blob_names::kHeadWeight) {
-      const std::vector<float> huge(t.elements(), 3e38f);
-      std::memcpy(bytes.data(), huge.data(), bytes.size());
-      damaged = true;
-    }
-    writer.add_tensor(t.name, t.dtype, t.shape, bytes.data(), bytes.size(), t.quant);
-  }
-  ASSERT_TRUE(damaged) << "no action head weight in " << blob_;
   const std::string path = scratch_ + "/damaged.actb";
-  writer.write(path);
+  rewrite_blob(blob_, path, [](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    TensorCopy& head = tensor_named(tensors, blob_names::kHeadWeight);
+    const std::vector<float> huge(head.bytes.size() / sizeof(float), 3e38f);
+    std::memcpy(head.bytes.data(), huge.data(), head.bytes.size());
+  });
   auto engine = Engine::open(path, {.threads = 1});
   ASSERT_TRUE(engine.ok()) << engine.status().to_string();
   auto out = chunk();
@@ -502,6 +525,146 @@ TEST_F(EngineApiTest, CorruptBlobsAreClearErrors) {
   }
   auto negative = Engine::open(blob_, {.threads = -1});
   EXPECT_EQ(negative.status().code(), StatusCode::kInvalidArgument);
+}
+
+// A blob whose config says one thing and whose tensors another (checksum intact) once opened and
+// ran: each such contradiction is now a kDataLoss error naming the blob and what disagrees.
+class BlobSemanticsTest : public EngineApiTest {
+ protected:
+  void expect_refused(const std::string& source, const std::string& name,
+                      const std::function<void(nlohmann::json&, std::vector<TensorCopy>&)>& edit,
+                      const std::vector<std::string>& needles) {
+    const std::string path = scratch_ + "/" + name + ".actb";
+    rewrite_blob(source, path, edit);
+    auto e = Engine::open(path, {.threads = 1});
+    ASSERT_FALSE(e.ok()) << name << " opened";
+    EXPECT_EQ(e.status().code(), StatusCode::kDataLoss) << name << ": " << e.status().to_string();
+    std::vector<std::string> expected = needles;
+    expected.push_back(path);
+    for (const std::string& needle : expected) {
+      EXPECT_NE(e.status().message().find(needle), std::string::npos) << name << ": " << e.status().message()
+                                                                      << " (expected: " << needle << ")";
+    }
+  }
+  std::string int8_blob() {
+    const std::string path = scratch_ + "/dynamic.actb";
+    write_int8_blob(import_lerobot_checkpoint(test::fixture_dir("act-tiny")), QuantConfig{}, path);
+    return path;
+  }
+  static nlohmann::json* input_norm_entry(nlohmann::json& config, const std::string& key) {
+    for (auto& e : config["input_norm"]) {
+      if (e["key"] == key) return &e;
+    }
+    return nullptr;
+  }
+};
+
+TEST_F(BlobSemanticsTest, RewrittenBlobStillOpens) {
+  // The edits below are the only difference: an unchanged rewrite opens and gives the same actions.
+  const std::string path = scratch_ + "/same.actb";
+  rewrite_blob(blob_, path, [](nlohmann::json&, std::vector<TensorCopy>&) {});
+  auto e = Engine::open(path, {.threads = 2});
+  ASSERT_TRUE(e.ok()) << e.status().to_string();
+  auto ours = chunk(), theirs = chunk();
+  ASSERT_TRUE(engine_->infer(observation(), ours).ok());
+  ASSERT_TRUE((*e)->infer(observation(), theirs).ok());
+  EXPECT_EQ(ours, theirs);
+  const std::string int8 = int8_blob();
+  EXPECT_TRUE(Engine::open(int8).ok());
+}
+
+TEST_F(BlobSemanticsTest, Int8WeightsMustBeSymmetric) {
+  const std::string weight = blob_names::enc(0, "linear1.weight");
+  expect_refused(int8_blob(), "zero_point", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    tensor_named(tensors, weight).quant.zero_points[3] = 5;
+  }, {weight, "zero point 5", "symmetric"});
+  expect_refused(int8_blob(), "per_tensor", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    TensorCopy& t = tensor_named(tensors, weight);
+    t.quant = {{0.01f}, {0}, 0};
+  }, {weight, "one scale per output channel"});
+  expect_refused(blob_, "int8_in_fp32", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    TensorCopy& t = tensor_named(tensors, weight);
+    t.dtype = DType::kI8;
+    t.bytes.resize(t.bytes.size() / sizeof(float));
+    t.quant = {std::vector<float>(static_cast<size_t>(t.shape[0]), 0.01f), std::vector<int32_t>(static_cast<size_t>(t.shape[0]), 0), 0};
+  }, {weight, "precision is not int8"});
+  expect_refused(blob_, "quant_on_float", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    tensor_named(tensors, blob_names::kHeadBias).quant = {{0.5f}, {0}, 0};
+  }, {blob_names::kHeadBias, "quantization parameters"});
+}
+
+TEST_F(BlobSemanticsTest, InputNormMustNameEveryInputFeature) {
+  expect_refused(blob_, "norm_missing", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    nlohmann::json kept = nlohmann::json::array();
+    for (const auto& e : config["input_norm"]) {
+      if (e["key"] != "observation.state") kept.push_back(e);
+    }
+    config["input_norm"] = kept;
+  }, {"input_norm", "\"observation.state\""});
+  expect_refused(blob_, "norm_extra", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["input_norm"].push_back({{"key", "observation.images.back"}, {"mode", "IDENTITY"}});
+  }, {"input_norm", "observation.images.back", "no input feature"});
+  expect_refused(blob_, "norm_twice", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["input_norm"].push_back({{"key", "observation.state"}, {"mode", "IDENTITY"}});
+  }, {"input_norm", "observation.state", "twice"});
+  expect_refused(blob_, "norm_empty", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["input_norm"] = nlohmann::json::array();
+  }, {"input_norm", "observation.images.front"});
+  expect_refused(blob_, "norm_null", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["input_norm"] = nullptr;
+  }, {"input_norm", "array"});
+  // IDENTITY for a feature whose statistics the blob holds: the statistics nobody reads are named.
+  expect_refused(blob_, "norm_identity", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    (*input_norm_entry(config, "observation.state"))["mode"] = "IDENTITY";
+  }, {"does not use", blob_names::norm_sub("observation.state")});
+}
+
+TEST_F(BlobSemanticsTest, EveryTensorMustBeUsed) {
+  expect_refused(blob_, "fewer_layers", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["n_encoder_layers"] = 1;
+  }, {"does not use", blob_names::enc(1, "")});
+  expect_refused(blob_, "extra_tensor", [](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    tensors.push_back({"encoder.layers.7.linear1.weight", DType::kF32, {2}, std::vector<uint8_t>(8), {}});
+  }, {"does not use", "encoder.layers.7.linear1.weight"});
+  expect_refused(blob_, "no_action_norm", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["action_norm"] = "IDENTITY";
+  }, {"does not use", blob_names::kUnnormScale});
+  expect_refused(blob_, "float_as_f16", [](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    TensorCopy& t = tensor_named(tensors, blob_names::kHeadBias);
+    t.dtype = DType::kF16;
+    t.bytes.resize(t.bytes.size() / 2);
+  }, {blob_names::kHeadBias, "F16"});
+}
+
+TEST_F(BlobSemanticsTest, BackboneMustBeOneThisEngineRuns) {
+  expect_refused(blob_, "unknown_backbone", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["backbone"] = "resnet19";
+  }, {"backbone", "\"resnet19\"", "resnet18, resnet34, resnet50, resnet101, resnet152"});
+  expect_refused(blob_, "wrong_backbone", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["backbone"] = "resnet34";
+  }, {"backbone", "\"resnet34\"", "2+2+2+2"});
+}
+
+TEST_F(BlobSemanticsTest, QuantizationSectionMustMatchTheNetwork) {
+  expect_refused(blob_, "quant_in_fp32", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["quantization"] = QuantConfig{}.to_json();
+  }, {"quantization section", "not int8"});
+  expect_refused(int8_blob(), "dynamic_with_activations", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["quantization"]["activations"]["cam0.image"] = {0.01, 0};
+  }, {"dynamic", "cam0.image"});
+  // Static: parameters for every value of the network, and one for a value it does not have.
+  QuantConfig quant;
+  quant.mode = QuantMode::kStatic;
+  for (const std::string& name : engine_->intermediate_names()) quant.activations[name] = {0.01f, 0};
+  const std::string static_blob = scratch_ + "/static.actb";
+  write_int8_blob(import_lerobot_checkpoint(test::fixture_dir("act-tiny")), quant, static_blob);
+  ASSERT_TRUE(Engine::open(static_blob).ok());
+  expect_refused(static_blob, "activation_of_nothing", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["quantization"]["activations"]["cam0.backbone.layer9"] = {0.01, 0};
+  }, {"cam0.backbone.layer9", "no value of the network"});
+  expect_refused(int8_blob(), "float_layer_int8", [](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["quantization"]["float_layers"] = {blob_names::enc(0, "linear1.weight")};
+  }, {"float_layers", blob_names::enc(0, "linear1.weight"), "int8"});
 }
 
 }  // namespace

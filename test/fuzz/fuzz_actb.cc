@@ -1,10 +1,12 @@
-// libFuzzer target: the .actb blob loader and the parsers of the blob's JSON config (model and
-// quantization sections), as Engine::open runs them. The checksum is skipped for most inputs (the
-// first byte decides) so that mutations reach the header and tensor-directory checks behind it.
+// libFuzzer target: the .actb blob loader, the parsers of the blob's JSON config (model and
+// quantization sections) and their cross-check with the tensors (blob_model_config), as Engine::open
+// runs them. The checksum is skipped for most inputs (the first byte decides) so that mutations
+// reach the header and tensor-directory checks behind it. (The check that the network reads every
+// tensor needs a whole model, megabytes, beyond the inputs a fuzzer mutates.)
 #include "test/fuzz/fuzz_input_file.h"
 #include "weights/blob/actb.h"
+#include "weights/blob/blob_tensors.h"
 #include "weights/blob/error.h"
-#include "weights/blob/model_config.h"
 #include "weights/blob/quant_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -18,7 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     }
     // Each section on its own, so that a bad model section does not hide the quantization one.
     try {
-      (void)act::ModelConfig::from_json(blob.config());
+      (void)act::blob_model_config(blob);
     } catch (const act::Error&) {
     }
     if (blob.config().contains("quantization")) (void)act::QuantConfig::from_json(blob.config()["quantization"]);

@@ -35,21 +35,23 @@ int main(int argc, char** argv) {
                           {"bytes", act::DType::kU8, {1, 4}, u8.data(), u8.size()}},
                          {{"format", "pt"}});
 
-  // .actb: the fixture's model config with a quantization section, a float tensor and an int8
-  // per-channel quantized one.
+  // .actb: the fixture's model config as an int8 blob states it (every input feature normalised, a
+  // quantization section), a float layer and an int8 per-channel quantized one: blob_model_config
+  // accepts it, so mutations reach each of its checks.
   std::ifstream config_file(argv[2]);
-  const act::ModelConfig model_config =
-      act::lerobot_model_config(nlohmann::ordered_json::parse(config_file), argv[2]);
+  act::ModelConfig model_config = act::lerobot_model_config(nlohmann::ordered_json::parse(config_file), argv[2]);
+  for (const std::string& key : model_config.input_keys()) model_config.input_norm.emplace_back(key, act::NormMode::kMeanStd);
+  model_config.precision = act::Precision::kInt8;
   act::QuantConfig quant;
   quant.mode = act::QuantMode::kStatic;
   quant.calibration = "mse";
   quant.activations["backbone.conv1"] = {0.05f, -3};
-  quant.float_layers = {"backbone.layer4.1.conv2"};
+  quant.float_layers = {"backbone.layer4.1.conv2.weight"};
   nlohmann::json blob_config = model_config.to_json();
   blob_config["quantization"] = quant.to_json();
   act::ActbWriter blob;
   blob.set_config(blob_config);
-  blob.add_f32("encoder.bias", {2, 3}, f32);
+  blob.add_f32("backbone.layer4.1.conv2.weight", {2, 3}, f32);
   const std::vector<int8_t> i8 = {1, -2, 3, -4, 5, -6};
   blob.add_tensor("encoder.weight", act::DType::kI8, {2, 3}, i8.data(), i8.size(),
                   act::QuantParams{{0.5f, 0.25f}, {0, 0}, 0});

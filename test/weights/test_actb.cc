@@ -17,7 +17,9 @@
 
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
+#include "weights/blob/blob_tensors.h"
 #include "weights/blob/error.h"
+#include "weights/blob/quant_config.h"
 #include "weights/import/safetensors.h"
 
 namespace act {
@@ -353,6 +355,68 @@ TEST(Actb, OpenMissingOrDirectory) {
   EXPECT_TRUE(throws_error([&] { ActbFile::open(dir + "/missing.actb"); }, ErrorCode::kNotFound,
                            {dir + "/missing.actb"}));
   EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, ErrorCode::kIoError, {dir}));
+}
+
+// ------------------------------------------------------------------------- config against tensors
+
+// A small int8 model config as a blob states it (the tensors of the tests below are not its network).
+nlohmann::json small_int8_config() {
+  ModelConfig c;
+  c.backbone_blocks = {2, 2, 2, 2};
+  c.cameras = {{"observation.images.front", 64, 64}};
+  c.state_dim = 2;
+  c.action_dim = 2;
+  c.dim_model = 16;
+  c.n_heads = 2;
+  c.dim_feedforward = 32;
+  c.chunk_size = c.n_action_steps = 4;
+  c.input_norm = {{"observation.state", NormMode::kMeanStd}, {"observation.images.front", NormMode::kIdentity}};
+  c.precision = Precision::kInt8;
+  nlohmann::json j = c.to_json();
+  j["quantization"] = QuantConfig{}.to_json();
+  return j;
+}
+
+TEST(ActbSemantics, ConfigAndTensorsMustAgree) {
+  const std::string dir = test::scratch_dir();
+  const std::vector<int8_t> q = {1, -2, 3, -4, 5, -6};
+  const auto blob = [&](const std::string& name, nlohmann::json config, std::vector<int32_t> zero_points) {
+    ActbWriter w;
+    w.set_config(std::move(config));
+    w.add_tensor("w", DType::kI8, {2, 3}, q.data(), q.size(), {{0.5f, 0.25f}, std::move(zero_points), 0});
+    w.write(dir + "/" + name);
+    return ActbFile::open(dir + "/" + name);
+  };
+  EXPECT_EQ(blob_model_config(blob("ok.actb", small_int8_config(), {0, 0})).precision, Precision::kInt8);
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("zp.actb", small_int8_config(), {0, 7})); },
+                           ErrorCode::kDataLoss, {dir + "/zp.actb", "\"w\"", "zero point 7", "symmetric"}));
+  nlohmann::json fp32 = small_int8_config();
+  fp32["precision"] = "fp32";
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("fp32.actb", fp32, {0, 0})); }, ErrorCode::kDataLoss,
+                           {dir + "/fp32.actb", "\"w\"", "precision is not int8"}));
+  nlohmann::json null_norm = small_int8_config();
+  null_norm["input_norm"] = nullptr;
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("null.actb", null_norm, {0, 0})); }, ErrorCode::kDataLoss,
+                           {dir + "/null.actb", "input_norm"}));
+  nlohmann::json backbone = small_int8_config();
+  backbone["backbone"] = "vgg16";
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("vgg.actb", backbone, {0, 0})); }, ErrorCode::kDataLoss,
+                           {dir + "/vgg.actb", "\"vgg16\"", "resnet18, resnet34, resnet50, resnet101, resnet152"}));
+}
+
+TEST(ActbSemantics, TensorsNobodyReadAreNamed) {
+  const std::string path = test::scratch_dir() + "/reads.actb";
+  small_writer().write(path);
+  const ActbFile f = ActbFile::open(path);
+  BlobTensors tensors(f);
+  for (const ActbTensor& t : f.tensors()) {
+    if (t.name != "q") tensors.find(t.name);
+  }
+  EXPECT_TRUE(throws_error([&] { tensors.check_all_read(); }, ErrorCode::kDataLoss, {path, "\"q\"", "does not use"}));
+  tensors.find("q");
+  EXPECT_NO_THROW(tensors.check_all_read());
+  EXPECT_TRUE(throws_error([&] { tensors.f32("q", f.get("q").shape); }, ErrorCode::kDataLoss, {path, "\"q\"", "I8"}));
+  EXPECT_TRUE(throws_error([&] { tensors.get("q", {99}); }, ErrorCode::kDataLoss, {path, "\"q\"", "[99]"}));
 }
 
 // ---------------------------------------------------------------------------------------------- writer

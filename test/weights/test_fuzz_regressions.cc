@@ -34,6 +34,14 @@ nlohmann::ordered_json read_regression_json(const std::string& name) {
     EXPECT_NE(std::string(e_->what()).find(needle), std::string::npos) << "message: " << e_->what(); \
   } while (0)
 
+// The act-tiny fixture's architecture as a blob states it: every input feature in input_norm.
+ModelConfig act_tiny_blob_config() {
+  std::ifstream config_file(test::fixture_dir("act-tiny") + "/config.json");
+  ModelConfig config = lerobot_model_config(nlohmann::ordered_json::parse(config_file), "config.json");
+  for (const std::string& key : config.input_keys()) config.input_norm.emplace_back(key, NormMode::kIdentity);
+  return config;
+}
+
 TEST(FuzzRegressions, LeRobotConfigFeatureShapeThatIsNotAnInteger) {
   // Seen by UBSan in fuzz_lerobot_config (on a hand-made input; the fuzzer had not reached it yet):
   // "shape": [1e300] was converted to int64, which is undefined behaviour.
@@ -51,8 +59,7 @@ TEST(FuzzRegressions, LeRobotConfigFeatureShapeThatIsNotAnInteger) {
 TEST(FuzzRegressions, BlobModelConfigIntegersAreRangeChecked) {
   const std::string fixture = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);
-  std::ifstream config_file(fixture + "/config.json");
-  const nlohmann::json good = lerobot_model_config(nlohmann::ordered_json::parse(config_file), "config.json").to_json();
+  const nlohmann::json good = act_tiny_blob_config().to_json();
   ASSERT_NO_THROW(ModelConfig::from_json(good));
   for (const char* value : {"1e300", "4294967298", "2.5", "\"64\""}) {
     nlohmann::json bad = good;
@@ -71,8 +78,7 @@ TEST(FuzzRegressions, BlobModelConfigIntegersAreRangeChecked) {
 TEST(FuzzRegressions, BlobModelConfigPrecisionIsValidated) {
   const std::string fixture = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);
-  std::ifstream config_file(fixture + "/config.json");
-  ModelConfig config = lerobot_model_config(nlohmann::ordered_json::parse(config_file), "config.json");
+  ModelConfig config = act_tiny_blob_config();
   EXPECT_EQ(config.precision, Precision::kFp32) << "an imported checkpoint is float";
   config.precision = Precision::kInt8;
   const nlohmann::json int8 = config.to_json();

@@ -32,6 +32,28 @@ const char* norm_mode_name(NormMode m) {
   return "?";
 }
 
+const std::vector<ResNetArchitecture>& resnet_architectures() {
+  static const std::vector<ResNetArchitecture> kResNets = {{"resnet18", {2, 2, 2, 2}, false},
+                                                           {"resnet34", {3, 4, 6, 3}, false},
+                                                           {"resnet50", {3, 4, 6, 3}, true},
+                                                           {"resnet101", {3, 4, 23, 3}, true},
+                                                           {"resnet152", {3, 8, 36, 3}, true}};
+  return kResNets;
+}
+
+const ResNetArchitecture* find_resnet(const std::string& name) {
+  for (const ResNetArchitecture& a : resnet_architectures()) {
+    if (name == a.name) return &a;
+  }
+  return nullptr;
+}
+
+std::string resnet_names() {
+  std::string names;
+  for (const ResNetArchitecture& a : resnet_architectures()) names += (names.empty() ? "" : ", ") + std::string(a.name);
+  return names;
+}
+
 namespace {
 
 int ceil_half(int n) { return (n + 1) / 2; }
@@ -101,6 +123,14 @@ int ModelConfig::n_tokens() const {
   int n = n_1d_tokens();
   for (const auto& cam : cameras) n += feature_height(cam) * feature_width(cam);
   return n;
+}
+
+std::vector<std::string> ModelConfig::input_keys() const {
+  std::vector<std::string> keys;
+  for (const auto& cam : cameras) keys.push_back(cam.key);
+  if (state_dim > 0) keys.push_back(state_key);
+  if (env_state_dim > 0) keys.push_back(env_state_key);
+  return keys;
 }
 
 NormMode ModelConfig::input_norm_mode(const std::string& key) const {
@@ -174,9 +204,18 @@ std::string ModelConfig::ensemble_coeff_problem(double coeff, int chunk_size) {
 
 void ModelConfig::validate() const {
   auto bad = [](const std::string& msg) { fail(ErrorCode::kInvalidArgument, "invalid model config: " + msg); };
-  if (backbone_blocks.size() != 4) bad("backbone must have 4 stages");
-  for (int b : backbone_blocks) {
-    if (b < 1 || b > 64) bad("backbone stage with " + std::to_string(b) + " blocks");
+  const ResNetArchitecture* resnet = find_resnet(backbone);
+  if (resnet == nullptr) {
+    bad("backbone \"" + backbone + "\" is not one this engine runs (" + resnet_names() + ")");
+  } else if (backbone_blocks != resnet->blocks || bottleneck != resnet->bottleneck) {
+    // The blocks build the network; the name is what reports show: they must agree.
+    std::string blocks;
+    for (int b : backbone_blocks) {
+      if (!blocks.empty()) blocks += '+';
+      blocks += std::to_string(b);
+    }
+    bad("backbone \"" + backbone + "\" does not have " + blocks + " blocks per stage" +
+        (bottleneck ? " of bottlenecks" : " of basic blocks"));
   }
   if (dilate_layer4 && !bottleneck) {
     fail(ErrorCode::kUnimplemented,
@@ -277,6 +316,24 @@ nlohmann::json ModelConfig::to_json() const {
 
 namespace {
 
+// Every input feature has exactly one input_norm entry, and every entry is an input feature.
+void check_input_norm(const ModelConfig& c) {
+  const std::vector<std::string> keys = c.input_keys();
+  std::vector<std::string> seen;
+  for (const auto& [key, mode] : c.input_norm) {
+    const std::string entry = "model config in blob: \"input_norm\" entry \"" + key + "\" ";
+    if (std::find(keys.begin(), keys.end(), key) == keys.end()) fail(ErrorCode::kDataLoss, entry + "is no input feature of the model");
+    if (std::find(seen.begin(), seen.end(), key) != seen.end()) fail(ErrorCode::kDataLoss, entry + "appears twice");
+    seen.push_back(key);
+  }
+  for (const std::string& key : keys) {
+    if (std::find(seen.begin(), seen.end(), key) == seen.end()) {
+      fail(ErrorCode::kDataLoss, "model config in blob: \"input_norm\" has no entry for the input feature \"" + key +
+           "\" (its normalisation would be skipped)");
+    }
+  }
+}
+
 // The blob's integers are range-checked before narrowing (a float or a too-large integer made int is
 // undefined or wraps silently).
 int int_field(const nlohmann::json& j, const std::string& key) {
@@ -318,13 +375,16 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     c.chunk_size = int_field(j, "chunk_size");
     c.n_action_steps = int_field(j, "n_action_steps");
     if (!j.at("temporal_ensemble_coeff").is_null()) c.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
-    for (const auto& e : j.at("input_norm")) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
+    const nlohmann::json& input_norm = j.at("input_norm");
+    if (!input_norm.is_array()) fail(ErrorCode::kDataLoss, "malformed model config in blob: \"input_norm\" must be an array");
+    for (const auto& e : input_norm) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
     c.action_norm = norm_from_json(j.at("action_norm"));
     c.precision = precision_from_string(j.at("precision").get<std::string>());
   } catch (const nlohmann::json::exception& e) {
     fail(ErrorCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
   }
   c.validate();
+  check_input_norm(c);
   return c;
 }
 

@@ -51,6 +51,20 @@ struct BlockSpec {
   ConvSpec downsample;
 };
 
+/// A torchvision ResNet this engine runs: its name, blocks per stage and block type.
+struct ResNetArchitecture {
+  const char* name;
+  std::vector<int> blocks;
+  bool bottleneck;
+};
+/// Every backbone this engine runs (resnet18 ... resnet152): the one list the importer, the
+/// config inference and the blob's checks share.
+const std::vector<ResNetArchitecture>& resnet_architectures();
+/// The architecture called `name`, or null.
+const ResNetArchitecture* find_resnet(const std::string& name);
+/// "resnet18, resnet34, resnet50, resnet101, resnet152", for messages.
+std::string resnet_names();
+
 struct ModelConfig {
   // Backbone.
   std::string backbone = "resnet18";    ///< resnet18/34/50/101/152
@@ -111,11 +125,17 @@ struct ModelConfig {
   /// kMaxEnsembleExponent). One rule for the blob, the importer and the chunk scheduler.
   static std::string ensemble_coeff_problem(double coeff, int chunk_size);
 
-  /// Checks every invariant (positive dims, D % n_heads, D % 4, n_action_steps <= chunk_size,
-  /// ensembling needs n_action_steps == 1, ...). Throws act::Error(kInvalidArgument / kUnimplemented).
+  /// Checks every invariant (a known backbone whose blocks match its name, positive dims, D % n_heads,
+  /// D % 4, n_action_steps <= chunk_size, ensembling needs n_action_steps == 1, ...). Throws
+  /// act::Error(kInvalidArgument / kUnimplemented).
   void validate() const;
   nlohmann::json to_json() const;
-  /// Parses and validates; throws act::Error(kDataLoss) naming the missing or malformed field.
+  /// The input feature keys, in token order: each camera's, then the state's and the environment
+  /// state's when the model takes them.
+  std::vector<std::string> input_keys() const;
+  /// Parses and validates (input_norm must name every input feature once, and nothing else: a
+  /// feature without an entry would silently go unnormalised); throws act::Error(kDataLoss) naming
+  /// the missing or malformed field.
   static ModelConfig from_json(const nlohmann::json& j);
 };
 

@@ -1,5 +1,6 @@
 #include "weights/import/config_inference.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -147,17 +148,16 @@ class Planner {
     std::vector<int> blocks;
     for (int s = 1; s <= 4; ++s) blocks.push_back(count_indices("model.backbone.layer" + std::to_string(s) + "."));
     const bool bottleneck = sd_.contains("model.backbone.layer1.0.conv3.weight");
-    static const std::map<std::pair<std::vector<int>, bool>, std::string> kResnets = {
-        {{{2, 2, 2, 2}, false}, "resnet18"}, {{{3, 4, 6, 3}, false}, "resnet34"}, {{{3, 4, 6, 3}, true}, "resnet50"},
-        {{{3, 4, 23, 3}, true}, "resnet101"}, {{{3, 8, 36, 3}, true}, "resnet152"}};
-    const auto bb = kResnets.find({blocks, bottleneck});
+    const auto& resnets = resnet_architectures();
+    const auto bb = std::find_if(resnets.begin(), resnets.end(),
+                                 [&](const ResNetArchitecture& a) { return a.blocks == blocks && a.bottleneck == bottleneck; });
     std::string counts;
     for (int b : blocks) counts += (counts.empty() ? "" : "+") + std::to_string(b);
-    if (bb == kResnets.end()) {
+    if (bb == resnets.end()) {
       fail(ErrorCode::kUnimplemented, sd_.origin() + ": the backbone has " + counts + " blocks per stage" +
            (bottleneck ? " (bottleneck)" : "") + ", which is no torchvision ResNet this engine runs");
     }
-    infer("vision_backbone", bb->second, "model.backbone.layer<s>.<block> keys: " + counts + " blocks" + (bottleneck ? ", conv3 (bottleneck)" : ""));
+    infer("vision_backbone", bb->name, "model.backbone.layer<s>.<block> keys: " + counts + " blocks" + (bottleneck ? ", conv3 (bottleneck)" : ""));
     has_buffers_ = std::any_of(plan_.checkpoint.saved_order.begin(), plan_.checkpoint.saved_order.end(), is_norm_buffer);
   }
 

@@ -153,18 +153,14 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   ParsedConfig pc;
   ModelConfig& m = pc.model;
   const std::string backbone = cfg.get_string("vision_backbone");
-  static const std::map<std::string, std::pair<std::vector<int>, bool>> kBackbones = {
-      {"resnet18", {{2, 2, 2, 2}, false}},  {"resnet34", {{3, 4, 6, 3}, false}},
-      {"resnet50", {{3, 4, 6, 3}, true}},   {"resnet101", {{3, 4, 23, 3}, true}},
-      {"resnet152", {{3, 8, 36, 3}, true}}};
-  const auto bb = kBackbones.find(backbone);
-  if (bb == kBackbones.end()) {
-    fail(ErrorCode::kUnimplemented, path.string() + ": vision_backbone \"" + backbone +
-         "\" is not supported (resnet18, resnet34, resnet50, resnet101, resnet152)");
+  const ResNetArchitecture* resnet = find_resnet(backbone);
+  if (resnet == nullptr) {
+    fail(ErrorCode::kUnimplemented, path.string() + ": vision_backbone \"" + backbone + "\" is not supported (" +
+         resnet_names() + ")");
   }
   m.backbone = backbone;
-  m.backbone_blocks = bb->second.first;
-  m.bottleneck = bb->second.second;
+  m.backbone_blocks = resnet->blocks;
+  m.bottleneck = resnet->bottleneck;
   m.dilate_layer4 = j.contains("replace_final_stride_with_dilation") && cfg.get_bool("replace_final_stride_with_dilation");
   m.pre_norm = cfg.get_bool("pre_norm");
   m.dim_model = cfg.get_int("dim_model");

@@ -1,0 +1,105 @@
+#include "weights/blob/blob_tensors.h"
+
+#include "weights/blob/error.h"
+#include "weights/blob/quant_config.h"
+
+namespace act {
+
+namespace {
+
+// What is wrong with tensor `t` of a blob of `precision`, or "".
+std::string tensor_problem(const ActbTensor& t, Precision precision) {
+  if (t.dtype == DType::kF32) return t.quant.empty() ? "" : "is float32 but has quantization parameters";
+  if (t.dtype != DType::kI8) return std::string("has dtype ") + dtype_name(t.dtype) + " (this engine reads F32 and I8 tensors)";
+  if (precision != Precision::kInt8) return "is int8 in a blob whose precision is not int8";
+  if (t.shape.empty() || t.quant.scales.size() != static_cast<size_t>(t.shape[0]) || t.quant.axis != 0) {
+    return "is int8 without one scale per output channel (axis 0)";
+  }
+  for (int32_t zero_point : t.quant.zero_points) {
+    if (zero_point != 0) {
+      return "is int8 with zero point " + std::to_string(zero_point) + ": the int8 kernels need symmetric weights (zero points 0)";
+    }
+  }
+  return "";
+}
+
+void check_quantization(const ActbFile& blob, const ModelConfig& config) {
+  const auto section = blob.config().find("quantization");
+  const bool int8 = config.precision == Precision::kInt8;
+  if (section == blob.config().end()) {
+    if (int8) fail(ErrorCode::kDataLoss, "int8 blob without a quantization section");
+    return;
+  }
+  if (!int8) fail(ErrorCode::kDataLoss, "a quantization section in a blob whose precision is not int8");
+  const QuantConfig quant = QuantConfig::from_json(*section);
+  if (!quant.static_activations() && !quant.activations.empty()) {
+    fail(ErrorCode::kDataLoss, "dynamic quantization with activation parameters (\"" + quant.activations.begin()->first +
+         "\", ...): only static and mixed blobs have them");
+  }
+  for (const std::string& name : quant.float_layers) {
+    const ActbTensor* t = blob.find(name);
+    if (t == nullptr || t->dtype != DType::kF32) {
+      fail(ErrorCode::kDataLoss, "quantization float_layers names \"" + name + "\", " +
+           (t == nullptr ? "which is no tensor of the blob" : "which the blob stores as int8"));
+    }
+  }
+}
+
+}  // namespace
+
+ModelConfig blob_model_config(const ActbFile& blob) {
+  try {
+    ModelConfig config = ModelConfig::from_json(blob.config());
+    for (const ActbTensor& t : blob.tensors()) {
+      if (const std::string problem = tensor_problem(t, config.precision); !problem.empty()) {
+        fail(ErrorCode::kDataLoss, "tensor \"" + t.name + "\" " + problem);
+      }
+    }
+    check_quantization(blob, config);
+    return config;
+  } catch (const Error& e) {
+    // A config breaking one of ModelConfig's invariants is a bad argument to an importer, but in a
+    // blob it is damage.
+    fail(e.code() == ErrorCode::kInvalidArgument ? ErrorCode::kDataLoss : e.code(), "'" + blob.path() + "': " + e.what());
+  }
+}
+
+const ActbTensor* BlobTensors::find(const std::string& name) {
+  const ActbTensor* t = blob_.find(name);
+  if (t != nullptr) read_[static_cast<size_t>(t - blob_.tensors().data())] = true;
+  return t;
+}
+
+const ActbTensor& BlobTensors::get(const std::string& name, const std::vector<int64_t>& shape) {
+  const ActbTensor* t = find(name);
+  if (t == nullptr) fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': missing tensor \"" + name + "\"");
+  if (t->shape != shape) {
+    fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+         ", the model config implies " + shape_string(shape));
+  }
+  return *t;
+}
+
+const float* BlobTensors::f32(const std::string& name, const std::vector<int64_t>& shape) {
+  const ActbTensor& t = get(name, shape);
+  if (t.dtype != DType::kF32) {
+    fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has dtype " + dtype_name(t.dtype) +
+         ", the model reads it as F32");
+  }
+  return t.f32();
+}
+
+void BlobTensors::check_all_read() const {
+  std::vector<std::string> unread;
+  for (size_t i = 0; i < read_.size(); ++i) {
+    if (!read_[i]) unread.push_back(blob_.tensors()[i].name);
+  }
+  if (unread.empty()) return;
+  std::string list;
+  for (size_t i = 0; i < unread.size() && i < 8; ++i) list += (i ? ", " : "") + ("\"" + unread[i] + "\"");
+  if (unread.size() > 8) list += ", ... (" + std::to_string(unread.size()) + " in all)";
+  fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensors the model config does not use: " + list +
+       " (does the config belong to these tensors?)");
+}
+
+}  // namespace act

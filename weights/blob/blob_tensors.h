@@ -1,0 +1,44 @@
+// A blob's tensors as the model its config describes reads them, and the checks that config and
+// tensors agree. A blob whose semantic fields contradict its tensors (asymmetric int8 weights, a
+// quantization section on a float model, a tensor no layer reads) is refused at Engine::open rather
+// than half-used. Errors start with "'<blob path>': " and are kDataLoss.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "weights/blob/actb.h"
+#include "weights/blob/model_config.h"
+
+namespace act {
+
+/// The model config of `blob`, parsed (ModelConfig::from_json) and checked against the tensors:
+/// every tensor is F32, or I8 in an int8 blob with one positive scale per output channel (axis 0) and
+/// every zero point 0 (the int8 kernels are symmetric); F32 tensors carry no quantization
+/// parameters; the "quantization" section is there exactly when the precision is int8, a dynamic one
+/// has no activation parameters, and its float_layers name F32 tensors of the blob. Throws act::Error.
+ModelConfig blob_model_config(const ActbFile& blob);
+
+/// Reads tensors for a network built from the blob's config and records each one asked for, so that
+/// a tensor nothing asked for (an encoder layer beyond n_encoder_layers, statistics of a feature the
+/// model does not normalise) is found by check_all_read.
+class BlobTensors {
+ public:
+  explicit BlobTensors(const ActbFile& blob) : blob_(blob), read_(blob.tensors().size(), false) {}
+
+  const ActbFile& blob() const { return blob_; }
+  /// The tensor called `name`, or null; recorded as read.
+  const ActbTensor* find(const std::string& name);
+  /// The float tensor called `name`; throws kDataLoss when it is missing, not F32, or not of `shape`.
+  const float* f32(const std::string& name, const std::vector<int64_t>& shape);
+  /// The tensor called `name` (any dtype); throws kDataLoss when it is missing or not of `shape`.
+  const ActbTensor& get(const std::string& name, const std::vector<int64_t>& shape);
+  /// Throws kDataLoss listing the tensors never asked for.
+  void check_all_read() const;
+
+ private:
+  const ActbFile& blob_;
+  std::vector<bool> read_;  // by index in blob_.tensors()
+};
+
+}  // namespace act

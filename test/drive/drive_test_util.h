@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -20,6 +21,12 @@
 #include "apps/drive/inference.h"
 
 namespace act::drive::test {
+
+/// Prints how long a fault took to reach neutral on the wire, for the README's fault-timing table
+/// (scripts/fault_timing.sh collects these lines; the tests themselves assert only the safety bound).
+inline void report_fault_timing(const std::string& fault, double ms, const char* until = "neutral on the wire") {
+  std::printf("[fault timing] %s: %.1f ms to %s\n", fault.c_str(), ms, until);
+}
 
 /// What a FakeModel does; shared between the test and the model living on the worker thread.
 struct FakeModelControls {

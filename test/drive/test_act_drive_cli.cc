@@ -168,6 +168,7 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
   // Wait until it drives, then signal it.
   const auto deadline = Clock::now() + std::chrono::seconds(20);
   while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const auto signalled = Clock::now();
   ::kill(pid, c.signal);
   int status = 0;
   ::waitpid(pid, &status, 0);
@@ -188,6 +189,13 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
   EXPECT_EQ(commands.back().steering_us, 1500);
   EXPECT_EQ(commands.back().throttle_us, 1500);
   EXPECT_TRUE(board.bad_lines().empty());
+  const auto neutral = std::find_if(commands.begin(), commands.end(), [&](const FakeArduino::Command& command) {
+    return command.when >= signalled && command.steering_us == 1500 && command.throttle_us == 1500;
+  });
+  if (neutral != commands.end()) {
+    report_fault_timing(std::string("SIG") + sigabbrev_np(c.signal),
+                        std::chrono::duration<double, std::milli>(neutral->when - signalled).count());
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Signals, ActDriveSignal,

@@ -46,7 +46,7 @@ std::vector<FakeArduino::Command> drive_commands(const FakeArduino& board) {
 
 // Checks that the rover went neutral within kFaultDeadline of `fault` and stayed neutral until `until`.
 ::testing::AssertionResult neutral_after(const std::vector<FakeArduino::Command>& commands, Clock::time_point fault,
-                                         Clock::time_point until) {
+                                         Clock::time_point until, const std::string& fault_name) {
   const FakeArduino::Command* first = nullptr;
   for (const auto& c : commands) {
     if (c.when >= fault && is(c, kSafe)) {
@@ -55,6 +55,7 @@ std::vector<FakeArduino::Command> drive_commands(const FakeArduino& board) {
     }
   }
   if (!first) return ::testing::AssertionFailure() << "no neutral command after the fault";
+  report_fault_timing(fault_name, ms(first->when - fault));
   if (first->when - fault > kFaultDeadline) {
     return ::testing::AssertionFailure() << "first neutral " << ms(first->when - fault) << " ms after the fault";
   }
@@ -171,7 +172,7 @@ TEST(ControlLoop, NeutralWithin250msOfTheModelReturningNaN) {
     nan_at = rig.controls->first_nan_returned;
   }
   ASSERT_TRUE(nan_at.has_value());
-  EXPECT_TRUE(neutral_after(drive_commands(*rig.board), *nan_at, Clock::now()));
+  EXPECT_TRUE(neutral_after(drive_commands(*rig.board), *nan_at, Clock::now(), "the model returns NaN"));
   EXPECT_GT(summary.inference_errors, 0u);
   EXPECT_NE(rig.log.str().find("non-finite action"), std::string::npos) << rig.log.str();
   // Inference that keeps failing ends the run.
@@ -191,7 +192,7 @@ TEST(ControlLoop, NeutralWithin250msOfTheCameraEnding) {
   const Clock::time_point ended = camera->latest()->captured + milliseconds(1000 / 30);
   const auto commands = drive_commands(*rig.board);
   EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [](const auto& c) { return is(c, kDriving); }));
-  EXPECT_TRUE(neutral_after(commands, ended, Clock::now()));
+  EXPECT_TRUE(neutral_after(commands, ended, Clock::now(), "the camera ends"));
 }
 
 TEST(ControlLoop, NeutralWithin250msOfStaleFramesThenDrivesAgain) {
@@ -221,7 +222,7 @@ TEST(ControlLoop, NeutralWithin250msOfStaleFramesThenDrivesAgain) {
   feeder.join();
   const auto commands = drive_commands(*rig.board);
   // Stale from the moment the newest frame is older than --max-frame-age.
-  EXPECT_TRUE(neutral_after(commands, frozen + rig.options.max_frame_age, resumed));
+  EXPECT_TRUE(neutral_after(commands, frozen + rig.options.max_frame_age, resumed, "frames older than --max-frame-age"));
   EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [&](const auto& c) { return c.when > resumed && is(c, kDriving); }))
       << "did not drive again after the frames came back";
   EXPECT_NE(rig.log.str().find("stale frame"), std::string::npos);
@@ -247,6 +248,7 @@ TEST(ControlLoop, SerialHangUpReconnectsAndSendsNeutralFirst) {
   EXPECT_EQ(after[1].type, 'C');
   EXPECT_TRUE(is(after[1], kSafe));
   EXPECT_LT(ms(after[0].when - hang_up), 1500);
+  report_fault_timing("the serial port hangs up (neutral first on the new port)", ms(after[1].when - hang_up));
   EXPECT_TRUE(std::any_of(after.begin(), after.end(), [](const auto& c) { return is(c, kDriving); }));
   EXPECT_GT(summary.link_down_ticks, 0u);
   EXPECT_NE(summary.link_summary.find("1 reconnects"), std::string::npos) << summary.link_summary;

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "apps/drive/serial_link.h"
+#include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 
 namespace act::drive::test {
@@ -45,6 +46,8 @@ TEST(SerialLink, AlarmsAndDropsTheLinkWhenAcksStop) {
   const auto down = drive_until(link, acks_stopped + std::chrono::milliseconds(1500));
   ASSERT_TRUE(down.has_value()) << "the link stayed up without acks\n" << log.str();
   const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(*down - acks_stopped).count();
+  report_fault_timing("the board's acks stop", static_cast<double>(ms),
+                      "the alarm and the dropped link (the board then fails safe 250 ms after its last command)");
   EXPECT_LE(ms, ROVER_WATCHDOG_MS + 2 * 33 + 50) << log.str();
   EXPECT_GE(link.ack_timeouts(), 1u);
   EXPECT_NE(log.str().find("no acknowledgement from the board"), std::string::npos) << log.str();

@@ -20,6 +20,7 @@
 #include "actengine/convert.h"
 #include "actengine/engine.h"
 #include "apps/bench_support.h"
+#include "apps/diff_stats.h"
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
 #include "kernels/fp32/gemm_f32.h"
@@ -183,8 +184,7 @@ struct TimedRuns {
   double first_ms = 0;  ///< the first inference, before the warm-up
   double bench_ms = 0;  ///< wall time of the timed runs
   std::vector<act::InferenceTimings> runs, other_runs;
-  double err_sq = 0, err_max = 0;
-  size_t err_count = 0;
+  act::DiffStats action_diff;  ///< ours against the other precision's
 };
 
 // This core's peak for the engine's main kernels (int8 dot products, or float FMAs), measured by
@@ -209,10 +209,13 @@ Peak measure_peak(const act::ModelInfo& info) {
 struct Comparison {
   std::string other_precision;
   act::LatencySummary other_total;
-  double speed_ratio = 0, rmse = 0, max_abs = 0;
+  double speed_ratio = 0;
+  act::DiffStats action_diff;
   nlohmann::ordered_json to_json() const {
+    const auto number_or_null = [](double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(); };
     return {{"other_precision", other_precision}, {"other_latency_ms", other_total.to_json()},
-            {"speed_ratio", speed_ratio}, {"action_mse", rmse * rmse}, {"action_max_abs", max_abs}};
+            {"speed_ratio", speed_ratio}, {"action_mse", number_or_null(action_diff.mse())},
+            {"action_max_abs", action_diff.max_abs}, {"action_non_finite", action_diff.non_finite}};
   }
 };
 
@@ -300,12 +303,7 @@ class Benchmark {
       if (other_) {  // interleaved run by run, so both see the same machine conditions
         infer(*other_, i, other_chunk);
         timed_.other_runs.push_back(other_->last_timings());
-        for (size_t k = 0; k < chunk.size(); ++k) {
-          const double d = static_cast<double>(chunk[k]) - other_chunk[k];
-          timed_.err_sq += d * d;
-          timed_.err_max = std::max(timed_.err_max, std::fabs(d));
-        }
-        timed_.err_count += chunk.size();
+        for (size_t k = 0; k < chunk.size(); ++k) timed_.action_diff.add(chunk[k], other_chunk[k]);
       }
       if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt_.num_runs, timed_.runs.back().total_ms);
       if (ms_since(bench_start) > opt_.max_secs * 1e3) break;
@@ -332,8 +330,7 @@ class Benchmark {
       c.other_precision = other_->model_info().precision;
       c.other_total = act::summarize(samples);
       c.speed_ratio = c.other_total.mean / total().mean;
-      c.rmse = std::sqrt(timed_.err_sq / static_cast<double>(std::max<size_t>(timed_.err_count, 1)));
-      c.max_abs = timed_.err_max;
+      c.action_diff = timed_.action_diff;
       comparison_ = c;
     }
     machine_ = act::read_machine_info();
@@ -378,8 +375,14 @@ class Benchmark {
       std::printf("\ncompare      %s: mean %.2f ms, p50 %.2f ms (interleaved with the runs above)\n", c.other_precision.c_str(),
                   c.other_total.mean, c.other_total.p50);
       std::printf("             %s is %.2fx the speed of %s\n", info.precision.c_str(), c.speed_ratio, c.other_precision.c_str());
-      std::printf("             action difference (normalised units): MSE %.3g, RMS %.3g, max |diff| %.3g\n", c.rmse * c.rmse,
-                  c.rmse, c.max_abs);
+      const act::DiffStats& d = c.action_diff;
+      if (d.non_finite > 0) {
+        std::printf("             action difference: %zu of %zu values NaN or infinite in one of the two (no MSE)\n",
+                    d.non_finite, d.count);
+      } else {
+        std::printf("             action difference (normalised units): MSE %.3g, RMS %.3g, max |diff| %.3g\n", d.mse(),
+                    std::sqrt(d.mse()), d.max_abs);
+      }
     }
   }
 

@@ -115,6 +115,32 @@ TEST_F(ImportTest, RefusesUnsupportedOrInconsistentConfigs) {
   expect_error(patched(R"({"output_features": {}})"), ErrorCode::kInvalidArgument, "action");
 }
 
+TEST_F(ImportTest, AnAbsurdlyLargeWeightIsRefused) {
+  // A finite 3e38 in a weight once converted without a word and made every action infinite.
+  const std::string dir = patched("{}");
+  const std::string weights = dir + "/model.safetensors";
+  std::vector<std::vector<uint8_t>> copies;
+  std::vector<SafetensorsWriteTensor> out;
+  std::string damaged;
+  {
+    const SafetensorsFile in = SafetensorsFile::open(weights);
+    copies.reserve(in.names().size());
+    for (const std::string& name : in.names()) {
+      const SafetensorsTensor& t = in.get(name);
+      copies.emplace_back(t.data, t.data + t.nbytes);
+      if (damaged.empty() && t.dtype == DType::kF32 && name.find("backbone.conv1.weight") != std::string::npos) {
+        const float huge = 3e38f;
+        std::memcpy(copies.back().data(), &huge, sizeof huge);
+        damaged = name;
+      }
+      out.push_back({name, t.dtype, t.shape, copies.back().data(), t.nbytes});
+    }
+  }
+  ASSERT_FALSE(damaged.empty());
+  write_safetensors(weights, out);
+  expect_error(dir, ErrorCode::kInvalidArgument, "\"" + damaged + "\" holds 3e+38");
+}
+
 TEST_F(ImportTest, DuplicateKeysInTheConfigAreRefused) {
   // A key given twice in config.json used to take its last value silently.
   const std::string dir = patched("{}");

@@ -1,6 +1,7 @@
 #include "weights/import/lerobot_import.h"
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -42,6 +43,8 @@ namespace {
 
 constexpr double kBatchNormEps = 1e-5;
 constexpr float kLegacyEps = 1e-8f;
+// Larger than any weight (or BatchNorm statistic) a trained ACT network holds by many orders of magnitude.
+constexpr float kMaxWeightMagnitude = 1e6f;
 
 // ------------------------------------------------------------------------------------------ config
 
@@ -355,6 +358,13 @@ class Weights {
     std::vector<float> v = t->to_f32();
     for (float x : v) {
       if (!std::isfinite(x)) fail(ErrorCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" contains NaN or Inf");
+      // A finite 3e38 once converted without a word and made every action infinite.
+      if (std::fabs(x) > kMaxWeightMagnitude) {
+        char value[32];
+        std::snprintf(value, sizeof value, "%g", x);
+        fail(ErrorCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" holds " + value +
+             ": no trained network weight is that large (the limit is 1e6); is the checkpoint damaged?");
+      }
     }
     return v;
   }

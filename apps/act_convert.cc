@@ -99,16 +99,19 @@ void check_options(const CLI::App& app, Options& o) {
 // Imports the checkpoint, printing the --explain report first when asked. Null when only the
 // explanation was asked for (`exit_code` then says whether everything could be known).
 std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code) {
-  if (!o.quiet) std::cerr << "reading " << o.checkpoint << " ...\n";
-  if (std::filesystem::is_directory(o.checkpoint)) {
-    if (o.explain) std::cout << "checkpoint   " << o.checkpoint << ": a LeRobot checkpoint folder; every value comes from its config.json\n";
+  const auto location = act::locate_checkpoint(o.checkpoint);
+  act::throw_if_failed(location.status());
+  if (!o.quiet) std::cerr << "reading " << location->path << " ...\n";
+  if (!location->note.empty()) std::cerr << "act_convert: " << location->note << "\n";
+  if (location->lerobot_folder) {
+    if (o.explain) std::cout << "checkpoint   " << location->path << ": a LeRobot checkpoint folder; every value comes from its config.json\n";
     exit_code = 0;
     if (o.output.empty()) return nullptr;
-    auto model = act::import_checkpoint(o.checkpoint);
+    auto model = act::import_checkpoint(location->path);
     act::throw_if_failed(model.status());
     return std::move(model).value();
   }
-  auto plan = act::PthPlan::read(o.checkpoint, o.pth);
+  auto plan = act::PthPlan::read(location->path, o.pth);
   act::throw_if_failed(plan.status());
   if (o.explain) act::print_explanation(std::cout, (*plan)->explanation());
   exit_code = (*plan)->explanation().missing.empty() ? 0 : 1;

@@ -4,6 +4,7 @@
 #include <cstring>
 
 #include "weights/blob/error.h"
+#include "weights/blob/file_kind.h"
 #include "weights/import/safetensors.h"
 
 namespace act {
@@ -20,6 +21,12 @@ void expect_shape(const SafetensorsTensor& t, const std::vector<int64_t>& shape,
 }  // namespace
 
 ObservationBatch ObservationBatch::read(const std::string& path, const ModelInfo& model, ImageSource source) {
+  // The wrong kind of input (an image, a blob, a folder) says what it is instead of failing to parse.
+  if (const FileKind kind = file_kind(path); kind != FileKind::kSafetensors && kind != FileKind::kMissing &&
+                                             kind != FileKind::kOther) {
+    fail(ErrorCode::kInvalidArgument, "'" + path + "' is " + file_kind_name(kind) +
+         ", not an observation file (a .safetensors file of input.<feature key> tensors, as in the LeRobot fixtures)");
+  }
   const SafetensorsFile file = SafetensorsFile::open(path);
   ObservationBatch b;
   b.model_ = model;

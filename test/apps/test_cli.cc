@@ -116,6 +116,34 @@ TEST(ActEvalCli, CompareFailsOnNonFiniteValues) {
   }
 }
 
+TEST(ToolsCli, TheWrongKindOfFileSaysWhatItIsAndWhatToRun) {
+  // act_eval -i frame.png once said "header length 727905341920923785 exceeds the limit", and a
+  // checkpoint folder given as a model "cannot map ...: not a regular file".
+  const std::string src = act::test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = dir + "/tiny.actb";
+  ASSERT_EQ(run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(blob) + " -q").exit_code, 0);
+  const std::string png = src + "/sample0.observation.images.front.png";
+  const CommandResult image_as_input = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " + q(png));
+  EXPECT_EQ(image_as_input.exit_code, 1);
+  EXPECT_NE(image_as_input.output.find("is a PNG image, not an observation file"), std::string::npos) << image_as_input.output;
+  for (const std::string& tool : {std::string(ACT_EVAL_BIN) + " -i " + q(src + "/reference.safetensors") + " -m ",
+                                  std::string(ACT_BENCH_BIN) + " --num_runs 1 -m "}) {
+    const CommandResult folder_as_model = run_command(tool + q(src));
+    EXPECT_EQ(folder_as_model.exit_code, 1) << folder_as_model.output;
+    EXPECT_NE(folder_as_model.output.find("is a LeRobot checkpoint folder, not an .actb blob: convert it first with "
+                                          "act_convert"), std::string::npos) << folder_as_model.output;
+  }
+  // act_convert finds the policy in LeRobot's training output and says where.
+  const std::string last = dir + "/checkpoints/last";
+  fs::create_directories(last);
+  fs::copy(src, last + "/pretrained_model", fs::copy_options::recursive);
+  const CommandResult training = run_command(std::string(ACT_CONVERT_BIN) + " " + q(last) + " -o " + q(dir + "/t.actb"));
+  EXPECT_EQ(training.exit_code, 0) << training.output;
+  EXPECT_NE(training.output.find("the policy of this training checkpoint is in"), std::string::npos) << training.output;
+}
+
 TEST(ActEvalCli, CorruptModelAndMissingInputAreClearErrors) {
   const std::string dir = act::test::scratch_dir();
   std::ofstream(dir + "/junk.actb") << "this is not a model";

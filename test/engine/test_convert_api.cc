@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
 #include <nlohmann/json.hpp>
 
@@ -42,6 +43,45 @@ TEST(ConvertApi, MissingCheckpointIsNamed) {
   ASSERT_FALSE(model.ok());
   EXPECT_EQ(model.status().code(), StatusCode::kNotFound) << model.status().to_string();
   EXPECT_NE(model.status().message().find(missing), std::string::npos) << model.status().to_string();
+}
+
+TEST(ConvertApi, LocatesLeRobotsTrainingLayouts) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = test::scratch_dir();
+  // outputs/train/<run>/checkpoints/last/pretrained_model/, as LeRobot's training writes it.
+  const std::string last = dir + "/checkpoints/last";
+  fs::create_directories(last);
+  fs::copy(fixture, last + "/pretrained_model", fs::copy_options::recursive);
+  const auto from_training = locate_checkpoint(last);
+  ASSERT_TRUE(from_training.ok()) << from_training.status().to_string();
+  EXPECT_EQ(from_training->path, last + "/pretrained_model");
+  EXPECT_TRUE(from_training->lerobot_folder);
+  EXPECT_NE(from_training->note.find("pretrained_model"), std::string::npos);
+  auto model = import_checkpoint(last);
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+
+  const auto itself = locate_checkpoint(fixture);
+  ASSERT_TRUE(itself.ok());
+  EXPECT_EQ(itself->path, fixture);
+  EXPECT_TRUE(itself->note.empty());
+  // Its weights file given directly: the folder around it.
+  const auto from_weights = locate_checkpoint(fixture + "/model.safetensors");
+  ASSERT_TRUE(from_weights.ok()) << from_weights.status().to_string();
+  EXPECT_EQ(from_weights->path, fixture);
+  EXPECT_TRUE(from_weights->lerobot_folder);
+
+  const auto typo = locate_checkpoint(dir + "/checkpoints/lsat");
+  EXPECT_EQ(typo.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(typo.status().message().find("no such file or folder"), std::string::npos) << typo.status().message();
+  fs::create_directories(dir + "/empty");
+  const auto empty = locate_checkpoint(dir + "/empty");
+  EXPECT_EQ(empty.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(empty.status().message().find("not a LeRobot checkpoint"), std::string::npos) << empty.status().message();
+  std::ofstream(dir + "/m.actb") << "x";
+  const auto blob = locate_checkpoint(dir + "/m.actb");
+  EXPECT_EQ(blob.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(blob.status().message().find("already converted"), std::string::npos) << blob.status().message();
 }
 
 TEST(ConvertApi, PthOptionsOnAFolderAreRefused) {

@@ -354,7 +354,8 @@ TEST(Actb, OpenMissingOrDirectory) {
   const std::string dir = test::scratch_dir();
   EXPECT_TRUE(throws_error([&] { ActbFile::open(dir + "/missing.actb"); }, ErrorCode::kNotFound,
                            {dir + "/missing.actb"}));
-  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, ErrorCode::kIoError, {dir}));
+  // A folder says what it is (a LeRobot checkpoint folder would also say to convert it first).
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, ErrorCode::kInvalidArgument, {dir, "is a folder, not an .actb blob"}));
 }
 
 // ------------------------------------------------------------------------- config against tensors
@@ -562,7 +563,8 @@ TEST_F(ActbBad, BadMagic) {
 TEST_F(ActbBad, SafetensorsFileIsNotAnActb) {
   const std::vector<float> v = {1, 2};
   write_safetensors(path_, {{"a", DType::kF32, {2}, v.data(), 8}});
-  EXPECT_TRUE(corrupt(test::read_file(path_), {"not an .actb file (bad magic)"}));
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(path_); }, ErrorCode::kInvalidArgument,
+                           {path_, "is a safetensors file, not an .actb blob"}));
 }
 
 TEST_F(ActbBad, WrongVersion) {

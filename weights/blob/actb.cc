@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "weights/blob/error.h"
+#include "weights/blob/file_kind.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/tensor_header.h"
 
@@ -416,6 +417,8 @@ void check_no_overlap(const std::string& path, const std::vector<ActbTensor>& te
 
 ActbFile ActbFile::open(const std::string& path, bool verify_checksum, FileMapping::Mode mode) {
   ActbFile f;
+  // The wrong kind of input (a checkpoint folder, an image...) says what it is and what to run.
+  if (const std::string hint = not_a_blob_hint(path); !hint.empty()) fail(ErrorCode::kInvalidArgument, hint);
   f.mapping_ = FileMapping::open(path, mode);
   const uint8_t* base = f.mapping_.data();
   const uint64_t size = f.mapping_.size();

@@ -231,6 +231,18 @@ class ImportedCheckpoint {
   ImportSummary summary_;
 };
 
+/// Where the checkpoint a user names really is. A LeRobot folder (config.json inside) is also found
+/// one level down in LeRobot's training output (`checkpoints/last` -> `checkpoints/last/pretrained_model`)
+/// and from its `model.safetensors`; any other file is taken for a PyTorch .pth/.pt.
+struct CheckpointLocation {
+  std::string path;             ///< the folder or file to import
+  bool lerobot_folder = false;  ///< a LeRobot checkpoint folder (else a PyTorch file)
+  std::string note;             ///< how `path` was found when it is not what was given, else empty
+};
+/// kNotFound for a path that does not exist or a folder holding no checkpoint; kInvalidArgument for an
+/// .actb blob (already converted), naming what it is.
+StatusOr<CheckpointLocation> locate_checkpoint(const std::string& path);
+
 /// Imports a LeRobot ACT checkpoint folder (config.json + model.safetensors [+ processor files], current
 /// or legacy layout), or a torch.save .pth/.pt file holding the policy's state dict with `pth` saying
 /// what the weights do not (for a folder, `pth` must be left empty). Errors name the file and the problem: kNotFound, kDataLoss (malformed),

@@ -121,12 +121,43 @@ StatusOr<std::unique_ptr<PthPlan>> PthPlan::read(const std::string& pth_path, co
 ImportedCheckpoint::ImportedCheckpoint(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 ImportedCheckpoint::~ImportedCheckpoint() = default;
 
-StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& path, const PthOptions& pth) {
-  if (std::filesystem::is_directory(path) && any_pth_option(pth)) {
+StatusOr<CheckpointLocation> locate_checkpoint(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path given(path);
+  if (!fs::exists(given, ec)) return Status(StatusCode::kNotFound, "no such file or folder: " + path);
+  const auto has_config = [&](const fs::path& dir) { return fs::is_regular_file(dir / "config.json", ec); };
+  if (fs::is_directory(given, ec)) {
+    if (has_config(given)) return CheckpointLocation{path, true, ""};
+    // LeRobot's training output: outputs/train/<run>/checkpoints/<step or last>/pretrained_model/.
+    if (has_config(given / "pretrained_model")) {
+      const std::string inner = (given / "pretrained_model").string();
+      return CheckpointLocation{inner, true, "the policy of this training checkpoint is in " + inner};
+    }
+    return Status(StatusCode::kNotFound, path + " is a folder but not a LeRobot checkpoint: it has no config.json "
+                  "(nor pretrained_model/config.json)");
+  }
+  if (given.extension() == ".actb") {
+    return Status(StatusCode::kInvalidArgument, path + " is an .actb blob, already converted: run it with act_bench, "
+                  "act_eval or act_drive (or Engine::open)");
+  }
+  // A checkpoint's own weights file given directly: the folder around it is the checkpoint.
+  if (given.extension() == ".safetensors" && given.has_parent_path() && has_config(given.parent_path())) {
+    const std::string folder = given.parent_path().string();
+    return CheckpointLocation{folder, true, path + " is a LeRobot checkpoint's weights: converting its folder " + folder};
+  }
+  return CheckpointLocation{path, false, ""};
+}
+
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& given, const PthOptions& pth) {
+  const StatusOr<CheckpointLocation> location = locate_checkpoint(given);
+  if (!location.ok()) return location.status();
+  const std::string& path = location->path;
+  if (location->lerobot_folder && any_pth_option(pth)) {
     return Status(StatusCode::kInvalidArgument, "the .pth options do not apply to a LeRobot checkpoint folder (" + path +
                   "): its config.json and statistics are in the folder");
   }
-  if (!std::filesystem::is_directory(path)) {
+  if (!location->lerobot_folder) {
     StatusOr<std::unique_ptr<PthPlan>> plan = PthPlan::read(path, pth);
     if (!plan.ok()) return plan.status();
     return import_checkpoint(**plan);

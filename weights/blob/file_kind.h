@@ -1,0 +1,22 @@
+// What kind of file or folder a path is, from its first bytes (or a folder's telltale files), so that
+// a tool given the wrong kind can say what it got and which command takes it.
+#pragma once
+
+#include <string>
+
+namespace act {
+
+enum class FileKind {
+  kMissing, kLeRobotCheckpoint, kTrainingCheckpoint, kRecording, kLeRobotDataset, kFolder,
+  kActb, kSafetensors, kPyTorchZip, kPyTorchLegacy, kPng, kJpeg, kVideo, kOther,
+};
+
+FileKind file_kind(const std::string& path);
+/// "a LeRobot checkpoint folder", "a PNG image", ...
+const char* file_kind_name(FileKind kind);
+/// For a tool that wants an .actb blob: "" when `path` is one (or cannot be told), else what it is and
+/// what to do, e.g. "'ckpt' is a LeRobot checkpoint folder, not an .actb blob: convert it first with
+/// act_convert ckpt -o model.actb".
+std::string not_a_blob_hint(const std::string& path);
+
+}  // namespace act

@@ -22,6 +22,7 @@
 #include "apps/bench_support.h"
 #include "apps/diff_stats.h"
 #include "apps/observation_file.h"
+#include "apps/op_profile_report.h"
 #include "apps/status_error.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
@@ -47,6 +48,8 @@ struct Options {
   std::string json_path, csv_path, input_path;
   bool compare = false;
   std::string compare_with;
+  bool op_profiling = false;
+  std::string trace_path;
   uint32_t seed = 1;
 };
 
@@ -235,6 +238,7 @@ class Benchmark {
     print_report();
     if (json_file_) write_json();
     if (csv_file_) write_csv();
+    if (trace_file_) write_trace();
     return 0;
   }
 
@@ -244,6 +248,7 @@ class Benchmark {
   void open_outputs() {
     if (!opt_.json_path.empty()) json_file_.emplace(opt_.json_path);
     if (!opt_.csv_path.empty()) csv_file_.emplace(opt_.csv_path);
+    if (!opt_.trace_path.empty()) trace_file_.emplace(opt_.trace_path);
   }
 
   // The model: a blob, or a built-in synthetic one written to a temporary blob.
@@ -294,6 +299,7 @@ class Benchmark {
       infer(*engine_, i, chunk);
       if (other_) infer(*other_, i, other_chunk);
     }
+    engine_->reset_op_profile();  // the op profile averages the timed runs only
 
     const bool progress = ::isatty(STDERR_FILENO);
     const auto bench_start = Clock::now();
@@ -338,6 +344,10 @@ class Benchmark {
     peak_ = measure_peak(engine_->model_info());
     pct_peak_ = peak_.gmacs_per_core > 0 ? 100.0 * gmacs_per_s_ / (peak_.gmacs_per_core * engine_->threads()) : 0.0;
     rss_ = act::peak_rss_bytes();
+    if (opt_.op_profiling) {
+      const std::vector<act::OpProfile> profile = engine_->op_profile();
+      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core * engine_->threads());
+    }
   }
 
   const act::LatencySummary& total() const { return stages_.back().second; }
@@ -370,6 +380,7 @@ class Benchmark {
       std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(peak_.isa));
     }
     std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss_) / 1e6);
+    if (op_table_) op_table_->print(stdout, 10);
     if (comparison_) {
       const Comparison& c = *comparison_;
       std::printf("\ncompare      %s: mean %.2f ms, p50 %.2f ms (interleaved with the runs above)\n", c.other_precision.c_str(),
@@ -415,6 +426,7 @@ class Benchmark {
                  {"gmac_per_s_per_core", peak_.gmacs_per_core},
                  {"percent_of_peak", pct_peak_}};
     j["peak_rss_bytes"] = rss_;
+    if (op_table_) j["op_profile"] = op_table_->to_json();
     json_file_->write(j.dump(2) + "\n");
     json_file_->commit();
   }
@@ -432,8 +444,17 @@ class Benchmark {
     csv_file_->commit();
   }
 
+  // The last timed inference as a Chrome trace: one lane per thread.
+  void write_trace() {
+    act::StatusOr<std::string> trace = engine_->chrome_trace();
+    act::throw_if_failed(trace.status());
+    trace_file_->write(*trace);
+    trace_file_->commit();
+    std::printf("trace        %s (open in ui.perfetto.dev or chrome://tracing)\n", opt_.trace_path.c_str());
+  }
+
   const Options& opt_;
-  std::optional<act::detail::AtomicFileWriter> json_file_, csv_file_;
+  std::optional<act::detail::AtomicFileWriter> json_file_, csv_file_, trace_file_;
   // The model.
   BuiltinBlobs builtin_;  // owns the built-in model's temporary blobs until the benchmark ends
   std::string blob_path_, model_label_, other_path_;
@@ -450,6 +471,7 @@ class Benchmark {
   act::ModelConfig::Macs macs_;
   double gmac_ = 0, gmacs_per_s_ = 0;
   std::optional<Comparison> comparison_;
+  std::optional<act::OpProfileTable> op_table_;
   act::MachineInfo machine_;
   Peak peak_;
   double pct_peak_ = 0;
@@ -484,6 +506,10 @@ int main(int argc, char** argv) {
                "FP32 and INT8 of the same model, interleaved run by run: speed ratio and action difference "
                "(built-in models; with --model also give --compare-with)");
   app.add_option("--compare-with", opt.compare_with, "with --model and --compare: the same model in the other precision");
+  app.add_flag("--op_profiling,--enable_op_profiling", opt.op_profiling,
+               "per-op profile of the timed runs: time, share, GMAC/s and % of peak per op, top ops, ops by kind "
+               "(also in --json)");
+  app.add_option("--trace", opt.trace_path, "write the last timed inference as a Chrome trace (ui.perfetto.dev), a lane per thread");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {

@@ -29,6 +29,7 @@
 #include <ctime>
 #include <fstream>
 #include <iostream>
+#include <atomic>
 #include <map>
 #include <memory>
 #include <random>
@@ -366,6 +367,17 @@ void bm_dequant(benchmark::State& state, const kernels::QuantS8Kernels* k, size_
   state.SetLabel(k->dequantize_name);
 }
 
+// One parallel section that does nothing, a task per thread: what an op pays to use the pool (the
+// workers are still spinning from the previous section, as between the ops of an inference).
+void bm_dispatch(benchmark::State& state, int threads) {
+  ThreadPool& tp = pool(threads);
+  std::atomic<size_t> tasks_run{0};
+  for (auto _ : state) {
+    tp.parallel_for(static_cast<size_t>(threads), [&](size_t, int) { tasks_run.fetch_add(1, std::memory_order_relaxed); });
+  }
+  benchmark::DoNotOptimize(tasks_run.load());
+}
+
 void bm_maxpool(benchmark::State& state, const kernels::MaxPoolS8Kernels* k, int h, int w) {
   const int c = 64, oh = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1), ow = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   std::vector<int8_t> x(static_cast<size_t>(h) * w * c, 1), y(static_cast<size_t>(oh) * ow * c);
@@ -512,6 +524,11 @@ int main(int argc, char** argv) {
     if (k == nullptr) continue;
     const std::string name = std::string("pool/") + kernels::isa_name(isa) + "/maxpool_3x3s2/240x320x64";
     reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_maxpool, k, 240, 320));
+  }
+  for (int t = 1; t <= max_threads; ++t) {
+    benchmark::RegisterBenchmark(("thread_pool/dispatch/threads:" + std::to_string(t)).c_str(), bench::bm_dispatch, t)
+        ->Unit(benchmark::kMicrosecond)
+        ->UseRealTime();
   }
   benchmark::AddCustomContext("cpu_model", bench::cpu_model());
   benchmark::AddCustomContext("threads", "1.." + std::to_string(max_threads) + " (see /threads:T)");

@@ -55,7 +55,7 @@ class ActNetwork {
   ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels);
 
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
-  void run(ThreadPool& pool, StageTimes* times = nullptr) { graph_.run(pool, kernels_, times); }
+  void run(ThreadPool& pool, RunProfile* profile = nullptr) { graph_.run(pool, kernels_, profile); }
 
   float* camera_input(size_t camera) { return graph_.data(camera_inputs_.at(camera)); }  ///< [H, W, 3]
   float* state_input() { return graph_.data(state_input_); }                          ///< [state_dim]

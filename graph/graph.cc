@@ -116,22 +116,38 @@ void Graph::plan(int threads, bool keep_all_values) {
   planned_ = true;
 }
 
-void Graph::run(ThreadPool& pool, const kernels::KernelConfig& kernels, StageTimes* times) {
+const char* stage_name(Stage stage) {
+  switch (stage) {
+    case Stage::kBackbone: return "backbone";
+    case Stage::kEncoder: return "encoder";
+    case Stage::kDecoder: return "decoder";
+    case Stage::kOther: break;
+  }
+  return "other";
+}
+
+void Graph::run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfile* profile) {
   check(planned_, ErrorCode::kInternal, "Graph::run before plan");
   check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
         "graph planned for fewer threads than the pool has");
   RunContext ctx(arena_.data(), values_, pool, kernels, arena_.data() + scratch_offset_, scratch_per_thread_);
-  if (times == nullptr) {
+  if (profile == nullptr) {
     for (const auto& op : ops_) op->run(ctx);
     return;
   }
-  const bool per_op = times->op_seconds.size() == ops_.size();
+  profile->op_start.resize(ops_.size());
+  profile->op_end.resize(ops_.size());
+  for (auto& spans : profile->spans.by_thread) spans.clear();
+  pool.record_spans(&profile->spans);
+  struct StopRecording {
+    ThreadPool& pool;
+    ~StopRecording() { pool.record_spans(nullptr); }  // also when an op throws
+  } stop_recording{pool};
   for (size_t i = 0; i < ops_.size(); ++i) {
-    const auto start = std::chrono::steady_clock::now();
+    profile->spans.tag = static_cast<int>(i);
+    profile->op_start[i] = std::chrono::steady_clock::now();
     ops_[i]->run(ctx);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    (*times)[ops_[i]->stage] += seconds;
-    if (per_op) times->op_seconds[i] += seconds;
+    profile->op_end[i] = std::chrono::steady_clock::now();
   }
 }
 

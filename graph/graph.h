@@ -7,6 +7,7 @@
 // intermediate after a run.
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -82,14 +83,15 @@ struct MatrixRef {
 enum class Stage { kOther, kBackbone, kEncoder, kDecoder };
 inline constexpr int kStageCount = 4;
 
-/// Accumulated wall time per stage (seconds), filled by Graph::run when profiling.
-struct StageTimes {
-  double seconds[kStageCount] = {};
-  /// When non-empty (sized to the op count by the caller), each op's wall time is added here too.
-  std::vector<double> op_seconds;
-  double& operator[](Stage s) { return seconds[static_cast<int>(s)]; }
-  double operator[](Stage s) const { return seconds[static_cast<int>(s)]; }
+/// What Graph::run records of one run when profiling: when each op started and ended on the calling
+/// thread, and each thread's span of every parallel section (tagged with the op's index). Reused
+/// run after run, so recording allocates nothing once the lists have grown.
+struct RunProfile {
+  std::vector<std::chrono::steady_clock::time_point> op_start, op_end;
+  ThreadSpans spans;
+  double op_seconds(size_t op) const { return std::chrono::duration<double>(op_end[op] - op_start[op]).count(); }
 };
+const char* stage_name(Stage stage);
 
 class Op {
  public:
@@ -100,6 +102,9 @@ class Op {
   virtual size_t scratch_per_thread() const { return 0; }
   /// Multiply-accumulates of one run (for profiling and the benchmark's GMAC/s).
   virtual double macs() const { return 0.0; }
+  /// The kernel variant this op calls under `kernels`, e.g. "gemm_s8_s8out_6x64c4_avx512vnni" (for
+  /// the profiler: which code the time went to).
+  virtual std::string kernel(const kernels::KernelConfig& kernels) const = 0;
 
   std::string name;
   Stage stage = Stage::kOther;
@@ -125,8 +130,8 @@ class Graph {
 
   void plan(int threads, bool keep_all_values);
   /// Runs every op in order with `kernels` (the configuration int8 weights were packed for). With
-  /// `times`, adds each op's wall time to its stage.
-  void run(ThreadPool& pool, const kernels::KernelConfig& kernels, StageTimes* times = nullptr);
+  /// `profile`, records when each op ran (and on which threads).
+  void run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfile* profile = nullptr);
 
   float* data(ValueId id) { return arena_.data() + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) { return reinterpret_cast<int8_t*>(data(id)); }

@@ -20,6 +20,7 @@ class Conv2dOp : public Op {
   Conv2dOp(const kernels::Conv2dShape& shape, const float* weight, const float* bias, bool relu, ValueId input,
            ValueId residual, ValueId output);
   const char* type() const override { return "conv2d_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
@@ -39,6 +40,9 @@ class MaxPoolOp : public Op {
  public:
   MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, bool s8, ValueId input, ValueId output);
   const char* type() const override { return s8_ ? "maxpool_s8" : "maxpool_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override {
+    return s8_ ? k.maxpool_s8.max_taps_name : "scalar";
+  }
   void run(const RunContext& ctx) const override;
 
  private:
@@ -53,6 +57,7 @@ class LinearOp : public Op {
   LinearOp(int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias, MatrixRef residual,
            Epilogue epilogue, ValueId output);
   const char* type() const override { return "linear_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
 
@@ -68,6 +73,7 @@ class GluOp : public Op {
  public:
   GluOp(int rows, int cols_in, ValueId input, ValueId output);
   const char* type() const override { return "glu_f32"; }
+  std::string kernel(const kernels::KernelConfig&) const override { return "scalar"; }
   void run(const RunContext& ctx) const override;
 
  private:
@@ -78,6 +84,7 @@ class LayerNormOp : public Op {
  public:
   LayerNormOp(int rows, int cols, const float* gamma, const float* beta, ValueId input, ValueId output);
   const char* type() const override { return "layernorm_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.elementwise.layernorm_name; }
   void run(const RunContext& ctx) const override;
 
  private:
@@ -92,6 +99,9 @@ class AttentionOp : public Op {
  public:
   AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k, MatrixRef v, ValueId output);
   const char* type() const override { return "attention_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override {
+    return std::string(k.gemm_f32.name) + " + " + k.elementwise.softmax_name;
+  }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
@@ -110,6 +120,7 @@ class ConcatRowsOp : public Op {
   };
   ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output);
   const char* type() const override { return "concat_rows_f32"; }
+  std::string kernel(const kernels::KernelConfig&) const override { return "memcpy"; }
   void run(const RunContext& ctx) const override;
 
  private:

@@ -44,6 +44,7 @@ class QuantizeOp : public Op {
   QuantizeOp(size_t elements, kernels::QuantS8 q, ValueId input, ValueId output);                 // static
   QuantizeOp(size_t elements, ValueId input, ValueId output, ValueId params);                     // dynamic
   const char* type() const override { return "quantize_f32_s8"; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.quant.quantize_name; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override { return 16; }
 
@@ -58,6 +59,7 @@ class DequantizeOp : public Op {
  public:
   DequantizeOp(size_t elements, kernels::QuantS8 q, ValueId input, ValueId output);
   const char* type() const override { return "dequantize_s8_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.quant.dequantize_name; }
   void run(const RunContext& ctx) const override;
 
  private:
@@ -88,6 +90,9 @@ class ConvS8Op : public Op {
  public:
   ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec, ValueId input, ValueId output);
   const char* type() const override { return spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override {
+    return spec_.s8_out ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
+  }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
@@ -109,6 +114,9 @@ class LinearS8Op : public Op {
              const float* w_scale, MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output,
              ValueId quantized_x, ValueId row_scale, ValueId row_zero_point);
   const char* type() const override { return "linear_s8_dyn"; }
+  std::string kernel(const kernels::KernelConfig& k) const override {
+    return std::string(k.quant.quantize_name) + " + " + k.gemm_s8.f32out_name;
+  }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
 

@@ -2,7 +2,23 @@
 
 #include <algorithm>
 
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
+
 namespace act {
+namespace {
+
+// Tells the core this is a spin-wait (frees the sibling hyperthread, saves power).
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  _mm_pause();
+#elif defined(__aarch64__)
+  asm volatile("yield");
+#endif
+}
+
+}  // namespace
 
 int ThreadPool::hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
 
@@ -15,33 +31,67 @@ ThreadPool::ThreadPool(int threads) {
 ThreadPool::~ThreadPool() {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    stopping_ = true;
+    stopping_.store(true, std::memory_order_relaxed);  // published by the generation's release
+    generation_.fetch_add(1, std::memory_order_release);  // ends the spinning of idle workers
   }
   wake_.notify_all();
   for (auto& w : workers_) w.join();
 }
 
+// Pauses before the spin starts yielding: about a microsecond, long enough for a thread on another
+// core to arrive.
+constexpr unsigned kPureSpins = 64;
+
+template <class Done>
+bool ThreadPool::spin_until(Done done) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::microseconds(kSpinMicroseconds);
+  for (unsigned i = 1;; ++i) {
+    if (done()) return true;
+    if (i < kPureSpins) {
+      cpu_relax();
+      continue;
+    }
+    // Past the first microseconds, yield: when the thread we wait for shares this core (more
+    // runnable threads than cores), it runs now instead of after our spin.
+    std::this_thread::yield();
+    if (std::chrono::steady_clock::now() >= deadline) return done();
+  }
+}
+
+void ThreadPool::record_spans(ThreadSpans* spans) {
+  if (spans != nullptr) spans->by_thread.resize(static_cast<size_t>(threads()));
+  spans_ = spans;
+}
+
 void ThreadPool::run_tasks(int thread_index) {
+  std::chrono::steady_clock::time_point start;
+  bool claimed_any = false;
   for (;;) {
     const size_t i = next_task_.fetch_add(1, std::memory_order_relaxed);
-    if (i >= n_tasks_) return;
+    if (i >= n_tasks_) break;
+    if (spans_ != nullptr && !claimed_any) start = std::chrono::steady_clock::now();
+    claimed_any = true;
     (*task_)(i, thread_index);
+  }
+  if (spans_ != nullptr && claimed_any) {
+    spans_->by_thread[static_cast<size_t>(thread_index)].push_back({spans_->tag, start, std::chrono::steady_clock::now()});
   }
 }
 
 void ThreadPool::worker_loop(int thread_index) {
   size_t seen_generation = 0;
   for (;;) {
-    {
+    const auto started = [&] { return generation_.load(std::memory_order_acquire) != seen_generation; };
+    if (!spin_until(started)) {
       std::unique_lock<std::mutex> lock(mutex_);
-      wake_.wait(lock, [&] { return stopping_ || generation_ != seen_generation; });
-      if (stopping_) return;
-      seen_generation = generation_;
+      wake_.wait(lock, started);
     }
+    seen_generation = generation_.load(std::memory_order_acquire);
+    if (stopping_.load(std::memory_order_relaxed)) return;
     run_tasks(thread_index);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (--busy_workers_ == 0) done_.notify_one();
+    if (busy_workers_.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+      std::lock_guard<std::mutex> lock(mutex_);  // the caller may be asleep on done_
+      done_.notify_one();
     }
   }
 }
@@ -49,21 +99,27 @@ void ThreadPool::worker_loop(int thread_index) {
 void ThreadPool::parallel_for(size_t n_tasks, const std::function<void(size_t, int)>& task) {
   if (n_tasks == 0) return;
   if (workers_.empty() || n_tasks == 1) {
+    const auto start = std::chrono::steady_clock::now();
     for (size_t i = 0; i < n_tasks; ++i) task(i, 0);
+    if (spans_ != nullptr) spans_->by_thread[0].push_back({spans_->tag, start, std::chrono::steady_clock::now()});
     return;
   }
+  task_ = &task;
+  n_tasks_ = n_tasks;
+  next_task_.store(0, std::memory_order_relaxed);
+  busy_workers_.store(static_cast<int>(workers_.size()), std::memory_order_relaxed);
   {
+    // Under the mutex, so a worker about to sleep sees either the new generation or the notify.
     std::lock_guard<std::mutex> lock(mutex_);
-    task_ = &task;
-    n_tasks_ = n_tasks;
-    next_task_.store(0, std::memory_order_relaxed);
-    busy_workers_ = static_cast<int>(workers_.size());
-    ++generation_;
+    generation_.fetch_add(1, std::memory_order_release);
   }
   wake_.notify_all();
   run_tasks(0);
-  std::unique_lock<std::mutex> lock(mutex_);
-  done_.wait(lock, [&] { return busy_workers_ == 0; });
+  const auto finished = [&] { return busy_workers_.load(std::memory_order_acquire) == 0; };
+  if (!spin_until(finished)) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, finished);
+  }
   task_ = nullptr;
 }
 

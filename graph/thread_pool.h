@@ -1,9 +1,16 @@
 // A persistent pool of worker threads for splitting one op into tiles. The calling thread works
 // too, so ThreadPool(1) runs everything inline with no other thread. Tasks are claimed from an atomic
 // counter, so uneven tiles balance themselves. Not reentrant: one parallel_for at a time per pool.
+//
+// Waking costs next to nothing (as in pthreadpool and ruy): after a parallel section, workers spin on
+// an atomic for up to kSpinMicroseconds before they sleep on a condition variable, and the caller
+// spins as long for them to finish. ACT runs well over a hundred ops per inference back to back, so
+// workers are nearly always still spinning when the next op starts; between inferences (a control
+// loop's tens of milliseconds) they sleep and leave the cores to the camera and control threads.
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstddef>
 #include <functional>
@@ -13,8 +20,22 @@
 
 namespace act {
 
+/// Where each thread spent one parallel section: [start, end) from its first task claimed to its
+/// last finished (steady_clock), with the section's tag (the op's index). Recorded only when a
+/// ThreadSpans is attached (profiling); each thread appends to its own list, so no locking.
+struct ThreadSpan {
+  int tag = 0;
+  std::chrono::steady_clock::time_point start, end;
+};
+struct ThreadSpans {
+  int tag = 0;                                  ///< set by the caller before each parallel section
+  std::vector<std::vector<ThreadSpan>> by_thread;  ///< [thread index] -> spans, in time order
+};
+
 class ThreadPool {
  public:
+  static constexpr int kSpinMicroseconds = 100;
+
   /// `threads` >= 1 is the total including the caller; 0 means one per online core.
   explicit ThreadPool(int threads);
   ~ThreadPool();
@@ -27,12 +48,19 @@ class ThreadPool {
   /// `task` receives (task index, thread index in [0, threads())) so it can use per-thread scratch.
   void parallel_for(size_t n_tasks, const std::function<void(size_t task, int thread)>& task);
 
+  /// Records every thread's span of each parallel section into `spans` (sized to threads() here),
+  /// or stops recording (nullptr). Call between parallel sections only.
+  void record_spans(ThreadSpans* spans);
+
   /// Online cores of this machine (at least 1).
   static int hardware_threads();
 
  private:
   void worker_loop(int thread_index);
   void run_tasks(int thread_index);
+  /// Spins until `done()` or kSpinMicroseconds pass; true when done() became true.
+  template <class Done>
+  static bool spin_until(Done done);
 
   std::vector<std::thread> workers_;
   std::mutex mutex_;
@@ -40,10 +68,11 @@ class ThreadPool {
   std::condition_variable done_;
   const std::function<void(size_t, int)>* task_ = nullptr;
   size_t n_tasks_ = 0;
+  ThreadSpans* spans_ = nullptr;
   std::atomic<size_t> next_task_{0};
-  size_t generation_ = 0;
-  int busy_workers_ = 0;
-  bool stopping_ = false;
+  std::atomic<size_t> generation_{0};    // bumped (under mutex_) to start a section
+  std::atomic<int> busy_workers_{0};     // workers still in the current section
+  std::atomic<bool> stopping_{false};
 };
 
 }  // namespace act

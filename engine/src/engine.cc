@@ -204,22 +204,12 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
     fail(ErrorCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
   }
   const auto preprocessed = Clock::now();
-  graph::StageTimes stages;
-  network_->run(pool_, profile_ ? &stages : nullptr);
+  network_->run(pool_, profile_ ? &last_run_ : nullptr);
   const float* out = network_->actions_normalized();
   std::copy(out, out + actions_normalized.size(), actions_normalized.begin());
   check_finite(actions_normalized, "the network's output");
   has_run_ = true;
-  if (profile_) {
-    const auto ms = [](double seconds) { return seconds * 1e3; };
-    timings_.preprocess_ms = std::chrono::duration<double, std::milli>(preprocessed - start).count();
-    timings_.backbone_ms = ms(stages[graph::Stage::kBackbone]);
-    timings_.encoder_ms = ms(stages[graph::Stage::kEncoder]);
-    timings_.decoder_ms = ms(stages[graph::Stage::kDecoder]);
-    timings_.total_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-    timings_.other_ms = timings_.total_ms - timings_.preprocess_ms - timings_.backbone_ms - timings_.encoder_ms -
-                        timings_.decoder_ms;
-  }
+  if (profile_) record_profile(start, preprocessed);
 }
 
 void Engine::Impl::unnormalize(std::span<const float> normalized, std::span<float> raw, size_t rows) const {
@@ -286,6 +276,17 @@ Status Engine::infer(const Observation& observation, std::span<float> actions) {
 }
 
 const InferenceTimings& Engine::last_timings() const { return impl_->timings(); }
+
+std::vector<OpProfile> Engine::op_profile() const { return impl_->op_profile(); }
+
+void Engine::reset_op_profile() { impl_->reset_op_profile(); }
+
+StatusOr<std::string> Engine::chrome_trace() const {
+  std::string trace;
+  Status s = guarded([&] { trace = impl_->chrome_trace(); });
+  if (!s.ok()) return s;
+  return trace;
+}
 
 std::vector<std::string> Engine::intermediate_names() const {
   const graph::Graph& g = impl_->network().graph();

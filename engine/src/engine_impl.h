@@ -1,6 +1,7 @@
 // Engine internals, shared by engine.cc and policy.cc, and used by tests to read intermediates.
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <new>
 #include <span>
@@ -42,6 +43,12 @@ class Engine::Impl {
   /// Stage times of the last run (zeros unless profiling).
   InferenceTimings& timings() { return timings_; }
   bool profiling() const { return profile_; }
+  /// Per-op sums since open or reset_op_profile (empty unless profiling).
+  std::vector<OpProfile> op_profile() const;
+  void reset_op_profile();
+  /// The last run as Chrome trace JSON. Throws act::Error(kFailedPrecondition) without profiling
+  /// or before the first run.
+  std::string chrome_trace() const;
 
  private:
   struct InputNorm {
@@ -53,6 +60,9 @@ class Engine::Impl {
   /// The statistics of input feature `key` (`size` values), read at open.
   InputNorm input_norm(const std::string& key, size_t size);
   void load_image(size_t camera, const ImageView& image);
+  /// Profiling: turns last_run_ into the stage timings and adds it to the op sums.
+  void record_profile(std::chrono::steady_clock::time_point preprocess_start,
+                      std::chrono::steady_clock::time_point preprocess_end);
   void load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm, float* dst);
 
   ActbFile blob_;
@@ -68,6 +78,9 @@ class Engine::Impl {
   const float* unnorm_scale_ = nullptr;
   const float* unnorm_offset_ = nullptr;
   bool profile_ = false;
+  graph::RunProfile last_run_;             // profiling: when each op of the last run ran, per thread
+  std::vector<double> op_total_seconds_;   // profiling: each op's time summed over the runs
+  int64_t profiled_runs_ = 0;
   bool keep_intermediates_ = false;
   bool has_run_ = false;
   InferenceTimings timings_;

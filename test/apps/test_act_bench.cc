@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <random>
+#include <set>
 
 #include <filesystem>
 #include <fstream>
@@ -10,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/bench_support.h"
+#include "apps/op_profile_report.h"
 #include "support/command.h"
 #include "support/test_paths.h"
 #include "weights/import/lerobot_import.h"
@@ -113,6 +115,63 @@ TEST(ActBench, BuiltInInt8AndCompare) {
   EXPECT_LE(c["action_max_abs"].get<double>(), 0.1);
 }
 
+// --op_profiling: a row per op whose shares add up, kinds that cover every op, the same in the
+// JSON; --trace: a Chrome trace with a lane per thread. (--enable_op_profiling is TFLite's name.)
+TEST(ActBench, OpProfileAndTrace) {
+  const std::string dir = test::scratch_dir();
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 --precision int8 -n 2 -w 0 -t 2 " +
+                             "--enable_op_profiling --json " + q(dir + "/p.json") + " --trace " + q(dir + "/t.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* section : {"op profile", "top 10 ops by time", "by kind", "gemm_s8"}) {
+    EXPECT_NE(r.output.find(section), std::string::npos) << section << "\n" << r.output;
+  }
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/p.json"));
+  const auto& profile = j.at("op_profile");
+  double percent = 0, ms = 0;
+  for (const auto& op : profile.at("ops")) {
+    EXPECT_EQ(op.at("runs"), 2);
+    percent += op.at("percent").get<double>();
+    ms += op.at("mean_ms").get<double>();
+  }
+  EXPECT_NEAR(percent, 100.0, 1e-6);
+  EXPECT_NEAR(ms, profile.at("total_ms").get<double>(), 1e-9 * ms);
+  EXPECT_LE(ms, j["latency_ms"]["total"]["mean"].get<double>()) << "the ops run inside the inference";
+  int kind_ops = 0;
+  for (const auto& kind : profile.at("kinds")) kind_ops += kind.at("ops").get<int>();
+  EXPECT_EQ(kind_ops, static_cast<int>(profile.at("ops").size()));
+  const nlohmann::json trace = nlohmann::json::parse(std::ifstream(dir + "/t.json"));
+  std::set<int> lanes;
+  for (const auto& ev : trace.at("traceEvents")) lanes.insert(ev.at("tid").get<int>());
+  EXPECT_EQ(lanes, (std::set<int>{0, 1}));
+}
+
+// The table's arithmetic on a profile made by hand.
+TEST(OpProfileTable, MeansSharesRatesAndKinds) {
+  const std::vector<OpProfile> profile = {{"a", "conv", "k1", "backbone", 1e6, 2, 4.0},
+                                          {"b", "conv", "k1", "backbone", 3e6, 2, 2.0},
+                                          {"c", "norm", "k2", "encoder", 0.0, 2, 2.0}};
+  const OpProfileTable t = OpProfileTable::make(profile, 10.0);
+  EXPECT_DOUBLE_EQ(t.total_ms, 4.0);
+  ASSERT_EQ(t.ops.size(), 3u);
+  EXPECT_DOUBLE_EQ(t.ops[0].mean_ms, 2.0);
+  EXPECT_DOUBLE_EQ(t.ops[0].percent, 50.0);
+  EXPECT_DOUBLE_EQ(t.ops[0].gmacs_per_s, 0.5);  // 1e6 MAC in 2 ms
+  EXPECT_DOUBLE_EQ(t.ops[0].percent_of_peak, 5.0);
+  EXPECT_DOUBLE_EQ(t.ops[1].gmacs_per_s, 3.0);
+  EXPECT_DOUBLE_EQ(t.ops[2].gmacs_per_s, 0.0);
+  ASSERT_EQ(t.kinds.size(), 2u);
+  EXPECT_EQ(t.kinds[0].kind, "conv");
+  EXPECT_EQ(t.kinds[0].ops, 2);
+  EXPECT_DOUBLE_EQ(t.kinds[0].mean_ms, 3.0);
+  EXPECT_DOUBLE_EQ(t.kinds[0].percent, 75.0);
+  EXPECT_DOUBLE_EQ(t.kinds[0].gmacs_per_s, 4e6 / 3e6);
+  const auto top = t.top(2);
+  ASSERT_EQ(top.size(), 2u);
+  EXPECT_EQ(top[0].name, "a");
+  EXPECT_EQ(top[1].name, "b");
+  EXPECT_DOUBLE_EQ(OpProfileTable::make(profile, 0.0).ops[0].percent_of_peak, 0.0) << "no peak, no % of peak";
+}
+
 TEST(ActBench, CompareWithABlobNeedsTheOtherPrecision) {
   const std::string fixture = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);
@@ -149,7 +208,7 @@ TEST(ActBench, BadArgumentsAreClearErrors) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("none.actb"), std::string::npos) << r.output;
   // An output that cannot be written fails before the benchmark, not silently after it.
-  for (const char* flag : {"--json", "--csv"}) {
+  for (const char* flag : {"--json", "--csv", "--trace"}) {
     r = run_command(std::string(ACT_BENCH_BIN) + " --num_runs 1 " + flag + " " + q(dir + "/missing/out"));
     EXPECT_EQ(r.exit_code, 1) << flag << "\n" << r.output;
     EXPECT_NE(r.output.find(dir + "/missing/out"), std::string::npos) << r.output;

@@ -10,7 +10,11 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
+#include <set>
 #include <thread>
+
+#include <nlohmann/json.hpp>
 
 #include "actengine/engine.h"
 #include "kernels/common/isa.h"
@@ -374,6 +378,81 @@ TEST_F(EngineApiTest, ProfilingReportsEveryStage) {
     EXPECT_LT(stage, t.total_ms);
   }
   EXPECT_GE(t.other_ms, 0.0);
+}
+
+// The op profile: every op once, with its kind, kernel and stage; its sums reset; the stage times
+// are the sums of their ops' times. The trace: one slice per op on the caller's lane, in order, and
+// each worker slice inside its op's.
+TEST_F(EngineApiTest, ProfilerTimesEveryOpAndTracesEveryThread) {
+  auto chunk_out = chunk();
+  EXPECT_TRUE(engine_->op_profile().empty()) << "profiling is off by default";
+  EXPECT_EQ(engine_->chrome_trace().status().code(), StatusCode::kFailedPrecondition);
+
+  auto profiled = Engine::open(blob_, {.threads = 2, .profile = true});
+  ASSERT_TRUE(profiled.ok()) << profiled.status().to_string();
+  Engine& e = **profiled;
+  EXPECT_EQ(e.chrome_trace().status().code(), StatusCode::kFailedPrecondition) << "before the first inference";
+  for (int run = 0; run < 3; ++run) ASSERT_TRUE(e.infer(observation(), chunk_out).ok());
+  std::vector<OpProfile> ops = e.op_profile();
+  ASSERT_GT(ops.size(), 20u);
+  std::set<std::string> names;
+  double macs = 0;
+  for (const OpProfile& op : ops) {
+    EXPECT_TRUE(names.insert(op.name).second) << "op named twice: " << op.name;
+    EXPECT_EQ(op.runs, 3) << op.name;
+    EXPECT_GE(op.total_ms, 0.0) << op.name;
+    EXPECT_FALSE(op.kind.empty()) << op.name;
+    EXPECT_FALSE(op.kernel.empty()) << op.name;
+    if (op.kind.rfind("conv2d", 0) == 0) {
+      EXPECT_GT(op.macs, 0.0) << op.name;
+      EXPECT_EQ(op.stage, "backbone") << op.name;
+    }
+    macs += op.macs;
+  }
+  EXPECT_GT(macs, 0.0);
+
+  e.reset_op_profile();
+  for (const OpProfile& op : e.op_profile()) EXPECT_EQ(op.runs, 0) << op.name;
+  ASSERT_TRUE(e.infer(observation(), chunk_out).ok());
+  ops = e.op_profile();
+  std::map<std::string, double> stage_ms;
+  for (const OpProfile& op : ops) {
+    EXPECT_EQ(op.runs, 1) << op.name;
+    stage_ms[op.stage] += op.total_ms;
+  }
+  const InferenceTimings& t = e.last_timings();
+  EXPECT_NEAR(stage_ms["backbone"], t.backbone_ms, 1e-9 * t.total_ms);
+  EXPECT_NEAR(stage_ms["encoder"], t.encoder_ms, 1e-9 * t.total_ms);
+  EXPECT_NEAR(stage_ms["decoder"], t.decoder_ms, 1e-9 * t.total_ms);
+
+  const auto trace = e.chrome_trace();
+  ASSERT_TRUE(trace.ok()) << trace.status().to_string();
+  const nlohmann::json j = nlohmann::json::parse(*trace);
+  std::map<int, std::vector<nlohmann::json>> lanes;
+  std::set<int> named_lanes;
+  for (const auto& ev : j.at("traceEvents")) {
+    if (ev.at("ph") == "X") lanes[ev.at("tid").get<int>()].push_back(ev);
+    if (ev.at("ph") == "M") named_lanes.insert(ev.at("tid").get<int>());
+  }
+  EXPECT_EQ(named_lanes, (std::set<int>{0, 1}));
+  const std::vector<nlohmann::json>& caller = lanes[0];
+  ASSERT_EQ(caller.size(), ops.size());
+  std::map<std::string, std::pair<double, double>> op_span;
+  for (size_t i = 0; i < caller.size(); ++i) {
+    EXPECT_EQ(caller[i].at("name"), ops[i].name);
+    const double start = caller[i].at("ts"), end = start + caller[i].at("dur").get<double>();
+    if (i > 0) {
+      EXPECT_GE(start, op_span[ops[i - 1].name].second - 1e-3) << "ops overlap on the caller's lane";
+    }
+    op_span[ops[i].name] = {start, end};
+  }
+  ASSERT_FALSE(lanes[1].empty()) << "the worker took no tile of any op";
+  for (const auto& ev : lanes[1]) {
+    const auto [op_start, op_end] = op_span.at(ev.at("name").get<std::string>());
+    const double start = ev.at("ts"), end = start + ev.at("dur").get<double>();
+    EXPECT_GE(start, op_start - 1e-3) << ev.dump();
+    EXPECT_LE(end, op_end + 1e-3) << ev.dump();
+  }
 }
 
 TEST_F(EngineApiTest, IntermediatesAreReadAfterARunWhenKept) {

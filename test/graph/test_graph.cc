@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <set>
+#include <thread>
 
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
@@ -26,6 +28,53 @@ TEST(ThreadPool, RunsEveryTaskOnceWithValidThreadIndices) {
       EXPECT_FALSE(bad_thread);
     }
   }
+}
+
+// Sections back to back (workers still spinning) and after pauses longer than the spin (workers
+// asleep on the condition variable) all run every task once; pools are destroyed in both states.
+TEST(ThreadPool, WakesSpinningAndSleepingWorkers) {
+  for (int round = 0; round < 3; ++round) {
+    ThreadPool pool(3);
+    for (int section = 0; section < 600; ++section) {
+      const size_t n = 2 + static_cast<size_t>(section % 7);
+      std::vector<std::atomic<int>> hits(n);
+      pool.parallel_for(n, [&](size_t i, int) { hits[i]++; });
+      for (size_t i = 0; i < n; ++i) ASSERT_EQ(hits[i].load(), 1) << "section " << section << " task " << i;
+      if (section % 100 == 99) {
+        std::this_thread::sleep_for(std::chrono::microseconds(5 * ThreadPool::kSpinMicroseconds));
+      }
+    }
+    if (round == 1) std::this_thread::sleep_for(std::chrono::microseconds(5 * ThreadPool::kSpinMicroseconds));
+  }
+}
+
+// With spans attached, each thread that worked on a section records one span with the section's
+// tag; detached, nothing is recorded.
+TEST(ThreadPool, RecordsEachThreadsSpanOfASection) {
+  ThreadPool pool(2);
+  ThreadSpans spans;
+  pool.record_spans(&spans);
+  ASSERT_EQ(spans.by_thread.size(), 2u);
+  for (int tag : {7, 8}) {
+    spans.tag = tag;
+    // Each task waits for the other to start, so both threads must take one.
+    std::atomic<int> started{0};
+    pool.parallel_for(2, [&](size_t, int) {
+      started++;
+      while (started.load() < 2) std::this_thread::yield();
+    });
+  }
+  for (const auto& thread_spans : spans.by_thread) {
+    ASSERT_EQ(thread_spans.size(), 2u);
+    for (size_t s = 0; s < 2; ++s) {
+      EXPECT_EQ(thread_spans[s].tag, 7 + static_cast<int>(s));
+      EXPECT_LE(thread_spans[s].start, thread_spans[s].end);
+    }
+    EXPECT_LE(thread_spans[0].end, thread_spans[1].start);
+  }
+  pool.record_spans(nullptr);
+  pool.parallel_for(4, [](size_t, int) {});
+  EXPECT_EQ(spans.by_thread[0].size() + spans.by_thread[1].size(), 4u);
 }
 
 // A chain a -> b -> c -> d of LayerNorms: the planner may reuse a's memory for c, never for b.

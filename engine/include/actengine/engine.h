@@ -36,7 +36,8 @@ struct EngineOptions {
   /// processes run one blob); then the file must not change while the Engine is open: a rewrite
   /// changes the weights under it, a truncation kills the process with SIGBUS.
   bool share_blob_pages = false;
-  /// Time every stage of every inference (see Engine::last_timings); costs a clock read per op.
+  /// Time every stage and op of every inference (Engine::last_timings, op_profile, chrome_trace);
+  /// costs two clock reads per op and thread. Off, the profiler costs nothing.
   bool profile = false;
   /// Give every network value its own memory so Engine::intermediate() can read it after an
   /// inference (to compare with LeRobot layer by layer); costs memory, never changes results.
@@ -56,6 +57,18 @@ struct InferenceTimings {
   double encoder_ms = 0;
   double decoder_ms = 0;     ///< decoder and action head
   double other_ms = 0;
+  double total_ms = 0;
+};
+
+/// One op of the network as the profiler saw it (EngineOptions::profile): its wall time summed
+/// over every inference since open() or Engine::reset_op_profile().
+struct OpProfile {
+  std::string name;    ///< the value it computes, e.g. "cam0.backbone.layer1.0.conv1.s8"
+  std::string kind;    ///< e.g. "conv2d_s8_s8", "attention_f32"
+  std::string kernel;  ///< the kernel variant it calls, e.g. "gemm_s8_s8out_6x64c4_avx512vnni"
+  std::string stage;   ///< "backbone", "encoder", "decoder" or "other"
+  double macs = 0;     ///< multiply-accumulates of one run (0 for ops that do no dot products)
+  int64_t runs = 0;
   double total_ms = 0;
 };
 
@@ -132,6 +145,15 @@ class Engine {
   Status infer_normalized(const Observation& observation, std::span<float> actions_normalized);
   /// Stage times of the last successful infer (all zero unless EngineOptions::profile is set).
   const InferenceTimings& last_timings() const;
+  /// Every op in the order it runs, with its time summed over the inferences since open() or
+  /// reset_op_profile() (empty unless EngineOptions::profile is set).
+  std::vector<OpProfile> op_profile() const;
+  /// Starts the op profile's sums afresh (e.g. after warm-up runs).
+  void reset_op_profile();
+  /// The last inference as a Chrome trace (JSON for chrome://tracing and ui.perfetto.dev): one
+  /// lane per thread, a slice per op on each thread that worked on it. kFailedPrecondition without
+  /// EngineOptions::profile or before the first inference.
+  StatusOr<std::string> chrome_trace() const;
 
   /// The names of the network's values, in the order they are computed ("cam0.backbone.layer1",
   /// "encoder_layer0_out", "actions_normalized", ...).

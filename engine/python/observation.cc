@@ -66,11 +66,11 @@ std::string vector_expectation(size_t size) {
 py::array image_array(const std::string& key, const py::handle& value, const CameraInfo& cam, bool allow_float,
                       ImageView::Format& format) {
   py::array array = without_batch(to_numpy(key, value), 3);
-  if (array.dtype().is(py::dtype::of<uint8_t>()) && has_shape(array, {cam.height, cam.width, 3})) {
+  if (py::isinstance<py::array_t<uint8_t>>(array) && has_shape(array, {cam.height, cam.width, 3})) {
     format = ImageView::Format::kRgbU8Hwc;
     return py::array_t<uint8_t, py::array::c_style>::ensure(array);
   }
-  if (allow_float && array.dtype().is(py::dtype::of<float>()) && has_shape(array, {3, cam.height, cam.width})) {
+  if (allow_float && py::isinstance<py::array_t<float>>(array) && has_shape(array, {3, cam.height, cam.width})) {
     format = ImageView::Format::kRgbF32Chw;
     return py::array_t<float, py::array::c_style>::ensure(array);
   }

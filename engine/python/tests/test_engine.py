@@ -145,3 +145,20 @@ def test_a_second_thread_runs_while_the_engine_infers(act_tiny, tiny_engine):
         thread.join()
         sys.setswitchinterval(switch_interval)
     assert during > 0
+
+
+def test_two_python_threads_can_share_one_engine(act_tiny, tiny_engine):
+    """infer() runs without the GIL, so the Engine's own lock keeps two threads out of it at once."""
+    results = {}
+
+    def run(sample):
+        results[sample] = [tiny_engine.infer(act_tiny.observation(sample)) for _ in range(5)]
+
+    threads = [threading.Thread(target=run, args=(sample,)) for sample in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    for sample, chunks in results.items():
+        for chunk in chunks:
+            np.testing.assert_allclose(chunk, act_tiny.ref["output.action"][sample], **TOLERANCE)

@@ -12,6 +12,7 @@ packages=(
   libopencv-dev
   gcc-avr avr-libc arduino-core-avr
   python3 python3-numpy python3-torch
+  python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (python/) and its tests
   clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
 )
 

@@ -2,7 +2,8 @@
 # README command (2) and what CI runs (.ci/run): installs the dependencies, builds actengine and runs
 # every test, in stages (each one's wall time is printed at the end):
 #   1. Release (build/, only what these need): the tests of the full-size generated models, which
-#      take seconds here and many minutes under ASan, and a smoke run of act_kernel_bench;
+#      take seconds here and many minutes under ASan, the Python module's pytest suite, and a smoke
+#      run of act_kernel_bench;
 #   2. every other test in a native build under AddressSanitizer + UndefinedBehaviorSanitizer
 #      (build-asan/; -O1 with the kernels at -O2, which builds in much less time than -O2
 #      everywhere while the whole-model tests stay quick);
@@ -69,6 +70,11 @@ stage_done release-build
 echo "== Release: full-size model tests =="
 run_ctest "$root/build" -R "$full_size"
 stage_done release-tests
+echo "== Release: the Python module (engine/python, pytest) =="
+cmake -S "$root" -B "$root/build" -DACT_BUILD_PYTHON=ON >/dev/null  # a missing pybind11 fails here, not skips
+cmake --build "$root/build" -j "$jobs" --target _actengine act_convert
+run_ctest "$root/build" -R '^python_module$'
+stage_done python-tests
 echo "== kernel benchmarks (smoke run; the numbers are not judged) =="
 "$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01 >"$root/build/kernel_bench.txt" 2>&1 ||
   { tail -n 40 "$root/build/kernel_bench.txt"; exit 1; }

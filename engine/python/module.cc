@@ -1,0 +1,410 @@
+// actengine._actengine: the Python binding of the public API (engine.h, scheduler.h, convert.h).
+// The pure-Python package (actengine/__init__.py) re-exports it. Every call that runs the network or
+// converts a checkpoint releases the GIL; an Engine's mutex keeps two Python threads from running one
+// Engine (and the Policies on it) at once, as engine.h requires.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "actengine/convert.h"
+#include "actengine/engine.h"
+#include "actengine/scheduler.h"
+#include "actengine/status.h"
+#include "observation.h"
+
+namespace act::python {
+
+namespace py = pybind11;
+
+namespace {
+
+/// actengine.Error: the engine failed (a file it cannot read, a checkpoint it cannot convert, ...).
+/// Bad input (a malformed observation or argument) raises ValueError instead.
+class EngineError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+[[noreturn]] void raise(const Status& status) {
+  if (status.code() == StatusCode::kInvalidArgument) throw py::value_error(status.message());
+  throw EngineError(status.message());
+}
+
+/// An Engine shared by the Python objects that use it (Policy keeps it alive).
+class PyEngine {
+ public:
+  PyEngine(const std::filesystem::path& path, int threads, const std::string& isa) {
+    EngineOptions options;
+    options.threads = threads;
+    options.isa = isa;
+    auto opened = [&] {
+      py::gil_scoped_release release;
+      return Engine::open(path.string(), options);
+    }();
+    if (!opened.ok()) raise(opened.status());
+    engine_ = std::move(opened).value();
+  }
+
+  const ModelInfo& model_info() const { return engine_->model_info(); }
+  int threads() const { return engine_->threads(); }
+  Engine& engine() { return *engine_; }
+  std::mutex& mutex() { return mutex_; }
+
+  py::array_t<float> infer(const py::dict& observation, bool normalized) {
+    const HeldObservation held = observation_from_dict(model_info(), observation);
+    const ModelInfo& info = model_info();
+    py::array_t<float> chunk({info.chunk_size, info.action_dim});
+    const std::span<float> out(chunk.mutable_data(), info.chunk_values());
+    Status status;
+    {
+      py::gil_scoped_release release;
+      const std::lock_guard lock(mutex_);
+      status = normalized ? engine_->infer_normalized(held.view(), out) : engine_->infer(held.view(), out);
+    }
+    if (!status.ok()) raise(status);
+    return chunk;
+  }
+
+ private:
+  std::unique_ptr<Engine> engine_;
+  std::mutex mutex_;
+};
+
+class PyPolicy {
+ public:
+  explicit PyPolicy(std::shared_ptr<PyEngine> engine) : engine_(std::move(engine)), policy_(engine_->engine()) {}
+
+  py::array_t<float> select_action(const py::dict& observation) {
+    const HeldObservation held = observation_from_dict(engine_->model_info(), observation);
+    py::array_t<float> action(engine_->model_info().action_dim);
+    const std::span<float> out(action.mutable_data(), static_cast<size_t>(action.size()));
+    Status status;
+    {
+      py::gil_scoped_release release;
+      const std::lock_guard lock(engine_->mutex());
+      status = policy_.select_action(held.view(), out);
+    }
+    if (!status.ok()) raise(status);
+    return action;
+  }
+
+  void reset() {
+    const std::lock_guard lock(engine_->mutex());
+    policy_.reset();
+  }
+
+  bool will_infer_next() {
+    const std::lock_guard lock(engine_->mutex());
+    return policy_.will_infer_next();
+  }
+
+ private:
+  std::shared_ptr<PyEngine> engine_;
+  Policy policy_;
+};
+
+/// The scheduler with the chunk shape it checks its input against.
+class PyChunkScheduler {
+ public:
+  explicit PyChunkScheduler(const ModelInfo& info)
+      : scheduler_(created(info)), chunk_size_(static_cast<size_t>(info.chunk_size)),
+        action_dim_(static_cast<size_t>(info.action_dim)) {}
+
+  void add(const py::handle& chunk, int64_t observation_tick) {
+    const py::array_t<float> values = float_matrix(chunk, "chunk", chunk_size_, action_dim_);
+    const Status status = scheduler_.add({values.data(), static_cast<size_t>(values.size())}, observation_tick);
+    if (!status.ok()) raise(status);
+  }
+
+  /// The action for `tick`, or None when no chunk covers it (hold a safe action then).
+  std::optional<py::array_t<float>> action_at(int64_t tick) const {
+    py::array_t<float> action(static_cast<py::ssize_t>(action_dim_));
+    const Status status = scheduler_.action_at(tick, {action.mutable_data(), action_dim_});
+    if (status.code() == StatusCode::kNotFound) return std::nullopt;
+    if (!status.ok()) raise(status);
+    return action;
+  }
+
+  bool wants_inference(int64_t tick, int lead_ticks) const { return scheduler_.wants_inference(tick, lead_ticks); }
+  void clear() { scheduler_.clear(); }
+
+ private:
+  static ChunkScheduler created(const ModelInfo& info) {
+    auto scheduler = ChunkScheduler::create(info);
+    if (!scheduler.ok()) raise(scheduler.status());
+    return std::move(scheduler).value();
+  }
+
+  ChunkScheduler scheduler_;
+  size_t chunk_size_, action_dim_;
+};
+
+// ------------------------------------------------------------------------------------------ convert
+
+/// convert()'s arguments, act_convert's options by their Python names.
+struct ConvertArgs {
+  std::filesystem::path checkpoint, output;
+  std::string precision;
+  std::optional<std::string> mode;
+  std::vector<py::dict> calib;
+  size_t calib_samples = 64;
+  std::optional<size_t> holdout;
+  std::string calib_method;
+  double percentile = 99.99;
+  std::optional<double> target_mse, max_mse;
+  int threads = 0;
+  uint64_t seed = 1;
+  bool layer_report = true;
+  py::object progress;
+  PthOptions pth;
+};
+
+bool any_pth_option(const PthOptions& p) {
+  return !p.config_path.empty() || !p.stats_paths.empty() || p.image_size || p.n_action_steps || p.n_heads ||
+         p.activation || !p.cameras.empty() || p.lerobot_defaults || p.no_normalization || !p.state_dict_key.empty();
+}
+
+// act_convert's option checks (check_options), in the same words with the Python argument names.
+Int8Options int8_options(const ConvertArgs& a) {
+  Int8Options o;
+  const std::string mode = a.mode.value_or("static");
+  if (mode == "dynamic") {
+    o.mode = Int8Mode::kDynamic;
+  } else if (mode == "mixed") {
+    o.mode = Int8Mode::kMixed;
+  } else if (mode != "static") {
+    throw py::value_error("mode must be 'dynamic', 'static' or 'mixed', got '" + mode + "'");
+  }
+  auto method = parse_calibration_method(a.calib_method);
+  if (!method.ok()) raise(method.status());
+  o.method = *method;
+  if (!(a.percentile >= 50.0 && a.percentile <= 100.0)) throw py::value_error("percentile must be in [50, 100]");
+  if (a.calib_samples < 1) throw py::value_error("calib_samples must be at least 1");
+  o.percentile = a.percentile;
+  o.calib_samples = a.calib_samples;
+  o.holdout = a.holdout;
+  o.target_mse = a.target_mse;
+  o.max_mse = a.max_mse;
+  o.threads = a.threads;
+  o.seed = a.seed;
+  o.layer_report = a.layer_report;
+  if (o.mode != Int8Mode::kDynamic && a.calib.empty()) {
+    throw py::value_error(mode + " quantization needs calibration frames: calib=[observation dict, ...] (or "
+                          "mode='dynamic', which needs none)");
+  }
+  if (o.mode == Int8Mode::kMixed && !o.target_mse) {
+    throw py::value_error("mode='mixed' needs target_mse (held-out MSE in normalised units)");
+  }
+  if (!a.progress.is_none()) {
+    // A handle, not an object: copies of the callback may be destroyed in threads that hold no GIL.
+    const py::handle progress = a.progress;
+    o.progress = [progress](const std::string& line) {
+      const py::gil_scoped_acquire acquire;
+      try {
+        progress(line);
+      } catch (py::error_already_set& e) {
+        e.discard_as_unraisable("actengine.convert progress callback");
+      }
+    };
+  }
+  return o;
+}
+
+std::unique_ptr<ImportedCheckpoint> import(const ConvertArgs& a, std::vector<std::string>& notes) {
+  auto location = locate_checkpoint(a.checkpoint.string());
+  if (!location.ok()) raise(location.status());
+  if (!location->note.empty()) notes.push_back(location->note);
+  if (location->lerobot_folder && any_pth_option(a.pth)) {
+    throw py::value_error("the .pth options (config, stats, ...) do not apply to a LeRobot checkpoint folder: its "
+                          "config.json and statistics are in the folder");
+  }
+  py::gil_scoped_release release;
+  if (location->lerobot_folder) {
+    auto model = import_checkpoint(location->path);
+    if (!model.ok()) {
+      const py::gil_scoped_acquire acquire;
+      raise(model.status());
+    }
+    return std::move(model).value();
+  }
+  auto plan = PthPlan::read(location->path, a.pth);
+  auto model = plan.ok() ? import_checkpoint(**plan) : StatusOr<std::unique_ptr<ImportedCheckpoint>>(plan.status());
+  if (!model.ok()) {
+    const py::gil_scoped_acquire acquire;
+    raise(model.status());
+  }
+  return std::move(model).value();
+}
+
+py::dict convert(const ConvertArgs& a) {
+  if (a.precision != "fp32" && a.precision != "int8") {
+    throw py::value_error("precision must be 'fp32' or 'int8', got '" + a.precision + "'");
+  }
+  if (a.precision == "fp32" && (!a.calib.empty() || a.mode || a.max_mse)) {
+    throw py::value_error("mode, calib and max_mse need precision='int8'");
+  }
+  const std::optional<Int8Options> int8 = a.precision == "int8" ? std::optional(int8_options(a)) : std::nullopt;
+  std::vector<std::string> notes;
+  const std::unique_ptr<ImportedCheckpoint> model = import(a, notes);
+  const ImportSummary& summary = model->summary();
+  notes.insert(notes.end(), summary.notes.begin(), summary.notes.end());
+
+  py::dict result;
+  result["precision"] = a.precision;
+  result["model"] = summary.model.summary;
+  result["notes"] = notes;
+  if (!int8) {
+    StatusOr<uint64_t> bytes = [&] {
+      py::gil_scoped_release release;
+      return model->write_fp32(a.output.string());
+    }();
+    if (!bytes.ok()) raise(bytes.status());
+    result["bytes"] = *bytes;
+    return result;
+  }
+  CalibrationSet calibration;
+  for (const py::dict& observation : a.calib) calibration.frames.push_back(calibration_frame_from_dict(summary.model, observation));
+  calibration.preprocessing = "frames given to actengine.convert";
+  StatusOr<Int8Report> report = [&] {
+    py::gil_scoped_release release;
+    return model->write_int8(a.output.string(), calibration, *int8);
+  }();
+  if (!report.ok()) {
+    if (report.status().code() == StatusCode::kFailedPrecondition && int8->max_mse) {
+      const std::string target = py::repr(py::float_(*int8->max_mse)).cast<std::string>();
+      throw EngineError(report.status().message() + "\nmax_mse " + target + " missed: try mode='mixed', target_mse=" +
+                        target + ", more calibration frames, or another calib_method.");
+    }
+    raise(report.status());
+  }
+  result["bytes"] = report->int8_bytes;
+  result["report"] = py::module_::import("json").attr("loads")(report->to_json());
+  return result;
+}
+
+void define_module(py::module_& m) {
+  m.doc() = "actengine: run a converted LeRobot ACT policy (.actb) on the CPU, and convert checkpoints";
+  m.attr("__version__") = version();
+  py::register_exception<EngineError>(m, "Error", PyExc_RuntimeError);
+
+  py::class_<CameraInfo>(m, "CameraInfo", "One camera input: its LeRobot feature key and image size.")
+      .def_readonly("key", &CameraInfo::key)
+      .def_readonly("height", &CameraInfo::height)
+      .def_readonly("width", &CameraInfo::width)
+      .def("__repr__", [](const CameraInfo& c) {
+        return "CameraInfo('" + c.key + "', " + std::to_string(c.height) + "x" + std::to_string(c.width) + ")";
+      });
+
+  py::class_<ModelInfo>(m, "ModelInfo", "What a loaded model expects and produces (from the blob's config).")
+      .def_readonly("cameras", &ModelInfo::cameras)
+      .def_readonly("state_dim", &ModelInfo::state_dim)
+      .def_readonly("env_state_dim", &ModelInfo::env_state_dim)
+      .def_readonly("env_state_key", &ModelInfo::env_state_key)
+      .def_readonly("action_dim", &ModelInfo::action_dim)
+      .def_readonly("chunk_size", &ModelInfo::chunk_size)
+      .def_readonly("n_action_steps", &ModelInfo::n_action_steps)
+      .def_readonly("action_low", &ModelInfo::action_low)
+      .def_readonly("action_high", &ModelInfo::action_high)
+      .def_readonly("temporal_ensembling", &ModelInfo::temporal_ensembling)
+      .def_readonly("temporal_ensemble_coeff", &ModelInfo::temporal_ensemble_coeff)
+      .def_readonly("precision", &ModelInfo::precision)
+      .def_readonly("isa", &ModelInfo::isa)
+      .def_readonly("kernels", &ModelInfo::kernels)
+      .def_readonly("summary", &ModelInfo::summary)
+      .def("__repr__", [](const ModelInfo& i) { return "ModelInfo(" + i.summary + ", " + i.precision + ")"; });
+
+  py::class_<PyEngine, std::shared_ptr<PyEngine>>(m, "Engine", R"(A converted ACT policy (.actb) ready to run.
+
+Engine(path, threads=0, isa="auto"): threads 0 = one per online core; isa "auto" (or ACT_ISA) picks the
+best kernels this CPU runs. Observations are dicts keyed by LeRobot feature names.)")
+      .def(py::init<const std::filesystem::path&, int, const std::string&>(), py::arg("path"), py::arg("threads") = 0,
+           py::arg("isa") = "auto")
+      .def_property_readonly("model_info", &PyEngine::model_info, py::return_value_policy::reference_internal)
+      .def_property_readonly("threads", &PyEngine::threads)
+      .def("infer", [](PyEngine& e, const py::dict& obs) { return e.infer(obs, false); }, py::arg("observation"),
+           "The raw action chunk, float32 (chunk_size, action_dim), for one observation.")
+      .def("infer_normalized", [](PyEngine& e, const py::dict& obs) { return e.infer(obs, true); },
+           py::arg("observation"), "The network's normalised action chunk (before un-normalisation).");
+
+  py::class_<PyPolicy>(m, "Policy", R"(LeRobot's select_action on an Engine: the n_action_steps queue, or
+temporal ensembling when the model's config asks for it. One action per call.)")
+      .def(py::init<std::shared_ptr<PyEngine>>(), py::arg("engine"))
+      .def("select_action", &PyPolicy::select_action, py::arg("observation"),
+           "The raw action (float32, action_dim) for this control step.")
+      .def("reset", &PyPolicy::reset, "Empties the queue / ensemble (call at the start of an episode).")
+      .def("will_infer_next", &PyPolicy::will_infer_next, "True when the next select_action runs the network.");
+
+  py::class_<PyChunkScheduler>(m, "ChunkScheduler", R"(Chunks in, one action per control tick out, for a
+robot that keeps acting while the next chunk is inferred (actengine/scheduler.h).)")
+      .def(py::init<const ModelInfo&>(), py::arg("model_info"))
+      .def("add", &PyChunkScheduler::add, py::arg("chunk"), py::arg("observation_tick"),
+           "Adds a chunk (chunk_size, action_dim) predicted from the observation captured at observation_tick.")
+      .def("action_at", &PyChunkScheduler::action_at, py::arg("tick"),
+           "The action for tick, or None when no chunk covers it.")
+      .def("wants_inference", &PyChunkScheduler::wants_inference, py::arg("tick"), py::arg("lead_ticks") = 0,
+           "True when the next inference should start at tick (lead_ticks: its latency in ticks plus a margin).")
+      .def("clear", &PyChunkScheduler::clear, "Forgets every chunk (a new episode, or a fault).");
+
+  m.def(
+      "convert",
+      [](const std::filesystem::path& checkpoint, const std::filesystem::path& output, const std::string& precision,
+         const std::optional<std::string>& mode, const std::vector<py::dict>& calib, size_t calib_samples,
+         const std::optional<size_t>& holdout, const std::string& calib_method, double percentile,
+         const std::optional<double>& target_mse, const std::optional<double>& max_mse, int threads, uint64_t seed,
+         bool layer_report, const py::object& progress, const std::optional<std::string>& config,
+         const std::vector<std::string>& stats, const std::optional<std::pair<int, int>>& image_size,
+         const std::optional<int>& n_action_steps, const std::optional<int>& n_heads,
+         const std::optional<std::string>& activation, const std::vector<std::string>& cameras, bool lerobot_defaults,
+         bool no_normalization, const std::optional<std::string>& state_dict_key) {
+        ConvertArgs a{checkpoint, output, precision, mode, calib, calib_samples, holdout, calib_method, percentile,
+                      target_mse, max_mse, threads, seed, layer_report, progress, {}};
+        a.pth.config_path = config.value_or("");
+        a.pth.stats_paths = stats;
+        a.pth.image_size = image_size;
+        a.pth.n_action_steps = n_action_steps;
+        a.pth.n_heads = n_heads;
+        a.pth.activation = activation;
+        a.pth.cameras = cameras;
+        a.pth.lerobot_defaults = lerobot_defaults;
+        a.pth.no_normalization = no_normalization;
+        a.pth.state_dict_key = state_dict_key.value_or("");
+        return convert(a);
+      },
+      R"(Converts a LeRobot ACT checkpoint (folder, training output or .pth) into an .actb blob, as act_convert does.
+
+precision "int8" (default) or "fp32". INT8: mode "static" (default; needs calib), "dynamic" (no
+calibration) or "mixed" (needs target_mse); calib is a list of observation dicts (uint8 HxWx3 images at
+the model's input size, states optional); calib_samples, holdout, calib_method ("minmax", "percentile",
+"mse"), percentile, max_mse (fail, writing nothing, above it), threads, seed, layer_report, and
+progress (called with each progress line). A .pth takes act_convert's options: config, stats,
+image_size (height, width), n_action_steps, n_heads, activation, cameras, lerobot_defaults,
+no_normalization, state_dict_key.
+
+Returns a dict: precision, bytes (the blob's size), model (one-line summary), notes, and for INT8 the
+accuracy report against FP32 (report: act_convert --report's JSON). Nothing is written on failure.)",
+      py::arg("checkpoint"), py::arg("output"), py::arg("precision") = "int8", py::kw_only(),
+      py::arg("mode") = py::none(), py::arg("calib") = std::vector<py::dict>{}, py::arg("calib_samples") = 64,
+      py::arg("holdout") = py::none(), py::arg("calib_method") = "mse", py::arg("percentile") = 99.99,
+      py::arg("target_mse") = py::none(), py::arg("max_mse") = py::none(), py::arg("threads") = 0,
+      py::arg("seed") = 1, py::arg("layer_report") = true, py::arg("progress") = py::none(),
+      py::arg("config") = py::none(), py::arg("stats") = std::vector<std::string>{},
+      py::arg("image_size") = py::none(), py::arg("n_action_steps") = py::none(), py::arg("n_heads") = py::none(),
+      py::arg("activation") = py::none(), py::arg("cameras") = std::vector<std::string>{},
+      py::arg("lerobot_defaults") = false, py::arg("no_normalization") = false,
+      py::arg("state_dict_key") = py::none());
+}
+
+}  // namespace
+}  // namespace act::python
+
+PYBIND11_MODULE(_actengine, m) { act::python::define_module(m); }

@@ -23,13 +23,13 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <fstream>
 #include <iostream>
-#include <atomic>
 #include <map>
 #include <memory>
 #include <random>
@@ -37,8 +37,10 @@
 #include <string>
 #include <vector>
 
-#include "kernels/peak/peak_probe.h"
+#include "graph/graph.h"
+#include "graph/ops_int8.h"
 #include "graph/thread_pool.h"
+#include "kernels/peak/peak_probe.h"
 #include "kernels/conv_s8/conv_s8.h"
 #include "kernels/fp32/elementwise_f32.h"
 #include "kernels/config/kernel_config.h"
@@ -338,6 +340,27 @@ void bm_attention(benchmark::State& state, const kernels::GemmF32Kernels* g, con
   state.SetLabel(std::string(g->name) + " + " + e->softmax_name + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
 }
 
+// The int8 attention op (graph/ops_int8.h: both matmuls on gemm_s8, keys and values packed per
+// run) on the same shape, with the kernels an Engine of this ISA level runs.
+void bm_attention_s8(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
+  const int d = kHeads * kHeadDim;
+  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
+  graph::Graph g;
+  const graph::ValueId qkv = g.add_input("qkv", {tokens, 3 * d});
+  const graph::ValueId out = g.add_value("out", {tokens, d});
+  g.add_op(std::make_unique<graph::AttentionS8Op>(config.gemm_s8, tokens, tokens, d, kHeads, graph::MatrixRef::of(qkv, 3 * d, 0),
+                                                  graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
+  g.mark_output(out);
+  g.plan(threads, false);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (size_t i = 0; i < static_cast<size_t>(tokens) * 3 * d; ++i) g.data(qkv)[i] = u(rng);
+  ThreadPool& tp = pool(threads);
+  const double macs = 2.0 * kHeads * tokens * static_cast<double>(tokens) * kHeadDim;
+  run_timed(state, key, threads, macs, peak_gmacs, [&] { g.run(tp, config); });
+  state.SetLabel(g.ops()[0]->kernel(config) + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
+}
+
 // ---- element-wise ops around the GEMMs (single thread, bytes/s of input + output) ---------------
 
 void bm_quant_rows(benchmark::State& state, const kernels::QuantS8Kernels* k, int rows, int cols) {
@@ -508,6 +531,18 @@ int main(int argc, char** argv) {
     const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);
     reg(benchmark::RegisterBenchmark((ew + "/layernorm/302x512").c_str(), bench::bm_layernorm, e, 302, 512));
     reg(benchmark::RegisterBenchmark((ew + "/softmax/2416x302").c_str(), bench::bm_softmax, e, 8 * 302, 302));
+  }
+  // The int8 attention: at each level with a gemm_s8 variant of its own (not the reference).
+  for (kernels::Isa isa : isas) {
+    if (kernels::isa_tables(isa).gemm_s8 == nullptr || isa == kernels::Isa::kRef) continue;
+    const double pk = peak.count(isa) ? peak[isa] : 0.0;
+    for (int tokens : {302, 242}) {
+      const std::string key = std::string("attention_s8/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
+      for (int t = 1; t <= max_threads; ++t) {
+        const std::string name = key + "/threads:" + std::to_string(t);
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention_s8, isa, tokens, pk, t, key));
+      }
+    }
   }
   for (kernels::Isa isa : isas) {
     const kernels::QuantS8Kernels* k = kernels::isa_tables(isa).quant;

@@ -179,8 +179,11 @@ ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, 
 ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v) {
   const int D = config_.dim_model;
   const ValueId y = graph_.add_value(out_name, {nq, D});
-  auto op = std::make_unique<AttentionOp>(nq, nk, D, config_.n_heads, q, k, v, y);
-  add(std::move(op), out_name);
+  if (config_.precision == Precision::kInt8 && quant_.int8_attention) {
+    add(std::make_unique<AttentionS8Op>(kernels_.gemm_s8, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
+  } else {
+    add(std::make_unique<AttentionOp>(nq, nk, D, config_.n_heads, q, k, v, y), out_name);
+  }
   return y;
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <limits>
 
@@ -278,4 +279,122 @@ void LinearS8Op::run(const RunContext& ctx) const {
   });
 }
 
+// ---------------------------------------------------------------------------------- AttentionS8
+
+namespace {
+constexpr int kAttentionS8BlockRows = 120;  // query rows per block: a multiple of every gemm_s8 MR
+}
+
+AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q,
+                             MatrixRef k, MatrixRef v, ValueId output)
+    : nq_(nq), nk_(nk), dim_(dim), heads_(heads), q_(q), k_(k), v_(v) {
+  for (const MatrixRef* r : {&q_, &k_, &v_}) {
+    if (r->value != kNoValue) inputs.push_back(r->value);
+  }
+  outputs = {output};
+  const size_t hd = static_cast<size_t>(dim / heads), n_keys = static_cast<size_t>(nk);
+  const size_t rows = kAttentionS8BlockRows;
+  size_t end = 0;
+  // Each buffer 64-byte aligned (packed weights must be); int8 matrices the GEMM reads as A get the
+  // kernels' over-read slack.
+  const auto region = [&](size_t bytes) {
+    const size_t at = end;
+    end = (at + bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
+    return at;
+  };
+  layout_.packed_k = region(kernels.packed_size(nk, static_cast<int>(hd)));
+  layout_.packed_v = region(kernels.packed_size(static_cast<int>(hd), nk));
+  layout_.k_scale = region(n_keys * sizeof(float));
+  layout_.v_scale = region(hd * sizeof(float));
+  layout_.k_s8 = region(n_keys * hd);
+  layout_.v_t = region(hd * n_keys * sizeof(float));
+  layout_.v_t_s8 = region(hd * n_keys);
+  layout_.q_s8 = region(rows * hd + kernels::kGemmS8ReadSlack);
+  layout_.q_scale = region(rows * sizeof(float));
+  layout_.q_zero_point = region(rows * sizeof(int32_t));
+  layout_.scores = region(rows * n_keys * sizeof(float));
+  layout_.p_s8 = region(rows * n_keys + kernels::kGemmS8ReadSlack);
+  layout_.p_scale = region(rows * sizeof(float));
+  layout_.bytes = end + kernels::kGemmS8PackedAlign;  // room to align the scratch's start
+}
+
+size_t AttentionS8Op::scratch_per_thread() const { return ceil_div(layout_.bytes, sizeof(float)); }
+
+void AttentionS8Op::run(const RunContext& ctx) const {
+  const float* q = q_.resolve(ctx);
+  const float* k = k_.resolve(ctx);
+  const float* v = v_.resolve(ctx);
+  float* out = ctx.data(outputs[0]);
+  const kernels::KernelConfig& kc = ctx.kernels();
+  const int hd = dim_ / heads_;
+  const float inv_sqrt_hd = 1.0f / std::sqrt(static_cast<float>(hd));
+  const size_t n_keys = static_cast<size_t>(nk_), head_dim = static_cast<size_t>(hd);
+  ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t head, int thread) {
+    const size_t misalignment = reinterpret_cast<uintptr_t>(ctx.scratch_s8(thread)) % kernels::kGemmS8PackedAlign;
+    uint8_t* base = reinterpret_cast<uint8_t*>(ctx.scratch_s8(thread)) +
+                    (misalignment ? kernels::kGemmS8PackedAlign - misalignment : 0);
+    const auto at = [&](size_t offset) { return static_cast<void*>(base + offset); };
+    int8_t* k_s8 = static_cast<int8_t*>(at(layout_.k_s8));
+    float* k_scale = static_cast<float*>(at(layout_.k_scale));
+    float* v_t = static_cast<float*>(at(layout_.v_t));
+    int8_t* v_t_s8 = static_cast<int8_t*>(at(layout_.v_t_s8));
+    float* v_scale = static_cast<float*>(at(layout_.v_scale));
+    const size_t column = head * head_dim;
+
+    // Keys: one int8 row per token, the 1 / sqrt(d) of the scores folded into their scales.
+    kernels::quantize_rows_symmetric_f32_s8(kc.quant, nk_, hd, k + column, k_.ld, k_s8, head_dim, k_scale);
+    for (size_t j = 0; j < n_keys; ++j) k_scale[j] *= inv_sqrt_hd;
+    kc.gemm_s8.pack(nk_, hd, k_s8, head_dim, nullptr, 0, at(layout_.packed_k));
+    // Values, transposed: one int8 row per channel (the output columns of p v).
+    for (size_t j = 0; j < n_keys; ++j) {
+      const float* vj = v + j * v_.ld + column;
+      for (size_t c = 0; c < head_dim; ++c) v_t[c * n_keys + j] = vj[c];
+    }
+    kernels::quantize_rows_symmetric_f32_s8(kc.quant, hd, nk_, v_t, n_keys, v_t_s8, n_keys, v_scale);
+    // The probabilities' zero point is the same for every row: fold it into the packed values.
+    kc.gemm_s8.pack(hd, nk_, v_t_s8, n_keys, nullptr, kernels::kSoftmaxS8ZeroPoint, at(layout_.packed_v));
+
+    int8_t* q_s8 = static_cast<int8_t*>(at(layout_.q_s8));
+    float* q_scale = static_cast<float*>(at(layout_.q_scale));
+    int32_t* q_zero_point = static_cast<int32_t*>(at(layout_.q_zero_point));
+    float* scores = static_cast<float*>(at(layout_.scores));
+    int8_t* p_s8 = static_cast<int8_t*>(at(layout_.p_s8));
+    float* p_scale = static_cast<float*>(at(layout_.p_scale));
+    for (int r0 = 0; r0 < nq_; r0 += kAttentionS8BlockRows) {
+      const int rows = std::min(kAttentionS8BlockRows, nq_ - r0);
+      kernels::quantize_rows_dynamic_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
+                                            head_dim, q_scale, q_zero_point);
+      kernels::GemmS8Args qk;
+      qk.m = rows;
+      qk.n = nk_;
+      qk.k = hd;
+      qk.a = q_s8;
+      qk.lda = head_dim;
+      qk.packed_w = at(layout_.packed_k);
+      qk.a_row_zero_point = q_zero_point;
+      kernels::GemmS8OutF32 s;
+      s.c = scores;
+      s.ldc = n_keys;
+      s.w_scale = k_scale;
+      s.a_row_scale = q_scale;
+      kc.gemm_s8.f32out(qk, s, 0, rows, 0, nk_);
+      kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);
+      kernels::GemmS8Args pv;
+      pv.m = rows;
+      pv.n = hd;
+      pv.k = nk_;
+      pv.a = p_s8;
+      pv.lda = n_keys;
+      pv.packed_w = at(layout_.packed_v);
+      kernels::GemmS8OutF32 o;
+      o.c = out + static_cast<size_t>(r0) * static_cast<size_t>(dim_) + column;
+      o.ldc = static_cast<size_t>(dim_);
+      o.w_scale = v_scale;
+      o.a_row_scale = p_scale;
+      kc.gemm_s8.f32out(pv, o, 0, rows, 0, hd);
+    }
+  });
+}
+
 }  // namespace act::graph
+

@@ -128,4 +128,33 @@ class LinearS8Op : public Op {
   PackedWeights packed_;
 };
 
+/// softmax(q k^T / sqrt(d)) v per head with both matmuls on the int8 GEMM; AttentionOp is its float
+/// twin (same operands, same output layout). One task per head: its keys (per token) and values (per
+/// channel) are quantized symmetric, the GEMM's weight side, and packed into the thread's scratch;
+/// then, block of query rows by block, the queries are quantized per row (asymmetric) and the
+/// softmax writes its probabilities straight into int8 (softmax_rows_s8: all 256 codes cover
+/// [0, max p] of each row).
+class AttentionS8Op : public Op {
+ public:
+  AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,
+                MatrixRef v, ValueId output);
+  const char* type() const override { return "attention_s8"; }
+  std::string kernel(const kernels::KernelConfig& k) const override {
+    return std::string(k.quant.quantize_name) + " + " + k.gemm_s8.f32out_name + " + " + k.elementwise.softmax_s8_name;
+  }
+  void run(const RunContext& ctx) const override;
+  size_t scratch_per_thread() const override;
+  double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
+
+ private:
+  /// Where each buffer of one task lives in its thread's scratch (byte offsets, 64-byte aligned).
+  struct ScratchLayout {
+    size_t packed_k, packed_v, k_scale, v_scale, k_s8, v_t, v_t_s8, q_s8, q_scale, q_zero_point, scores, p_s8, p_scale,
+        bytes;
+  };
+  int nq_, nk_, dim_, heads_;
+  MatrixRef q_, k_, v_;
+  ScratchLayout layout_;
+};
+
 }  // namespace act::graph

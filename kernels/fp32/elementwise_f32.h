@@ -9,19 +9,26 @@
 //                     reference's double ones; both round x - mean in float, whose error grows
 //                     with |mean| / std);
 //   softmax_rows      within 2e-6 relative of the reference or 1e-9 absolute (xsimd exp);
+//   softmax_rows_s8   row scales within 2e-6 relative, codes within 1 of the reference's (an exp
+//                     a few ulp apart can round to the neighbouring code);
 //   gelu              within 4 ulp of the reference or 1e-7 absolute (xsimd erf).
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 
 #include "kernels/common/isa.h"
 
 namespace act::kernels {
 
+/// The zero point of softmax_rows_s8's codes.
+inline constexpr int32_t kSoftmaxS8ZeroPoint = -128;
+
 struct ElementwiseF32Kernels {
   Isa isa;
   const char* layernorm_name;  ///< layernorm_rows_f32_<isa>, and so on
   const char* softmax_name;
+  const char* softmax_s8_name;
   const char* relu_name;
   const char* gelu_name;
   const char* add_name;
@@ -30,6 +37,12 @@ struct ElementwiseF32Kernels {
                          float eps, float* y, size_t ldy);
   /// In-place numerically stable softmax of each row.
   void (*softmax_rows)(int rows, int cols, float* x, size_t ldx);
+  /// Softmax of each row straight into int8 for the GEMM (attention's probabilities), no float
+  /// probabilities written: with e_c = exp(x_c - max x) in (0, 1] (the largest is exactly 1),
+  /// y_c = round(255 e_c) - 128, so softmax(x)_c ~= row_scale * (y_c - kSoftmaxS8ZeroPoint) with
+  /// row_scale = 1 / (255 sum_c e_c): all 256 codes cover [0, max p], the zero point is the same
+  /// for every row.
+  void (*softmax_rows_s8)(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy, float* row_scale);
   void (*relu)(size_t n, float* x);
   /// Exact (erf) GELU, as torch.nn.functional.gelu with approximate="none".
   void (*gelu)(size_t n, float* x);

@@ -17,8 +17,8 @@ using Arch = xsimd::fma3<xsimd::avx2>;
 const ElementwiseF32Kernels* elementwise_f32_table_avx2() {
   static constexpr ElementwiseF32Kernels kTable = {
       Isa::kAvx2,
-      "layernorm_rows_f32_avx2", "softmax_rows_f32_avx2", "relu_f32_avx2", "gelu_f32_avx2", "add_f32_avx2",
-      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
+      "layernorm_rows_f32_avx2", "softmax_rows_f32_avx2", "softmax_rows_s8_avx2", "relu_f32_avx2", "gelu_f32_avx2", "add_f32_avx2",
+      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, softmax_rows_s8_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
   };
   return &kTable;
 }

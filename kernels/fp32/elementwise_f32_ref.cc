@@ -44,6 +44,22 @@ void softmax_rows_f32_ref(int rows, int cols, float* x, size_t ldx) {
   }
 }
 
+void softmax_rows_s8_ref(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy, float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    int8_t* yr = y + static_cast<size_t>(r) * ldy;
+    float max_v = xr[0];
+    for (int c = 1; c < cols; ++c) max_v = std::max(max_v, xr[c]);
+    float sum = 0.0f;
+    for (int c = 0; c < cols; ++c) {
+      const float e = std::exp(xr[c] - max_v);
+      sum += e;
+      yr[c] = static_cast<int8_t>(std::nearbyint(255.0f * e) + static_cast<float>(kSoftmaxS8ZeroPoint));
+    }
+    row_scale[r] = 1.0f / (255.0f * sum);
+  }
+}
+
 void relu_f32_ref(size_t n, float* x) {
   for (size_t i = 0; i < n; ++i) x[i] = std::max(x[i], 0.0f);
 }
@@ -62,8 +78,8 @@ void add_f32_ref(size_t n, const float* a, const float* b, float* y) {
 const ElementwiseF32Kernels* elementwise_f32_table_ref() {
   static constexpr ElementwiseF32Kernels kTable = {
       Isa::kRef,
-      "layernorm_rows_f32_ref", "softmax_rows_f32_ref", "relu_f32_ref", "gelu_f32_ref", "add_f32_ref",
-      layernorm_rows_f32_ref, softmax_rows_f32_ref, relu_f32_ref, gelu_f32_ref, add_f32_ref,
+      "layernorm_rows_f32_ref", "softmax_rows_f32_ref", "softmax_rows_s8_ref", "relu_f32_ref", "gelu_f32_ref", "add_f32_ref",
+      layernorm_rows_f32_ref, softmax_rows_f32_ref, softmax_rows_s8_ref, relu_f32_ref, gelu_f32_ref, add_f32_ref,
   };
   return &kTable;
 }

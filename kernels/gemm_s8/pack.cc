@@ -1,6 +1,7 @@
 // The weight packers of every gemm_s8 variant. One generic routine; each named packer fixes the
 // layout (panel width nr, k-group kr, column order, weight shift). Plain C++ on purpose: it
 // runs once at load, on every architecture.
+#include <algorithm>
 #include <cstring>
 
 #include "kernels/common/check.h"
@@ -71,12 +72,19 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
       const int8_t* wrow = w + static_cast<size_t>(col) * ldw;
       const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
       int64_t sum = 0;
-      for (int kk = 0; kk < k; ++kk) {
-        ACT_DCHECK(wrow[kk] != -128, "gemm_s8 weights must lie in [-127, 127]");
-        sum += wrow[kk];
-        // Padding (k >= K, columns past N) stays 0 in every layout, so over-read A bytes meet 0.
-        const int8_t v = d.w_plus128 ? static_cast<int8_t>(wrow[kk] ^ 0x80) : wrow[kk];
-        data[(static_cast<size_t>(kk / d.kr) * d.nr + slot) * d.kr + kk % d.kr] = v;
+      // Column `slot` of k-group g sits at data[(g * nr + slot) * kr]: walk the groups, no division
+      // per byte (attention packs its keys and values at every run).
+      int8_t* group = data + static_cast<size_t>(slot) * d.kr;
+      const size_t group_stride = static_cast<size_t>(d.nr) * d.kr;
+      for (int k0 = 0; k0 < k; k0 += d.kr, group += group_stride) {
+        const int len = std::min(d.kr, k - k0);
+        for (int r = 0; r < len; ++r) {
+          const int8_t wv = wrow[k0 + r];
+          ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
+          sum += wv;
+          // Padding (k >= K, columns past N) stays 0 in every layout, so over-read A bytes meet 0.
+          group[r] = d.w_plus128 ? static_cast<int8_t>(wv ^ 0x80) : wv;
+        }
       }
       // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
       const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sum;

@@ -50,4 +50,10 @@ struct QuantS8Kernels {
 void quantize_rows_dynamic_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
                                   size_t ldy, float* row_scale, int32_t* row_zero_point);
 
+/// Symmetric per-row quantization, the gemm_s8 weight side (values in [-127, 127], zero point 0),
+/// for operands made at run time (attention's keys and values): row_scale[r] = max |row| / 127
+/// (at least FLT_MIN, so its inverse is finite; non-finite rows quantize as zeros).
+void quantize_rows_symmetric_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
+                                    size_t ldy, float* row_scale);
+
 }  // namespace act::kernels

@@ -68,4 +68,19 @@ void quantize_rows_dynamic_f32_s8(const QuantS8Kernels& k, int rows, int cols, c
   }
 }
 
+void quantize_rows_symmetric_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
+                                    size_t ldy, float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi;
+    k.minmax(static_cast<size_t>(cols), xr, &lo, &hi);
+    const float absmax = std::isfinite(lo) && std::isfinite(hi) ? std::max(-lo, hi) : 0.0f;
+    const float scale = std::max(absmax / 127.0f, std::numeric_limits<float>::min());
+    row_scale[r] = scale;
+    // 1 / scale may round so that max |row| lands a hair past 127: the clamp keeps it at 127, and
+    // -max |row| cannot reach -128.
+    k.quantize(static_cast<size_t>(cols), xr, absmax > 0.0f ? 1.0f / scale : 0.0f, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
 }  // namespace act::kernels

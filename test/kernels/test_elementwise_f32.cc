@@ -114,6 +114,37 @@ TEST_P(ElementwiseF32Variant, SoftmaxWithinTolerance) {
   }
 }
 
+// The fused softmax + int8: every variant within the stated bounds of the reference, and the
+// reference's dequantized probabilities within half a code (plus float rounding) of the softmax.
+TEST_P(ElementwiseF32Variant, SoftmaxS8WithinToleranceAndHalfACodeOfTheSoftmax) {
+  std::mt19937 rng(12);
+  for (int cols : col_sizes()) {
+    const int rows = 3;
+    const size_t ld = static_cast<size_t>(cols) + 5;
+    const std::vector<float> x = random_floats(rows * ld, rng, -6.0f, 6.0f);
+    std::vector<int8_t> y_ref(rows * ld), y(rows * ld);
+    float scale_ref[rows], scale[rows];
+    ref().softmax_rows_s8(rows, cols, x.data(), ld, y_ref.data(), ld, scale_ref);
+    v().softmax_rows_s8(rows, cols, x.data(), ld, y.data(), ld, scale);
+    for (int r = 0; r < rows; ++r) {
+      EXPECT_NEAR(scale[r], scale_ref[r], 2e-6 * scale_ref[r]) << v().softmax_s8_name << " cols=" << cols;
+      std::vector<float> p(x.begin() + static_cast<std::ptrdiff_t>(r * ld), x.begin() + static_cast<std::ptrdiff_t>(r * ld + cols));
+      ref().softmax_rows(1, cols, p.data(), ld);
+      float p_max = 0.0f;
+      for (float pc : p) p_max = std::max(p_max, pc);
+      for (int c = 0; c < cols; ++c) {
+        const size_t i = r * ld + static_cast<size_t>(c);
+        EXPECT_LE(std::abs(int{y[i]} - int{y_ref[i]}), 1) << v().softmax_s8_name << " cols=" << cols << " at " << c;
+        const float dequantized = scale_ref[r] * static_cast<float>(int{y_ref[i]} - kSoftmaxS8ZeroPoint);
+        ASSERT_NEAR(dequantized, p[static_cast<size_t>(c)], 0.5f * scale_ref[r] + 1e-6f * p_max) << "cols=" << cols << " at " << c;
+      }
+      EXPECT_EQ(*std::max_element(y_ref.begin() + static_cast<std::ptrdiff_t>(r * ld),
+                                  y_ref.begin() + static_cast<std::ptrdiff_t>(r * ld + cols)), 127)
+          << "the largest probability takes the top code";
+    }
+  }
+}
+
 TEST_P(ElementwiseF32Variant, GeluWithinTolerance) {
   std::mt19937 rng(44);
   for (int n : col_sizes()) {
@@ -152,6 +183,7 @@ TEST(ElementwiseF32Variants, RequiredLevelsRunSimdVariants) {
     EXPECT_NE(v.isa, Isa::kRef) << "no SIMD element-wise variant at " << isa_name(*isa);
     EXPECT_NE(v.layernorm_rows, ref.layernorm_rows);
     EXPECT_NE(v.softmax_rows, ref.softmax_rows);
+    EXPECT_NE(v.softmax_rows_s8, ref.softmax_rows_s8);
     EXPECT_NE(v.gelu, ref.gelu);
     if (std::getenv("ACT_ISA") == nullptr) {
       EXPECT_NE(std::find(tested.begin(), tested.end(), v.isa), tested.end()) << isa_name(v.isa) << " was not tested";

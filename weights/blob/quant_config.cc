@@ -31,6 +31,7 @@ nlohmann::json QuantConfig::to_json() const {
   j["activations"] = nlohmann::json::object();
   for (const auto& [name, q] : activations) j["activations"][name] = {q.scale, q.zero_point};
   j["float_layers"] = float_layers;
+  j["attention"] = int8_attention ? "int8" : "fp32";
   return j;
 }
 
@@ -57,6 +58,11 @@ QuantConfig QuantConfig::from_json(const nlohmann::json& j) {
       c.activations[name] = q;
     }
     c.float_layers = j.at("float_layers").get<std::vector<std::string>>();
+    const std::string attention = j.value("attention", "fp32");
+    if (attention != "int8" && attention != "fp32") {
+      fail(ErrorCode::kDataLoss, "unknown attention precision \"" + attention + "\" (int8 or fp32)");
+    }
+    c.int8_attention = attention == "int8";
   } catch (const nlohmann::json::exception& e) {
     fail(ErrorCode::kDataLoss, std::string("malformed quantization section: ") + e.what());
   }

@@ -4,7 +4,8 @@
 //   {"mode": "dynamic" | "static" | "mixed",
 //    "calibration": "minmax" | "percentile" | "mse" | "",       (static and mixed)
 //    "activations": {"<value name>": [scale, zero_point], ...},  (static and mixed)
-//    "float_layers": ["<weight name>", ...]}                     (layers kept in FP32)
+//    "float_layers": ["<weight name>", ...],                     (layers kept in FP32)
+//    "attention": "int8" | "fp32"}                                (QK^T and PV; absent: fp32)
 //
 // Which layers are int8 is also visible in the tensors themselves (dtype I8 with per-channel
 // scales); float_layers records the converter's choice for reports.
@@ -32,6 +33,9 @@ struct QuantConfig {
   std::string calibration;
   std::map<std::string, ActivationQuant> activations;
   std::vector<std::string> float_layers;
+  /// Attention's two matmuls (Q K^T, P V) on the int8 GEMM; the converter sets it when the held-out
+  /// error allows (blobs written before it existed keep float attention).
+  bool int8_attention = false;
 
   /// True when activations between int8 backbone layers stay int8 (static and mixed).
   bool static_activations() const { return mode != QuantMode::kDynamic; }

@@ -138,6 +138,10 @@ struct CalibrationSet {
   std::string preprocessing;       ///< how the images were made, for the report
 };
 
+enum class AttentionPrecision { kAuto, kInt8, kFp32 };
+/// kAuto's budget: int8 attention may raise the held-out error by this fraction at most.
+inline constexpr double kInt8AttentionErrorBudget = 0.25;
+
 struct Int8Options {
   Int8Mode mode = Int8Mode::kStatic;
   CalibrationMethod method = CalibrationMethod::kMse;
@@ -150,6 +154,10 @@ struct Int8Options {
   int threads = 0;                   ///< for calibration and evaluation; 0 = one per online core
   uint64_t seed = 1;                 ///< for sampled states and synthetic frames
   bool layer_report = true;          ///< per-layer SQNR (one more pass over up to 4 held-out frames)
+  /// Attention's matmuls (Q K^T, P V): kAuto puts them on the int8 GEMM when that raises the
+  /// held-out MSE and max |err| by at most kInt8AttentionErrorBudget (and, mixed, still meets the
+  /// target); kInt8 and kFp32 force the choice.
+  AttentionPrecision attention = AttentionPrecision::kAuto;
   /// Called with each progress line ("calibrating (mse): pass 1/2, frame 3/64", ...); none if empty.
   std::function<void(const std::string&)> progress;
 };
@@ -186,6 +194,9 @@ struct Int8Report {
   std::vector<std::string> notes;
   uint64_t fp32_bytes = 0, int8_bytes = 0;
   std::vector<std::string> float_layers;  ///< weights kept in float (mixed)
+  bool int8_attention = false;            ///< attention's matmuls on the int8 GEMM
+  /// Held-out error with float and with int8 attention (the latter only when it was tried).
+  std::optional<ActionError> fp32_attention_error, int8_attention_error;
   ActionError action_error;
   int action_keys = 0;                    ///< action dimensions
   std::vector<LayerSensitivity> sensitivity;  ///< mixed, when the search ran: most sensitive first

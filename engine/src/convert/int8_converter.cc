@@ -89,6 +89,7 @@ class Converter {
     auto [blob, err] = write_and_evaluate(quant);
     std::vector<LayerSensitivity> sensitivity;
     if (opt_.mode == Int8Mode::kMixed) choose_float_layers(quant, blob, err, sensitivity);
+    choose_attention(quant, blob, err);
 
     Int8Report r = report(quant, *blob, err, std::move(sensitivity), fp32.bytes());
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -283,6 +284,28 @@ class Converter {
     err = best_err;
   }
 
+  // Attention's matmuls on the int8 GEMM (Int8Options::attention). Tried last, on the model as
+  // chosen so far, so its cost is measured against everything else's.
+  void choose_attention(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err) {
+    if (opt_.attention == AttentionPrecision::kFp32) return;
+    fp32_attention_error_ = err;
+    QuantConfig with = quant;
+    with.int8_attention = true;
+    auto [candidate, e] = write_and_evaluate(with);
+    int8_attention_error_ = e;
+    const double allowed = 1.0 + kInt8AttentionErrorBudget;
+    const bool within_budget = e.mse <= allowed * err.mse && e.max_abs <= allowed * err.max_abs &&
+                               (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
+    progress(std::string("attention in int8: held-out MSE ") + fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (float: " +
+             fmt(err.mse) + ", " + fmt(err.max_abs) + ") -> " +
+             (opt_.attention == AttentionPrecision::kInt8 || within_budget ? "int8" : "float"));
+    if (opt_.attention == AttentionPrecision::kInt8 || within_budget) {
+      quant = std::move(with);
+      blob = std::move(candidate);
+      err = e;
+    }
+  }
+
   Int8Report report(const QuantConfig& quant, const ScratchBlob& blob, const ActionError& err,
                     std::vector<LayerSensitivity> sensitivity, uint64_t fp32_bytes) {
     Int8Report r;
@@ -295,6 +318,9 @@ class Converter {
     r.fp32_bytes = fp32_bytes;
     r.int8_bytes = blob.bytes();
     r.float_layers = quant.float_layers;
+    r.int8_attention = quant.int8_attention;
+    r.fp32_attention_error = fp32_attention_error_;
+    r.int8_attention_error = int8_attention_error_;
     r.action_error = err;
     r.action_keys = fp32_->config().action_dim;
     r.sensitivity = std::move(sensitivity);
@@ -353,6 +379,7 @@ class Converter {
   CalibrationSet frames_;
   std::vector<size_t> calib_, eval_;
   Reference ref_;
+  std::optional<ActionError> fp32_attention_error_, int8_attention_error_;
 };
 
 }  // namespace

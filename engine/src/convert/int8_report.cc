@@ -40,6 +40,9 @@ std::string Int8Report::to_json() const {
   r["fp32_bytes"] = fp32_bytes;
   r["int8_bytes"] = int8_bytes;
   r["float_layers"] = float_layers;
+  r["attention"] = {{"precision", int8_attention ? "int8" : "fp32"}};
+  if (fp32_attention_error) r["attention"]["fp32_action_error"] = action_error_json(*fp32_attention_error);
+  if (int8_attention_error) r["attention"]["int8_action_error"] = action_error_json(*int8_attention_error);
   r["action_error"] = action_error_json(action_error);
   r["action_keys"] = action_keys;
   if (!sensitivity.empty()) {
@@ -69,6 +72,13 @@ std::string Int8Report::to_text() const {
     s << "  [" << a << "] " << fmt(e.per_dim_mse[a]) << " / " << fmt(e.per_dim_max_abs[a]) << " | "
       << fmt(e.per_dim_mse_physical[a]) << " / " << fmt(e.per_dim_max_abs_physical[a]) << "\n";
   }
+  s << "attention      " << (int8_attention ? "int8" : "fp32");
+  if (fp32_attention_error && int8_attention_error) {
+    s << " (held-out MSE " << fmt(int8_attention_error->mse) << ", max |err| " << fmt(int8_attention_error->max_abs)
+      << " with int8 attention; " << fmt(fp32_attention_error->mse) << ", " << fmt(fp32_attention_error->max_abs)
+      << " with float)";
+  }
+  s << "\n";
   s << "layers in float " << (float_layers.empty() ? "none (besides the action head and state projections, always float)" : "")
     << "\n";
   for (const auto& l : float_layers) s << "  " << l << "\n";

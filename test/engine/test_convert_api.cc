@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 #include <nlohmann/json.hpp>
 
@@ -166,6 +167,54 @@ TEST(ConvertApi, MissedMaxMseWritesNothing) {
   EXPECT_EQ(r.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(r.status().message().find("held-out error"), std::string::npos) << "the message holds the report";
   EXPECT_TRUE(files_in(dir).empty()) << testing::PrintToString(files_in(dir));
+}
+
+// Attention's precision: forced either way, the blob runs what was chosen (its op profile names the
+// ops); auto keeps int8 exactly when both errors stay within the budget, and reports both.
+TEST(ConvertApi, AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  auto frames = model->synthetic_calibration_set(6, 3);
+  ASSERT_TRUE(frames.ok());
+  const std::string dir = test::scratch_dir();
+  const auto attention_kinds = [](const std::string& blob) {
+    std::set<std::string> kinds;
+    auto e = Engine::open(blob, {.threads = 1, .profile = true});
+    EXPECT_TRUE(e.ok()) << e.status().to_string();
+    if (!e.ok()) return kinds;
+    for (const OpProfile& op : (*e)->op_profile()) {
+      if (op.kind.rfind("attention", 0) == 0) kinds.insert(op.kind);
+    }
+    return kinds;
+  };
+  for (AttentionPrecision p : {AttentionPrecision::kInt8, AttentionPrecision::kFp32, AttentionPrecision::kAuto}) {
+    Int8Options o = quick_options();
+    o.attention = p;
+    const std::string blob = dir + "/a" + std::to_string(static_cast<int>(p)) + ".actb";
+    const auto r = model->write_int8(blob, *frames, o);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    const nlohmann::json j = nlohmann::json::parse(r->to_json());
+    EXPECT_EQ(j["attention"]["precision"], r->int8_attention ? "int8" : "fp32");
+    const std::set<std::string> kinds = attention_kinds(blob);
+    EXPECT_EQ(kinds, std::set<std::string>{r->int8_attention ? "attention_s8" : "attention_f32"});
+    if (p == AttentionPrecision::kFp32) {
+      EXPECT_FALSE(r->int8_attention);
+      EXPECT_FALSE(r->int8_attention_error) << "not tried";
+      continue;
+    }
+    ASSERT_TRUE(r->fp32_attention_error && r->int8_attention_error);
+    const ActionError& with = *r->int8_attention_error;
+    const ActionError& without = *r->fp32_attention_error;
+    EXPECT_NE(with.mse, without.mse) << "int8 attention changes the actions";
+    if (p == AttentionPrecision::kInt8) {
+      EXPECT_TRUE(r->int8_attention);
+    } else {
+      const double allowed = 1.0 + kInt8AttentionErrorBudget;
+      EXPECT_EQ(r->int8_attention, with.mse <= allowed * without.mse && with.max_abs <= allowed * without.max_abs);
+    }
+    EXPECT_EQ(r->action_error.mse, r->int8_attention ? with.mse : without.mse) << "the report is the blob's";
+  }
 }
 
 TEST(ConvertApi, ReportStructMatchesItsJson) {

@@ -378,6 +378,22 @@ nlohmann::json small_int8_config() {
   return j;
 }
 
+// The attention precision: written and read back, absent in older blobs (float), anything else
+// refused by name.
+TEST(QuantConfigJson, AttentionPrecisionRoundTripsAndDefaultsToFloat) {
+  QuantConfig q;
+  q.int8_attention = true;
+  EXPECT_TRUE(QuantConfig::from_json(q.to_json()).int8_attention);
+  q.int8_attention = false;
+  EXPECT_FALSE(QuantConfig::from_json(q.to_json()).int8_attention);
+  nlohmann::json older = QuantConfig{}.to_json();
+  older.erase("attention");
+  EXPECT_FALSE(QuantConfig::from_json(older).int8_attention);
+  nlohmann::json bad = QuantConfig{}.to_json();
+  bad["attention"] = "int4";
+  EXPECT_TRUE(throws_error([&] { QuantConfig::from_json(bad); }, ErrorCode::kDataLoss, {"attention", "\"int4\""}));
+}
+
 TEST(ActbSemantics, ConfigAndTensorsMustAgree) {
   const std::string dir = test::scratch_dir();
   const std::vector<int8_t> q = {1, -2, 3, -4, 5, -6};

@@ -12,6 +12,11 @@ namespace act::graph {
 
 enum class Epilogue { kNone, kRelu, kGelu };
 
+/// The epsilon of every LayerNorm of ACT (torch.nn.LayerNorm's default).
+inline constexpr float kLayerNormEps = 1e-5f;
+
+// Each op's parameters are readable (const accessors) so that exporters can translate the graph.
+
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
 /// Weights [out_c, kh, kw, in_c]. Tiles of output pixels; im2col of one tile into per-thread scratch
 /// (a 1x1 stride-1 conv reads its input directly).
@@ -23,6 +28,11 @@ class Conv2dOp : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
+  const kernels::Conv2dShape& shape() const { return s_; }
+  const float* weight() const { return weight_; }  ///< [out_c, kh, kw, in_c]
+  const float* bias() const { return bias_; }
+  bool relu() const { return relu_; }
+  ValueId residual() const { return residual_; }
 
  private:
   bool direct() const;
@@ -40,6 +50,9 @@ class MaxPoolOp : public Op {
   MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, bool s8, ValueId input, ValueId output);
   const char* type() const override { return s8_ ? "maxpool_s8" : "maxpool_f32"; }
   void run(const RunContext& ctx) const override;
+  int kernel() const { return kernel_; }
+  int stride() const { return stride_; }
+  int pad() const { return pad_; }
 
  private:
   int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
@@ -55,6 +68,14 @@ class LinearOp : public Op {
   const char* type() const override { return "linear_f32"; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
+  int rows() const { return rows_; }
+  int in() const { return in_; }
+  int out() const { return out_; }
+  const MatrixRef& x() const { return x_; }
+  const MatrixRef& bias() const { return bias_; }
+  const MatrixRef& residual() const { return residual_; }
+  const float* weight() const { return weight_; }  ///< [out, in]
+  Epilogue epilogue() const { return epilogue_; }
 
  private:
   int rows_, in_, out_;
@@ -79,6 +100,8 @@ class LayerNormOp : public Op {
   LayerNormOp(int rows, int cols, const float* gamma, const float* beta, ValueId input, ValueId output);
   const char* type() const override { return "layernorm_f32"; }
   void run(const RunContext& ctx) const override;
+  const float* gamma() const { return gamma_; }
+  const float* beta() const { return beta_; }
 
  private:
   int rows_, cols_;
@@ -95,6 +118,12 @@ class AttentionOp : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
+  int nq() const { return nq_; }
+  int nk() const { return nk_; }
+  int heads() const { return heads_; }
+  const MatrixRef& q() const { return q_; }
+  const MatrixRef& k() const { return k_; }
+  const MatrixRef& v() const { return v_; }
 
  private:
   int nq_, nk_, dim_, heads_;
@@ -111,6 +140,7 @@ class ConcatRowsOp : public Op {
   ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output);
   const char* type() const override { return "concat_rows_f32"; }
   void run(const RunContext& ctx) const override;
+  const std::vector<Part>& parts() const { return parts_; }
 
  private:
   int cols_;

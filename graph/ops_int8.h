@@ -46,6 +46,8 @@ class QuantizeOp : public Op {
   const char* type() const override { return "quantize_f32_s8"; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override { return 16; }
+  bool dynamic() const { return dynamic_; }
+  const kernels::QuantS8& quant() const { return q_; }  ///< static parameters
 
  private:
   size_t elements_;
@@ -59,6 +61,7 @@ class DequantizeOp : public Op {
   DequantizeOp(size_t elements, kernels::QuantS8 q, ValueId input, ValueId output);
   const char* type() const override { return "dequantize_s8_f32"; }
   void run(const RunContext& ctx) const override;
+  const kernels::QuantS8& quant() const { return q_; }
 
  private:
   size_t elements_;
@@ -91,6 +94,7 @@ class ConvS8Op : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
+  const ConvS8Spec& spec() const { return spec_; }
 
  private:
   ConvS8Spec spec_;
@@ -111,10 +115,20 @@ class LinearS8Op : public Op {
   const char* type() const override { return "linear_s8_dyn"; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
+  int rows() const { return rows_; }
+  int in() const { return in_; }
+  int out() const { return out_; }
+  const MatrixRef& x() const { return x_; }
+  const MatrixRef& bias() const { return bias_; }
+  const MatrixRef& residual() const { return residual_; }
+  const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
+  const float* w_scale() const { return w_scale_; }
+  Epilogue epilogue() const { return epilogue_; }
 
  private:
   int rows_, in_, out_;
   MatrixRef x_, bias_, residual_;
+  const int8_t* weight_;
   const float* w_scale_;
   Epilogue epilogue_;
   PackedWeights packed_;

@@ -53,6 +53,8 @@ class Engine::Impl {
   /// The statistics of input feature `key` (`size` values), read at open.
   InputNorm input_norm(const std::string& key, size_t size);
   void load_image(size_t camera, const ImageView& image);
+  /// Split engine: the camera's backbone output, channel-first, as the network's [h * w, D] tokens.
+  void load_features(size_t camera, const ImageView& features);
   void load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm, float* dst);
 
   ActbFile blob_;
@@ -69,6 +71,7 @@ class Engine::Impl {
   const float* unnorm_offset_ = nullptr;
   bool profile_ = false;
   bool keep_intermediates_ = false;
+  bool external_backbone_ = false;
   bool has_run_ = false;
   InferenceTimings timings_;
 };

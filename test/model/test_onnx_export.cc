@@ -6,6 +6,7 @@
 // Release stage only (scripts/run_tests.sh: the "Onnx" tests load Node and full-size models).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -169,9 +170,17 @@ TEST_P(OnnxExportTest, OnnxBackboneFeedsTheSplitEngine) {
   ASSERT_TRUE((*split)->infer(obs, got).ok());
   EXPECT_TRUE(test::all_close(std::string(GetParam().name) + " ONNX backbone + split engine vs engine", got.data(),
                               expected_.data(), got.size(), kTol));
-  // The split engine refuses a camera image, and the whole engine refuses features.
+  // The split engine refuses a camera image, features of the wrong size or not finite; the whole
+  // engine refuses features.
   EXPECT_EQ((*split)->infer(observation_, got).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(engine_->infer(obs, got).code(), StatusCode::kInvalidArgument);
+  const CameraInfo& cam0 = info.cameras[0];
+  Observation bad = obs;
+  bad.images[0] = ImageView::backbone_features(features[0].data(), cam0.feature_height, cam0.feature_width - 1);
+  const Status wrong_size = (*split)->infer(bad, got);
+  EXPECT_NE(wrong_size.message().find("feature map is"), std::string::npos) << wrong_size.to_string();
+  features[0][features[0].size() / 2] = std::nanf("");
+  EXPECT_EQ((*split)->infer(obs, got).code(), StatusCode::kInvalidArgument);
 }
 
 // The chunk in the network's normalised units (ModelInfo's action_low/high are the raw -1 and +1).

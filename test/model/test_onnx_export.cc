@@ -146,6 +146,42 @@ TEST_P(OnnxExportTest, FullModelInOnnxRuntimeMatchesTheEngine) {
                               got.size(), kTol));
 }
 
+// --onnx-normalization out: normalised observations in (the engine's own, read back from its
+// inputs), the network's normalised chunk out.
+TEST_P(OnnxExportTest, NormalizationOutsideTakesAndGivesNormalizedValues) {
+  const std::string onnx = scratch_ + "/out.onnx";
+  const auto summary = export_onnx(blob_, onnx, {.normalization = OnnxNormalization::kOutside});
+  ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+  auto engine = Engine::open(blob_, {.threads = 2, .keep_intermediates = true});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  const ModelInfo& info = (*engine)->model_info();
+  std::vector<float> expected(info.chunk_values());
+  ASSERT_TRUE((*engine)->infer_normalized(observation_, expected).ok());
+  std::vector<OrtInput> list = inputs(true);
+  for (OrtInput& in : list) {
+    const bool image = in.shape.size() == 4;
+    std::string value = in.name == "observation.state" ? "state" : "env_state";
+    for (size_t c = 0; image && c < info.cameras.size(); ++c) {
+      if (info.cameras[c].key == in.name) value = "cam" + std::to_string(c) + ".image";
+    }
+    StatusOr<std::vector<float>> normalized = (*engine)->intermediate(value);
+    ASSERT_TRUE(normalized.ok()) << normalized.status().to_string();
+    std::vector<float> data = *normalized;
+    if (image) {  // HWC -> CHW
+      const size_t pixels = data.size() / 3;
+      for (size_t i = 0; i < pixels; ++i) {
+        for (size_t ch = 0; ch < 3; ++ch) data[ch * pixels + i] = (*normalized)[i * 3 + ch];
+      }
+    }
+    write_floats(in.file, data.data(), data.size());
+  }
+  ASSERT_TRUE(run_ort(onnx, scratch_ + "/ort_out", list));
+  const std::vector<float> got = read_floats(scratch_ + "/ort_out/action.bin");
+  ASSERT_EQ(got.size(), expected.size());
+  EXPECT_TRUE(test::all_close(std::string(GetParam().name) + " normalised ONNX Runtime vs engine", got.data(),
+                              expected.data(), got.size(), kTol));
+}
+
 TEST_P(OnnxExportTest, OnnxBackboneFeedsTheSplitEngine) {
   const std::string onnx = scratch_ + "/backbone.onnx";
   const auto summary = export_onnx(blob_, onnx, {.part = OnnxPart::kBackbone});

@@ -17,6 +17,13 @@ inline constexpr float kLayerNormEps = 1e-5f;
 
 // Each op's parameters are readable (const accessors) so that exporters can translate the graph.
 
+/// What a linear op (float or int8 weights) computes: y[rows, out] = act(x W^T + bias [+ residual]).
+struct LinearParams {
+  int rows = 0, in = 0, out = 0;
+  MatrixRef x, bias, residual;
+  Epilogue epilogue = Epilogue::kNone;
+};
+
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
 /// Weights [out_c, kh, kw, in_c]. Tiles of output pixels; im2col of one tile into per-thread scratch
 /// (a 1x1 stride-1 conv reads its input directly).
@@ -68,14 +75,8 @@ class LinearOp : public Op {
   const char* type() const override { return "linear_f32"; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
-  int rows() const { return rows_; }
-  int in() const { return in_; }
-  int out() const { return out_; }
-  const MatrixRef& x() const { return x_; }
-  const MatrixRef& bias() const { return bias_; }
-  const MatrixRef& residual() const { return residual_; }
+  LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
   const float* weight() const { return weight_; }  ///< [out, in]
-  Epilogue epilogue() const { return epilogue_; }
 
  private:
   int rows_, in_, out_;

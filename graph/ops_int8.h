@@ -115,15 +115,9 @@ class LinearS8Op : public Op {
   const char* type() const override { return "linear_s8_dyn"; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
-  int rows() const { return rows_; }
-  int in() const { return in_; }
-  int out() const { return out_; }
-  const MatrixRef& x() const { return x_; }
-  const MatrixRef& bias() const { return bias_; }
-  const MatrixRef& residual() const { return residual_; }
+  LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
   const float* w_scale() const { return w_scale_; }
-  Epilogue epilogue() const { return epilogue_; }
 
  private:
   int rows_, in_, out_;

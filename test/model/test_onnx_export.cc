@@ -239,7 +239,7 @@ double mse(const std::vector<double>& x, const std::vector<double>& y) {
 // An INT8 blob (static calibration) exported as QDQ runs in ONNX Runtime, with our scales, and its
 // error against FP32 is no worse than twice the engine's INT8 error, over the reference's samples.
 TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
-  Int8Options opt;
+  Int8Options opt;  // a small calibration: the test compares errors, it does not set a target
   opt.calib_samples = 8;
   opt.holdout = 2;
   opt.threads = 2;

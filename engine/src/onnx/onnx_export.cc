@@ -6,10 +6,13 @@
 #include <onnx/onnx_pb.h>
 #include <onnx/shape_inference/implementation.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
-#include <memory>
 #include <numbers>
+#include <optional>
+#include <string>
+#include <vector>
 
 #include "actengine/onnx_export.h"
 #include "engine/src/engine_impl.h"
@@ -21,7 +24,6 @@
 #include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/model_config.h"
-#include "weights/blob/quant_config.h"
 
 namespace act {
 
@@ -36,8 +38,8 @@ constexpr int kOpset = 17;
 // A network value as the ONNX graph holds it.
 struct OnnxValue {
   std::string name;
-  bool nchw = false;                         // an image value [1, C, H, W] (engine: [H, W, C])
-  std::optional<kernels::QuantS8> int8;      // an int8 tensor with these parameters (QDQ)
+  bool nchw = false;                     // an image value [1, C, H, W] (engine: [H, W, C])
+  std::optional<kernels::QuantS8> int8;  // an int8 tensor with these parameters (QDQ)
 };
 
 class OnnxBuilder {
@@ -260,17 +262,12 @@ class OnnxBuilder {
   void set(ValueId id, OnnxValue v) { values_[id] = std::move(v); }
 
   void translate(const graph::Op& op) {
-    const std::string type = op.type();
     if (const auto* conv = dynamic_cast<const graph::Conv2dOp*>(&op)) return conv_f32(*conv);
     if (const auto* conv = dynamic_cast<const graph::ConvS8Op*>(&op)) return conv_s8(*conv);
     if (const auto* pool = dynamic_cast<const graph::MaxPoolOp*>(&op)) return maxpool(*pool);
-    if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) {
-      return linear(op, lin->rows(), lin->in(), lin->out(), lin->x(), lin->weight(), nullptr, nullptr, lin->bias(),
-                    lin->residual(), lin->epilogue());
-    }
+    if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) return linear(op, lin->params(), lin->weight(), nullptr, nullptr);
     if (const auto* lin = dynamic_cast<const graph::LinearS8Op*>(&op)) {
-      return linear(op, lin->rows(), lin->in(), lin->out(), lin->x(), nullptr, lin->weight(), lin->w_scale(), lin->bias(),
-                    lin->residual(), lin->epilogue());
+      return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale());
     }
     if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) return layernorm(*ln);
     if (const auto* att = dynamic_cast<const graph::AttentionOp*>(&op)) return attention(*att);
@@ -285,7 +282,7 @@ class OnnxBuilder {
       const OnnxValue& in = value(op.inputs[0]);
       return set(op.outputs[0], {float_of(op.inputs[0]), in.nchw, std::nullopt});
     }
-    fail(ErrorCode::kUnimplemented, "ONNX export: no translation for op \"" + op.name + "\" (" + type + ")");
+    fail(ErrorCode::kUnimplemented, "ONNX export: no translation for op \"" + op.name + "\" (" + op.type() + ")");
   }
 
   // Conv weights OHWI -> OIHW.
@@ -384,9 +381,9 @@ class OnnxBuilder {
   }
 
   // y = act(x W^T + bias [+ residual]), W float, or int8 with per-row scales (dequantized in the graph).
-  void linear(const graph::Op& op, int rows, int in, int out, const MatrixRef& x_ref, const float* w_f32,
-              const int8_t* w_s8, const float* w_scale, const MatrixRef& bias, const MatrixRef& residual,
-              graph::Epilogue epilogue) {
+  void linear(const graph::Op& op, const graph::LinearParams& p, const float* w_f32, const int8_t* w_s8, const float* w_scale) {
+    const int rows = p.rows, in = p.in, out = p.out;
+    const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
     const size_t w_size = static_cast<size_t>(out) * static_cast<size_t>(in);
     std::string weight;
     std::string y;
@@ -411,8 +408,8 @@ class OnnxBuilder {
     if (residual.value != graph::kNoValue || residual.constant != nullptr) {
       y = op1("Add", {y, matrix(residual, rows, out, "residual")}, "linear");
     }
-    if (epilogue == graph::Epilogue::kRelu) y = op1("Relu", {y}, "relu");
-    if (epilogue == graph::Epilogue::kGelu) y = gelu(y);
+    if (p.epilogue == graph::Epilogue::kRelu) y = op1("Relu", {y}, "relu");
+    if (p.epilogue == graph::Epilogue::kGelu) y = gelu(y);
     set(op.outputs[0], {y, false, std::nullopt});
   }
 

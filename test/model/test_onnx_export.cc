@@ -239,11 +239,7 @@ double mse(const std::vector<double>& x, const std::vector<double>& y) {
 // An INT8 blob (static calibration) exported as QDQ runs in ONNX Runtime, with our scales, and its
 // error against FP32 is no worse than twice the engine's INT8 error, over the reference's samples.
 TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
-  Int8Options opt;  // a small calibration: the test compares errors, it does not set a target
-  opt.calib_samples = 8;
-  opt.holdout = 2;
-  opt.threads = 2;
-  opt.layer_report = false;
+  const Int8Options opt = test::quick_int8_options();
   auto model = import_checkpoint(dir_);
   ASSERT_TRUE(model.ok()) << model.status().to_string();
   const CalibrationSet frames = load_calibration_frames({dir_ + "/reference.safetensors", test::fixture_dir("act-tiny")},

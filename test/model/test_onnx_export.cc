@@ -237,7 +237,8 @@ double mse(const std::vector<double>& x, const std::vector<double>& y) {
 }
 
 // An INT8 blob (static calibration) exported as QDQ runs in ONNX Runtime, with our scales, and its
-// error against FP32 is no worse than twice the engine's INT8 error, over the reference's samples.
+// error against FP32 is no worse than twice the engine's INT8 error, over the reference's samples; so
+// is the split engine's on that blob, fed by the QDQ backbone (an accelerator's int8 features).
 TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
   const Int8Options opt = test::quick_int8_options();
   auto model = import_checkpoint(dir_);
@@ -251,11 +252,15 @@ TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
   const auto summary = export_onnx(int8_blob, onnx);
   ASSERT_TRUE(summary.ok()) << summary.status().to_string();
   EXPECT_EQ(summary->precision, "int8 static");
+  const std::string backbone = scratch_ + "/qdq_backbone.onnx";
+  ASSERT_TRUE(export_onnx(int8_blob, backbone, {.part = OnnxPart::kBackbone}).ok());
 
   auto int8_engine = Engine::open(int8_blob, {.threads = 2});
   ASSERT_TRUE(int8_engine.ok()) << int8_engine.status().to_string();
+  auto split = Engine::open(int8_blob, {.threads = 2, .external_backbone = true});
+  ASSERT_TRUE(split.ok()) << split.status().to_string();
   const ModelInfo& info = engine_->model_info();
-  double ours = 0, ort = 0;
+  double ours = 0, ort = 0, split_error = 0;
   for (size_t i = 0; i < batch_->size(); ++i) {
     observation_ = batch_->at(i);
     std::vector<float> fp32(info.chunk_values()), int8(info.chunk_values());
@@ -267,12 +272,28 @@ TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
     ASSERT_EQ(got.size(), fp32.size());
     ours += mse(normalized(info, int8), normalized(info, fp32));
     ort += mse(normalized(info, got), normalized(info, fp32));
+
+    ASSERT_TRUE(run_ort(backbone, out, inputs(false)));
+    std::vector<std::vector<float>> features;
+    Observation obs = observation_;
+    for (size_t c = 0; c < info.cameras.size(); ++c) {
+      const CameraInfo& cam = info.cameras[c];
+      features.push_back(read_floats(out + "/" + cam.key + ".features.bin"));
+      obs.images[c] = ImageView::backbone_features(features.back().data(), cam.feature_height, cam.feature_width);
+    }
+    std::vector<float> split_actions(info.chunk_values());
+    ASSERT_TRUE((*split)->infer(obs, split_actions).ok());
+    split_error += mse(normalized(info, split_actions), normalized(info, fp32));
   }
-  ours /= static_cast<double>(batch_->size());
-  ort /= static_cast<double>(batch_->size());
-  std::cout << GetParam().name << ": INT8 action MSE vs FP32 (normalised): engine " << ours << ", ONNX Runtime QDQ " << ort << "\n";
+  const double n = static_cast<double>(batch_->size());
+  ours /= n;
+  ort /= n;
+  split_error /= n;
+  std::cout << GetParam().name << ": INT8 action MSE vs FP32 (normalised): engine " << ours << ", ONNX Runtime QDQ " << ort
+            << ", QDQ backbone in ONNX Runtime + split engine " << split_error << "\n";
   EXPECT_GT(ort, 0.0) << "the QDQ model computes in float: are the weights quantized?";
   EXPECT_LE(ort, 2 * ours + 1e-9);
+  EXPECT_LE(split_error, 2 * ours + 1e-9);
 }
 
 std::string model_name(const ::testing::TestParamInfo<Model>& info) {

@@ -243,10 +243,13 @@ void print_summary(const act::ImportSummary& s, const Options& o, uint64_t bytes
   for (const auto& note : s.notes) std::cout << "note: " << note << "\n";
 }
 
-// --export-calib: the frames as the ONNX model's camera inputs take them, NHWC, one file per camera.
+// --export-calib: the frames as the ONNX model's camera inputs take them, NHWC, one file per camera
+// (all of them or none).
 void export_calibration(const act::ModelInfo& model, const Options& o) {
   const act::CalibrationSet set = act::load_calibration_frames(o.calib_sources, model, o.int8.calib_samples);
   const std::filesystem::path given(o.calib_npy);
+  std::vector<std::unique_ptr<act::detail::AtomicFileWriter>> files;
+  std::string lines;
   for (size_t c = 0; c < model.cameras.size(); ++c) {
     const act::CameraInfo& cam = model.cameras[c];
     std::string path = o.calib_npy;
@@ -259,12 +262,13 @@ void export_calibration(const act::ModelInfo& model, const Options& o) {
     for (const auto& frame : set.frames) {
       for (uint8_t v : frame.images[c]) values.push_back(static_cast<float>(v) / 255.0f);  // as the engine converts
     }
-    act::write_npy_f32(path, {static_cast<int64_t>(set.frames.size()), cam.height, cam.width, 3}, values);
-    if (!o.quiet) {
-      std::cout << "calibration  " << path << " (" << set.frames.size() << " frames of " << cam.key << ", float32 [N, "
-                << cam.height << ", " << cam.width << ", 3], RGB in [0, 1])\n";
-    }
+    files.push_back(std::make_unique<act::detail::AtomicFileWriter>(path));
+    act::write_npy_f32(*files.back(), {static_cast<int64_t>(set.frames.size()), cam.height, cam.width, 3}, values);
+    lines += "calibration  " + path + " (" + std::to_string(set.frames.size()) + " frames of " + cam.key + ", float32 [N, " +
+             std::to_string(cam.height) + ", " + std::to_string(cam.width) + ", 3], RGB in [0, 1])\n";
   }
+  for (auto& file : files) file->commit();
+  if (!o.quiet) std::cout << lines;
 }
 
 #ifdef ACT_ONNX_EXPORT

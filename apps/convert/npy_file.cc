@@ -3,11 +3,10 @@
 #include <bit>
 
 #include "weights/blob/error.h"
-#include "weights/blob/file_util.h"
 
 namespace act {
 
-void write_npy_f32(const std::string& path, const std::vector<int64_t>& shape, const std::vector<float>& values) {
+void write_npy_f32(detail::AtomicFileWriter& out, const std::vector<int64_t>& shape, const std::vector<float>& values) {
   static_assert(std::endian::native == std::endian::little, "the .npy data is written as '<f4'");
   int64_t count = 1;
   std::string dims;
@@ -17,7 +16,7 @@ void write_npy_f32(const std::string& path, const std::vector<int64_t>& shape, c
   }
   if (shape.size() > 1) dims.resize(dims.size() - 2);  // a 1-d shape keeps its comma: "(3,)"
   if (count != static_cast<int64_t>(values.size())) {
-    fail(ErrorCode::kInvalidArgument, path + ": an array of shape (" + dims + ") holds " + std::to_string(count) +
+    fail(ErrorCode::kInvalidArgument, out.path() + ": an array of shape (" + dims + ") holds " + std::to_string(count) +
          " values, not " + std::to_string(values.size()));
   }
   std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + dims + "), }";
@@ -31,10 +30,8 @@ void write_npy_f32(const std::string& path, const std::vector<int64_t>& shape, c
   prefix += '\x00';
   prefix += static_cast<char>(length & 0xff);
   prefix += static_cast<char>(length >> 8);
-  detail::AtomicFileWriter out(path);
   out.write(prefix + header);
   out.write(values.data(), values.size() * sizeof(float));
-  out.commit();
 }
 
 }  // namespace act

@@ -4,13 +4,15 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
 #include <vector>
+
+#include "weights/blob/file_util.h"
 
 namespace act {
 
-/// Writes `values` as a C-order float32 array of `shape`, atomically (nothing at `path` on failure).
-/// Throws act::Error (kIoError naming the path; kInvalidArgument when the shape does not hold the values).
-void write_npy_f32(const std::string& path, const std::vector<int64_t>& shape, const std::vector<float>& values);
+/// Writes `values` as a C-order float32 array of `shape` into `out` (the caller commits it, so that
+/// several files appear together or not at all). Throws act::Error (kIoError naming the path;
+/// kInvalidArgument when the shape does not hold the values).
+void write_npy_f32(detail::AtomicFileWriter& out, const std::vector<int64_t>& shape, const std::vector<float>& values);
 
 }  // namespace act

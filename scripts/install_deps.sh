@@ -32,7 +32,7 @@ else
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
 fi
 
-# ONNX Runtime for the export tests, from the npm registry into build/node (not committed).
+# ONNX Runtime for the export tests, from the npm registry into test/onnx/node_modules (not committed).
 "$root/scripts/install_node_deps.sh"
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then

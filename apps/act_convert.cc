@@ -9,6 +9,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include "actengine/convert.h"
@@ -295,20 +296,34 @@ void export_onnx(const std::string& blob, const Options& o) {
             << "  outputs    " << list(summary->outputs) << "\n";
 }
 
-// A blob only for the export: an unnamed-until-written file in the ONNX file's folder, removed after.
+// A blob only for the export, in the ONNX file's folder: written atomically like any blob (no name
+// until complete), then opened and its name removed at once, so that the export reads it through
+// /proc/self/fd and an interrupted run leaves nothing behind.
 class ScratchBlob {
  public:
   explicit ScratchBlob(const std::string& beside) {
     const std::filesystem::path dir = std::filesystem::path(beside).parent_path();
     path_ = ((dir.empty() ? std::filesystem::path(".") : dir) / (".act_convert_export." + std::to_string(getpid()) + ".actb")).string();
   }
-  ~ScratchBlob() { std::remove(path_.c_str()); }
+  ~ScratchBlob() {
+    if (fd_ >= 0) close(fd_);
+    else std::remove(path_.c_str());
+  }
   ScratchBlob(const ScratchBlob&) = delete;
   ScratchBlob& operator=(const ScratchBlob&) = delete;
+  /// Where the conversion writes the blob.
   const std::string& path() const { return path_; }
+  /// After the conversion: the blob, its name removed, as a path that still opens it.
+  std::string unnamed() {
+    fd_ = open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) act::fail(act::ErrorCode::kIoError, "cannot reopen the blob converted for the export, " + path_);
+    std::remove(path_.c_str());
+    return "/proc/self/fd/" + std::to_string(fd_);
+  }
 
  private:
   std::string path_;
+  int fd_ = -1;
 };
 #endif
 
@@ -351,8 +366,11 @@ int main(int argc, char** argv) {
     const uint64_t bytes = convert(*model, o);
     if (!o.package.empty()) act::write_deploy_package(o.package, model->summary().model, o.checkpoint);
 #ifdef ACT_ONNX_EXPORT
+    if (scratch) {  // only the ONNX model was asked for
+      export_onnx(scratch->unnamed(), o);
+      return 0;
+    }
     if (!o.onnx_path.empty()) export_onnx(o.output, o);
-    if (scratch) return 0;  // only the ONNX model was asked for
 #endif
     if (!o.quiet) print_summary(model->summary(), o, bytes);
     return 0;

@@ -1,6 +1,7 @@
-// act_convert: LeRobot ACT checkpoint folder or PyTorch .pth state dict -> .actb blob [+ robot package].
-// A command line over the conversion API (actengine/convert.h); calibration frames are read from
-// files here (apps/convert/calib_frames.h, OpenCV).
+// act_convert: LeRobot ACT checkpoint folder or PyTorch .pth state dict -> .actb blob [+ robot package]
+// [+ ONNX model]; or an .actb blob -> ONNX model.
+// A command line over the conversion API (actengine/convert.h) and the ONNX export
+// (actengine/onnx_export.h); calibration frames are read from files here (apps/convert/calib_frames.h, OpenCV).
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
@@ -8,12 +9,18 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <fcntl.h>
+#include <unistd.h>
 
 #include "actengine/convert.h"
 #include "apps/convert/calib_frames.h"
+#include "apps/convert/npy_file.h"
 #include "apps/deploy_package.h"
 #include "apps/pytorch_options.h"
 #include "apps/status_error.h"
+#ifdef ACT_ONNX_EXPORT
+#include "actengine/onnx_export.h"
+#endif
 #include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 
@@ -28,7 +35,11 @@ struct Options {
   act::Int8Options int8;
   double target_mse = 0, max_mse = 0, percentile = 99.99;
   size_t holdout = 0;
+  std::string onnx_path, onnx_part = "full", onnx_normalization = "in";
+  std::string calib_npy;
 };
+
+bool is_blob(const std::string& path) { return std::filesystem::path(path).extension() == ".actb"; }
 
 void add_options(CLI::App& app, Options& o) {
   app.add_option("checkpoint", o.checkpoint,
@@ -66,12 +77,50 @@ void add_options(CLI::App& app, Options& o) {
   int8_group->add_option("--report", o.report_path, "also write the accuracy report as JSON to this file");
   int8_group->add_option("--threads", o.int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, 256));
   app.add_flag("-q,--quiet", o.quiet, "print nothing but errors");
+#ifdef ACT_ONNX_EXPORT
+  auto* onnx = app.add_option_group("ONNX", "export an ONNX model (from the blob just converted, or from an .actb given "
+                                    "as the checkpoint; an int8 blob exports as QDQ)");
+  onnx->add_option("--export-onnx", o.onnx_path, "write the ONNX model here (opset 17, batch 1, static shapes)");
+  onnx->add_option("--onnx-part", o.onnx_part, "full (default): the whole policy; backbone: each camera's ResNet and input "
+                   "projection (for an accelerator; run the rest with the split engine)")
+      ->check(CLI::IsMember({"full", "backbone"}));
+  onnx->add_option("--onnx-normalization", o.onnx_normalization, "in (default): raw observations in, raw actions out; "
+                   "out: the caller normalises")
+      ->check(CLI::IsMember({"in", "out"}));
+#endif
+  app.add_option("--export-calib", o.calib_npy, "write --calib-samples frames of the --calib sources as NumPy float32 "
+                 "[N, H, W, 3] RGB in [0, 1] (NHWC: what the Hailo Dataflow Compiler calibrates on for the ONNX model's "
+                 "camera input); with several cameras one file per camera, FILE.<camera>.npy");
 }
 
 // The checks that need to know which flags were given; fills what depends on them.
 void check_options(const CLI::App& app, Options& o) {
-  if (o.precision == "fp32" && (!o.calib_sources.empty() || app.count("--mode") || app.count("--max-mse") || app.count("--report") ||
-                                app.count("--attention"))) {
+  if (o.onnx_path.empty() && (app.count("--onnx-part") || app.count("--onnx-normalization"))) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--onnx-part and --onnx-normalization need --export-onnx FILE.onnx");
+  }
+  // The ONNX model is written last: a folder that is not there fails now, before any conversion.
+  if (const auto dir = std::filesystem::path(o.onnx_path).parent_path(); !o.onnx_path.empty() && !dir.empty() &&
+                                                                         !std::filesystem::is_directory(dir)) {
+    act::fail(act::ErrorCode::kIoError, "--export-onnx " + o.onnx_path + ": there is no folder " + dir.string());
+  }
+  if (!o.calib_npy.empty() && o.calib_sources.empty()) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--export-calib needs the frames' sources: --calib DIR|VIDEO|DATASET|OBS.safetensors");
+  }
+  if (!o.calib_npy.empty() && o.onnx_normalization == "out") {
+    act::fail(act::ErrorCode::kInvalidArgument, "--export-calib writes images in [0, 1], the input of an ONNX model exported "
+              "with --onnx-normalization in (the default)");
+  }
+  if (is_blob(o.checkpoint)) {
+    // A blob only exports: say what it is when nothing is asked that a blob can give.
+    if (o.onnx_path.empty() && o.calib_npy.empty()) act::throw_if_failed(act::locate_checkpoint(o.checkpoint).status());
+    if (app.count("--precision") || !o.output.empty() || !o.package.empty() || o.explain) {
+      act::fail(act::ErrorCode::kInvalidArgument, o.checkpoint + " is an .actb blob, already converted: with a blob, "
+                "act_convert only exports (--export-onnx, --export-calib); -o, --package, --precision and --explain need a checkpoint");
+    }
+    return;
+  }
+  if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
+                                app.count("--report") || app.count("--attention"))) {
     act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --max-mse and --report need --precision int8");
   }
   if (!o.package.empty()) {
@@ -79,7 +128,9 @@ void check_options(const CLI::App& app, Options& o) {
                                      std::string(act::kPackageBlobName) + " into the folder)");
     o.output = act::prepare_package_dir(o.package);
   }
-  if (o.output.empty() && !o.explain) act::fail(act::ErrorCode::kInvalidArgument, "--output (or --package, or --explain) is required");
+  if (o.output.empty() && !o.explain && o.onnx_path.empty() && o.calib_npy.empty()) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--output (or --package, --explain, --export-onnx or --export-calib) is required");
+  }
   if (std::filesystem::is_directory(o.checkpoint) && act::any_pytorch_option(app)) {
     act::fail(act::ErrorCode::kInvalidArgument, "the .pth options (--config, --stats, ...) do not apply to a LeRobot "
               "checkpoint folder: its config.json and statistics are in the folder");
@@ -114,7 +165,7 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   if (location->lerobot_folder) {
     if (o.explain) std::cout << "checkpoint   " << location->path << ": a LeRobot checkpoint folder; every value comes from its config.json\n";
     exit_code = 0;
-    if (o.output.empty()) return nullptr;
+    if (o.output.empty() && o.onnx_path.empty() && o.calib_npy.empty()) return nullptr;
     auto model = act::import_checkpoint(location->path);
     act::throw_if_failed(model.status());
     return std::move(model).value();
@@ -123,7 +174,7 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   act::throw_if_failed(plan.status());
   if (o.explain) act::print_explanation(std::cout, (*plan)->explanation());
   exit_code = (*plan)->explanation().missing.empty() ? 0 : 1;
-  if (o.explain && o.output.empty()) return nullptr;
+  if (o.explain && o.output.empty() && o.onnx_path.empty() && o.calib_npy.empty()) return nullptr;
   auto model = act::import_checkpoint(**plan);
   act::throw_if_failed(model.status());
   return std::move(model).value();
@@ -201,6 +252,89 @@ void print_summary(const act::ImportSummary& s, const Options& o, uint64_t bytes
   for (const auto& note : s.notes) std::cout << "note: " << note << "\n";
 }
 
+// --export-calib: the frames as the ONNX model's camera inputs take them, NHWC, one file per camera
+// (all of them or none).
+void export_calibration(const act::ModelInfo& model, const Options& o) {
+  const act::CalibrationSet set = act::load_calibration_frames(o.calib_sources, model, o.int8.calib_samples);
+  const std::filesystem::path given(o.calib_npy);
+  std::vector<std::unique_ptr<act::detail::AtomicFileWriter>> files;
+  std::string lines;
+  for (size_t c = 0; c < model.cameras.size(); ++c) {
+    const act::CameraInfo& cam = model.cameras[c];
+    std::string path = o.calib_npy;
+    if (model.cameras.size() > 1) {
+      const std::string name = cam.key.substr(cam.key.rfind('.') + 1);  // "observation.images.top" -> "top"
+      path = (given.parent_path() / (given.stem().string() + "." + name + ".npy")).string();
+    }
+    std::vector<float> values;
+    values.reserve(set.frames.size() * static_cast<size_t>(cam.height) * cam.width * 3);
+    for (const auto& frame : set.frames) {
+      for (uint8_t v : frame.images[c]) values.push_back(static_cast<float>(v) / 255.0f);  // as the engine converts
+    }
+    files.push_back(std::make_unique<act::detail::AtomicFileWriter>(path));
+    act::write_npy_f32(*files.back(), {static_cast<int64_t>(set.frames.size()), cam.height, cam.width, 3}, values);
+    lines += "calibration  " + path + " (" + std::to_string(set.frames.size()) + " frames of " + cam.key + ", float32 [N, " +
+             std::to_string(cam.height) + ", " + std::to_string(cam.width) + ", 3], RGB in [0, 1])\n";
+  }
+  for (auto& file : files) file->commit();
+  if (!o.quiet) std::cout << lines;
+}
+
+#ifdef ACT_ONNX_EXPORT
+void export_onnx(const std::string& blob, const Options& o) {
+  act::OnnxExportOptions options;
+  options.part = act::parse_onnx_part(o.onnx_part).value();  // CLI11 checked the names
+  options.normalization = act::parse_onnx_normalization(o.onnx_normalization).value();
+  auto summary = act::export_onnx(blob, o.onnx_path, options);
+  act::throw_if_failed(summary.status());
+  if (o.quiet) return;
+  const auto list = [](const std::vector<act::OnnxTensorInfo>& tensors) {
+    std::string text;
+    for (const auto& t : tensors) {
+      text += (text.empty() ? "" : ", ") + t.name + " [";
+      for (size_t i = 0; i < t.shape.size(); ++i) text += (i ? ", " : "") + std::to_string(t.shape[i]);
+      text += "]";
+    }
+    return text;
+  };
+  std::cout << "onnx         " << o.onnx_path << " (" << o.onnx_part << ", " << summary->precision
+            << (summary->precision == "fp32" ? "" : " as QDQ") << ", normalization " << o.onnx_normalization << ", "
+            << summary->nodes << " nodes, " << human_bytes(static_cast<double>(summary->bytes)) << "; passes onnx::checker)\n"
+            << "  inputs     " << list(summary->inputs) << "\n"
+            << "  outputs    " << list(summary->outputs) << "\n";
+}
+
+// A blob only for the export, in the ONNX file's folder: written atomically like any blob (no name
+// until complete), then opened and its name removed at once, so that the export reads it through
+// /proc/self/fd and an interrupted run leaves nothing behind.
+class ScratchBlob {
+ public:
+  explicit ScratchBlob(const std::string& beside) {
+    const std::filesystem::path dir = std::filesystem::path(beside).parent_path();
+    path_ = ((dir.empty() ? std::filesystem::path(".") : dir) / (".act_convert_export." + std::to_string(getpid()) + ".actb")).string();
+  }
+  ~ScratchBlob() {
+    if (fd_ >= 0) close(fd_);
+    else std::remove(path_.c_str());
+  }
+  ScratchBlob(const ScratchBlob&) = delete;
+  ScratchBlob& operator=(const ScratchBlob&) = delete;
+  /// Where the conversion writes the blob.
+  const std::string& path() const { return path_; }
+  /// After the conversion: the blob, its name removed, as a path that still opens it.
+  std::string unnamed() {
+    fd_ = open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) act::fail(act::ErrorCode::kIoError, "cannot reopen the blob converted for the export, " + path_);
+    std::remove(path_.c_str());
+    return "/proc/self/fd/" + std::to_string(fd_);
+  }
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+};
+#endif
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -214,11 +348,38 @@ int main(int argc, char** argv) {
   // file that gets its name only when complete, so SIGINT or SIGTERM at any point leaves nothing.
   try {
     check_options(app, o);
+    if (is_blob(o.checkpoint)) {
+      if (!o.calib_npy.empty()) {
+        auto engine = act::Engine::open(o.checkpoint, {.threads = 1});
+        act::throw_if_failed(engine.status());
+        export_calibration((*engine)->model_info(), o);
+      }
+#ifdef ACT_ONNX_EXPORT
+      if (!o.onnx_path.empty()) export_onnx(o.checkpoint, o);
+#endif
+      return 0;
+    }
+#ifdef ACT_ONNX_EXPORT
+    std::optional<ScratchBlob> scratch;
+    if (!o.onnx_path.empty() && o.output.empty()) {
+      scratch.emplace(o.onnx_path);
+      o.output = scratch->path();
+    }
+#endif
     int exit_code = 0;
     const std::unique_ptr<act::ImportedCheckpoint> model = import(o, exit_code);
     if (!model) return exit_code;
+    if (!o.calib_npy.empty()) export_calibration(model->summary().model, o);
+    if (o.output.empty()) return 0;  // only the calibration set was asked for
     const uint64_t bytes = convert(*model, o);
     if (!o.package.empty()) act::write_deploy_package(o.package, model->summary().model, o.checkpoint);
+#ifdef ACT_ONNX_EXPORT
+    if (scratch) {  // only the ONNX model was asked for
+      export_onnx(scratch->unnamed(), o);
+      return 0;
+    }
+    if (!o.onnx_path.empty()) export_onnx(o.output, o);
+#endif
     if (!o.quiet) print_summary(model->summary(), o, bytes);
     return 0;
   } catch (const std::exception& e) {

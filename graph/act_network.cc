@@ -347,7 +347,16 @@ ValueId ActNetwork::decoder_layer(int l, ValueId y, ValueId memory) {
   return out;
 }
 
-ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels)
+ValueId ActNetwork::external_features(size_t camera) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const ValueId features = graph_.add_input(cam_prefix(camera) + "features",
+                                            {config_.feature_height(cam) * config_.feature_width(cam), config_.dim_model});
+  camera_inputs_.push_back(features);
+  return features;
+}
+
+ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels,
+                       bool external_backbone)
     : config_(config), tensors_(tensors), kernels_(kernels) {
   // blob_model_config checked that an int8 blob has its quantization section.
   if (config_.precision == Precision::kInt8) quant_ = QuantConfig::from_json(tensors_.blob().config().at("quantization"));
@@ -370,8 +379,13 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
   }
   stage_ = Stage::kBackbone;
   for (size_t c = 0; c < config_.cameras.size(); ++c) {
-    const ValueId feats = backbone(c);
+    const ValueId feats = external_backbone ? external_features(c) : backbone(c);
     tokens.push_back({MatrixRef::of(feats, d), static_cast<int>(graph_.value(feats).shape[0])});
+  }
+  if (external_backbone) {
+    tensors_.skip("backbone.");
+    tensors_.skip(bn::kImgProjWeight);
+    tensors_.skip(bn::kImgProjBias);
   }
   stage_ = Stage::kEncoder;
   ValueId x = graph_.add_value("encoder_in_tokens", {N, D});
@@ -391,8 +405,9 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
   graph_.mark_output(actions_);
 
   // Activation parameters are looked up by value name: one naming no value would never be used.
+  // (An external backbone's values, all of camera branches "camN.", are elsewhere.)
   for (const auto& [name, q] : quant_.activations) {
-    if (graph_.find(name) == kNoValue) {
+    if (graph_.find(name) == kNoValue && !(external_backbone && name.starts_with("cam"))) {
       fail(ErrorCode::kDataLoss, "'" + tensors_.blob().path() + "': quantization parameters for \"" + name +
            "\", which is no value of the network");
     }

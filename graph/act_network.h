@@ -52,12 +52,17 @@ class ActNetwork {
   /// its gemm_s8 variant). Both must outlive the network. Throws act::Error(kDataLoss) when a blob
   /// tensor is missing or has a shape that does not match the config, or when activation parameters
   /// name no value of the network.
-  ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels);
+  /// With `external_backbone` the cameras' backbones are not built: each camera's input is its
+  /// backbone output, [feature_height * feature_width, dim_model] (camera_input), and the blob's
+  /// backbone and image projection weights are left unused.
+  ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels,
+             bool external_backbone = false);
 
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
   void run(ThreadPool& pool, RunProfile* profile = nullptr) { graph_.run(pool, kernels_, profile); }
 
-  float* camera_input(size_t camera) { return graph_.data(camera_inputs_.at(camera)); }  ///< [H, W, 3]
+  /// [H, W, 3]; with an external backbone [h * w, dim_model]
+  float* camera_input(size_t camera) { return graph_.data(camera_inputs_.at(camera)); }
   float* state_input() { return graph_.data(state_input_); }                          ///< [state_dim]
   float* env_state_input() { return graph_.data(env_input_); }                        ///< [env_state_dim]
   const float* actions_normalized() { return graph_.data(actions_); }                 ///< [T, A]
@@ -96,6 +101,8 @@ class ActNetwork {
   /// Records a float value of camera `camera_` (the branch being built) as a calibration point.
   void calibration_point(CalibrationRole role, ValueId value);
   ValueId backbone(size_t camera);
+  /// The input that takes an external backbone's output for `camera` (its tokens, [h * w, D]).
+  ValueId external_features(size_t camera);
   /// [LayerNorm1 (pre-norm)] -> fused qkv projection -> attention -> out projection + residual x
   /// [-> LayerNorm1 (post-norm)]. Weights under `w` ("in_proj.*", "out_proj.*", "norm1.*").
   ValueId self_attention_block(const std::string& prefix, int rows, ValueId x, const std::string& w);

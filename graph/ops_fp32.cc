@@ -174,7 +174,7 @@ void LayerNormOp::run(const RunContext& ctx) const {
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kRows;
     const int rows = std::min(kRows, rows_ - r0);
-    ctx.kernels().elementwise.layernorm_rows(rows, cols_, x + r0 * ld, ld, gamma_, beta_, 1e-5f, y + r0 * ld, ld);
+    ctx.kernels().elementwise.layernorm_rows(rows, cols_, x + r0 * ld, ld, gamma_, beta_, kLayerNormEps, y + r0 * ld, ld);
   });
 }
 

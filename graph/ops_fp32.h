@@ -12,6 +12,18 @@ namespace act::graph {
 
 enum class Epilogue { kNone, kRelu, kGelu };
 
+/// The epsilon of every LayerNorm of ACT (torch.nn.LayerNorm's default).
+inline constexpr float kLayerNormEps = 1e-5f;
+
+// Each op's parameters are readable (const accessors) so that exporters can translate the graph.
+
+/// What a linear op (float or int8 weights) computes: y[rows, out] = act(x W^T + bias [+ residual]).
+struct LinearParams {
+  int rows = 0, in = 0, out = 0;
+  MatrixRef x, bias, residual;
+  Epilogue epilogue = Epilogue::kNone;
+};
+
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
 /// Weights [out_c, kh, kw, in_c]. Tiles of output pixels; im2col of one tile into per-thread scratch
 /// (a 1x1 stride-1 conv reads its input directly).
@@ -24,6 +36,11 @@ class Conv2dOp : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
+  const kernels::Conv2dShape& shape() const { return s_; }
+  const float* weight() const { return weight_; }  ///< [out_c, kh, kw, in_c]
+  const float* bias() const { return bias_; }
+  bool relu() const { return relu_; }
+  ValueId residual() const { return residual_; }
 
  private:
   bool direct() const;
@@ -44,6 +61,9 @@ class MaxPoolOp : public Op {
     return s8_ ? k.maxpool_s8.max_taps_name : "scalar";
   }
   void run(const RunContext& ctx) const override;
+  int kernel() const { return kernel_; }
+  int stride() const { return stride_; }
+  int pad() const { return pad_; }
 
  private:
   int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
@@ -60,6 +80,8 @@ class LinearOp : public Op {
   std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
+  LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
+  const float* weight() const { return weight_; }  ///< [out, in]
 
  private:
   int rows_, in_, out_;
@@ -86,6 +108,8 @@ class LayerNormOp : public Op {
   const char* type() const override { return "layernorm_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override { return k.elementwise.layernorm_name; }
   void run(const RunContext& ctx) const override;
+  const float* gamma() const { return gamma_; }
+  const float* beta() const { return beta_; }
 
  private:
   int rows_, cols_;
@@ -105,6 +129,12 @@ class AttentionOp : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
+  int nq() const { return nq_; }
+  int nk() const { return nk_; }
+  int heads() const { return heads_; }
+  const MatrixRef& q() const { return q_; }
+  const MatrixRef& k() const { return k_; }
+  const MatrixRef& v() const { return v_; }
 
  private:
   int nq_, nk_, dim_, heads_;
@@ -122,6 +152,7 @@ class ConcatRowsOp : public Op {
   const char* type() const override { return "concat_rows_f32"; }
   std::string kernel(const kernels::KernelConfig&) const override { return "memcpy"; }
   void run(const RunContext& ctx) const override;
+  const std::vector<Part>& parts() const { return parts_; }
 
  private:
   int cols_;

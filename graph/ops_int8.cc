@@ -215,7 +215,7 @@ void ConvS8Op::run(const RunContext& ctx) const {
 LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const int8_t* weight,
                        const float* w_scale, MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output,
                        ValueId quantized_x, ValueId row_scale, ValueId row_zero_point)
-    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), w_scale_(w_scale),
+    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), weight_(weight), w_scale_(w_scale),
       epilogue_(epilogue), packed_(kernels, out, in, weight, nullptr, 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;

@@ -47,6 +47,8 @@ class QuantizeOp : public Op {
   std::string kernel(const kernels::KernelConfig& k) const override { return k.quant.quantize_name; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override { return 16; }
+  bool dynamic() const { return dynamic_; }
+  const kernels::QuantS8& quant() const { return q_; }  ///< static parameters
 
  private:
   size_t elements_;
@@ -61,6 +63,7 @@ class DequantizeOp : public Op {
   const char* type() const override { return "dequantize_s8_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override { return k.quant.dequantize_name; }
   void run(const RunContext& ctx) const override;
+  const kernels::QuantS8& quant() const { return q_; }
 
  private:
   size_t elements_;
@@ -96,6 +99,7 @@ class ConvS8Op : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
+  const ConvS8Spec& spec() const { return spec_; }
 
  private:
   ConvS8Spec spec_;
@@ -119,10 +123,14 @@ class LinearS8Op : public Op {
   }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
+  LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
+  const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
+  const float* w_scale() const { return w_scale_; }
 
  private:
   int rows_, in_, out_;
   MatrixRef x_, bias_, residual_;
+  const int8_t* weight_;
   const float* w_scale_;
   Epilogue epilogue_;
   PackedWeights packed_;

@@ -14,6 +14,8 @@ packages=(
   python3 python3-numpy python3-torch
   python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (python/) and its tests
   clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
+  libonnx-dev libprotobuf-dev  # act_convert --export-onnx: ONNX's protobuf classes, checker, shape inference
+  nodejs                       # ONNX Runtime (npm's onnxruntime-node) in the export tests
 )
 
 missing=()
@@ -30,6 +32,9 @@ else
   $SUDO apt-get update
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
 fi
+
+# ONNX Runtime for the export tests, from the npm registry into test/onnx/node_modules (not committed).
+"$root/scripts/install_node_deps.sh"
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then
   "$root/scripts/install_cross_deps.sh"

@@ -39,6 +39,7 @@ slow_tests=(
   'EngineApiTest\.RowStrideIsHonoured'
   'SyntheticModel\.ActivationsStayWellScaled'  # one inference of the full-size rover model
   'SyntheticModel\.DeterministicForASeed'
+  'SplitEngine\.Int8StaticBlobRunsTheRestExactlyAsTheWholeEngine'  # an INT8 calibration, then two engines
 )
 exclude="^($(IFS='|'; echo "${slow_tests[*]}"))\$"
 

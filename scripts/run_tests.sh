@@ -59,8 +59,9 @@ echo "kernel variants required by the tests: ${ACT_TEST_REQUIRE_ISAS:-none}"
 # Both native trees share the generated test checkpoints (generating them takes minutes).
 checkpoints="$root/build/test-checkpoints"
 # Tests of the full-size generated models (Presets/...: FP32 against float64 references, INT8
-# calibration and accuracy at 480x640): seconds each in Release, many minutes under ASan.
-full_size='^Presets/'
+# calibration and accuracy at 480x640; Onnx...: the ONNX export in ONNX Runtime through Node): seconds
+# each in Release, many minutes under ASan.
+full_size='^(Presets/|Onnx)'
 
 echo "== Release build of the full-size model tests and the kernel benchmarks (-Werror) =="
 cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON \

@@ -71,7 +71,10 @@ Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t 
 
 ModelInfo model_info_of(const ModelConfig& config) {
   ModelInfo info;
-  for (const auto& cam : config.cameras) info.cameras.push_back({cam.key, cam.height, cam.width});
+  for (const auto& cam : config.cameras) {
+    info.cameras.push_back({cam.key, cam.height, cam.width, config.feature_height(cam), config.feature_width(cam)});
+  }
+  info.dim_model = config.dim_model;
   info.state_dim = config.state_dim;
   info.env_state_dim = config.env_state_dim;
   info.env_state_key = config.env_state_key;
@@ -93,8 +96,9 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
       pool_(options.threads),
       kernels_(engine_kernels(options.isa)),
       profile_(options.profile),
-      keep_intermediates_(options.keep_intermediates) {
-  network_ = std::make_unique<graph::ActNetwork>(config_, blob_tensors_, kernels_);
+      keep_intermediates_(options.keep_intermediates),
+      external_backbone_(options.external_backbone) {
+  network_ = std::make_unique<graph::ActNetwork>(config_, blob_tensors_, kernels_, external_backbone_);
 
   for (const auto& cam : config_.cameras) camera_norm_.push_back(input_norm(cam.key, 3));
   if (config_.state_dim > 0) state_norm_ = input_norm(config_.state_key, static_cast<size_t>(config_.state_dim));
@@ -117,11 +121,42 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
   info_.isa = kernels::isa_name(kernels_.isa);
   info_.kernels = kernels_.describe();
   if (config_.precision == Precision::kInt8) info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");
+  info_.placement = std::string("backbone: ") + (external_backbone_ ? "external (features given by the caller)" : "actengine (cpu)") +
+                    ", transformer: actengine (cpu)";
+}
+
+void Engine::Impl::load_features(size_t camera, const ImageView& features) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const std::string what = "backbone features " + std::to_string(camera) + " (" + cam.key + ")";
+  if (features.format != ImageView::Format::kBackboneFeaturesF32Chw) {
+    fail(ErrorCode::kInvalidArgument, "image " + std::to_string(camera) + " (" + cam.key + ") is an image, but the engine " +
+         "was opened with external_backbone: pass the backbone's output, ImageView::backbone_features");
+  }
+  if (features.data == nullptr) fail(ErrorCode::kInvalidArgument, what + " has no data");
+  const int fh = config_.feature_height(cam), fw = config_.feature_width(cam);
+  if (features.height != fh || features.width != fw) {
+    fail(ErrorCode::kInvalidArgument, what + " are " + std::to_string(features.height) + "x" + std::to_string(features.width) +
+         ", the model's feature map is " + std::to_string(fh) + "x" + std::to_string(fw) + " (height x width)");
+  }
+  const size_t pixels = static_cast<size_t>(fh) * static_cast<size_t>(fw), d = static_cast<size_t>(config_.dim_model);
+  const auto* src = static_cast<const float*>(features.data);
+  float* dst = network_->camera_input(camera);
+  for (size_t c = 0; c < d; ++c) {
+    for (size_t i = 0; i < pixels; ++i) {
+      const float v = src[c * pixels + i];
+      if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contain NaN or Inf");
+      dst[i * d + c] = v;
+    }
+  }
 }
 
 void Engine::Impl::load_image(size_t camera, const ImageView& image) {
+  if (external_backbone_) return load_features(camera, image);
   const CameraConfig& cam = config_.cameras[camera];
   const std::string what = "image " + std::to_string(camera) + " (" + cam.key + ")";
+  if (image.format == ImageView::Format::kBackboneFeaturesF32Chw) {
+    fail(ErrorCode::kInvalidArgument, what + " holds backbone features: open the engine with EngineOptions::external_backbone");
+  }
   if (image.data == nullptr) fail(ErrorCode::kInvalidArgument, what + " has no data");
   if (image.height != cam.height || image.width != cam.width) {
     fail(ErrorCode::kInvalidArgument, what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) +

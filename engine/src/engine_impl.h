@@ -63,6 +63,8 @@ class Engine::Impl {
   /// Profiling: turns last_run_ into the stage timings and adds it to the op sums.
   void record_profile(std::chrono::steady_clock::time_point preprocess_start,
                       std::chrono::steady_clock::time_point preprocess_end);
+  /// Split engine: the camera's backbone output, channel-first, as the network's [h * w, D] tokens.
+  void load_features(size_t camera, const ImageView& features);
   void load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm, float* dst);
 
   ActbFile blob_;
@@ -82,6 +84,7 @@ class Engine::Impl {
   std::vector<double> op_total_seconds_;   // profiling: each op's time summed over the runs
   int64_t profiled_runs_ = 0;
   bool keep_intermediates_ = false;
+  bool external_backbone_ = false;
   bool has_run_ = false;
   InferenceTimings timings_;
 };

@@ -47,12 +47,7 @@ TEST_P(GeneratedInt8Test, Int8StaysNearFp32) {
   ACT_REQUIRE_PATH(dir + "/reference.safetensors");
   ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
   const std::string blob = test::scratch_dir() + "/int8.actb";
-  Int8Options opt;
-  opt.mode = c.mode;
-  opt.calib_samples = 8;
-  opt.holdout = 3;
-  opt.threads = 2;
-  opt.layer_report = false;
+  const Int8Options opt = test::quick_int8_options(c.mode);
   auto model = import_checkpoint(dir);
   ASSERT_TRUE(model.ok()) << model.status().to_string();
   const CalibrationSet frames = load_calibration_frames(

@@ -13,6 +13,16 @@ namespace fs = std::filesystem;
 
 namespace act::test {
 
+Int8Options quick_int8_options(Int8Mode mode) {
+  Int8Options options;
+  options.mode = mode;
+  options.calib_samples = 8;
+  options.holdout = 3;
+  options.threads = 2;
+  options.layer_report = false;
+  return options;
+}
+
 std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem) {
   const std::string path = (fs::path(scratch) / (stem + ".actb")).string();
   write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);

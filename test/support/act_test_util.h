@@ -6,12 +6,17 @@
 #include <string>
 #include <vector>
 
+#include "actengine/convert.h"
 #include "weights/import/safetensors.h"
 
 namespace act::test {
 
 /// act_convert in-process: imports `checkpoint_dir` and writes `<scratch>/<stem>.actb`; returns its path.
 std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem = "model");
+
+/// INT8 options for a quick conversion in a test: 8 calibration frames and 3 held out, 2 threads, no
+/// per-layer report.
+Int8Options quick_int8_options(Int8Mode mode = Int8Mode::kStatic);
 
 /// NCHW (batch 1) -> HWC, the engine's layout.
 std::vector<float> nchw_to_hwc(const float* src, int channels, int height, int width);

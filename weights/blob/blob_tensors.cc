@@ -89,6 +89,12 @@ const float* BlobTensors::f32(const std::string& name, const std::vector<int64_t
   return t.f32();
 }
 
+void BlobTensors::skip(const std::string& prefix) {
+  for (size_t i = 0; i < read_.size(); ++i) {
+    if (blob_.tensors()[i].name.starts_with(prefix)) read_[i] = true;
+  }
+}
+
 void BlobTensors::check_all_read() const {
   std::vector<std::string> unread;
   for (size_t i = 0; i < read_.size(); ++i) {

@@ -33,6 +33,9 @@ class BlobTensors {
   const float* f32(const std::string& name, const std::vector<int64_t>& shape);
   /// The tensor called `name` (any dtype); throws kDataLoss when it is missing or not of `shape`.
   const ActbTensor& get(const std::string& name, const std::vector<int64_t>& shape);
+  /// Records every tensor whose name starts with `prefix` as read: a part of the network that runs
+  /// elsewhere (the split engine's backbone) leaves its weights in the blob, unused.
+  void skip(const std::string& prefix);
   /// Throws kDataLoss listing the tensors never asked for.
   void check_all_read() const;
 

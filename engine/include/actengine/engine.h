@@ -47,13 +47,17 @@ struct EngineOptions {
   /// neondot (AArch64). An unknown ISA, or one this CPU cannot run, fails Engine::open with a
   /// message listing the ISAs this CPU runs.
   std::string isa = "auto";
+  /// The split engine: the cameras' backbones (ResNet + input projection) run elsewhere, e.g. the ONNX
+  /// export's `--onnx-part backbone` on an accelerator, and every image of an Observation is their
+  /// output, ImageView::backbone_features. The blob is the same; its backbone weights go unused.
+  bool external_backbone = false;
 };
 
 /// Wall time of one inference by stage, in milliseconds. "other" is what belongs to no stage: the
 /// state tokens, copying the chunk out, un-normalising.
 struct InferenceTimings {
   double preprocess_ms = 0;  ///< validating and normalising the observation
-  double backbone_ms = 0;    ///< ResNet and the image projections, all cameras
+  double backbone_ms = 0;    ///< ResNet and the image projections, all cameras (0 when external)
   double encoder_ms = 0;
   double decoder_ms = 0;     ///< decoder and action head
   double other_ms = 0;
@@ -76,6 +80,8 @@ struct CameraInfo {
   std::string key;  ///< feature key, e.g. "observation.images.front"
   int height = 0;
   int width = 0;
+  int feature_height = 0;  ///< of the backbone's output feature map (ImageView::backbone_features)
+  int feature_width = 0;
 };
 
 /// What a loaded model expects and produces; everything is derived from the blob's config.
@@ -85,6 +91,7 @@ struct ModelInfo {
   int env_state_dim = 0;            ///< environment state values (0 = none)
   std::string env_state_key;        ///< its feature key, e.g. "observation.environment_state"
   int action_dim = 0;
+  int dim_model = 0;  ///< the transformer's width: channels of the backbone's output features
   int chunk_size = 0;
   int n_action_steps = 0;
   /// The raw actions that the network's normalised -1 and +1 stand for, per action dimension
@@ -97,13 +104,19 @@ struct ModelInfo {
   std::string isa;        ///< the instruction set the kernels were chosen for, e.g. "avx512vnni"
   std::string kernels;    ///< the kernel variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32_eigen_avx512, ..."
   std::string summary;    ///< one line: backbone, dims, layers, cameras
+  /// Where each part runs: "backbone: actengine (cpu), transformer: actengine (cpu)", or with
+  /// EngineOptions::external_backbone "backbone: external (features given by the caller), ...".
+  std::string placement;
   size_t chunk_values() const { return static_cast<size_t>(chunk_size) * action_dim; }
 };
 
 /// One camera image, viewed (not copied). Either uint8 RGB, height x width x 3, rows `row_stride`
-/// bytes apart (0 = packed); or float32 RGB channel-first 3 x height x width with values in [0, 1].
+/// bytes apart (0 = packed); or float32 RGB channel-first 3 x height x width with values in [0, 1];
+/// or, for an Engine opened with EngineOptions::external_backbone, the camera's backbone output:
+/// float32 channel-first dim_model x feature_height x feature_width (the ONNX backbone's
+/// "<camera key>.features" [1, dim_model, h, w], CameraInfo::feature_height/width).
 struct ImageView {
-  enum class Format { kRgbU8Hwc, kRgbF32Chw };
+  enum class Format { kRgbU8Hwc, kRgbF32Chw, kBackboneFeaturesF32Chw };
   Format format = Format::kRgbU8Hwc;
   const void* data = nullptr;
   int height = 0;
@@ -115,6 +128,9 @@ struct ImageView {
   }
   static ImageView rgb_f32_chw(const float* data, int height, int width) {
     return {Format::kRgbF32Chw, data, height, width, 0};
+  }
+  static ImageView backbone_features(const float* data, int feature_height, int feature_width) {
+    return {Format::kBackboneFeaturesF32Chw, data, feature_height, feature_width, 0};
   }
 };
 

@@ -1,0 +1,558 @@
+// The ONNX export: the Engine's graph (graph/act_network.h) translated op by op into ONNX nodes with
+// Debian's libonnx protobuf classes, checked by onnx::checker and strict shape inference, then written
+// atomically. Layouts: the engine's image values are NHWC [H, W, C], ONNX's are NCHW [1, C, H, W];
+// token values are [rows, cols] in both.
+#include <onnx/checker.h>
+#include <onnx/onnx_pb.h>
+#include <onnx/shape_inference/implementation.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "actengine/onnx_export.h"
+#include "engine/src/engine_impl.h"
+#include "graph/act_network.h"
+#include "kernels/config/kernel_config.h"
+#include "weights/blob/actb.h"
+#include "weights/blob/blob_names.h"
+#include "weights/blob/blob_tensors.h"
+#include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
+#include "weights/blob/model_config.h"
+
+namespace act {
+
+namespace {
+
+namespace bn = blob_names;
+using graph::MatrixRef;
+using graph::ValueId;
+
+constexpr int kOpset = 17;
+
+// A network value as the ONNX graph holds it.
+struct OnnxValue {
+  std::string name;
+  bool nchw = false;                     // an image value [1, C, H, W] (engine: [H, W, C])
+  std::optional<kernels::QuantS8> int8;  // an int8 tensor with these parameters (QDQ)
+};
+
+class OnnxBuilder {
+ public:
+  OnnxBuilder(graph::ActNetwork& network, BlobTensors& tensors, const OnnxExportOptions& options)
+      : g_(network.graph()), config_(network.config()), tensors_(tensors), options_(options) {
+    model_.set_ir_version(8);  // ONNX 1.12's IR; opset 17 needs IR >= 8
+    model_.set_producer_name("actengine");
+    model_.set_producer_version(version());
+    auto* opset = model_.add_opset_import();
+    opset->set_domain("");
+    opset->set_version(kOpset);
+    graph_ = model_.mutable_graph();
+    graph_->set_name(options.part == OnnxPart::kFull ? "act_policy" : "act_backbone");
+  }
+
+  onnx::ModelProto build() {
+    const bool full = options_.part == OnnxPart::kFull;
+    for (size_t c = 0; c < config_.cameras.size(); ++c) add_camera_input(c);
+    if (full && config_.state_dim > 0) add_vector_input(config_.state_key, "state", config_.state_dim);
+    if (full && config_.env_state_dim > 0) add_vector_input(config_.env_state_key, "env_state", config_.env_state_dim);
+    for (const auto& op : g_.ops()) {
+      if (!full && op->stage != graph::Stage::kBackbone) continue;
+      translate(*op);
+    }
+    if (full) {
+      add_action_output();
+    } else {
+      for (size_t c = 0; c < config_.cameras.size(); ++c) add_feature_output(c);
+    }
+    return std::move(model_);
+  }
+
+ private:
+  // ------------------------------------------------------------------------------ names, constants
+  std::string fresh(const std::string& base) { return base + "_" + std::to_string(counter_++); }
+
+  std::string constant_f32(const std::string& base, const std::vector<int64_t>& dims, std::vector<float> data) {
+    onnx::TensorProto* t = graph_->add_initializer();
+    t->set_name(fresh(base));
+    t->set_data_type(onnx::TensorProto::FLOAT);
+    for (int64_t d : dims) t->add_dims(d);
+    t->set_raw_data(data.data(), data.size() * sizeof(float));
+    return t->name();
+  }
+  std::string constant_i8(const std::string& base, const std::vector<int64_t>& dims, const int8_t* data, size_t n) {
+    onnx::TensorProto* t = graph_->add_initializer();
+    t->set_name(fresh(base));
+    t->set_data_type(onnx::TensorProto::INT8);
+    for (int64_t d : dims) t->add_dims(d);
+    t->set_raw_data(data, n);
+    return t->name();
+  }
+  std::string constant_i64(const std::string& base, const std::vector<int64_t>& values) {
+    onnx::TensorProto* t = graph_->add_initializer();
+    t->set_name(fresh(base));
+    t->set_data_type(onnx::TensorProto::INT64);
+    t->add_dims(static_cast<int64_t>(values.size()));
+    t->set_raw_data(values.data(), values.size() * sizeof(int64_t));
+    return t->name();
+  }
+  std::string scalar_f32(const std::string& base, float v) { return constant_f32(base, {}, {v}); }
+  std::string scalar_i8(const std::string& base, int32_t v) {
+    const int8_t b = static_cast<int8_t>(v);
+    return constant_i8(base, {}, &b, 1);
+  }
+
+  onnx::NodeProto* node(const std::string& type, const std::vector<std::string>& inputs, const std::string& output) {
+    onnx::NodeProto* n = graph_->add_node();
+    n->set_op_type(type);
+    n->set_name(output);
+    for (const auto& i : inputs) n->add_input(i);
+    n->add_output(output);
+    return n;
+  }
+  std::string op1(const std::string& type, const std::vector<std::string>& inputs, const std::string& base) {
+    const std::string out = fresh(base);
+    node(type, inputs, out);
+    return out;
+  }
+  static void attr_int(onnx::NodeProto* n, const std::string& name, int64_t v) {
+    auto* a = n->add_attribute();
+    a->set_name(name);
+    a->set_type(onnx::AttributeProto::INT);
+    a->set_i(v);
+  }
+  static void attr_ints(onnx::NodeProto* n, const std::string& name, const std::vector<int64_t>& v) {
+    auto* a = n->add_attribute();
+    a->set_name(name);
+    a->set_type(onnx::AttributeProto::INTS);
+    for (int64_t x : v) a->add_ints(x);
+  }
+  static void attr_float(onnx::NodeProto* n, const std::string& name, float v) {
+    auto* a = n->add_attribute();
+    a->set_name(name);
+    a->set_type(onnx::AttributeProto::FLOAT);
+    a->set_f(v);
+  }
+
+  void declare(onnx::ValueInfoProto* info, const std::string& name, const std::vector<int64_t>& shape) {
+    info->set_name(name);
+    auto* tensor = info->mutable_type()->mutable_tensor_type();
+    tensor->set_elem_type(onnx::TensorProto::FLOAT);
+    for (int64_t d : shape) tensor->mutable_shape()->add_dim()->set_dim_value(d);
+  }
+
+  // ---------------------------------------------------------------------------- inputs and outputs
+  bool normalize_inside() const { return options_.normalization == OnnxNormalization::kInside; }
+
+  // x -> the network's normalised input: (x - sub) / div [* 2 - 1], statistics shaped `dims`.
+  std::string normalize(const std::string& key, const std::string& x, const std::vector<int64_t>& dims, size_t n) {
+    const NormMode mode = config_.input_norm_mode(key);
+    if (!normalize_inside() || mode == NormMode::kIdentity) return x;
+    const std::vector<int64_t> shape = {static_cast<int64_t>(n)};
+    const float* sub = tensors_.f32(bn::norm_sub(key), shape);
+    const float* div = tensors_.f32(bn::norm_div(key), shape);
+    std::string y = op1("Sub", {x, constant_f32("norm_sub", dims, {sub, sub + n})}, "normalized");
+    y = op1("Div", {y, constant_f32("norm_div", dims, {div, div + n})}, "normalized");
+    if (mode == NormMode::kMinMax) {
+      y = op1("Mul", {y, scalar_f32("two", 2.0f)}, "normalized");
+      y = op1("Sub", {y, scalar_f32("one", 1.0f)}, "normalized");
+    }
+    return y;
+  }
+
+  void add_camera_input(size_t c) {
+    const CameraConfig& cam = config_.cameras[c];
+    declare(graph_->add_input(), cam.key, {1, 3, cam.height, cam.width});
+    const ValueId image = g_.find("cam" + std::to_string(c) + ".image");
+    values_[image] = {normalize(cam.key, cam.key, {1, 3, 1, 1}, 3), true, std::nullopt};
+  }
+
+  void add_vector_input(const std::string& key, const std::string& value, int n) {
+    declare(graph_->add_input(), key, {1, n});
+    values_[g_.find(value)] = {normalize(key, key, {1, n}, static_cast<size_t>(n)), false, std::nullopt};
+  }
+
+  void add_action_output() {
+    const int T = config_.chunk_size, A = config_.action_dim;
+    std::string y = float_of(g_.find("actions_normalized"));
+    if (normalize_inside() && config_.action_norm != NormMode::kIdentity) {
+      const std::vector<int64_t> shape = {A};
+      const size_t a = static_cast<size_t>(A);
+      const float* shift = tensors_.f32(bn::kUnnormShift, shape);
+      const float* scale = tensors_.f32(bn::kUnnormScale, shape);
+      const float* offset = tensors_.f32(bn::kUnnormOffset, shape);
+      y = op1("Add", {y, constant_f32("unnorm_shift", {1, A}, {shift, shift + a})}, "action_raw");
+      y = op1("Mul", {y, constant_f32("unnorm_scale", {1, A}, {scale, scale + a})}, "action_raw");
+      y = op1("Add", {y, constant_f32("unnorm_offset", {1, A}, {offset, offset + a})}, "action_raw");
+    }
+    node("Reshape", {y, constant_i64("shape", {1, T, A})}, "action");
+    declare(graph_->add_output(), "action", {1, T, A});
+  }
+
+  void add_feature_output(size_t c) {
+    const ValueId feats = g_.find("cam" + std::to_string(c) + ".img_feat_proj");
+    const auto it = features_nchw_.find(feats);
+    check(it != features_nchw_.end(), ErrorCode::kInternal, "camera " + std::to_string(c) + ": no backbone features");
+    const CameraConfig& cam = config_.cameras[c];
+    const std::string name = cam.key + ".features";
+    node("Identity", {it->second}, name);
+    declare(graph_->add_output(), name,
+            {1, config_.dim_model, config_.feature_height(cam), config_.feature_width(cam)});
+  }
+
+  // ---------------------------------------------------------------------------------- operands
+  const OnnxValue& value(ValueId id) {
+    const auto it = values_.find(id);
+    check(it != values_.end(), ErrorCode::kInternal, "ONNX export: value \"" + g_.value(id).name + "\" used before it is made");
+    return it->second;
+  }
+
+  std::string dequantize(const std::string& x, const kernels::QuantS8& q) {
+    return op1("DequantizeLinear", {x, scalar_f32("scale", q.scale), scalar_i8("zero_point", q.zero_point)}, "dq");
+  }
+  std::string quantize(const std::string& x, const kernels::QuantS8& q) {
+    return op1("QuantizeLinear", {x, scalar_f32("scale", q.scale), scalar_i8("zero_point", q.zero_point)}, "q");
+  }
+  // The value as a float ONNX tensor (dequantized when int8).
+  std::string float_of(ValueId id) {
+    const OnnxValue& v = value(id);
+    return v.int8 ? dequantize(v.name, *v.int8) : v.name;
+  }
+  // A float image value in NCHW.
+  std::string float_nchw(ValueId id) {
+    check(value(id).nchw, ErrorCode::kInternal, "ONNX export: \"" + g_.value(id).name + "\" is no image");
+    return float_of(id);
+  }
+
+  // A matrix operand as an ONNX tensor of [rows, cols] (a broadcast row stays [1, cols]).
+  std::string matrix(const MatrixRef& ref, int rows, int cols, const std::string& base) {
+    if (ref.value == graph::kNoValue) {
+      const size_t r = ref.ld == 0 ? 1 : static_cast<size_t>(rows), n = static_cast<size_t>(cols);
+      std::vector<float> data(r * n);
+      for (size_t i = 0; i < r; ++i) {
+        std::copy_n(ref.constant + ref.col_offset + i * ref.ld, n, data.begin() + static_cast<std::ptrdiff_t>(i * n));
+      }
+      return constant_f32(base, {static_cast<int64_t>(r), cols}, std::move(data));
+    }
+    std::string x = float_of(ref.value);
+    const graph::Value& v = g_.value(ref.value);
+    if (value(ref.value).nchw) x = tokens_of_nchw(x, v.shape);
+    if (ref.col_offset == 0 && static_cast<int64_t>(ref.ld) == cols && v.shape[0] == rows) return x;
+    const int64_t c0 = static_cast<int64_t>(ref.col_offset);
+    return op1("Slice", {x, constant_i64("starts", {0, c0}), constant_i64("ends", {rows, c0 + cols}),
+                         constant_i64("axes", {0, 1})}, base);
+  }
+
+  // [1, C, H, W] -> [H * W, C] (the engine's row-major NHWC tokens).
+  std::string tokens_of_nchw(const std::string& x, const std::vector<int64_t>& engine_shape) {
+    const int64_t h = engine_shape[0], w = engine_shape.size() == 3 ? engine_shape[1] : 1;
+    const int64_t c = engine_shape.back();
+    const std::string flat = op1("Reshape", {x, constant_i64("shape", {c, h * w})}, "flat");
+    onnx::NodeProto* t = node("Transpose", {flat}, fresh("tokens"));
+    attr_ints(t, "perm", {1, 0});
+    return t->output(0);
+  }
+
+  // --------------------------------------------------------------------------------- translation
+  void set(ValueId id, OnnxValue v) { values_[id] = std::move(v); }
+
+  void translate(const graph::Op& op) {
+    if (const auto* conv = dynamic_cast<const graph::Conv2dOp*>(&op)) return conv_f32(*conv);
+    if (const auto* conv = dynamic_cast<const graph::ConvS8Op*>(&op)) return conv_s8(*conv);
+    if (const auto* pool = dynamic_cast<const graph::MaxPoolOp*>(&op)) return maxpool(*pool);
+    if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) return linear(op, lin->params(), lin->weight(), nullptr, nullptr);
+    if (const auto* lin = dynamic_cast<const graph::LinearS8Op*>(&op)) {
+      return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale());
+    }
+    if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) return layernorm(*ln);
+    if (const auto* att = dynamic_cast<const graph::AttentionOp*>(&op)) return attention(*att);
+    if (const auto* cat = dynamic_cast<const graph::ConcatRowsOp*>(&op)) return concat(*cat);
+    if (dynamic_cast<const graph::GluOp*>(&op) != nullptr) return glu(op);
+    if (const auto* q = dynamic_cast<const graph::QuantizeOp*>(&op)) {
+      // A dynamic quantization (scale computed per run) has no QDQ form: the value stays float.
+      const OnnxValue& in = value(op.inputs[0]);
+      return set(op.outputs[0], q->dynamic() ? in : OnnxValue{quantize(in.name, q->quant()), in.nchw, q->quant()});
+    }
+    if (dynamic_cast<const graph::DequantizeOp*>(&op) != nullptr) {
+      const OnnxValue& in = value(op.inputs[0]);
+      return set(op.outputs[0], {float_of(op.inputs[0]), in.nchw, std::nullopt});
+    }
+    fail(ErrorCode::kUnimplemented, "ONNX export: no translation for op \"" + op.name + "\" (" + op.type() + ")");
+  }
+
+  // Conv weights OHWI -> OIHW.
+  static std::vector<size_t> ohwi_to_oihw(const kernels::Conv2dShape& s) {
+    const size_t O = static_cast<size_t>(s.out_c), H = static_cast<size_t>(s.kernel_h), W = static_cast<size_t>(s.kernel_w),
+                 I = static_cast<size_t>(s.in_c);
+    std::vector<size_t> from(O * H * W * I);
+    size_t k = 0;
+    for (size_t o = 0; o < O; ++o)
+      for (size_t i = 0; i < I; ++i)
+        for (size_t y = 0; y < H; ++y)
+          for (size_t x = 0; x < W; ++x) from[k++] = ((o * H + y) * W + x) * I + i;
+    return from;
+  }
+
+  // A Conv node over NCHW x; `weight` float OIHW; adds the residual and ReLU. Returns the float output.
+  std::string conv_node(const kernels::Conv2dShape& s, const std::string& x, const std::string& weight, const float* bias,
+                        const std::string& residual, bool relu, const std::string& base) {
+    const std::string b = constant_f32("bias", {s.out_c}, {bias, bias + s.out_c});
+    onnx::NodeProto* n = node("Conv", {x, weight, b}, fresh(base));
+    attr_ints(n, "kernel_shape", {s.kernel_h, s.kernel_w});
+    attr_ints(n, "strides", {s.stride, s.stride});
+    attr_ints(n, "pads", {s.pad, s.pad, s.pad, s.pad});
+    attr_ints(n, "dilations", {s.dilation, s.dilation});
+    std::string y = n->output(0);
+    if (!residual.empty()) y = op1("Add", {y, residual}, base);
+    if (relu) y = op1("Relu", {y}, base);
+    return y;
+  }
+
+  // A conv's output value: an image, or (the 1x1 projection) tokens, kept also as NCHW features.
+  void set_conv_output(ValueId out, const std::string& y, std::optional<kernels::QuantS8> q, int64_t out_h, int64_t out_w) {
+    const graph::Value& v = g_.value(out);
+    if (v.shape.size() == 3) return set(out, {y, true, q});
+    features_nchw_[out] = y;
+    // [h*w, D] in the engine: h and w from the conv's output shape.
+    set(out, {tokens_of_nchw(y, {out_h, out_w, v.shape[1]}), false, q});
+  }
+
+  void conv_f32(const graph::Conv2dOp& op) {
+    const kernels::Conv2dShape& s = op.shape();
+    const std::vector<size_t> from = ohwi_to_oihw(s);
+    std::vector<float> w(from.size());
+    for (size_t i = 0; i < from.size(); ++i) w[i] = op.weight()[from[i]];
+    const std::string weight = constant_f32("weight", {s.out_c, s.in_c, s.kernel_h, s.kernel_w}, std::move(w));
+    const std::string residual = op.residual() == graph::kNoValue ? "" : float_nchw(op.residual());
+    const std::string y = conv_node(s, float_nchw(op.inputs[0]), weight, op.bias(), residual, op.relu(), "conv");
+    set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
+  }
+
+  // DequantizeLinear of int8 weights [rows, ...] with one scale per row (axis 0).
+  std::string dequantized_weight(const int8_t* data, const std::vector<int64_t>& dims, const float* scales,
+                                 const std::vector<size_t>& order) {
+    size_t n = 1;
+    for (int64_t d : dims) n *= static_cast<size_t>(d);
+    std::vector<int8_t> w(n);
+    for (size_t i = 0; i < n; ++i) w[i] = data[order.empty() ? i : order[i]];
+    const size_t rows = static_cast<size_t>(dims[0]);
+    const std::vector<int8_t> zeros(rows, 0);
+    const std::string q = constant_i8("weight_s8", dims, w.data(), n);
+    const std::string scale = constant_f32("weight_scale", {dims[0]}, {scales, scales + rows});
+    const std::string zp = constant_i8("weight_zero_point", {dims[0]}, zeros.data(), rows);
+    onnx::NodeProto* dq = node("DequantizeLinear", {q, scale, zp}, fresh("weight"));
+    attr_int(dq, "axis", 0);
+    return dq->output(0);
+  }
+
+  void conv_s8(const graph::ConvS8Op& op) {
+    const graph::ConvS8Spec& spec = op.spec();
+    const kernels::Conv2dShape& s = spec.shape;
+    const std::string weight = dequantized_weight(spec.weight, {s.out_c, s.in_c, s.kernel_h, s.kernel_w}, spec.w_scale,
+                                                  ohwi_to_oihw(s));
+    // Static input parameters: the input is an int8 value; dynamic ones: it stayed float (translate()).
+    const std::string x = float_nchw(op.inputs[0]);
+    std::string residual;
+    if (spec.residual != graph::kNoValue) residual = float_nchw(spec.residual);
+    std::string y = conv_node(s, x, weight, spec.bias, residual, spec.relu, "conv");
+    std::optional<kernels::QuantS8> q;
+    if (spec.s8_out) {
+      y = quantize(y, spec.output_q);
+      q = spec.output_q;
+    }
+    set_conv_output(op.outputs[0], y, q, s.out_h, s.out_w);
+  }
+
+  void maxpool(const graph::MaxPoolOp& op) {
+    const OnnxValue& in = value(op.inputs[0]);
+    onnx::NodeProto* n = node("MaxPool", {float_nchw(op.inputs[0])}, fresh("maxpool"));
+    attr_ints(n, "kernel_shape", {op.kernel(), op.kernel()});
+    attr_ints(n, "strides", {op.stride(), op.stride()});
+    attr_ints(n, "pads", {op.pad(), op.pad(), op.pad(), op.pad()});
+    std::string y = n->output(0);
+    // Max commutes with quantization: the output keeps the input's parameters.
+    if (in.int8) y = quantize(y, *in.int8);
+    set(op.outputs[0], {y, true, in.int8});
+  }
+
+  // y = act(x W^T + bias [+ residual]), W float, or int8 with per-row scales (dequantized in the graph).
+  void linear(const graph::Op& op, const graph::LinearParams& p, const float* w_f32, const int8_t* w_s8, const float* w_scale) {
+    const int rows = p.rows, in = p.in, out = p.out;
+    const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
+    const size_t w_size = static_cast<size_t>(out) * static_cast<size_t>(in);
+    std::string weight;
+    std::string y;
+    const bool image_input = x_ref.value != graph::kNoValue && value(x_ref.value).nchw;
+    if (image_input) {
+      // The 1x1 input projection over a feature map: a Conv, so that the backbone stays NCHW.
+      const graph::Value& fm = g_.value(x_ref.value);
+      const kernels::Conv2dShape s = kernels::Conv2dShape::square(static_cast<int>(fm.shape[0]), static_cast<int>(fm.shape[1]),
+                                                                  in, out, 1, 1, 0);
+      weight = w_s8 ? dequantized_weight(w_s8, {out, in, 1, 1}, w_scale, {})
+                    : constant_f32("weight", {out, in, 1, 1}, {w_f32, w_f32 + w_size});
+      check(bias.value == graph::kNoValue && bias.ld == 0, ErrorCode::kInternal, "ONNX export: projection bias is no vector");
+      y = conv_node(s, float_nchw(x_ref.value), weight, bias.constant + bias.col_offset, "", false, "proj");
+      set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
+      return;
+    }
+    weight = w_s8 ? dequantized_weight(w_s8, {out, in}, w_scale, {})
+                  : constant_f32("weight", {out, in}, {w_f32, w_f32 + w_size});
+    onnx::NodeProto* gemm = node("Gemm", {matrix(x_ref, rows, in, "x"), weight, matrix(bias, rows, out, "bias")}, fresh("linear"));
+    attr_int(gemm, "transB", 1);
+    y = gemm->output(0);
+    if (residual.value != graph::kNoValue || residual.constant != nullptr) {
+      y = op1("Add", {y, matrix(residual, rows, out, "residual")}, "linear");
+    }
+    if (p.epilogue == graph::Epilogue::kRelu) y = op1("Relu", {y}, "relu");
+    if (p.epilogue == graph::Epilogue::kGelu) y = gelu(y);
+    set(op.outputs[0], {y, false, std::nullopt});
+  }
+
+  // Exact GELU (opset 17 has no Gelu): 0.5 x (1 + erf(x / sqrt 2)).
+  std::string gelu(const std::string& x) {
+    const std::string e = op1("Erf", {op1("Mul", {x, scalar_f32("inv_sqrt2", static_cast<float>(1.0 / std::numbers::sqrt2))}, "gelu")},
+                              "gelu");
+    const std::string one_plus = op1("Add", {e, scalar_f32("one", 1.0f)}, "gelu");
+    return op1("Mul", {op1("Mul", {x, one_plus}, "gelu"), scalar_f32("half", 0.5f)}, "gelu");
+  }
+
+  void glu(const graph::Op& op) {
+    const graph::Value& in = g_.value(op.inputs[0]);
+    const int64_t half = in.shape[1] / 2;
+    const std::string x = float_of(op.inputs[0]);
+    const std::string a = op1("Slice", {x, constant_i64("starts", {0}), constant_i64("ends", {half}), constant_i64("axes", {1})}, "glu_a");
+    const std::string b = op1("Slice", {x, constant_i64("starts", {half}), constant_i64("ends", {2 * half}), constant_i64("axes", {1})}, "glu_b");
+    set(op.outputs[0], {op1("Mul", {a, op1("Sigmoid", {b}, "glu")}, "glu"), false, std::nullopt});
+  }
+
+  void layernorm(const graph::LayerNormOp& op) {
+    const int64_t D = g_.value(op.outputs[0]).shape[1];
+    const size_t d = static_cast<size_t>(D);
+    onnx::NodeProto* n = node("LayerNormalization",
+                              {float_of(op.inputs[0]), constant_f32("gamma", {D}, {op.gamma(), op.gamma() + d}),
+                               constant_f32("beta", {D}, {op.beta(), op.beta() + d})},
+                              fresh("layernorm"));
+    attr_int(n, "axis", -1);
+    attr_float(n, "epsilon", graph::kLayerNormEps);
+    set(op.outputs[0], {n->output(0), false, std::nullopt});
+  }
+
+  // Multi-head attention: heads split by Reshape/Transpose, softmax(q k^T / sqrt(hd)) v.
+  void attention(const graph::AttentionOp& op) {
+    const int D = config_.dim_model, H = op.heads(), hd = D / H;
+    const auto heads_of = [&](const MatrixRef& ref, int rows, const std::vector<int64_t>& perm, const std::string& base) {
+      const std::string m = matrix(ref, rows, D, base);
+      const std::string r = op1("Reshape", {m, constant_i64("shape", {rows, H, hd})}, base);
+      onnx::NodeProto* t = node("Transpose", {r}, fresh(base));
+      attr_ints(t, "perm", perm);
+      return t->output(0);
+    };
+    const std::string q = heads_of(op.q(), op.nq(), {1, 0, 2}, "q");   // [H, nq, hd]
+    const std::string k = heads_of(op.k(), op.nk(), {1, 2, 0}, "k");   // [H, hd, nk]
+    const std::string v = heads_of(op.v(), op.nk(), {1, 0, 2}, "v");   // [H, nk, hd]
+    const std::string scores = op1("Mul", {op1("MatMul", {q, k}, "scores"),
+                                           scalar_f32("scale", 1.0f / std::sqrt(static_cast<float>(hd)))}, "scores");
+    onnx::NodeProto* sm = node("Softmax", {scores}, fresh("probs"));
+    attr_int(sm, "axis", -1);
+    const std::string ctx = op1("MatMul", {sm->output(0), v}, "context");  // [H, nq, hd]
+    onnx::NodeProto* t = node("Transpose", {ctx}, fresh("context"));
+    attr_ints(t, "perm", {1, 0, 2});
+    set(op.outputs[0], {op1("Reshape", {t->output(0), constant_i64("shape", {op.nq(), D})}, "attention"), false, std::nullopt});
+  }
+
+  void concat(const graph::ConcatRowsOp& op) {
+    const int cols = static_cast<int>(g_.value(op.outputs[0]).shape[1]);
+    std::vector<std::string> parts;
+    for (const auto& p : op.parts()) parts.push_back(matrix(p.source, p.rows, cols, "token"));
+    onnx::NodeProto* n = node("Concat", parts, fresh("tokens"));
+    attr_int(n, "axis", 0);
+    set(op.outputs[0], {n->output(0), false, std::nullopt});
+  }
+
+ private:
+  graph::Graph& g_;
+  const ModelConfig& config_;
+  BlobTensors& tensors_;
+  OnnxExportOptions options_;
+  onnx::ModelProto model_;
+  onnx::GraphProto* graph_ = nullptr;
+  std::map<ValueId, OnnxValue> values_;
+  std::map<ValueId, std::string> features_nchw_;  // projection outputs as [1, D, h, w]
+  int counter_ = 0;
+};
+
+std::vector<OnnxTensorInfo> tensor_infos(const google::protobuf::RepeatedPtrField<onnx::ValueInfoProto>& list) {
+  std::vector<OnnxTensorInfo> infos;
+  for (const auto& v : list) {
+    OnnxTensorInfo info{v.name(), {}};
+    for (const auto& d : v.type().tensor_type().shape().dim()) info.shape.push_back(d.dim_value());
+    infos.push_back(std::move(info));
+  }
+  return infos;
+}
+
+// onnx::checker (full) and ONNX's strict shape inference, which must agree with the declared outputs.
+void check_onnx_model(const onnx::ModelProto& model) {
+  try {
+    onnx::checker::check_model(model);
+    onnx::ModelProto inferred = model;
+    onnx::shape_inference::InferShapes(inferred, onnx::OpSchemaRegistry::Instance(),
+                                       onnx::ShapeInferenceOptions(/*check_type=*/true, /*strict_mode=*/1,
+                                                                   /*data_prop=*/true));
+    onnx::checker::check_model(inferred);
+  } catch (const std::exception& e) {
+    fail(ErrorCode::kInternal, std::string("the exported ONNX model fails ONNX's checker: ") + e.what());
+  }
+}
+
+}  // namespace
+
+StatusOr<OnnxPart> parse_onnx_part(std::string_view name) {
+  if (name == "full") return OnnxPart::kFull;
+  if (name == "backbone") return OnnxPart::kBackbone;
+  return Status(StatusCode::kInvalidArgument, "unknown ONNX part \"" + std::string(name) + "\" (full or backbone)");
+}
+
+StatusOr<OnnxNormalization> parse_onnx_normalization(std::string_view name) {
+  if (name == "in") return OnnxNormalization::kInside;
+  if (name == "out") return OnnxNormalization::kOutside;
+  return Status(StatusCode::kInvalidArgument, "unknown ONNX normalization \"" + std::string(name) +
+                "\" (in: statistics inside the graph, out: the caller normalises)");
+}
+
+StatusOr<OnnxExportSummary> export_onnx(const std::string& blob_path, const std::string& onnx_path,
+                                        const OnnxExportOptions& options) {
+  OnnxExportSummary summary;
+  Status s = guarded([&] {
+    const ActbFile blob = ActbFile::open(blob_path, /*verify_checksum=*/true, FileMapping::Mode::kMap);
+    BlobTensors tensors(blob);
+    const ModelConfig config = blob_model_config(blob);
+    // The reference kernels: the network is only read (its rebuilt bias tables are computed with them).
+    const kernels::KernelConfigChoice kernels = kernels::kernel_config("ref");
+    check(kernels.config.has_value(), ErrorCode::kInternal, kernels.error);
+    graph::ActNetwork network(config, tensors, *kernels.config);
+    summary.precision = precision_name(config.precision);
+    if (config.precision == Precision::kInt8) summary.precision += " " + blob.config()["quantization"].value("mode", "?");
+
+    const onnx::ModelProto model = OnnxBuilder(network, tensors, options).build();
+    check_onnx_model(model);
+    std::string bytes;
+    if (!model.SerializeToString(&bytes)) fail(ErrorCode::kInternal, "the ONNX model cannot be serialised (over 2 GB?)");
+    detail::AtomicFileWriter out(onnx_path);
+    out.write(bytes);
+    out.commit();
+    summary.inputs = tensor_infos(model.graph().input());
+    summary.outputs = tensor_infos(model.graph().output());
+    summary.nodes = static_cast<size_t>(model.graph().node_size());
+    summary.bytes = bytes.size();
+  });
+  if (!s.ok()) return s;
+  return summary;
+}
+
+}  // namespace act

@@ -117,8 +117,15 @@ class LayerNormOp : public Op {
   const float* beta_;
 };
 
+/// The operands of multi-head attention, the same for the float and the int8 op (and what an
+/// exporter reads): q [nq, dim], k and v [nk, dim] as matrix references (usually column slices of
+/// one fused projection), `heads` heads of dim / heads columns.
+struct AttentionParams {
+  int nq, nk, dim, heads;
+  MatrixRef q, k, v;
+};
+
 /// Multi-head scaled dot-product attention, no mask: out[:, head] = softmax(q_h k_h^T / sqrt(d)) v_h.
-/// q [nq, D], k and v [nk, D] as matrix references (usually column slices of one fused projection).
 class AttentionOp : public Op {
  public:
   AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k, MatrixRef v, ValueId output);
@@ -129,12 +136,7 @@ class AttentionOp : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
-  int nq() const { return nq_; }
-  int nk() const { return nk_; }
-  int heads() const { return heads_; }
-  const MatrixRef& q() const { return q_; }
-  const MatrixRef& k() const { return k_; }
-  const MatrixRef& v() const { return v_; }
+  AttentionParams params() const { return {nq_, nk_, dim_, heads_, q_, k_, v_}; }
 
  private:
   int nq_, nk_, dim_, heads_;

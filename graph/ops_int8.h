@@ -153,6 +153,7 @@ class AttentionS8Op : public Op {
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override { return 2.0 * nq_ * nk_ * dim_; }
+  AttentionParams params() const { return {nq_, nk_, dim_, heads_, q_, k_, v_}; }
 
  private:
   /// Where each buffer of one task lives in its thread's scratch (byte offsets, 64-byte aligned).

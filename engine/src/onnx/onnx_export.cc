@@ -270,7 +270,10 @@ class OnnxBuilder {
       return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale());
     }
     if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) return layernorm(*ln);
-    if (const auto* att = dynamic_cast<const graph::AttentionOp*>(&op)) return attention(*att);
+    if (const auto* att = dynamic_cast<const graph::AttentionOp*>(&op)) return attention(att->params(), op.outputs[0]);
+    // Int8 attention quantizes its keys and values at every run, which has no fixed QDQ form: the
+    // export computes it in float, as the QDQ model's other run-time-quantized activations.
+    if (const auto* att = dynamic_cast<const graph::AttentionS8Op*>(&op)) return attention(att->params(), op.outputs[0]);
     if (const auto* cat = dynamic_cast<const graph::ConcatRowsOp*>(&op)) return concat(*cat);
     if (dynamic_cast<const graph::GluOp*>(&op) != nullptr) return glu(op);
     if (const auto* q = dynamic_cast<const graph::QuantizeOp*>(&op)) {
@@ -443,8 +446,8 @@ class OnnxBuilder {
   }
 
   // Multi-head attention: heads split by Reshape/Transpose, softmax(q k^T / sqrt(hd)) v.
-  void attention(const graph::AttentionOp& op) {
-    const int D = config_.dim_model, H = op.heads(), hd = D / H;
+  void attention(const graph::AttentionParams& op, graph::ValueId output) {
+    const int D = config_.dim_model, H = op.heads, hd = D / H;
     const auto heads_of = [&](const MatrixRef& ref, int rows, const std::vector<int64_t>& perm, const std::string& base) {
       const std::string m = matrix(ref, rows, D, base);
       const std::string r = op1("Reshape", {m, constant_i64("shape", {rows, H, hd})}, base);
@@ -452,9 +455,9 @@ class OnnxBuilder {
       attr_ints(t, "perm", perm);
       return t->output(0);
     };
-    const std::string q = heads_of(op.q(), op.nq(), {1, 0, 2}, "q");   // [H, nq, hd]
-    const std::string k = heads_of(op.k(), op.nk(), {1, 2, 0}, "k");   // [H, hd, nk]
-    const std::string v = heads_of(op.v(), op.nk(), {1, 0, 2}, "v");   // [H, nk, hd]
+    const std::string q = heads_of(op.q, op.nq, {1, 0, 2}, "q");   // [H, nq, hd]
+    const std::string k = heads_of(op.k, op.nk, {1, 2, 0}, "k");   // [H, hd, nk]
+    const std::string v = heads_of(op.v, op.nk, {1, 0, 2}, "v");   // [H, nk, hd]
     const std::string scores = op1("Mul", {op1("MatMul", {q, k}, "scores"),
                                            scalar_f32("scale", 1.0f / std::sqrt(static_cast<float>(hd)))}, "scores");
     onnx::NodeProto* sm = node("Softmax", {scores}, fresh("probs"));
@@ -462,7 +465,7 @@ class OnnxBuilder {
     const std::string ctx = op1("MatMul", {sm->output(0), v}, "context");  // [H, nq, hd]
     onnx::NodeProto* t = node("Transpose", {ctx}, fresh("context"));
     attr_ints(t, "perm", {1, 0, 2});
-    set(op.outputs[0], {op1("Reshape", {t->output(0), constant_i64("shape", {op.nq(), D})}, "attention"), false, std::nullopt});
+    set(output, {op1("Reshape", {t->output(0), constant_i64("shape", {op.nq, D})}, "attention"), false, std::nullopt});
   }
 
   void concat(const graph::ConcatRowsOp& op) {

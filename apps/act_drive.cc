@@ -20,6 +20,7 @@
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_kind.h"
 
 namespace {
 
@@ -208,6 +209,24 @@ int drive(const Options& opt) {
   return summary.exit_code;
 }
 
+// A model, checkpoint or recording given as the camera says what it is instead of "cannot open camera".
+void check_camera_kind(const std::string& camera) {
+  switch (const act::FileKind kind = act::file_kind(camera)) {
+    case act::FileKind::kRecording:
+      act::fail(act::ErrorCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera") +
+                "; to replay it as a camera: --camera " + camera + "/frames/%06d.png");
+    case act::FileKind::kLeRobotCheckpoint:
+    case act::FileKind::kTrainingCheckpoint:
+    case act::FileKind::kLeRobotDataset:
+    case act::FileKind::kActb:
+    case act::FileKind::kPyTorchZip:
+    case act::FileKind::kPyTorchLegacy:
+    case act::FileKind::kSafetensors:
+      act::fail(act::ErrorCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera"));
+    default: break;
+  }
+}
+
 // act_drive from the parsed options to its exit code: calibration, or driving.
 int run(const Options& opt) {
   try {
@@ -216,6 +235,9 @@ int run(const Options& opt) {
     }
     if (opt.model.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--model is required");
     if (opt.camera.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--camera is required");
+    // Both checked before the camera opens, so the wrong kind of file is the first thing said.
+    if (const std::string hint = act::not_a_blob_hint(opt.model); !hint.empty()) act::fail(act::ErrorCode::kInvalidArgument, hint);
+    check_camera_kind(opt.camera);
     if (opt.serial.empty() && !opt.dry_run) {
       act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
     }

@@ -15,6 +15,7 @@
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_kind.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -59,6 +60,15 @@ class Loader {
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
     if (!fs::exists(p)) fail(ErrorCode::kNotFound, "calibration source not found: " + source);
+    switch (const FileKind kind = file_kind(source)) {
+      case FileKind::kLeRobotCheckpoint:
+      case FileKind::kTrainingCheckpoint:
+      case FileKind::kActb:
+      case FileKind::kPyTorchZip:
+      case FileKind::kPyTorchLegacy:
+        fail(ErrorCode::kInvalidArgument, wrong_kind_message(source, kind, "calibration frames"));
+      default: break;
+    }
     if (fs::is_directory(p)) {
       if (fs::exists(p / "meta" / "info.json") && fs::is_directory(p / "videos")) return add_lerobot_dataset(p, max_frames);
       if (fs::exists(p / "log.jsonl")) return add_recording(p, max_frames);

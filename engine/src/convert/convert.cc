@@ -7,6 +7,7 @@
 #include "engine/src/convert/convert_impl.h"
 #include "engine/src/convert/int8_converter.h"
 #include "engine/src/engine_impl.h"
+#include "weights/blob/file_kind.h"
 #include "weights/import/synthetic_model.h"
 
 namespace act {
@@ -134,17 +135,23 @@ StatusOr<CheckpointLocation> locate_checkpoint(const std::string& path) {
       const std::string inner = (given / "pretrained_model").string();
       return CheckpointLocation{inner, true, "the policy of this training checkpoint is in " + inner};
     }
+    if (const FileKind kind = file_kind(path); kind == FileKind::kRecording || kind == FileKind::kLeRobotDataset) {
+      return Status(StatusCode::kInvalidArgument, wrong_kind_message(path, kind, "a checkpoint"));
+    }
     return Status(StatusCode::kNotFound, path + " is a folder but not a LeRobot checkpoint: it has no config.json "
                   "(nor pretrained_model/config.json)");
   }
-  if (given.extension() == ".actb") {
-    return Status(StatusCode::kInvalidArgument, path + " is an .actb blob, already converted: run it with act_bench, "
-                  "act_eval or act_drive (or Engine::open)");
-  }
   // A checkpoint's own weights file given directly: the folder around it is the checkpoint.
-  if (given.extension() == ".safetensors" && given.has_parent_path() && has_config(given.parent_path())) {
+  if (given.filename() == "model.safetensors" && given.has_parent_path() && has_config(given.parent_path())) {
     const std::string folder = given.parent_path().string();
     return CheckpointLocation{folder, true, path + " is a LeRobot checkpoint's weights: converting its folder " + folder};
+  }
+  // Anything else but a PyTorch file says what it is (an unknown kind may still be a pickle: the reader
+  // decides); a damaged blob is still known by its name.
+  const FileKind kind = given.extension() == ".actb" ? FileKind::kActb : file_kind(path);
+  if (kind != FileKind::kPyTorchZip && kind != FileKind::kPyTorchLegacy && kind != FileKind::kOther) {
+    return Status(StatusCode::kInvalidArgument,
+                  wrong_kind_message(path, kind, "a checkpoint (a LeRobot checkpoint folder or a PyTorch .pth file)"));
   }
   return CheckpointLocation{path, false, ""};
 }

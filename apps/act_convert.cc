@@ -24,6 +24,7 @@ struct Options {
   std::string precision = "fp32", mode = "static", method = "mse";
   bool quiet = false, explain = false;
   act::PthOptions pth;
+  act::DeploymentOptions deployment;
   std::vector<std::string> calib_sources;
   act::Int8Options int8;
   double target_mse = 0, max_mse = 0, percentile = 99.99;
@@ -41,6 +42,7 @@ void add_options(CLI::App& app, Options& o) {
   app.add_flag("--explain", o.explain, "print every config value and where it comes from (for a .pth: which tensor, file "
                "or flag), and what cannot be known; converts too if -o or --package is given");
   act::add_pytorch_options(app, o.pth);
+  act::add_deployment_options(app, o.deployment);
   app.add_option("--precision", o.precision, "weight precision of the blob (default fp32)")->check(CLI::IsMember({"fp32", "int8"}));
   auto* int8_group = app.add_option_group("INT8", "with --precision int8");
   int8_group->add_option("--mode", o.mode,
@@ -104,14 +106,18 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   if (!o.quiet) std::cerr << "reading " << location->path << " ...\n";
   if (!location->note.empty()) std::cerr << "act_convert: " << location->note << "\n";
   if (location->lerobot_folder) {
-    if (o.explain) std::cout << "checkpoint   " << location->path << ": a LeRobot checkpoint folder; every value comes from its config.json\n";
+    if (o.explain) {
+      std::cout << "checkpoint   " << location->path << ": a LeRobot checkpoint folder; every value comes from its config.json"
+                << (o.deployment.n_action_steps || o.deployment.temporal_ensemble_coeff ? " but the deployment options given" : "")
+                << "\n";
+    }
     exit_code = 0;
     if (o.output.empty()) return nullptr;
-    auto model = act::import_checkpoint(location->path);
+    auto model = act::import_checkpoint(location->path, {}, o.deployment);
     act::throw_if_failed(model.status());
     return std::move(model).value();
   }
-  auto plan = act::PthPlan::read(location->path, o.pth);
+  auto plan = act::PthPlan::read(location->path, o.pth, o.deployment);
   act::throw_if_failed(plan.status());
   if (o.explain) act::print_explanation(std::cout, (*plan)->explanation());
   exit_code = (*plan)->explanation().missing.empty() ? 0 : 1;

@@ -84,6 +84,31 @@ TEST(ConvertApi, LocatesLeRobotsTrainingLayouts) {
   EXPECT_NE(blob.status().message().find("already converted"), std::string::npos) << blob.status().message();
 }
 
+TEST(ConvertApi, DeploymentOptionsReplaceTheFoldersAndReachTheBlob) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string blob = test::scratch_dir() + "/ensemble.actb";
+  auto model = import_checkpoint(fixture, {}, {.n_action_steps = 1, .temporal_ensemble_coeff = 0.01});
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  ASSERT_TRUE((*model)->write_fp32(blob).ok());
+  auto engine = Engine::open(blob);
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  EXPECT_EQ((*engine)->model_info().n_action_steps, 1);
+  EXPECT_TRUE((*engine)->model_info().temporal_ensembling);
+  EXPECT_DOUBLE_EQ((*engine)->model_info().temporal_ensemble_coeff, 0.01);
+  // "none" turns a checkpoint's ensembling off again.
+  DeploymentOptions off;
+  off.temporal_ensemble_coeff.emplace(std::nullopt);
+  auto plain = import_checkpoint(fixture, {}, off);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE((*plain)->summary().model.temporal_ensembling);
+  EXPECT_EQ((*plain)->summary().model.n_action_steps, 10);
+
+  const auto refused = import_checkpoint(fixture, {}, {.n_action_steps = std::nullopt, .temporal_ensemble_coeff = 0.01});
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("needs n_action_steps == 1"), std::string::npos) << refused.status().message();
+}
+
 TEST(ConvertApi, PthOptionsOnAFolderAreRefused) {
   ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
   PthOptions pth;

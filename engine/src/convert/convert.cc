@@ -14,12 +14,13 @@ namespace act {
 
 namespace {
 
-ConfigSources config_sources(const PthOptions& o) {
+ConfigSources config_sources(const PthOptions& o, const DeploymentOptions& deployment) {
   ConfigSources s;
   s.config_path = o.config_path;
   s.stats_paths = o.stats_paths;
   s.image_size = o.image_size;
-  s.n_action_steps = o.n_action_steps;
+  s.n_action_steps = deployment.n_action_steps;
+  s.temporal_ensemble_coeff = deployment.temporal_ensemble_coeff;
   s.n_heads = o.n_heads;
   s.activation = o.activation;
   s.cameras = o.cameras;
@@ -30,8 +31,19 @@ ConfigSources config_sources(const PthOptions& o) {
 }
 
 bool any_pth_option(const PthOptions& o) {
-  return !o.config_path.empty() || !o.stats_paths.empty() || o.image_size || o.n_action_steps || o.n_heads || o.activation ||
+  return !o.config_path.empty() || !o.stats_paths.empty() || o.image_size || o.n_heads || o.activation ||
          !o.cameras.empty() || o.lerobot_defaults || o.no_normalization || !o.state_dict_key.empty();
+}
+
+// The folder's config.json with the deployment choices replaced, checked again as a whole.
+void apply_deployment(ModelConfig& config, const DeploymentOptions& deployment, const std::string& config_path) {
+  if (deployment.n_action_steps) config.n_action_steps = *deployment.n_action_steps;
+  if (deployment.temporal_ensemble_coeff) config.temporal_ensemble_coeff = *deployment.temporal_ensemble_coeff;
+  if (const std::string problem = ModelConfig::deployment_problem(config.n_action_steps, config.temporal_ensemble_coeff,
+                                                                 config.chunk_size);
+      !problem.empty()) {
+    fail(ErrorCode::kInvalidArgument, "deployment settings (" + config_path + " with the overrides given): " + problem);
+  }
 }
 
 PthExplanation explain(const PyTorchConversion& plan) {
@@ -108,11 +120,12 @@ size_t calibration_frames_wanted(const Int8Options& options) {
 PthPlan::PthPlan(std::unique_ptr<Impl> impl) : impl_(std::move(impl)), explanation_(explain(impl_->plan)) {}
 PthPlan::~PthPlan() = default;
 
-StatusOr<std::unique_ptr<PthPlan>> PthPlan::read(const std::string& pth_path, const PthOptions& options) {
+StatusOr<std::unique_ptr<PthPlan>> PthPlan::read(const std::string& pth_path, const PthOptions& options,
+                                                 const DeploymentOptions& deployment) {
   std::unique_ptr<PthPlan> plan;
   const Status s = guarded([&] {
     auto impl = std::make_unique<Impl>();
-    impl->plan = plan_pytorch_conversion(pth_path, config_sources(options));
+    impl->plan = plan_pytorch_conversion(pth_path, config_sources(options, deployment));
     plan.reset(new PthPlan(std::move(impl)));
   });
   if (!s.ok()) return s;
@@ -156,7 +169,8 @@ StatusOr<CheckpointLocation> locate_checkpoint(const std::string& path) {
   return CheckpointLocation{path, false, ""};
 }
 
-StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& given, const PthOptions& pth) {
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& given, const PthOptions& pth,
+                                                                const DeploymentOptions& deployment) {
   const StatusOr<CheckpointLocation> location = locate_checkpoint(given);
   if (!location.ok()) return location.status();
   const std::string& path = location->path;
@@ -165,7 +179,7 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::strin
                   "): its config.json and statistics are in the folder");
   }
   if (!location->lerobot_folder) {
-    StatusOr<std::unique_ptr<PthPlan>> plan = PthPlan::read(path, pth);
+    StatusOr<std::unique_ptr<PthPlan>> plan = PthPlan::read(path, pth, deployment);
     if (!plan.ok()) return plan.status();
     return import_checkpoint(**plan);
   }
@@ -173,6 +187,7 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::strin
   const Status s = guarded([&] {
     auto impl = std::make_unique<ImportedCheckpoint::Impl>();
     impl->model = import_lerobot_checkpoint(path);
+    apply_deployment(impl->model.config, deployment, path + "/config.json");
     out.reset(new ImportedCheckpoint(std::move(impl)));
     out->summary_ = import_summary(out->impl_->model, out->impl_->model.layout + " LeRobot layout");
   });

@@ -22,6 +22,7 @@
 #include "apps/bench_support.h"
 #include "apps/diff_stats.h"
 #include "apps/observation_file.h"
+#include "apps/progress.h"
 #include "apps/status_error.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
@@ -295,7 +296,9 @@ class Benchmark {
       if (other_) infer(*other_, i, other_chunk);
     }
 
-    const bool progress = ::isatty(STDERR_FILENO);
+    act::ProgressLine progress(stderr, "act_bench", act::ProgressLine::stderr_is_terminal());
+    const size_t runs = static_cast<size_t>(opt_.num_runs);
+    progress.update("timed runs", 0, runs, "runs");
     const auto bench_start = Clock::now();
     for (int i = 0; i < opt_.num_runs; ++i) {
       infer(*engine_, i, chunk);
@@ -305,10 +308,15 @@ class Benchmark {
         timed_.other_runs.push_back(other_->last_timings());
         for (size_t k = 0; k < chunk.size(); ++k) timed_.action_diff.add(chunk[k], other_chunk[k]);
       }
-      if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt_.num_runs, timed_.runs.back().total_ms);
-      if (ms_since(bench_start) > opt_.max_secs * 1e3) break;
+      progress.update("timed runs", timed_.runs.size(), runs, "runs");
+      if (ms_since(bench_start) > opt_.max_secs * 1e3) {
+        char stopped[64];
+        std::snprintf(stopped, sizeof stopped, "stopped after --max_secs %g s", opt_.max_secs);
+        progress.message(stopped);
+        break;
+      }
     }
-    if (progress) std::fprintf(stderr, "\r%40s\r", "");
+    progress.finish();
     timed_.bench_ms = ms_since(bench_start);
   }
 

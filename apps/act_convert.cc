@@ -12,6 +12,7 @@
 #include "actengine/convert.h"
 #include "apps/convert/calib_frames.h"
 #include "apps/deploy_package.h"
+#include "apps/progress.h"
 #include "apps/pytorch_options.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
@@ -95,7 +96,6 @@ void check_options(const CLI::App& app, Options& o) {
   if (int8.mode == act::Int8Mode::kMixed && !int8.target_mse) {
     act::fail(act::ErrorCode::kInvalidArgument, "--mode mixed needs --target-mse (held-out MSE in normalised units)");
   }
-  if (!o.quiet) int8.progress = [](const std::string& line) { std::cerr << "act_convert: " << line << "\n"; };
 }
 
 // Imports the checkpoint, printing the --explain report first when asked. Null when only the
@@ -134,16 +134,32 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
     act::throw_if_failed(bytes.status());
     return *bytes;
   }
+  std::optional<act::ProgressLine> progress;
+  act::Int8Options int8 = o.int8;
+  if (!o.quiet) {
+    progress.emplace(stderr, "act_convert", act::ProgressLine::stderr_is_terminal());
+    int8.progress = [&progress](const act::ConversionProgress& p) {
+      if (p.total == 0) {
+        progress->message(p.task);
+      } else {
+        progress->update(p.task, p.done, p.total, p.unit);
+      }
+    };
+  }
   act::CalibrationSet frames;
   if (!o.calib_sources.empty()) {
-    if (!o.quiet) std::cerr << "act_convert: reading calibration frames from " << o.calib_sources.size() << " source(s) ...\n";
-    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(o.int8));
+    if (progress) progress->message("reading calibration frames from " + std::to_string(o.calib_sources.size()) + " source(s) ...");
+    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(int8));
+    if (progress) {
+      for (const auto& note : frames.notes) progress->message(note.rfind("warning: ", 0) == 0 ? note : "note: " + note);
+    }
   }
   // The report file is created (unnamed until written) before the conversion, so a folder that does
   // not exist fails at once instead of after the blob was written.
   std::optional<act::detail::AtomicFileWriter> report_file;
   if (!o.report_path.empty()) report_file.emplace(o.report_path);
-  auto report = model.write_int8(o.output, frames, o.int8);
+  auto report = model.write_int8(o.output, frames, int8);
+  if (progress) progress->finish();
   if (!report.ok() && report.status().code() == act::StatusCode::kFailedPrecondition && o.int8.max_mse) {
     std::cerr << "act_convert: --max-mse " << *o.int8.max_mse << " missed: try --mode mixed --target-mse "
               << *o.int8.max_mse << ", more calibration frames, or another --calib-method.\n";

@@ -360,6 +360,9 @@ class Benchmark {
                 static_cast<double>(blob_file_->file_size()) / 1e6, engine_->threads(), info.kernels.c_str());
     if (!builtin_.int8_note.empty()) std::printf("int8         %s\n", builtin_.int8_note.c_str());
     std::printf("machine      %s\n", machine_.one_line().c_str());
+    if (!machine_.emulation.empty()) {
+      std::printf("EMULATED     every time below is the emulator's, not a CPU's (%s)\n", machine_.emulation.c_str());
+    }
     if (build_ms_ > 0) std::printf("build        %.0f ms (synthetic weights, import, blob)\n", build_ms_);
     std::printf("init         load + plan %.1f ms, first inference %.1f ms\n", load_ms_, timed_.first_ms);
     std::printf("runs         %zu timed (after %d warm-up) in %.1f s\n\n", timed_.runs.size(), opt_.warmup_runs,
@@ -372,8 +375,9 @@ class Benchmark {
     }
     std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total().mean, gmacs_per_s_);
     if (peak_.probe != nullptr && peak_.gmacs_per_core > 0) {
-      std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads\n", pct_peak_,
-                  peak_.int8 ? "INT8" : "FP32", peak_.gmacs_per_core, peak_.probe->name, engine_->threads());
+      std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads%s\n", pct_peak_,
+                  peak_.int8 ? "INT8" : "FP32", peak_.gmacs_per_core, peak_.probe->name, engine_->threads(),
+                  machine_.emulation.empty() ? "" : " (both emulated: says nothing of a real CPU)");
     } else {
       std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(peak_.isa));
     }
@@ -398,6 +402,7 @@ class Benchmark {
     const act::ModelInfo& info = engine_->model_info();
     nlohmann::ordered_json j;
     j["actengine_version"] = act::version();
+    j["emulated"] = !machine_.emulation.empty();  // then every time is the emulator's (machine.emulation says why)
     j["model"] = {{"source", opt_.model.empty() ? "built-in" : "blob"},
                   {"name", model_label_},
                   {"summary", config_.summary()},
@@ -473,13 +478,14 @@ int main(int argc, char** argv) {
   // (scripts/run_bench.sh passes --num_runs 20 before the user's arguments).
   app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   Options opt;
-  app.add_option("-m,--model", opt.model, "an .actb blob (from act_convert); default: a built-in model");
+  // TFLite benchmark_model's names are aliases: --graph, --num_threads (--num_runs, --warmup_runs are ours too).
+  app.add_option("-m,--model,--graph", opt.model, "an .actb blob (from act_convert); default: a built-in model");
   app.add_option("--config", opt.config, "built-in model: default, rover (360x640, 2-dim state/action), or WxH")
       ->capture_default_str();
   app.add_option("--precision", opt.precision, "built-in model precision: fp32 or int8")
       ->check(CLI::IsMember({"fp32", "int8"}))
       ->capture_default_str();
-  app.add_option("-t,--threads", opt.threads, "threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();
+  app.add_option("-t,--threads,--num_threads", opt.threads, "threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();
   app.add_option("-w,--warmup_runs", opt.warmup_runs, "untimed runs after the first inference")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -494,6 +500,11 @@ int main(int argc, char** argv) {
   app.add_option("--compare-with", opt.compare_with, "with --model and --compare: the same model in the other precision");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (const long cores = ::sysconf(_SC_NPROCESSORS_ONLN); cores > 0 && opt.threads > cores) {
+    std::cerr << "act_bench: warning: --threads " << opt.threads << " is more than the " << cores
+              << " online cores: threads then take turns on a core and every parallel op waits for the last one "
+                 "(slower, not faster); use --threads " << cores << " or fewer\n";
+  }
   try {
     return Benchmark(opt).run();
   } catch (const std::exception& e) {

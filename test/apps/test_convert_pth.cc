@@ -44,7 +44,7 @@ TEST(ActConvertPth, ConvertsWithFlagsAndWritesARobotPackage) {
   }
   std::ifstream readme(dir + "/pkg/README.md");
   const std::string text((std::istreambuf_iterator<char>(readme)), std::istreambuf_iterator<char>());
-  for (const char* step : {"build_packages.sh", "apt install ./actengine_*_arm64.deb", "act_bench --model", "act_drive"}) {
+  for (const char* step : {"build_packages.sh", "apt install ./actengine-tools_*_arm64.deb", "act_bench --model", "act_drive"}) {
     EXPECT_NE(text.find(step), std::string::npos) << step;
   }
   // The package's blob is the folder's.

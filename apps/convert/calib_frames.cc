@@ -61,9 +61,12 @@ class Loader {
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
     if (!fs::exists(p)) fail(ErrorCode::kNotFound, "calibration source not found: " + source);
+    // A model given as frames says what it is (a checkpoint folder holding images is still a folder of images).
     switch (const FileKind kind = file_kind(source)) {
       case FileKind::kLeRobotCheckpoint:
       case FileKind::kTrainingCheckpoint:
+        if (!files_with(p, kImageExtensions).empty()) break;
+        [[fallthrough]];
       case FileKind::kActb:
       case FileKind::kPyTorchZip:
       case FileKind::kPyTorchLegacy:

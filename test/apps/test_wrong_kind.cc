@@ -79,6 +79,10 @@ TEST_F(WrongKindOfFile, ActConvertCheckpoint) {
 }
 
 TEST_F(WrongKindOfFile, ActConvertCalib) {
+  // A checkpoint folder without images (the fixture keeps sample frames beside its weights).
+  fs::create_directories(dir_ + "/ckpt");
+  for (const char* file : {"config.json", "model.safetensors"}) fs::copy_file(fixture_ + "/" + file, dir_ + "/ckpt/" + file);
+  kinds_["checkpoint"].path = dir_ + "/ckpt";
   expect_refused(kinds_, {"checkpoint", "pth", "actb"},
                  std::string(ACT_CONVERT_BIN) + " " + q(fixture_) + " -o " + q(dir_ + "/out.actb") + " --precision int8 --calib ");
   EXPECT_FALSE(fs::exists(dir_ + "/out.actb"));

@@ -23,6 +23,7 @@
 #include "apps/diff_stats.h"
 #include "apps/observation_file.h"
 #include "apps/op_profile_report.h"
+#include "apps/progress.h"
 #include "apps/status_error.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
@@ -301,7 +302,9 @@ class Benchmark {
     }
     engine_->reset_op_profile();  // the op profile averages the timed runs only
 
-    const bool progress = ::isatty(STDERR_FILENO);
+    act::ProgressLine progress(stderr, "act_bench", act::ProgressLine::stderr_is_terminal());
+    const size_t runs = static_cast<size_t>(opt_.num_runs);
+    progress.update("timed runs", 0, runs, "runs");
     const auto bench_start = Clock::now();
     for (int i = 0; i < opt_.num_runs; ++i) {
       infer(*engine_, i, chunk);
@@ -311,10 +314,15 @@ class Benchmark {
         timed_.other_runs.push_back(other_->last_timings());
         for (size_t k = 0; k < chunk.size(); ++k) timed_.action_diff.add(chunk[k], other_chunk[k]);
       }
-      if (progress) std::fprintf(stderr, "\rrun %d/%d  %.1f ms   ", i + 1, opt_.num_runs, timed_.runs.back().total_ms);
-      if (ms_since(bench_start) > opt_.max_secs * 1e3) break;
+      progress.update("timed runs", timed_.runs.size(), runs, "runs");
+      if (ms_since(bench_start) > opt_.max_secs * 1e3) {
+        char stopped[64];
+        std::snprintf(stopped, sizeof stopped, "stopped after --max_secs %g s", opt_.max_secs);
+        progress.message(stopped);
+        break;
+      }
     }
-    if (progress) std::fprintf(stderr, "\r%40s\r", "");
+    progress.finish();
     timed_.bench_ms = ms_since(bench_start);
   }
 
@@ -362,6 +370,9 @@ class Benchmark {
                 static_cast<double>(blob_file_->file_size()) / 1e6, engine_->threads(), info.kernels.c_str());
     if (!builtin_.int8_note.empty()) std::printf("int8         %s\n", builtin_.int8_note.c_str());
     std::printf("machine      %s\n", machine_.one_line().c_str());
+    if (!machine_.emulation.empty()) {
+      std::printf("EMULATED     every time below is the emulator's, not a CPU's (%s)\n", machine_.emulation.c_str());
+    }
     if (build_ms_ > 0) std::printf("build        %.0f ms (synthetic weights, import, blob)\n", build_ms_);
     std::printf("init         load + plan %.1f ms, first inference %.1f ms\n", load_ms_, timed_.first_ms);
     std::printf("runs         %zu timed (after %d warm-up) in %.1f s\n\n", timed_.runs.size(), opt_.warmup_runs,
@@ -374,8 +385,9 @@ class Benchmark {
     }
     std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total().mean, gmacs_per_s_);
     if (peak_.probe != nullptr && peak_.gmacs_per_core > 0) {
-      std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads\n", pct_peak_,
-                  peak_.int8 ? "INT8" : "FP32", peak_.gmacs_per_core, peak_.probe->name, engine_->threads());
+      std::printf("peak         %.1f %% of this CPU's %s peak: %.1f GMAC/s per core (%s probe) x %d threads%s\n", pct_peak_,
+                  peak_.int8 ? "INT8" : "FP32", peak_.gmacs_per_core, peak_.probe->name, engine_->threads(),
+                  machine_.emulation.empty() ? "" : " (both emulated: says nothing of a real CPU)");
     } else {
       std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(peak_.isa));
     }
@@ -401,6 +413,7 @@ class Benchmark {
     const act::ModelInfo& info = engine_->model_info();
     nlohmann::ordered_json j;
     j["actengine_version"] = act::version();
+    j["emulated"] = !machine_.emulation.empty();  // then every time is the emulator's (machine.emulation says why)
     j["model"] = {{"source", opt_.model.empty() ? "built-in" : "blob"},
                   {"name", model_label_},
                   {"summary", config_.summary()},
@@ -487,13 +500,14 @@ int main(int argc, char** argv) {
   // (scripts/run_bench.sh passes --num_runs 20 before the user's arguments).
   app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   Options opt;
-  app.add_option("-m,--model", opt.model, "an .actb blob (from act_convert); default: a built-in model");
+  // TFLite benchmark_model's names are aliases: --graph, --num_threads (--num_runs, --warmup_runs are ours too).
+  app.add_option("-m,--model,--graph", opt.model, "an .actb blob (from act_convert); default: a built-in model");
   app.add_option("--config", opt.config, "built-in model: default, rover (360x640, 2-dim state/action), or WxH")
       ->capture_default_str();
   app.add_option("--precision", opt.precision, "built-in model precision: fp32 or int8")
       ->check(CLI::IsMember({"fp32", "int8"}))
       ->capture_default_str();
-  app.add_option("-t,--threads", opt.threads, "threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();
+  app.add_option("-t,--threads,--num_threads", opt.threads, "threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();
   app.add_option("-w,--warmup_runs", opt.warmup_runs, "untimed runs after the first inference")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -512,6 +526,11 @@ int main(int argc, char** argv) {
   app.add_option("--trace", opt.trace_path, "write the last timed inference as a Chrome trace (ui.perfetto.dev), a lane per thread");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (const long cores = ::sysconf(_SC_NPROCESSORS_ONLN); cores > 0 && opt.threads > cores) {
+    std::cerr << "act_bench: warning: --threads " << opt.threads << " is more than the " << cores
+              << " online cores: threads then take turns on a core and every parallel op waits for the last one "
+                 "(slower, not faster); use --threads " << cores << " or fewer\n";
+  }
   try {
     return Benchmark(opt).run();
   } catch (const std::exception& e) {

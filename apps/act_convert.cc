@@ -16,6 +16,7 @@
 #include "apps/convert/calib_frames.h"
 #include "apps/convert/npy_file.h"
 #include "apps/deploy_package.h"
+#include "apps/progress.h"
 #include "apps/pytorch_options.h"
 #include "apps/status_error.h"
 #ifdef ACT_ONNX_EXPORT
@@ -31,6 +32,7 @@ struct Options {
   std::string precision = "fp32", mode = "static", method = "mse", attention = "auto";
   bool quiet = false, explain = false;
   act::PthOptions pth;
+  act::DeploymentOptions deployment;
   std::vector<std::string> calib_sources;
   act::Int8Options int8;
   double target_mse = 0, max_mse = 0, percentile = 99.99;
@@ -52,6 +54,7 @@ void add_options(CLI::App& app, Options& o) {
   app.add_flag("--explain", o.explain, "print every config value and where it comes from (for a .pth: which tensor, file "
                "or flag), and what cannot be known; converts too if -o or --package is given");
   act::add_pytorch_options(app, o.pth);
+  act::add_deployment_options(app, o.deployment);
   app.add_option("--precision", o.precision, "weight precision of the blob (default fp32)")->check(CLI::IsMember({"fp32", "int8"}));
   auto* int8_group = app.add_option_group("INT8", "with --precision int8");
   int8_group->add_option("--mode", o.mode,
@@ -152,7 +155,6 @@ void check_options(const CLI::App& app, Options& o) {
   if (int8.mode == act::Int8Mode::kMixed && !int8.target_mse) {
     act::fail(act::ErrorCode::kInvalidArgument, "--mode mixed needs --target-mse (held-out MSE in normalised units)");
   }
-  if (!o.quiet) int8.progress = [](const std::string& line) { std::cerr << "act_convert: " << line << "\n"; };
 }
 
 // Imports the checkpoint, printing the --explain report first when asked. Null when only the
@@ -163,14 +165,18 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   if (!o.quiet) std::cerr << "reading " << location->path << " ...\n";
   if (!location->note.empty()) std::cerr << "act_convert: " << location->note << "\n";
   if (location->lerobot_folder) {
-    if (o.explain) std::cout << "checkpoint   " << location->path << ": a LeRobot checkpoint folder; every value comes from its config.json\n";
+    if (o.explain) {
+      std::cout << "checkpoint   " << location->path << ": a LeRobot checkpoint folder; every value comes from its config.json"
+                << (o.deployment.n_action_steps || o.deployment.temporal_ensemble_coeff ? " but the deployment options given" : "")
+                << "\n";
+    }
     exit_code = 0;
     if (o.output.empty() && o.onnx_path.empty() && o.calib_npy.empty()) return nullptr;
-    auto model = act::import_checkpoint(location->path);
+    auto model = act::import_checkpoint(location->path, {}, o.deployment);
     act::throw_if_failed(model.status());
     return std::move(model).value();
   }
-  auto plan = act::PthPlan::read(location->path, o.pth);
+  auto plan = act::PthPlan::read(location->path, o.pth, o.deployment);
   act::throw_if_failed(plan.status());
   if (o.explain) act::print_explanation(std::cout, (*plan)->explanation());
   exit_code = (*plan)->explanation().missing.empty() ? 0 : 1;
@@ -187,16 +193,32 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
     act::throw_if_failed(bytes.status());
     return *bytes;
   }
+  std::optional<act::ProgressLine> progress;
+  act::Int8Options int8 = o.int8;
+  if (!o.quiet) {
+    progress.emplace(stderr, "act_convert", act::ProgressLine::stderr_is_terminal());
+    int8.progress = [&progress](const act::ConversionProgress& p) {
+      if (p.total == 0) {
+        progress->message(p.task);
+      } else {
+        progress->update(p.task, p.done, p.total, p.unit);
+      }
+    };
+  }
   act::CalibrationSet frames;
   if (!o.calib_sources.empty()) {
-    if (!o.quiet) std::cerr << "act_convert: reading calibration frames from " << o.calib_sources.size() << " source(s) ...\n";
-    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(o.int8));
+    if (progress) progress->message("reading calibration frames from " + std::to_string(o.calib_sources.size()) + " source(s) ...");
+    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(int8));
+    if (progress) {
+      for (const auto& note : frames.notes) progress->message(note.rfind("warning: ", 0) == 0 ? note : "note: " + note);
+    }
   }
   // The report file is created (unnamed until written) before the conversion, so a folder that does
   // not exist fails at once instead of after the blob was written.
   std::optional<act::detail::AtomicFileWriter> report_file;
   if (!o.report_path.empty()) report_file.emplace(o.report_path);
-  auto report = model.write_int8(o.output, frames, o.int8);
+  auto report = model.write_int8(o.output, frames, int8);
+  if (progress) progress->finish();
   if (!report.ok() && report.status().code() == act::StatusCode::kFailedPrecondition && o.int8.max_mse) {
     std::cerr << "act_convert: --max-mse " << *o.int8.max_mse << " missed: try --mode mixed --target-mse "
               << *o.int8.max_mse << ", more calibration frames, or another --calib-method.\n";

@@ -13,6 +13,7 @@
 #include <opencv2/core/utils/logger.hpp>
 
 #include "apps/drive/calibrate.h"
+#include "apps/pytorch_options.h"
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/control_loop.h"
@@ -20,6 +21,7 @@
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_kind.h"
 
 namespace {
 
@@ -92,6 +94,7 @@ struct Options {
   int control_priority = 0, inference_priority = 0;
   std::vector<int> control_cpus, inference_cpus;
   bool dry_run = false, calibrate = false;
+  act::DeploymentOptions deployment;
 };
 
 Calibration load_calibration(const Options& opt) {
@@ -149,7 +152,7 @@ int drive(const Options& opt) {
   worker_options.placement = {opt.inference_priority, opt.inference_cpus};
   worker_options.keep_model_inputs = !opt.record_dir.empty();
   InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options, std::cerr);
-  const act::ModelInfo& info = worker.info();
+  const act::ModelInfo info = with_deployment(worker.info(), opt.deployment);  // fails early on a bad override
   check_model(info, calibration, opt);
   const act::CameraInfo& input = info.cameras.front();
   if (std::abs(static_cast<double>(camera.width()) / camera.height() - static_cast<double>(input.width) / input.height) > 0.01) {
@@ -192,6 +195,7 @@ int drive(const Options& opt) {
   control.duration_s = opt.duration;
   control.state_source = opt.state == "zeros" ? ControlOptions::StateSource::kZeros : ControlOptions::StateSource::kLastAction;
   control.placement = {opt.control_priority, opt.control_cpus};
+  control.deployment = opt.deployment;
   ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);
   const DriveSummary summary = loop.run(g_stop);
   if (recorder) {
@@ -208,6 +212,24 @@ int drive(const Options& opt) {
   return summary.exit_code;
 }
 
+// A model, checkpoint or recording given as the camera says what it is instead of "cannot open camera".
+void check_camera_kind(const std::string& camera) {
+  switch (const act::FileKind kind = act::file_kind(camera)) {
+    case act::FileKind::kRecording:
+      act::fail(act::ErrorCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera") +
+                "; to replay it as a camera: --camera " + camera + "/frames/%06d.png");
+    case act::FileKind::kLeRobotCheckpoint:
+    case act::FileKind::kTrainingCheckpoint:
+    case act::FileKind::kLeRobotDataset:
+    case act::FileKind::kActb:
+    case act::FileKind::kPyTorchZip:
+    case act::FileKind::kPyTorchLegacy:
+    case act::FileKind::kSafetensors:
+      act::fail(act::ErrorCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera"));
+    default: break;
+  }
+}
+
 // act_drive from the parsed options to its exit code: calibration, or driving.
 int run(const Options& opt) {
   try {
@@ -216,6 +238,9 @@ int run(const Options& opt) {
     }
     if (opt.model.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--model is required");
     if (opt.camera.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--camera is required");
+    // Both checked before the camera opens, so the wrong kind of file is the first thing said.
+    if (const std::string hint = act::not_a_blob_hint(opt.model); !hint.empty()) act::fail(act::ErrorCode::kInvalidArgument, hint);
+    check_camera_kind(opt.camera);
     if (opt.serial.empty() && !opt.dry_run) {
       act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
     }
@@ -252,6 +277,7 @@ int main(int argc, char** argv) {
                                                           "neutral instead)")->capture_default_str()->check(CLI::Range(1, 10000));
   app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  act::add_deployment_options(app, opt.deployment);
   app.add_option("--state", opt.state, "the model's observation.state: the last action executed, or zeros")
       ->capture_default_str()->check(CLI::IsMember({"last-action", "zeros"}));
   app.add_option("--control-priority", opt.control_priority, "SCHED_FIFO priority of the control thread (1-99, 0 = off; "

@@ -126,6 +126,14 @@ std::string read_first_line(const std::string& path) {
   return trim(line);
 }
 
+// All of a file ("" if unreadable); /proc files report no size, so read to the end.
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
 }  // namespace
 
 MachineInfo read_machine_info() {
@@ -155,7 +163,34 @@ MachineInfo read_machine_info() {
   if (!temp.empty()) m.temperature_c = std::atof(temp.c_str()) / 1000.0;
   // Raspberry Pi firmware (vcgencmd get_throttled without vcgencmd).
   m.throttled = read_first_line("/sys/devices/platform/soc/soc:firmware/get_throttled");
+  std::string process_name;
+  std::ifstream status("/proc/self/status");
+  for (std::string status_line; std::getline(status, status_line);) {
+    if (status_line.rfind("Name:", 0) == 0) process_name = trim(status_line.substr(5));
+  }
+  m.emulation = detect_emulation(read_text("/proc/thread-self/maps") + read_text("/proc/self/smaps"),
+                                 read_text("/proc/cpuinfo"), process_name);
   return m;
+}
+
+std::string detect_emulation(const std::string& maps, const std::string& cpuinfo, const std::string& process_name) {
+  std::istringstream lines(maps);
+  for (std::string line; std::getline(lines, line);) {
+    const size_t slash = line.rfind('/');
+    if (slash != std::string::npos && line.compare(slash + 1, 5, "qemu-") == 0) {
+      return "qemu-user: " + line.substr(line.find('/')) + " is mapped into this process";
+    }
+  }
+  if (process_name.rfind("qemu-", 0) == 0) return "qemu-user: this process is " + process_name;
+#if defined(__aarch64__) || defined(__arm__)
+  const bool other_cpu = cpuinfo.find("vendor_id") != std::string::npos;  // x86's /proc/cpuinfo
+#elif defined(__x86_64__) || defined(__i386__)
+  const bool other_cpu = cpuinfo.find("CPU implementer") != std::string::npos;  // ARM's
+#else
+  const bool other_cpu = false;
+#endif
+  if (other_cpu) return "an emulator: /proc/cpuinfo describes another architecture than this program's";
+  return "";
 }
 
 nlohmann::ordered_json MachineInfo::to_json() const {
@@ -163,6 +198,8 @@ nlohmann::ordered_json MachineInfo::to_json() const {
   j["cpu_mhz"] = cpu_mhz > 0 ? nlohmann::ordered_json(cpu_mhz) : nlohmann::ordered_json();
   j["temperature_c"] = temperature_c >= 0 ? nlohmann::ordered_json(temperature_c) : nlohmann::ordered_json();
   j["throttled"] = throttled.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json(throttled);
+  j["emulated"] = !emulation.empty();
+  j["emulation"] = emulation.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json(emulation);
   return j;
 }
 
@@ -172,6 +209,7 @@ std::string MachineInfo::one_line() const {
   if (cpu_mhz > 0) s << ", " << static_cast<int>(cpu_mhz) << " MHz";
   if (temperature_c >= 0) s << ", " << temperature_c << " C";
   if (!throttled.empty()) s << ", throttled=" << throttled;
+  if (!emulation.empty()) s << ", EMULATED (" << emulation << "): timings are the emulator's, not this CPU's";
   return s.str();
 }
 

@@ -46,10 +46,20 @@ struct MachineInfo {
   double cpu_mhz = 0;                  ///< 0 when unknown
   double temperature_c = -1;           ///< < 0 when unknown
   std::string throttled;               ///< e.g. "0x0"; empty when unknown
+  /// Why this process looks emulated (qemu-user: timings are the emulator's, not this CPU's); empty
+  /// when it runs natively as far as can be told (detect_emulation).
+  std::string emulation;
   nlohmann::ordered_json to_json() const;
   std::string one_line() const;
 };
 MachineInfo read_machine_info();
+
+/// Evidence that this process runs under qemu-user, from what Linux shows of it: `maps` (the real
+/// mappings of /proc/thread-self/maps and /proc/self/smaps, where qemu 7 leaves its own binary
+/// visible: qemu-aarch64 or a binfmt interpreter qemu-*-static), `cpuinfo` (qemu before 8.1 passes
+/// the host's through: an x86 CPU seen by an ARM binary) and `process_name` (/proc/self/status Name:
+/// "qemu-aarch64" when started through it). "" when none says so.
+std::string detect_emulation(const std::string& maps, const std::string& cpuinfo, const std::string& process_name);
 
 /// Peak resident set size of this process, in bytes.
 size_t peak_rss_bytes();

@@ -24,8 +24,8 @@ ObservationBatch ObservationBatch::read(const std::string& path, const ModelInfo
   // The wrong kind of input (an image, a blob, a folder) says what it is instead of failing to parse.
   if (const FileKind kind = file_kind(path); kind != FileKind::kSafetensors && kind != FileKind::kMissing &&
                                              kind != FileKind::kOther) {
-    fail(ErrorCode::kInvalidArgument, "'" + path + "' is " + file_kind_name(kind) +
-         ", not an observation file (a .safetensors file of input.<feature key> tensors, as in the LeRobot fixtures)");
+    fail(ErrorCode::kInvalidArgument, wrong_kind_message(path, kind, "an observation file (a .safetensors file of "
+                                                      "input.<feature key> tensors, as in the LeRobot fixtures)"));
   }
   const SafetensorsFile file = SafetensorsFile::open(path);
   ObservationBatch b;

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <ostream>
 
@@ -11,7 +12,7 @@ namespace act {
 namespace {
 
 constexpr const char* kGroup = "PyTorch .pth input (what the weights do not say)";
-constexpr const char* kOptionNames[] = {"--config", "--stats", "--image-size", "--n-action-steps", "--n-heads",
+constexpr const char* kOptionNames[] = {"--config", "--stats", "--image-size", "--n-heads",
                                         "--activation", "--camera", "--assume-lerobot-defaults", "--no-normalization",
                                         "--state-dict-key"};
 
@@ -36,9 +37,6 @@ void add_pytorch_options(CLI::App& app, PthOptions& s) {
          },
          "camera image size in training, HxW (e.g. 480x640)")
       ->group(kGroup);
-  app.add_option_function<int>("--n-action-steps", [&s](int n) { s.n_action_steps = n; },
-                               "actions executed per predicted chunk (<= chunk_size)")
-      ->check(CLI::PositiveNumber)->group(kGroup);
   app.add_option_function<int>("--n-heads", [&s](int n) { s.n_heads = n; }, "attention heads")
       ->check(CLI::PositiveNumber)->group(kGroup);
   app.add_option_function<std::string>("--activation", [&s](const std::string& a) { s.activation = a; },
@@ -60,6 +58,35 @@ bool any_pytorch_option(const CLI::App& app) {
     if (app.count(name) > 0) return true;
   }
   return false;
+}
+
+void add_deployment_options(CLI::App& app, DeploymentOptions& d) {
+  constexpr const char* group = "Deployment (replaces the model's own)";
+  app.add_option_function<int>("--n-action-steps", [&d](int n) { d.n_action_steps = n; },
+                               "actions executed per predicted chunk (1..chunk_size)")
+      ->check(CLI::PositiveNumber)->group(group);
+  app.add_option_function<std::string>(
+         "--temporal-ensemble-coeff",
+         [&d](const std::string& text) {
+           if (text == "none") {
+             d.temporal_ensemble_coeff.emplace(std::nullopt);
+             return;
+           }
+           size_t used = 0;
+           double coeff = 0;
+           try {
+             coeff = std::stod(text, &used);
+           } catch (const std::exception&) {
+             used = 0;
+           }
+           if (used != text.size() || !std::isfinite(coeff)) {
+             throw CLI::ValidationError("--temporal-ensemble-coeff", "expected a finite number or none, got '" + text + "'");
+           }
+           d.temporal_ensemble_coeff.emplace(coeff);
+         },
+         "LeRobot's temporal ensembling, weights exp(-coeff * i) (e.g. 0.01; needs --n-action-steps 1), or none to "
+         "turn it off")
+      ->group(group);
 }
 
 void print_explanation(std::ostream& out, const PthExplanation& plan) {

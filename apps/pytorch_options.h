@@ -12,11 +12,14 @@ class App;
 
 namespace act {
 
-/// Registers --config, --stats, --image-size, --n-action-steps, --n-heads, --activation, --camera,
+/// Registers --config, --stats, --image-size, --n-heads, --activation, --camera,
 /// --assume-lerobot-defaults, --no-normalization and --state-dict-key, filling `options`.
 void add_pytorch_options(CLI::App& app, PthOptions& options);
 
-/// True when any of those options was given (they only apply to a .pth input).
+/// Registers --n-action-steps and --temporal-ensemble-coeff (LeRobot's null: "none"), filling `deployment`.
+void add_deployment_options(CLI::App& app, DeploymentOptions& deployment);
+
+/// True when any of the .pth options was given (they only apply to a .pth input).
 bool any_pytorch_option(const CLI::App& app);
 
 /// What was read, every config value with its source, and what cannot be known.

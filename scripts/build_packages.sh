@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Builds the Debian packages: actengine_<version>_amd64.deb (native) and actengine_<version>_arm64.deb
-# (cross-compiled with Debian's aarch64 toolchain against the arm64 multiarch libraries, for the
-# Raspberry Pi 5), Release, no tests or benchmarks, into build-packages/. Install on the Pi with
-#   sudo apt install ./actengine_<version>_arm64.deb
+# Builds the Debian packages libactengine0, libactengine-dev and actengine-tools (cmake/ActPackaging.cmake)
+# for amd64 (native) and arm64 (cross-compiled with Debian's aarch64 toolchain against the arm64
+# multiarch libraries, for the Raspberry Pi 5), Release, no tests or benchmarks, into build-packages/.
+# Installs only what that needs (install_deps.sh --packaging). Install the tools on the Pi with
+#   sudo apt install ./libactengine0_<version>_arm64.deb ./actengine-tools_<version>_arm64.deb
 # ACT_PACKAGE_ARCHS="arm64" (or "amd64") builds only one. Extra arguments go to CMake's configure step.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -10,7 +11,7 @@ out="${ACT_PACKAGE_DIR:-$root/build-packages}"
 jobs="${ACT_JOBS:-$(nproc)}"
 archs="${ACT_PACKAGE_ARCHS:-amd64 arm64}"
 
-"$root/scripts/install_deps.sh"
+"$root/scripts/install_deps.sh" --packaging
 mkdir -p "$out"
 for arch in $archs; do
   build="$out/build-$arch"
@@ -28,6 +29,6 @@ for arch in $archs; do
   cmake -S "$root" -B "$build" "${configure[@]}" "$@"
   cmake --build "$build" -j "$jobs"
   (cd "$build" && cpack -G DEB)
-  cp "$build"/actengine_*_"$arch".deb "$out/"
+  cp "$build"/*_"$arch".deb "$out/"
 done
-ls -l "$out"/actengine_*.deb
+ls -l "$out"/*.deb

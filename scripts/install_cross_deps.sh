@@ -4,6 +4,8 @@
 # links and runs with: the Debian arm64 runtime (loader, libc, libstdc++, as on a Raspberry Pi OS /
 # Debian bookworm board), zlib, GoogleTest and cpuinfo's library. Header-only dependencies (Eigen,
 # nlohmann-json) and the cpuinfo header are architecture-independent: the host's (install_deps.sh).
+# --packaging (scripts/build_packages.sh): only the cross compiler and the arm64 libraries the
+# packages link, no qemu-user or GoogleTest.
 #
 # cpuinfo: libcpuinfo-dev:arm64 is NOT installed. Debian's libcpuinfo-dev is "Multi-Arch: same" but
 # ships /usr/lib/cmake/cpuinfo/cpuinfo-targets-none.cmake with its own architecture's paths inside,
@@ -17,8 +19,12 @@
 # linux-libc-dev); it must never remove one: such a transaction is refused.
 set -euo pipefail
 
-host_packages=(g++-aarch64-linux-gnu qemu-user)
-arm64_packages=(libc6 libstdc++6 zlib1g-dev libgtest-dev libgmock-dev libcpuinfo0)
+host_packages=(g++-aarch64-linux-gnu)
+arm64_packages=(libc6 libstdc++6 zlib1g-dev libcpuinfo0)
+if [ "${1:-}" != "--packaging" ]; then  # the tests under emulation; --packaging: only the arm64 packages' build
+  host_packages+=(qemu-user)
+  arm64_packages+=(libgtest-dev libgmock-dev)
+fi
 
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi

@@ -1,22 +1,29 @@
 #!/usr/bin/env bash
-# Installs every build, test and tool dependency of actengine from Debian packages.
+# Installs every build, test and tool dependency of actengine from Debian packages; with --packaging
+# only what building the library and apps and packaging them needs (scripts/build_packages.sh).
 # Idempotent: packages already present are left alone; safe to run again.
 # Then scripts/install_cross_deps.sh adds the aarch64 cross build's packages (skipped with ACT_SKIP_ARM64=1).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
+mode="${1:-}"
 
-packages=(
-  build-essential cmake ninja-build pkg-config git
-  libeigen3-dev libxsimd-dev nlohmann-json3-dev libcli11-dev libcpuinfo-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
+packages=(  # the library, the apps and their Debian packages (dpkg-shlibdeps, file)
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev libxsimd-dev nlohmann-json3-dev libcli11-dev libcpuinfo-dev zlib1g-dev
   libopencv-dev
-  gcc-avr avr-libc arduino-core-avr
-  python3 python3-numpy python3-torch
-  python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (python/) and its tests
-  clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
   libonnx-dev libprotobuf-dev  # act_convert --export-onnx: ONNX's protobuf classes, checker, shape inference
-  nodejs                       # ONNX Runtime (npm's onnxruntime-node) in the export tests
+  dpkg-dev file
 )
+if [ "$mode" != "--packaging" ]; then
+  packages+=(  # tests, benchmarks, test-checkpoint generation, the sketch, fuzzing
+    git libgtest-dev libgmock-dev libbenchmark-dev
+    gcc-avr avr-libc arduino-core-avr
+    python3 python3-numpy python3-torch
+    python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (engine/python) and its tests
+    clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
+    nodejs                    # ONNX Runtime (npm's onnxruntime-node) in the export tests
+  )
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -34,8 +41,8 @@ else
 fi
 
 # ONNX Runtime for the export tests, from the npm registry into test/onnx/node_modules (not committed).
-"$root/scripts/install_node_deps.sh"
+if [ "$mode" != "--packaging" ]; then "$root/scripts/install_node_deps.sh"; fi
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then
-  "$root/scripts/install_cross_deps.sh"
+  "$root/scripts/install_cross_deps.sh" ${mode:+"$mode"}
 fi

@@ -6,10 +6,11 @@
 # Called by scripts/run_tests.sh (CI), which skips it with ACT_SKIP_ARM64=1. Extra arguments go to
 # CMake's configure step.
 #
-# Then the arm64 Debian package from the same tree (the apps are built too, not their tests; act_convert
+# Then the arm64 Debian packages from the same tree (the apps are built too, not their tests; act_convert
 # and act_drive against the arm64 OpenCV of scripts/fetch_arm64_opencv.sh): built with CPack,
-# unpacked, every app checked to be an aarch64 program whose OpenCV libraries the package depends on,
-# and its act_bench run under qemu (`--help`), so the package CI ships starts. (act_drive itself
+# unpacked, the library checked to be in /usr/lib/aarch64-linux-gnu, every app to be a stripped
+# aarch64 program whose OpenCV libraries actengine-tools depends on, and its act_bench run under qemu
+# (`--help`, then one run that must say it is emulated), so the packages CI ships start. (act_drive itself
 # cannot start under qemu here: OpenCV's own arm64 dependencies, FFmpeg and more, are not installed.)
 #
 # Which tests: all of act_tests except the few end-to-end tests listed below, which repeat
@@ -77,25 +78,36 @@ else
 fi
 ctest "${ctest_args[@]}"
 
-echo "== arm64 Debian package =="
+echo "== arm64 Debian packages =="
+rm -f "$build"/*.deb
 (cd "$build" && cpack -G DEB >/dev/null)
-deb="$(ls "$build"/actengine_*_arm64.deb)"
-dpkg-deb -f "$deb" Package Version Architecture Depends
 unpacked="$build/package-check"
 rm -rf "$unpacked"
-dpkg-deb -x "$deb" "$unpacked"
-depends="$(dpkg-deb -f "$deb" Depends)"
+for package in libactengine0 libactengine-dev actengine-tools; do
+  deb="$(ls "$build/${package}"_*_arm64.deb)"
+  dpkg-deb -f "$deb" Package Version Architecture Depends
+  dpkg-deb -x "$deb" "$unpacked"
+done
+if [ ! -f "$unpacked/usr/lib/aarch64-linux-gnu/libactengine.so.0" ]; then
+  echo "run_arm64_tests: libactengine0 has no /usr/lib/aarch64-linux-gnu/libactengine.so.0" >&2
+  exit 1
+fi
+depends="$(dpkg-deb -f "$(ls "$build"/actengine-tools_*_arm64.deb)" Depends)"
 for app in act_bench act_eval act_convert act_drive; do
   program="$unpacked/usr/bin/$app"
   if ! readelf -h "$program" 2>/dev/null | grep -q "Machine: *AArch64"; then
     echo "run_arm64_tests: the arm64 package has no aarch64 $app" >&2
     exit 1
   fi
+  if readelf -S "$program" | grep -qE ' \.(symtab|debug_info) '; then
+    echo "run_arm64_tests: $app in the arm64 package is not stripped" >&2
+    exit 1
+  fi
   # Each OpenCV library the program needs (libopencv_videoio.so.406) -> its package (libopencv-videoio406).
   for lib in $(readelf -d "$program" | sed -n 's/.*NEEDED.*\[\(libopencv_[a-z]*\)\.so\.\([0-9]*\)\]/\1\2/p'); do
     package="$(echo "$lib" | tr _ -)"
     if [[ "$depends" != *"$package "* ]]; then
-      echo "run_arm64_tests: $app needs $lib but the package does not depend on $package" >&2
+      echo "run_arm64_tests: $app needs $lib but actengine-tools does not depend on $package" >&2
       exit 1
     fi
   done
@@ -104,4 +116,13 @@ done
 read -r -a qemu <<<"$emulator"
 help="$("${qemu[@]}" "$unpacked/usr/bin/act_bench" --help)"
 echo "${help%%$'\n'*}"
-echo "arm64 package OK: $deb"
+# A run under qemu says that its timings are the emulator's, in the text and the JSON.
+bench="$("${qemu[@]}" "$unpacked/usr/bin/act_bench" --config 64x64 --num_runs 1 --warmup_runs 0 --threads 1 \
+  --json "$build/emulated_bench.json" 2>&1)"
+if ! grep -q '^EMULATED ' <<<"$bench" || ! grep -q '"emulated": true' "$build/emulated_bench.json"; then
+  echo "$bench"
+  echo "run_arm64_tests: act_bench under qemu does not say that it is emulated" >&2
+  exit 1
+fi
+grep '^EMULATED ' <<<"$bench"
+echo "arm64 packages OK: $(ls "$build"/*_arm64.deb | tr '\n' ' ')"

@@ -2,13 +2,13 @@
 # README command (2) and what CI runs (.ci/run): installs the dependencies, builds actengine and runs
 # every test, in stages (each one's wall time is printed at the end):
 #   1. Release (build/, only what these need): the tests of the full-size generated models, which
-#      take seconds here and many minutes under ASan, the Python module's pytest suite, and a smoke
-#      run of act_kernel_bench;
+#      take seconds here and many minutes under ASan, the Python module's pytest suite, the host's
+#      Debian packages (unpacked, run, built against) and a smoke run of act_kernel_bench;
 #   2. every other test in a native build under AddressSanitizer + UndefinedBehaviorSanitizer
 #      (build-asan/; -O1 with the kernels at -O2, which builds in much less time than -O2
 #      everywhere while the whole-model tests stay quick);
 #   3. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
-#      Debian package (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
+#      Debian packages (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
 #   4. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
 #   5. each parser's libFuzzer target for ACT_FUZZ_SECONDS (default 60; scripts/run_fuzz.sh;
 #      ACT_SKIP_FUZZ=1 skips it).
@@ -62,14 +62,18 @@ checkpoints="$root/build/test-checkpoints"
 # calibration and accuracy at 480x640; Onnx...: the ONNX export in ONNX Runtime through Node): seconds
 # each in Release, many minutes under ASan.
 full_size='^(Presets/|Onnx)'
+# The host's Debian packages from the Release tree (test/consumer/run_package_test.sh): its libraries
+# and apps are built for it; the ASan stage's would not run outside their sanitizer runtime.
+packages='^debian_packages$'
 
-echo "== Release build of the full-size model tests and the kernel benchmarks (-Werror) =="
+echo "== Release build of the full-size model tests, the kernel benchmarks and the packaged libraries and apps (-Werror) =="
 cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON \
   -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints" >/dev/null
-cmake --build "$root/build" -j "$jobs" --target act_model_tests act_kernel_bench
+cmake --build "$root/build" -j "$jobs" --target act_model_tests act_kernel_bench \
+  actengine actengine_convert actengine_vision act_convert act_eval act_bench act_drive
 stage_done release-build
-echo "== Release: full-size model tests =="
-run_ctest "$root/build" -R "$full_size"
+echo "== Release: full-size model tests, the Debian packages =="
+run_ctest "$root/build" -R "$full_size|$packages"
 stage_done release-tests
 echo "== Release: the Python module (engine/python, pytest) =="
 cmake -S "$root" -B "$root/build" -DACT_BUILD_PYTHON=ON >/dev/null  # a missing pybind11 fails here, not skips
@@ -90,7 +94,7 @@ ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=Rel
 stage_done asan-build
 echo "== ASan + UBSan: every other test =="
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  run_ctest "$root/build-asan" -E "$full_size"
+  run_ctest "$root/build-asan" -E "$full_size|$packages"
 stage_done asan-tests
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then

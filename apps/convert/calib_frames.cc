@@ -15,6 +15,7 @@
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_kind.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -55,10 +56,23 @@ class Loader {
   explicit Loader(const ModelInfo& model) : model_(model) {}
 
   CalibrationSet take() { return std::move(set_); }
+  size_t frames() const { return set_.frames.size(); }
 
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
     if (!fs::exists(p)) fail(ErrorCode::kNotFound, "calibration source not found: " + source);
+    // A model given as frames says what it is (a checkpoint folder holding images is still a folder of images).
+    switch (const FileKind kind = file_kind(source)) {
+      case FileKind::kLeRobotCheckpoint:
+      case FileKind::kTrainingCheckpoint:
+        if (!files_with(p, kImageExtensions).empty()) break;
+        [[fallthrough]];
+      case FileKind::kActb:
+      case FileKind::kPyTorchZip:
+      case FileKind::kPyTorchLegacy:
+        fail(ErrorCode::kInvalidArgument, wrong_kind_message(source, kind, "calibration frames"));
+      default: break;
+    }
     if (fs::is_directory(p)) {
       if (fs::exists(p / "meta" / "info.json") && fs::is_directory(p / "videos")) return add_lerobot_dataset(p, max_frames);
       if (fs::exists(p / "log.jsonl")) return add_recording(p, max_frames);
@@ -77,7 +91,16 @@ class Loader {
     if (std::find(set_.notes.begin(), set_.notes.end(), n) == set_.notes.end()) set_.notes.push_back(n);
   }
 
-  static void to_model_rgb(const cv::Mat& image, const CameraInfo& cam, std::vector<uint8_t>& rgb) {
+  void to_model_rgb(const cv::Mat& image, const CameraInfo& cam, std::vector<uint8_t>& rgb) {
+    // A frame of another shape is stretched to the model's input, as act_drive's camera would be; the
+    // model saw training frames of its own aspect ratio, so calibration on stretched ones misleads.
+    const double frame_aspect = static_cast<double>(image.cols) / image.rows;
+    const double model_aspect = static_cast<double>(cam.width) / cam.height;
+    if (std::abs(frame_aspect - model_aspect) > 0.01 * model_aspect) {
+      note("warning: calibration frames of " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
+           " are stretched to the model's " + std::to_string(cam.width) + "x" + std::to_string(cam.height) + " (" +
+           cam.key + "): another aspect ratio than training's; use frames from the robot's camera at its training setting");
+    }
     throw_if_failed(frame_to_model_rgb(image, cam.height, cam.width, rgb));
   }
 
@@ -278,9 +301,22 @@ CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, 
   Loader loader(model);
   // Every source contributes its share of the frames.
   const size_t share = std::max<size_t>(1, (max_frames + sources.size() - 1) / sources.size());
-  for (const auto& s : sources) loader.add_source(s, share);
+  std::vector<std::string> short_sources;
+  for (const auto& s : sources) {
+    const size_t before = loader.frames();
+    loader.add_source(s, share);
+    if (loader.frames() - before < share) {
+      short_sources.push_back(s + " gave only " + std::to_string(loader.frames() - before) + " (its share: " + std::to_string(share) + ")");
+    }
+  }
   CalibrationSet set = loader.take();
   if (set.frames.size() > max_frames) set.frames.resize(max_frames);
+  if (set.frames.size() < max_frames) {
+    std::string why;
+    for (const auto& s : short_sources) why += (why.empty() ? "" : "; ") + s;
+    set.notes.push_back("read " + std::to_string(set.frames.size()) + " calibration frames of the " + std::to_string(max_frames) +
+                        " wanted (calibration samples + held-out): " + why);
+  }
   if (!model.cameras.empty()) {
     set.preprocessing = model_preprocessing_description(model.cameras[0].height, model.cameras[0].width);
   }

@@ -9,6 +9,8 @@
 
 #include "actengine/scheduler.h"
 #include "apps/status_error.h"
+#include "weights/blob/error.h"
+#include "weights/blob/model_config.h"
 
 namespace act::drive {
 namespace {
@@ -74,6 +76,20 @@ std::string DriveSummary::to_string() const {
   return s.str();
 }
 
+ModelInfo with_deployment(const ModelInfo& info, const DeploymentOptions& deployment) {
+  ModelInfo out = info;
+  if (deployment.n_action_steps) out.n_action_steps = *deployment.n_action_steps;
+  if (deployment.temporal_ensemble_coeff) {
+    out.temporal_ensembling = deployment.temporal_ensemble_coeff->has_value();
+    out.temporal_ensemble_coeff = deployment.temporal_ensemble_coeff->value_or(0.0);
+  }
+  const std::optional<double> coeff = out.temporal_ensembling ? std::optional<double>(out.temporal_ensemble_coeff) : std::nullopt;
+  if (const std::string problem = ModelConfig::deployment_problem(out.n_action_steps, coeff, out.chunk_size); !problem.empty()) {
+    fail(ErrorCode::kInvalidArgument, "--n-action-steps / --temporal-ensemble-coeff with this model: " + problem);
+  }
+  return out;
+}
+
 namespace {
 
 // Ticks of margin on top of the measured inference latency before the chunk runs out: they absorb
@@ -105,7 +121,7 @@ class ControlRun {
         link_(link),
         recorder_(recorder),
         log_(log),
-        info_(inference.info()),
+        info_(with_deployment(inference.info(), options.deployment)),
         period_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.control_hz))),
         period_s_(1.0 / options.control_hz),
         safe_(calibration.safe_command()),
@@ -336,7 +352,7 @@ class ControlRun {
   ActuatorLink& link_;
   Recorder* recorder_;
   std::ostream& log_;
-  const ModelInfo& info_;
+  const ModelInfo info_;  // the blob's, with ControlOptions::deployment applied
   const Clock::duration period_;
   const double period_s_;
   const PwmCommand safe_;

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "actengine/convert.h"
 #include "apps/bench_support.h"
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
@@ -33,7 +34,12 @@ struct ControlOptions {
   /// values, zero-padded), or zeros.
   enum class StateSource { kLastAction, kZeros } state_source = StateSource::kLastAction;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
+  DeploymentOptions deployment;  ///< replaces the blob's n_action_steps / temporal ensembling
 };
+
+/// `info` with `deployment`'s choices in place of the blob's; throws act::Error(kInvalidArgument) when
+/// they do not fit its chunk (LeRobot's rules, ModelConfig::deployment_problem).
+ModelInfo with_deployment(const ModelInfo& info, const DeploymentOptions& deployment);
 
 /// The first tick of each period during which the rover held the safe action because of a fault.
 struct FaultEvent {

@@ -5,6 +5,8 @@
 #include <random>
 #include <set>
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 
@@ -218,9 +220,54 @@ TEST(ActBench, BadArgumentsAreClearErrors) {
   EXPECT_NE(r.exit_code, 0);
   r = run_command(std::string(ACT_BENCH_BIN) + " --help");
   EXPECT_EQ(r.exit_code, 0);
-  for (const char* flag : {"--warmup_runs", "--num_runs", "--max_secs", "--threads", "--json", "--csv", "--config"}) {
+  for (const char* flag : {"--warmup_runs", "--num_runs", "--max_secs", "--threads", "--num_threads", "--graph", "--json",
+                           "--csv", "--config"}) {
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
   }
+}
+
+TEST(ActBench, TfliteNamesAndTooManyThreads) {
+  const std::string dir = test::scratch_dir();
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  ASSERT_EQ(run_command(std::string(ACT_CONVERT_BIN) + " " + q(test::fixture_dir("act-tiny")) + " -q -o " + q(dir + "/tiny.actb")).exit_code, 0);
+  // benchmark_model's names: --graph, --num_threads, --num_runs, --warmup_runs.
+  auto r = run_command(std::string(ACT_BENCH_BIN) + " --graph " + q(dir + "/tiny.actb") +
+                       " --num_threads 1 --num_runs 2 --warmup_runs 0 --json " + q(dir + "/b.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream in(dir + "/b.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["model"]["source"], "blob");
+  EXPECT_EQ(j["engine"]["threads"], 1);
+  EXPECT_EQ(j["runs"]["timed"], 2);
+  EXPECT_EQ(j["runs"]["warmup"], 0);
+  EXPECT_EQ(r.output.find("more than the"), std::string::npos) << r.output;
+  // More threads than online cores: a warning saying how many there are.
+  const long cores = ::sysconf(_SC_NPROCESSORS_ONLN);
+  r = run_command(std::string(ACT_BENCH_BIN) + " --graph " + q(dir + "/tiny.actb") + " --num_threads " +
+                  std::to_string(cores + 1) + " --num_runs 1");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("warning: --threads " + std::to_string(cores + 1) + " is more than the " + std::to_string(cores) +
+                          " online cores"), std::string::npos) << r.output;
+}
+
+TEST(DetectEmulation, QemuUsersTracesAndNativeRuns) {
+  // What qemu-aarch64 7.2 on an x86-64 host shows an ARM program (this machine, measured).
+  const std::string host_maps =
+      "5500000000-5500001000 r-xp 00000000 fe:00 10954828                       /usr/bin/act_bench\n"
+      "562c9a3e6000-562c9a69e000 r-xp 00099000 fe:00 10977375                   /usr/bin/qemu-aarch64\n";
+  const std::string x86_cpuinfo = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC\nflags\t\t: fpu avx2\n";
+  const std::string arm_cpuinfo = "processor\t: 0\nBogoMIPS\t: 108.00\nFeatures\t: fp asimd asimddp\nCPU implementer\t: 0x41\n";
+  EXPECT_EQ(detect_emulation(host_maps, "", "act_bench"), "qemu-user: /usr/bin/qemu-aarch64 is mapped into this process");
+  EXPECT_EQ(detect_emulation("", "", "qemu-aarch64"), "qemu-user: this process is qemu-aarch64");
+#if defined(__x86_64__)
+  EXPECT_NE(detect_emulation("", arm_cpuinfo, "act_bench").find("another architecture"), std::string::npos);
+  EXPECT_EQ(detect_emulation("", x86_cpuinfo, "act_bench"), "");
+#elif defined(__aarch64__)
+  EXPECT_NE(detect_emulation("", x86_cpuinfo, "act_bench").find("another architecture"), std::string::npos);
+  EXPECT_EQ(detect_emulation("", arm_cpuinfo, "act_bench"), "");
+#endif
+  // A library whose folder merely has qemu in its name is no emulator.
+  EXPECT_EQ(detect_emulation("7f00-7f01 r-xp 0 fe:00 1 /opt/qemu-tools/lib/libz.so.1\n", "", "act_bench"), "");
 }
 
 TEST(LatencySummary, PercentilesInterpolateAndOrder) {

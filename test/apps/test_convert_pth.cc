@@ -44,7 +44,7 @@ TEST(ActConvertPth, ConvertsWithFlagsAndWritesARobotPackage) {
   }
   std::ifstream readme(dir + "/pkg/README.md");
   const std::string text((std::istreambuf_iterator<char>(readme)), std::istreambuf_iterator<char>());
-  for (const char* step : {"build_packages.sh", "apt install ./actengine_*_arm64.deb", "act_bench --model", "act_drive"}) {
+  for (const char* step : {"build_packages.sh", "apt install ./actengine-tools_*_arm64.deb", "act_bench --model", "act_drive"}) {
     EXPECT_NE(text.find(step), std::string::npos) << step;
   }
   // The package's blob is the folder's.
@@ -67,9 +67,50 @@ TEST(ActConvertPth, PthOptionsDoNotApplyToAFolder) {
   const std::string fixture = act::test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);
   const std::string dir = act::test::scratch_dir();
-  const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(fixture) + " --n-action-steps 5 -o " + q(dir + "/m.actb"));
+  const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(fixture) + " --n-heads 4 -o " + q(dir + "/m.actb"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("do not apply to a LeRobot checkpoint folder"), std::string::npos) << r.output;
+}
+
+// --n-action-steps and --temporal-ensemble-coeff replace the checkpoint's for every input kind, checked
+// as LeRobot's ACTConfig checks them (the fixture: chunk_size 10, n_action_steps 10, no ensembling).
+TEST(ActConvertDeployment, OverridesApplyToEveryInputKind) {
+  ACT_REQUIRE_PATH(pth("tiny_plain.pth"));
+  const std::string fixture = act::test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = act::test::scratch_dir();
+  const std::string pth_flags = " --stats " + q(pth("tiny_stats.json")) + " --image-size 96x128 --n-heads 4 --assume-lerobot-defaults";
+  const std::string ensemble = " --n-action-steps 1 --temporal-ensemble-coeff 0.01 -o " + q(dir + "/m.actb");
+  for (const std::string& input : {q(fixture), q(fixture + "/model.safetensors"), q(pth("tiny_plain.pth")) + pth_flags}) {
+    const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + input + ensemble);
+    ASSERT_EQ(r.exit_code, 0) << input << "\n" << r.output;
+    EXPECT_NE(r.output.find("n_action_steps 1, temporal ensembling coeff 0.01"), std::string::npos) << input << "\n" << r.output;
+    // The blob holds them: act_drive's scheduler reads them from there.
+    const CommandResult explain = run_command(std::string(ACT_CONVERT_BIN) + " " + input + " --n-action-steps 4 -o " + q(dir + "/q.actb"));
+    ASSERT_EQ(explain.exit_code, 0) << explain.output;
+    EXPECT_NE(explain.output.find("n_action_steps 4\n"), std::string::npos) << explain.output;
+  }
+  // The .pth explanation names the flag as the source.
+  const CommandResult explain = run_command(std::string(ACT_CONVERT_BIN) + " " + q(pth("tiny_plain.pth")) + pth_flags +
+                                            " --n-action-steps 1 --temporal-ensemble-coeff 0.01 --explain");
+  EXPECT_NE(explain.output.find("<- --temporal-ensemble-coeff"), std::string::npos) << explain.output;
+
+  fs::remove(dir + "/m.actb");
+  const std::pair<std::string, std::string> refused[] = {
+      {" --n-action-steps 4 --temporal-ensemble-coeff 0.01", "temporal ensembling needs n_action_steps == 1 (LeRobot's rule), got 4"},
+      {" --n-action-steps 11", "n_action_steps 11 must be in [1, chunk_size 10]"},
+      {" --n-action-steps 1 --temporal-ensemble-coeff 20", "overflow float32"},
+      {" --n-action-steps 1 --temporal-ensemble-coeff nan", "expected a finite number or none, got 'nan'"},
+      {" --n-action-steps 1 --temporal-ensemble-coeff 0.01x", "expected a finite number or none"},
+  };
+  for (const auto& [flags, message] : refused) {
+    for (const std::string& input : {q(fixture), q(pth("tiny_plain.pth")) + pth_flags}) {
+      const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + input + flags + " -o " + q(dir + "/m.actb"));
+      EXPECT_NE(r.exit_code, 0) << flags;
+      EXPECT_NE(r.output.find(message), std::string::npos) << input << flags << "\n" << r.output;
+      EXPECT_FALSE(fs::exists(dir + "/m.actb"));
+    }
+  }
 }
 
 }  // namespace

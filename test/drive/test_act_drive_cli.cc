@@ -97,6 +97,31 @@ TEST(ActDriveCli, ClearErrorsForModelAndSerialPort) {
   EXPECT_GT(silent_board.hellos(), 0);
 }
 
+TEST(ActDriveCli, DeploymentOptionsReplaceTheBlobs) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);  // n_action_steps 10 of chunk 10, no ensembling
+  const std::string video = write_test_video(dir + "/v.avi", 30, 30, 128, 96);
+  const std::string drive = kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 ";
+  // Runs act_drive with `flags`; returns its log (stderr; the commands on stdout are not needed here).
+  const auto log_of = [&](const std::string& flags) {
+    const auto r = run_command("(" + drive + flags + " 2>" + q(dir + "/stderr.txt") + " >/dev/null)");
+    const std::string log = read_text(dir + "/stderr.txt");
+    EXPECT_EQ(r.exit_code, 0) << log;
+    return log;
+  };
+  const std::string queue = log_of("--n-action-steps 2");
+  EXPECT_NE(queue.find("queue of 2 of 10 actions"), std::string::npos) << queue;
+  const std::string ensemble = log_of("--n-action-steps 1 --temporal-ensemble-coeff 0.01");
+  EXPECT_NE(ensemble.find("temporal ensembling"), std::string::npos) << ensemble;
+  const auto refused = run_command(drive + "--n-action-steps 11");
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_NE(refused.output.find("n_action_steps 11 must be in [1, chunk_size 10]"), std::string::npos) << refused.output;
+  const auto needs_one = run_command(drive + "--temporal-ensemble-coeff 0.01");
+  EXPECT_EQ(needs_one.exit_code, 1);
+  EXPECT_NE(needs_one.output.find("needs n_action_steps == 1"), std::string::npos) << needs_one.output;
+}
+
 TEST(ActDriveCli, DryRunDrivesTheRealModelUntilTheVideoEnds) {
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
   const std::string dir = act::test::scratch_dir();

@@ -282,6 +282,28 @@ TEST(ControlLoop, TemporalEnsemblingDrivesAtTheControlRate) {
   EXPECT_GT(summary.inferences, 10u);  // ensembling keeps inferring
 }
 
+TEST(ControlLoop, DeploymentOptionsReplaceTheModelsAsLeRobotChecksThem) {
+  const ModelInfo queue = fake_model_info(false, 10);  // chunk 10
+  EXPECT_EQ(with_deployment(queue, {.n_action_steps = 3, .temporal_ensemble_coeff = std::nullopt}).n_action_steps, 3);
+  const ModelInfo ensembling = with_deployment(queue, {.n_action_steps = 1, .temporal_ensemble_coeff = 0.05});
+  EXPECT_TRUE(ensembling.temporal_ensembling);
+  EXPECT_DOUBLE_EQ(ensembling.temporal_ensemble_coeff, 0.05);
+  DeploymentOptions off;
+  off.temporal_ensemble_coeff.emplace(std::nullopt);
+  EXPECT_FALSE(with_deployment(fake_model_info(true), off).temporal_ensembling);
+  const auto refused = [&](const DeploymentOptions& d, const std::string& why) {
+    try {
+      with_deployment(queue, d);
+      ADD_FAILURE() << "accepted; expected: " << why;
+    } catch (const std::exception& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  refused({.n_action_steps = 11, .temporal_ensemble_coeff = std::nullopt}, "must be in [1, chunk_size 10]");
+  refused({.n_action_steps = std::nullopt, .temporal_ensemble_coeff = 0.01}, "needs n_action_steps == 1");
+  refused({.n_action_steps = 1, .temporal_ensemble_coeff = 1e9}, "overflow float32");
+}
+
 TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   Rig rig;
   rig.recording = rig.dir + "/rec";

@@ -85,6 +85,31 @@ TEST(ConvertApi, LocatesLeRobotsTrainingLayouts) {
   EXPECT_NE(blob.status().message().find("already converted"), std::string::npos) << blob.status().message();
 }
 
+TEST(ConvertApi, DeploymentOptionsReplaceTheFoldersAndReachTheBlob) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string blob = test::scratch_dir() + "/ensemble.actb";
+  auto model = import_checkpoint(fixture, {}, {.n_action_steps = 1, .temporal_ensemble_coeff = 0.01});
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  ASSERT_TRUE((*model)->write_fp32(blob).ok());
+  auto engine = Engine::open(blob);
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  EXPECT_EQ((*engine)->model_info().n_action_steps, 1);
+  EXPECT_TRUE((*engine)->model_info().temporal_ensembling);
+  EXPECT_DOUBLE_EQ((*engine)->model_info().temporal_ensemble_coeff, 0.01);
+  // "none" turns a checkpoint's ensembling off again.
+  DeploymentOptions off;
+  off.temporal_ensemble_coeff.emplace(std::nullopt);
+  auto plain = import_checkpoint(fixture, {}, off);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE((*plain)->summary().model.temporal_ensembling);
+  EXPECT_EQ((*plain)->summary().model.n_action_steps, 10);
+
+  const auto refused = import_checkpoint(fixture, {}, {.n_action_steps = std::nullopt, .temporal_ensemble_coeff = 0.01});
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("needs n_action_steps == 1"), std::string::npos) << refused.status().message();
+}
+
 TEST(ConvertApi, PthOptionsOnAFolderAreRefused) {
   ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
   PthOptions pth;
@@ -223,17 +248,34 @@ TEST(ConvertApi, ReportStructMatchesItsJson) {
   ASSERT_TRUE(model);
   auto frames = model->synthetic_calibration_set(6, 3);
   ASSERT_TRUE(frames.ok());
-  std::vector<std::string> progress;
+  std::vector<ConversionProgress> progress;
   Int8Options o = quick_options();
   o.method = CalibrationMethod::kPercentile;
-  o.progress = [&](const std::string& line) { progress.push_back(line); };
+  o.progress = [&](const ConversionProgress& p) { progress.push_back(p); };
   const std::string dir = test::scratch_dir();
   const std::string blob = dir + "/p.actb";
   const auto r = model->write_int8(blob, *frames, o);
   ASSERT_TRUE(r.ok()) << r.status().to_string();
   EXPECT_EQ(files_in(dir), std::vector<std::string>{"p.actb"});
   EXPECT_EQ(r->int8_bytes, fs::file_size(blob));
-  EXPECT_FALSE(progress.empty());
+  // Each calibration pass counts its frames from 0 to all of them, in order.
+  for (const char* pass : {"calibrating (percentile), pass 1/2", "calibrating (percentile), pass 2/2"}) {
+    std::vector<size_t> counts;
+    for (const auto& p : progress) {
+      if (p.task == pass) {
+        EXPECT_EQ(p.total, r->calibration_frames);
+        EXPECT_STREQ(p.unit, "frames");
+        counts.push_back(p.done);
+      }
+    }
+    ASSERT_EQ(counts.size(), r->calibration_frames + 1) << pass;
+    for (size_t i = 0; i < counts.size(); ++i) EXPECT_EQ(counts[i], i);
+  }
+  // Fewer frames than calib_samples: the report says how many and why.
+  const std::string fewer = "calibrated on " + std::to_string(r->calibration_frames) + " frames, fewer than the " +
+                            std::to_string(o.calib_samples) + " asked: the calibration set holds 6 frames";
+  EXPECT_NE(std::find_if(r->notes.begin(), r->notes.end(), [&](const std::string& n) { return n.find(fewer) == 0; }),
+            r->notes.end()) << r->to_text();
 
   const nlohmann::json j = nlohmann::json::parse(r->to_json());
   EXPECT_EQ(j["mode"], "static");

@@ -70,30 +70,41 @@ const char* file_kind_name(FileKind kind) {
   return "not a known kind of file";
 }
 
-std::string not_a_blob_hint(const std::string& path) {
-  const FileKind kind = file_kind(path);
-  const std::string what = "'" + path + "' is " + file_kind_name(kind) + ", not an .actb blob";
+std::string what_takes(FileKind kind, const std::string& path) {
   switch (kind) {
-    case FileKind::kActb:
-    case FileKind::kMissing:
-    case FileKind::kOther: return "";
     case FileKind::kLeRobotCheckpoint:
     case FileKind::kTrainingCheckpoint:
     case FileKind::kPyTorchZip:
-    case FileKind::kPyTorchLegacy:
-      return what + ": convert it first with act_convert " + path + " -o model.actb";
+    case FileKind::kPyTorchLegacy: return "convert it first with act_convert " + path + " -o model.actb";
+    case FileKind::kActb:
+      return "it is already converted: run it with act_bench -m " + path + ", act_eval -m " + path +
+             " -i OBS.safetensors or act_drive -m " + path;
     case FileKind::kSafetensors:
-      return what + " (a checkpoint's model.safetensors? convert its folder with act_convert)";
+      return "observations go to act_eval -i or act_bench --input; a checkpoint's model.safetensors is converted "
+             "with its folder: act_convert FOLDER -o model.actb";
     case FileKind::kRecording:
     case FileKind::kLeRobotDataset:
     case FileKind::kPng:
     case FileKind::kJpeg:
     case FileKind::kVideo:
-      return what + " (frames are calibration input: act_convert CHECKPOINT -o model.actb --precision int8 --calib " +
-             path + ")";
-    case FileKind::kFolder: return what;
+      return "frames are calibration input: act_convert CHECKPOINT -o model.actb --precision int8 --calib " + path;
+    case FileKind::kMissing:
+    case FileKind::kFolder:
+    case FileKind::kOther: return "";
   }
   return "";
+}
+
+std::string wrong_kind_message(const std::string& path, FileKind kind, const std::string& wanted) {
+  std::string message = "'" + path + "' is " + file_kind_name(kind) + ", not " + wanted;
+  if (const std::string next = what_takes(kind, path); !next.empty()) message += ": " + next;
+  return message;
+}
+
+std::string not_a_blob_hint(const std::string& path) {
+  const FileKind kind = file_kind(path);
+  if (kind == FileKind::kActb || kind == FileKind::kMissing || kind == FileKind::kOther) return "";
+  return wrong_kind_message(path, kind, "an .actb blob");
 }
 
 }  // namespace act

@@ -14,6 +14,11 @@ enum class FileKind {
 FileKind file_kind(const std::string& path);
 /// "a LeRobot checkpoint folder", "a PNG image", ...
 const char* file_kind_name(FileKind kind);
+/// Which command takes a file of this kind, e.g. "convert it first with act_convert ckpt -o model.actb";
+/// "" for kinds no tool takes (kMissing, kFolder, kOther).
+std::string what_takes(FileKind kind, const std::string& path);
+/// "'PATH' is KIND, not WANTED: WHAT_TAKES", for a tool given the wrong kind of file.
+std::string wrong_kind_message(const std::string& path, FileKind kind, const std::string& wanted);
 /// For a tool that wants an .actb blob: "" when `path` is one (or cannot be told), else what it is and
 /// what to do, e.g. "'ckpt' is a LeRobot checkpoint folder, not an .actb blob: convert it first with
 /// act_convert ckpt -o model.actb".

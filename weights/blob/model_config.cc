@@ -189,6 +189,19 @@ std::string ModelConfig::summary() const {
   return s.str();
 }
 
+std::string ModelConfig::deployment_problem(int n_action_steps, std::optional<double> temporal_ensemble_coeff,
+                                            int chunk_size) {
+  if (n_action_steps < 1 || n_action_steps > chunk_size) {
+    return "n_action_steps " + std::to_string(n_action_steps) + " must be in [1, chunk_size " + std::to_string(chunk_size) + "]";
+  }
+  if (!temporal_ensemble_coeff) return "";
+  if (std::string problem = ensemble_coeff_problem(*temporal_ensemble_coeff, chunk_size); !problem.empty()) return problem;
+  if (n_action_steps != 1) {
+    return "temporal ensembling needs n_action_steps == 1 (LeRobot's rule), got " + std::to_string(n_action_steps);
+  }
+  return "";
+}
+
 std::string ModelConfig::ensemble_coeff_problem(double coeff, int chunk_size) {
   if (!std::isfinite(coeff)) return "temporal_ensemble_coeff is not finite";
   if (std::fabs(coeff) * std::max(chunk_size - 1, 0) > kMaxEnsembleExponent) {
@@ -242,17 +255,8 @@ void ModelConfig::validate() const {
   if (n_encoder_layers < 1 || n_encoder_layers > 256) bad("n_encoder_layers " + std::to_string(n_encoder_layers));
   if (n_decoder_layers < 1 || n_decoder_layers > 256) bad("n_decoder_layers " + std::to_string(n_decoder_layers));
   if (chunk_size < 1 || chunk_size > 100000) bad("chunk_size " + std::to_string(chunk_size));
-  if (n_action_steps < 1 || n_action_steps > chunk_size) {
-    bad("n_action_steps " + std::to_string(n_action_steps) + " must be in [1, chunk_size " +
-        std::to_string(chunk_size) + "]");
-  }
-  if (temporal_ensemble_coeff) {
-    if (const std::string problem = ensemble_coeff_problem(*temporal_ensemble_coeff, chunk_size); !problem.empty()) {
-      bad(problem);
-    }
-    if (n_action_steps != 1) {
-      bad("temporal ensembling needs n_action_steps == 1 (LeRobot's rule), got " + std::to_string(n_action_steps));
-    }
+  if (const std::string problem = deployment_problem(n_action_steps, temporal_ensemble_coeff, chunk_size); !problem.empty()) {
+    bad(problem);
   }
 }
 

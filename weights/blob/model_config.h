@@ -124,6 +124,10 @@ struct ModelConfig {
   /// Why `coeff` cannot weight a chunk of `chunk_size` rows, or "" when it can (finite, and within
   /// kMaxEnsembleExponent). One rule for the blob, the importer and the chunk scheduler.
   static std::string ensemble_coeff_problem(double coeff, int chunk_size);
+  /// Why these deployment choices do not fit a chunk of `chunk_size` rows (LeRobot's ACTConfig rules:
+  /// 1 <= n_action_steps <= chunk_size, ensembling needs n_action_steps == 1, ensemble_coeff_problem),
+  /// or "" when they do.
+  static std::string deployment_problem(int n_action_steps, std::optional<double> temporal_ensemble_coeff, int chunk_size);
 
   /// Checks every invariant (a known backbone whose blocks match its name, positive dims, D % n_heads,
   /// D % 4, n_action_steps <= chunk_size, ensembling needs n_action_steps == 1, ...). Throws

@@ -290,8 +290,13 @@ class Planner {
     take_inferred(c, "n_encoder_layers");
     take_inferred(c, "n_decoder_layers");
     take_inferred(c, "latent_dim");
-    c["temporal_ensemble_coeff"] = nullptr;
-    fact("temporal_ensemble_coeff", nullptr, "not given (no temporal ensembling; a deployment choice, set it with --config)");
+    if (src_.temporal_ensemble_coeff && *src_.temporal_ensemble_coeff) {
+      c["temporal_ensemble_coeff"] = **src_.temporal_ensemble_coeff;
+      fact("temporal_ensemble_coeff", c["temporal_ensemble_coeff"], "--temporal-ensemble-coeff");
+    } else {
+      c["temporal_ensemble_coeff"] = nullptr;
+      fact("temporal_ensemble_coeff", nullptr, "not given (no temporal ensembling; a deployment choice: --temporal-ensemble-coeff)");
+    }
     plan_.config = std::move(c);
   }
 
@@ -370,6 +375,9 @@ class Planner {
       }
     }
     if (src_.n_action_steps) c["n_action_steps"] = *src_.n_action_steps;
+    if (src_.temporal_ensemble_coeff) {
+      c["temporal_ensemble_coeff"] = *src_.temporal_ensemble_coeff ? OrderedJson(**src_.temporal_ensemble_coeff) : OrderedJson();
+    }
     if (src_.n_heads) c["n_heads"] = *src_.n_heads;
     if (src_.activation) c["feedforward_activation"] = *src_.activation;
     if (src_.image_size && c.contains("input_features") && c["input_features"].is_object()) {
@@ -381,6 +389,7 @@ class Planner {
     for (const auto& [field, value] : c.items()) {
       std::string source = cfg;
       if (inferred_.count(field)) source = inferred_[field].second + " (agrees with " + cfg + ")";
+      if (field == "temporal_ensemble_coeff" && src_.temporal_ensemble_coeff) source = "--temporal-ensemble-coeff";
       if ((field == "n_action_steps" && src_.n_action_steps) || (field == "n_heads" && src_.n_heads) ||
           (field == "feedforward_activation" && src_.activation)) {
         source = "--" + std::string(field == "n_action_steps" ? "n-action-steps" : field == "n_heads" ? "n-heads" : "activation");

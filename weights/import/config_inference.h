@@ -25,6 +25,7 @@ struct ConfigSources {
   std::vector<std::string> stats_paths;  ///< "<feature>.<stat>" safetensors (processor state files) or meta/stats.json
   std::optional<std::pair<int, int>> image_size;  ///< height, width of every camera
   std::optional<int> n_action_steps;
+  std::optional<std::optional<double>> temporal_ensemble_coeff;  ///< set: replaces the config's (empty: null)
   std::optional<int> n_heads;
   std::optional<std::string> activation;  ///< relu / gelu / glu
   std::vector<std::string> cameras;       ///< camera feature keys, in token order

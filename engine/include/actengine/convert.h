@@ -37,13 +37,23 @@ struct PthOptions {
   std::string config_path;               ///< LeRobot config.json of the trained policy ("" = none)
   std::vector<std::string> stats_paths;  ///< meta/stats.json or policy_*_normalizer_processor.safetensors
   std::optional<std::pair<int, int>> image_size;  ///< height, width of every camera in training
-  std::optional<int> n_action_steps;
   std::optional<int> n_heads;
   std::optional<std::string> activation;  ///< "relu", "gelu" or "glu"
   std::vector<std::string> cameras;       ///< camera feature keys, in token order
   bool lerobot_defaults = false;  ///< take LeRobot's ACTConfig defaults for what leaves no trace in the weights
   bool no_normalization = false;  ///< the model was trained on raw inputs and actions (no statistics)
   std::string state_dict_key;     ///< entry of a wrapping dict that holds the state dict
+};
+
+/// How the robot executes the chunks, a deployment choice LeRobot keeps in config.json: given, it
+/// replaces the checkpoint's (a .pth needs n_action_steps from here or its --config). Checked as
+/// LeRobot's ACTConfig does: 1 <= n_action_steps <= chunk_size, ensembling needs n_action_steps 1, the
+/// coefficient a finite number small enough for exp(-coeff * i) over the chunk.
+struct DeploymentOptions {
+  std::optional<int> n_action_steps;  ///< actions executed per predicted chunk
+  /// Set: replaces temporal_ensemble_coeff. A number turns ensembling on; an empty value (LeRobot's
+  /// null) turns it off.
+  std::optional<std::optional<double>> temporal_ensemble_coeff;
 };
 
 /// One config value of a .pth conversion and where it came from.
@@ -73,7 +83,8 @@ class PthPlan {
  public:
   /// Reads the state dict. Fails on an unreadable file or a contradiction (a config.json that does
   /// not match the weights); facts that cannot be known are listed in explanation().missing instead.
-  static StatusOr<std::unique_ptr<PthPlan>> read(const std::string& pth_path, const PthOptions& options = {});
+  static StatusOr<std::unique_ptr<PthPlan>> read(const std::string& pth_path, const PthOptions& options = {},
+                                                 const DeploymentOptions& deployment = {});
   ~PthPlan();
   PthPlan(const PthPlan&) = delete;
   PthPlan& operator=(const PthPlan&) = delete;
@@ -142,6 +153,15 @@ enum class AttentionPrecision { kAuto, kInt8, kFp32 };
 /// kAuto's budget: int8 attention may raise the held-out error by this fraction at most.
 inline constexpr double kInt8AttentionErrorBudget = 0.25;
 
+/// How far a conversion is, for a progress display: `done` of `total` `unit`s of `task` (e.g. 3 of 64
+/// "frames" of "calibrating (mse), pass 1/2"; done 0 when a task starts), or, with total 0, a one-off
+/// message in `task` (e.g. "all layers int8: held-out MSE 0.0021 (target 0.001)").
+struct ConversionProgress {
+  std::string task;
+  size_t done = 0, total = 0;
+  const char* unit = "";
+};
+
 struct Int8Options {
   Int8Mode mode = Int8Mode::kStatic;
   CalibrationMethod method = CalibrationMethod::kMse;
@@ -158,8 +178,8 @@ struct Int8Options {
   /// held-out MSE and max |err| by at most kInt8AttentionErrorBudget (and, mixed, still meets the
   /// target); kInt8 and kFp32 force the choice.
   AttentionPrecision attention = AttentionPrecision::kAuto;
-  /// Called with each progress line ("calibrating (mse): pass 1/2, frame 3/64", ...); none if empty.
-  std::function<void(const std::string&)> progress;
+  /// Called as the conversion goes (the library never prints); none if empty.
+  std::function<void(const ConversionProgress&)> progress;
 };
 
 /// How many frames a CalibrationSet should hold for these options: calib_samples plus the held-out ones.
@@ -234,7 +254,8 @@ class ImportedCheckpoint {
 
  private:
   class Impl;
-  friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string&, const PthOptions&);
+  friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string&, const PthOptions&,
+                                                                         const DeploymentOptions&);
   friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const PthPlan&);
   friend StatusOr<std::unique_ptr<ImportedCheckpoint>> import_synthetic_model(const std::string&, uint32_t);
   explicit ImportedCheckpoint(std::unique_ptr<Impl> impl);
@@ -256,9 +277,11 @@ StatusOr<CheckpointLocation> locate_checkpoint(const std::string& path);
 
 /// Imports a LeRobot ACT checkpoint folder (config.json + model.safetensors [+ processor files], current
 /// or legacy layout), or a torch.save .pth/.pt file holding the policy's state dict with `pth` saying
-/// what the weights do not (for a folder, `pth` must be left empty). Errors name the file and the problem: kNotFound, kDataLoss (malformed),
+/// what the weights do not (for a folder, `pth` must be left empty); `deployment` replaces the
+/// deployment choices of either. Errors name the file and the problem: kNotFound, kDataLoss (malformed),
 /// kInvalidArgument (inconsistent config, or for a .pth, facts that cannot be known), kUnimplemented.
-StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& path, const PthOptions& pth = {});
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& path, const PthOptions& pth = {},
+                                                                const DeploymentOptions& deployment = {});
 /// Imports a planned .pth (fails with kInvalidArgument listing what is missing).
 StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const PthPlan& plan);
 /// A model with random weights of a built-in shape ("default", "rover", ... as act_bench knows them),

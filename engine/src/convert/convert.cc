@@ -7,18 +7,20 @@
 #include "engine/src/convert/convert_impl.h"
 #include "engine/src/convert/int8_converter.h"
 #include "engine/src/engine_impl.h"
+#include "weights/blob/file_kind.h"
 #include "weights/import/synthetic_model.h"
 
 namespace act {
 
 namespace {
 
-ConfigSources config_sources(const PthOptions& o) {
+ConfigSources config_sources(const PthOptions& o, const DeploymentOptions& deployment) {
   ConfigSources s;
   s.config_path = o.config_path;
   s.stats_paths = o.stats_paths;
   s.image_size = o.image_size;
-  s.n_action_steps = o.n_action_steps;
+  s.n_action_steps = deployment.n_action_steps;
+  s.temporal_ensemble_coeff = deployment.temporal_ensemble_coeff;
   s.n_heads = o.n_heads;
   s.activation = o.activation;
   s.cameras = o.cameras;
@@ -29,8 +31,19 @@ ConfigSources config_sources(const PthOptions& o) {
 }
 
 bool any_pth_option(const PthOptions& o) {
-  return !o.config_path.empty() || !o.stats_paths.empty() || o.image_size || o.n_action_steps || o.n_heads || o.activation ||
+  return !o.config_path.empty() || !o.stats_paths.empty() || o.image_size || o.n_heads || o.activation ||
          !o.cameras.empty() || o.lerobot_defaults || o.no_normalization || !o.state_dict_key.empty();
+}
+
+// The folder's config.json with the deployment choices replaced, checked again as a whole.
+void apply_deployment(ModelConfig& config, const DeploymentOptions& deployment, const std::string& config_path) {
+  if (deployment.n_action_steps) config.n_action_steps = *deployment.n_action_steps;
+  if (deployment.temporal_ensemble_coeff) config.temporal_ensemble_coeff = *deployment.temporal_ensemble_coeff;
+  if (const std::string problem = ModelConfig::deployment_problem(config.n_action_steps, config.temporal_ensemble_coeff,
+                                                                 config.chunk_size);
+      !problem.empty()) {
+    fail(ErrorCode::kInvalidArgument, "deployment settings (" + config_path + " with the overrides given): " + problem);
+  }
 }
 
 PthExplanation explain(const PyTorchConversion& plan) {
@@ -107,11 +120,12 @@ size_t calibration_frames_wanted(const Int8Options& options) {
 PthPlan::PthPlan(std::unique_ptr<Impl> impl) : impl_(std::move(impl)), explanation_(explain(impl_->plan)) {}
 PthPlan::~PthPlan() = default;
 
-StatusOr<std::unique_ptr<PthPlan>> PthPlan::read(const std::string& pth_path, const PthOptions& options) {
+StatusOr<std::unique_ptr<PthPlan>> PthPlan::read(const std::string& pth_path, const PthOptions& options,
+                                                 const DeploymentOptions& deployment) {
   std::unique_ptr<PthPlan> plan;
   const Status s = guarded([&] {
     auto impl = std::make_unique<Impl>();
-    impl->plan = plan_pytorch_conversion(pth_path, config_sources(options));
+    impl->plan = plan_pytorch_conversion(pth_path, config_sources(options, deployment));
     plan.reset(new PthPlan(std::move(impl)));
   });
   if (!s.ok()) return s;
@@ -134,22 +148,29 @@ StatusOr<CheckpointLocation> locate_checkpoint(const std::string& path) {
       const std::string inner = (given / "pretrained_model").string();
       return CheckpointLocation{inner, true, "the policy of this training checkpoint is in " + inner};
     }
+    if (const FileKind kind = file_kind(path); kind == FileKind::kRecording || kind == FileKind::kLeRobotDataset) {
+      return Status(StatusCode::kInvalidArgument, wrong_kind_message(path, kind, "a checkpoint"));
+    }
     return Status(StatusCode::kNotFound, path + " is a folder but not a LeRobot checkpoint: it has no config.json "
                   "(nor pretrained_model/config.json)");
   }
-  if (given.extension() == ".actb") {
-    return Status(StatusCode::kInvalidArgument, path + " is an .actb blob, already converted: run it with act_bench, "
-                  "act_eval or act_drive (or Engine::open)");
-  }
   // A checkpoint's own weights file given directly: the folder around it is the checkpoint.
-  if (given.extension() == ".safetensors" && given.has_parent_path() && has_config(given.parent_path())) {
+  if (given.filename() == "model.safetensors" && given.has_parent_path() && has_config(given.parent_path())) {
     const std::string folder = given.parent_path().string();
     return CheckpointLocation{folder, true, path + " is a LeRobot checkpoint's weights: converting its folder " + folder};
+  }
+  // Anything else but a PyTorch file says what it is (an unknown kind may still be a pickle: the reader
+  // decides); a damaged blob is still known by its name.
+  const FileKind kind = given.extension() == ".actb" ? FileKind::kActb : file_kind(path);
+  if (kind != FileKind::kPyTorchZip && kind != FileKind::kPyTorchLegacy && kind != FileKind::kOther) {
+    return Status(StatusCode::kInvalidArgument,
+                  wrong_kind_message(path, kind, "a checkpoint (a LeRobot checkpoint folder or a PyTorch .pth file)"));
   }
   return CheckpointLocation{path, false, ""};
 }
 
-StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& given, const PthOptions& pth) {
+StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::string& given, const PthOptions& pth,
+                                                                const DeploymentOptions& deployment) {
   const StatusOr<CheckpointLocation> location = locate_checkpoint(given);
   if (!location.ok()) return location.status();
   const std::string& path = location->path;
@@ -158,7 +179,7 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::strin
                   "): its config.json and statistics are in the folder");
   }
   if (!location->lerobot_folder) {
-    StatusOr<std::unique_ptr<PthPlan>> plan = PthPlan::read(path, pth);
+    StatusOr<std::unique_ptr<PthPlan>> plan = PthPlan::read(path, pth, deployment);
     if (!plan.ok()) return plan.status();
     return import_checkpoint(**plan);
   }
@@ -166,6 +187,7 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::strin
   const Status s = guarded([&] {
     auto impl = std::make_unique<ImportedCheckpoint::Impl>();
     impl->model = import_lerobot_checkpoint(path);
+    apply_deployment(impl->model.config, deployment, path + "/config.json");
     out.reset(new ImportedCheckpoint(std::move(impl)));
     out->summary_ = import_summary(out->impl_->model, out->impl_->model.layout + " LeRobot layout");
   });

@@ -102,8 +102,11 @@ class Converter {
   }
 
  private:
-  void progress(const std::string& line) const {
-    if (opt_.progress) opt_.progress(line);
+  void progress(const std::string& message) const {
+    if (opt_.progress) opt_.progress({message, 0, 0, ""});
+  }
+  void progress(const std::string& task, size_t done, size_t total, const char* unit) const {
+    if (opt_.progress) opt_.progress({task, done, total, unit});
   }
 
   void choose_frames(const CalibrationSet& given) {
@@ -132,6 +135,11 @@ class Converter {
     if (eval_.empty()) {
       eval_ = calib_;
       frames_.notes.push_back("only one frame: the accuracy below is measured on the calibration frame itself");
+    }
+    if (!given.frames.empty() && calib_.size() < opt_.calib_samples) {
+      frames_.notes.push_back("calibrated on " + std::to_string(calib_.size()) + " frames, fewer than the " +
+                              std::to_string(opt_.calib_samples) + " asked: the calibration set holds " + std::to_string(n) +
+                              " frames and " + std::to_string(eval_.size()) + " of them are held out for the accuracy report");
     }
     progress(std::to_string(calib_.size()) + " calibration frames, " + std::to_string(eval_.size()) + " held out");
   }
@@ -170,9 +178,10 @@ class Converter {
     const int passes = histograms ? 2 : 1;
     std::vector<float> normalized(chunk_values());
     for (int pass = 1; pass <= passes; ++pass) {
+      const std::string task = "calibrating (" + std::string(calibration_method_name(opt_.method)) + "), pass " +
+                               std::to_string(pass) + "/" + std::to_string(passes);
+      progress(task, 0, calib_.size(), "frames");
       for (size_t f = 0; f < calib_.size(); ++f) {
-        progress("calibrating (" + std::string(calibration_method_name(opt_.method)) + "): pass " + std::to_string(pass) +
-                 "/" + std::to_string(passes) + ", frame " + std::to_string(f + 1) + "/" + std::to_string(calib_.size()));
         fp32_->run(obs(calib_[f]), normalized);
         for (size_t k = 0; k < points.size(); ++k) {
           const std::span<const float> values(g.data(points[k].value), g.value(points[k].value).elements);
@@ -182,6 +191,7 @@ class Converter {
             observers[k].observe_histogram(values);
           }
         }
+        progress(task, f + 1, calib_.size(), "frames");
       }
     }
     std::map<std::string, ActivationQuant> out;
@@ -239,6 +249,8 @@ class Converter {
     progress("all layers int8: held-out MSE " + fmt(err.mse) + " (target " + fmt(target) + ")");
     if (err.mse <= target) return;
     const std::vector<std::string> layers = quantizable_layers(model_);
+    const std::string task = "sensitivity search (one layer in int8 at a time)";
+    progress(task, 0, layers.size(), "layers");
     for (size_t i = 0; i < layers.size(); ++i) {
       QuantConfig one = quant;
       one.float_layers.clear();
@@ -247,8 +259,7 @@ class Converter {
       }
       const double mse = write_and_evaluate(one).second.mse;
       sensitivity.push_back({layers[i], mse});
-      progress("sensitivity " + std::to_string(i + 1) + "/" + std::to_string(layers.size()) + ": " + layers[i] +
-               " alone in int8 -> MSE " + fmt(mse));
+      progress(task, i + 1, layers.size(), "layers");
     }
     std::stable_sort(sensitivity.begin(), sensitivity.end(),
                      [](const auto& a, const auto& b) { return a.mse_alone_int8 > b.mse_alone_int8; });

@@ -84,7 +84,7 @@ std::string Int8Report::to_text() const {
   for (const auto& l : float_layers) s << "  " << l << "\n";
   s << "per-layer SQNR (dB, int8 vs fp32 output):\n";
   for (const auto& l : layers) s << "  " << fmt(l.sqnr_db, "%6.1f") << "  " << l.value << " (" << l.op << ")\n";
-  for (const auto& n : notes) s << "note: " << n << "\n";
+  for (const auto& n : notes) s << (n.rfind("warning: ", 0) == 0 ? "" : "note: ") << n << "\n";
   return s.str();
 }
 

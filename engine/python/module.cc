@@ -166,11 +166,13 @@ struct ConvertArgs {
   uint64_t seed = 1;
   bool layer_report = true;
   py::object progress;
+  std::string attention = "auto";
   PthOptions pth;
+  DeploymentOptions deployment;
 };
 
 bool any_pth_option(const PthOptions& p) {
-  return !p.config_path.empty() || !p.stats_paths.empty() || p.image_size || p.n_action_steps || p.n_heads ||
+  return !p.config_path.empty() || !p.stats_paths.empty() || p.image_size || p.n_heads ||
          p.activation || !p.cameras.empty() || p.lerobot_defaults || p.no_normalization || !p.state_dict_key.empty();
 }
 
@@ -202,13 +204,23 @@ Int8Options int8_options(const ConvertArgs& a) {
     throw py::value_error(mode + " quantization needs calibration frames: calib=[observation dict, ...] (or "
                           "mode='dynamic', which needs none)");
   }
+  if (a.attention == "int8") {
+    o.attention = AttentionPrecision::kInt8;
+  } else if (a.attention == "fp32") {
+    o.attention = AttentionPrecision::kFp32;
+  } else if (a.attention != "auto") {
+    throw py::value_error("attention must be 'auto', 'int8' or 'fp32', got '" + a.attention + "'");
+  }
   if (o.mode == Int8Mode::kMixed && !o.target_mse) {
     throw py::value_error("mode='mixed' needs target_mse (held-out MSE in normalised units)");
   }
   if (!a.progress.is_none()) {
     // A handle, not an object: copies of the callback may be destroyed in threads that hold no GIL.
     const py::handle progress = a.progress;
-    o.progress = [progress](const std::string& line) {
+    o.progress = [progress](const ConversionProgress& p) {
+      // One line, as act_convert prints it off a terminal: the task, and how far when it counts.
+      const std::string line = p.total == 0 ? p.task
+                                            : p.task + ": " + std::to_string(p.done) + "/" + std::to_string(p.total) + " " + p.unit;
       const py::gil_scoped_acquire acquire;
       try {
         progress(line);
@@ -230,14 +242,14 @@ std::unique_ptr<ImportedCheckpoint> import(const ConvertArgs& a, std::vector<std
   }
   py::gil_scoped_release release;
   if (location->lerobot_folder) {
-    auto model = import_checkpoint(location->path);
+    auto model = import_checkpoint(location->path, {}, a.deployment);
     if (!model.ok()) {
       const py::gil_scoped_acquire acquire;
       raise(model.status());
     }
     return std::move(model).value();
   }
-  auto plan = PthPlan::read(location->path, a.pth);
+  auto plan = PthPlan::read(location->path, a.pth, a.deployment);
   auto model = plan.ok() ? import_checkpoint(**plan) : StatusOr<std::unique_ptr<ImportedCheckpoint>>(plan.status());
   if (!model.ok()) {
     const py::gil_scoped_acquire acquire;
@@ -361,17 +373,24 @@ robot that keeps acting while the next chunk is inferred (actengine/scheduler.h)
          const std::optional<std::string>& mode, const std::vector<py::dict>& calib, size_t calib_samples,
          const std::optional<size_t>& holdout, const std::string& calib_method, double percentile,
          const std::optional<double>& target_mse, const std::optional<double>& max_mse, int threads, uint64_t seed,
-         bool layer_report, const py::object& progress, const std::optional<std::string>& config,
+         bool layer_report, const py::object& progress, const std::string& attention,
+         const std::optional<double>& temporal_ensemble_coeff, bool no_temporal_ensembling,
+         const std::optional<std::string>& config,
          const std::vector<std::string>& stats, const std::optional<std::pair<int, int>>& image_size,
          const std::optional<int>& n_action_steps, const std::optional<int>& n_heads,
          const std::optional<std::string>& activation, const std::vector<std::string>& cameras, bool lerobot_defaults,
          bool no_normalization, const std::optional<std::string>& state_dict_key) {
         ConvertArgs a{checkpoint, output, precision, mode, calib, calib_samples, holdout, calib_method, percentile,
-                      target_mse, max_mse, threads, seed, layer_report, progress, {}};
+                      target_mse, max_mse, threads, seed, layer_report, progress, attention, {}, {}};
+        if (temporal_ensemble_coeff && no_temporal_ensembling) {
+          throw py::value_error("give temporal_ensemble_coeff or no_temporal_ensembling, not both");
+        }
+        a.deployment.n_action_steps = n_action_steps;
+        if (temporal_ensemble_coeff) a.deployment.temporal_ensemble_coeff = temporal_ensemble_coeff;
+        if (no_temporal_ensembling) a.deployment.temporal_ensemble_coeff = std::optional<double>{};
         a.pth.config_path = config.value_or("");
         a.pth.stats_paths = stats;
         a.pth.image_size = image_size;
-        a.pth.n_action_steps = n_action_steps;
         a.pth.n_heads = n_heads;
         a.pth.activation = activation;
         a.pth.cameras = cameras;
@@ -385,9 +404,11 @@ robot that keeps acting while the next chunk is inferred (actengine/scheduler.h)
 precision "int8" (default) or "fp32". INT8: mode "static" (default; needs calib), "dynamic" (no
 calibration) or "mixed" (needs target_mse); calib is a list of observation dicts (uint8 HxWx3 images at
 the model's input size, states optional); calib_samples, holdout, calib_method ("minmax", "percentile",
-"mse"), percentile, max_mse (fail, writing nothing, above it), threads, seed, layer_report, and
-progress (called with each progress line). A .pth takes act_convert's options: config, stats,
-image_size (height, width), n_action_steps, n_heads, activation, cameras, lerobot_defaults,
+"mse"), percentile, max_mse (fail, writing nothing, above it), threads, seed, layer_report,
+attention ("auto", "int8", "fp32": act_convert --attention) and progress (called with each
+progress line). Deployment settings for every input: n_action_steps, temporal_ensemble_coeff (turns
+ensembling on; needs n_action_steps 1) or no_temporal_ensembling. A .pth takes act_convert's
+options: config, stats, image_size (height, width), n_heads, activation, cameras, lerobot_defaults,
 no_normalization, state_dict_key.
 
 Returns a dict: precision, bytes (the blob's size), model (one-line summary), notes, and for INT8 the
@@ -397,6 +418,8 @@ accuracy report against FP32 (report: act_convert --report's JSON). Nothing is w
       py::arg("holdout") = py::none(), py::arg("calib_method") = "mse", py::arg("percentile") = 99.99,
       py::arg("target_mse") = py::none(), py::arg("max_mse") = py::none(), py::arg("threads") = 0,
       py::arg("seed") = 1, py::arg("layer_report") = true, py::arg("progress") = py::none(),
+      py::arg("attention") = "auto", py::arg("temporal_ensemble_coeff") = py::none(),
+      py::arg("no_temporal_ensembling") = false,
       py::arg("config") = py::none(), py::arg("stats") = std::vector<std::string>{},
       py::arg("image_size") = py::none(), py::arg("n_action_steps") = py::none(), py::arg("n_heads") = py::none(),
       py::arg("activation") = py::none(), py::arg("cameras") = std::vector<std::string>{},

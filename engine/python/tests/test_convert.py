@@ -83,6 +83,8 @@ def test_conversion_errors_carry_act_converts_message(act_tiny, tiny_blob, tmp_p
     (dict(mode="fast"), "mode must be 'dynamic', 'static' or 'mixed', got 'fast'"),
     (dict(mode="dynamic", calib_method="median"), "median"),
     (dict(mode="dynamic", config="config.json"), "the .pth options (config, stats, ...) do not apply"),
+    (dict(mode="dynamic", attention="int4"), "attention must be 'auto', 'int8' or 'fp32', got 'int4'"),
+    (dict(mode="dynamic", temporal_ensemble_coeff=0.01, no_temporal_ensembling=True), "not both"),
     (dict(calib=[{CAMERA: np.zeros((3, 96, 128), np.float32)}]), "observation.images.front: expected uint8 96x128x3"),
 ])
 def test_bad_arguments_raise_value_error(act_tiny, tmp_path, arguments, message):
@@ -90,6 +92,17 @@ def test_bad_arguments_raise_value_error(act_tiny, tmp_path, arguments, message)
         actengine.convert(act_tiny.dir, tmp_path / "out.actb", **arguments)
     assert message in str(error.value)
     assert not (tmp_path / "out.actb").exists()
+
+
+def test_attention_and_deployment_settings_reach_the_blob(act_tiny, tmp_path):
+    result = actengine.convert(act_tiny.dir, tmp_path / "f.actb", mode="dynamic", threads=2, attention="fp32")
+    assert result["report"]["attention"] == {"precision": "fp32"}
+    result = actengine.convert(act_tiny.dir, tmp_path / "i.actb", mode="dynamic", threads=2, attention="int8",
+                               n_action_steps=1, temporal_ensemble_coeff=0.01)
+    assert result["report"]["attention"]["precision"] == "int8"
+    info = actengine.Engine(tmp_path / "i.actb").model_info
+    assert (info.n_action_steps, info.temporal_ensembling) == (1, True)
+    assert info.temporal_ensemble_coeff == pytest.approx(0.01)
 
 
 def test_a_missed_max_mse_writes_nothing_and_says_what_to_try(act_tiny, tmp_path):

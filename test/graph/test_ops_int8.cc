@@ -242,34 +242,49 @@ std::vector<double> attention_naive(const std::vector<float>& q, const std::vect
   return out;
 }
 
+// Runs one attention op (float or int8: `int8` chooses) on random q, k, v of these sizes, with k
+// and v side by side in one value as the fused projection makes them; returns its output and the
+// naive definition's.
+struct AttentionRun {
+  std::vector<float> got;
+  std::vector<double> want;
+};
+AttentionRun run_attention(const kernels::KernelConfig& k, ThreadPool& pool, bool int8, int nq, int nk, int dim, int heads,
+                           std::mt19937& rng) {
+  const std::vector<float> q = uniform(static_cast<size_t>(nq) * dim, rng, -2.0f, 2.0f);
+  const std::vector<float> kk = uniform(static_cast<size_t>(nk) * dim, rng, -2.0f, 2.0f);
+  const std::vector<float> v = uniform(static_cast<size_t>(nk) * dim, rng, -1.0f, 1.0f);
+  Graph g;
+  const ValueId qv = g.add_input("q", {nq, dim});
+  const ValueId kv = g.add_input("kv", {nk, 2 * dim});
+  const ValueId out = g.add_value("out", {nq, dim});
+  const MatrixRef qr = MatrixRef::of(qv, dim), kr = MatrixRef::of(kv, 2 * dim, 0), vr = MatrixRef::of(kv, 2 * dim, dim);
+  if (int8) {
+    g.add_op(std::make_unique<AttentionS8Op>(k.gemm_s8, nq, nk, dim, heads, qr, kr, vr, out));
+  } else {
+    g.add_op(std::make_unique<AttentionOp>(nq, nk, dim, heads, qr, kr, vr, out));
+  }
+  g.mark_output(out);
+  g.plan(pool.threads(), false);
+  std::copy(q.begin(), q.end(), g.data(qv));
+  for (int j = 0; j < nk; ++j) {
+    std::copy_n(kk.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim);
+    std::copy_n(v.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim + dim);
+  }
+  g.run(pool, k);
+  return {std::vector<float>(g.data(out), g.data(out) + static_cast<size_t>(nq) * dim),
+          attention_naive(q, kk, v, nq, nk, dim, heads)};
+}
+
 // AttentionOp against the naive definition: self-attention over a fused qkv value (column slices,
 // as the encoder uses it) and cross-attention with fewer queries than keys; query counts that leave
 // a ragged tile.
 TEST_P(OpsPerIsa, AttentionMatchesNaiveSoftmaxAttention) {
-  const kernels::KernelConfig k = config();
   std::mt19937 rng(9);
-  const int dim = 64, heads = 4;
   for (auto [nq, nk] : {std::pair{37, 37}, std::pair{130, 45}, std::pair{1, 9}}) {
-    const std::vector<float> q = uniform(static_cast<size_t>(nq) * dim, rng, -2.0f, 2.0f);
-    const std::vector<float> kk = uniform(static_cast<size_t>(nk) * dim, rng, -2.0f, 2.0f);
-    const std::vector<float> v = uniform(static_cast<size_t>(nk) * dim, rng, -1.0f, 1.0f);
-    Graph g;
-    const ValueId qv = g.add_input("q", {nq, dim});
-    const ValueId kv = g.add_input("kv", {nk, 2 * dim});  // k and v side by side, as the fused projection
-    const ValueId out = g.add_value("out", {nq, dim});
-    g.add_op(std::make_unique<AttentionOp>(nq, nk, dim, heads, MatrixRef::of(qv, dim), MatrixRef::of(kv, 2 * dim, 0),
-                                           MatrixRef::of(kv, 2 * dim, dim), out));
-    g.mark_output(out);
-    g.plan(pool_.threads(), false);
-    std::copy(q.begin(), q.end(), g.data(qv));
-    for (int j = 0; j < nk; ++j) {
-      std::copy_n(kk.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim);
-      std::copy_n(v.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim + dim);
-    }
-    g.run(pool_, k);
-    const std::vector<double> want = attention_naive(q, kk, v, nq, nk, dim, heads);
-    for (size_t i = 0; i < want.size(); ++i) {
-      ASSERT_NEAR(g.data(out)[i], want[i], 2e-5 * (1 + std::fabs(want[i])))
+    const AttentionRun r = run_attention(config(), pool_, false, nq, nk, 64, 4, rng);
+    for (size_t i = 0; i < r.want.size(); ++i) {
+      ASSERT_NEAR(r.got[i], r.want[i], 2e-5 * (1 + std::fabs(r.want[i])))
           << kernels::isa_name(GetParam()) << " " << nq << "x" << nk << " at " << i;
     }
   }
@@ -281,35 +296,16 @@ TEST_P(OpsPerIsa, AttentionMatchesNaiveSoftmaxAttention) {
 // on these inputs the worst output error stays below 1.5 % of the largest |v| (the outputs are
 // convex combinations of v's rows), and the RMS error below 0.4 % of it.
 TEST_P(OpsPerIsa, AttentionS8MatchesNaiveSoftmaxAttentionWithinQuantizationError) {
-  const kernels::KernelConfig k = config();
   std::mt19937 rng(11);
-  const int dim = 64, heads = 4;
   for (auto [nq, nk] : {std::pair{37, 37}, std::pair{130, 45}, std::pair{1, 9}, std::pair{251, 302}}) {
-    const std::vector<float> q = uniform(static_cast<size_t>(nq) * dim, rng, -2.0f, 2.0f);
-    const std::vector<float> kk = uniform(static_cast<size_t>(nk) * dim, rng, -2.0f, 2.0f);
-    const std::vector<float> v = uniform(static_cast<size_t>(nk) * dim, rng, -1.0f, 1.0f);
-    Graph g;
-    const ValueId qv = g.add_input("q", {nq, dim});
-    const ValueId kv = g.add_input("kv", {nk, 2 * dim});
-    const ValueId out = g.add_value("out", {nq, dim});
-    g.add_op(std::make_unique<AttentionS8Op>(k.gemm_s8, nq, nk, dim, heads, MatrixRef::of(qv, dim),
-                                             MatrixRef::of(kv, 2 * dim, 0), MatrixRef::of(kv, 2 * dim, dim), out));
-    g.mark_output(out);
-    g.plan(pool_.threads(), false);
-    std::copy(q.begin(), q.end(), g.data(qv));
-    for (int j = 0; j < nk; ++j) {
-      std::copy_n(kk.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim);
-      std::copy_n(v.data() + static_cast<size_t>(j) * dim, dim, g.data(kv) + static_cast<size_t>(j) * 2 * dim + dim);
-    }
-    g.run(pool_, k);
-    const std::vector<double> want = attention_naive(q, kk, v, nq, nk, dim, heads);
+    const AttentionRun r = run_attention(config(), pool_, true, nq, nk, 64, 4, rng);
     double worst = 0, squares = 0;
-    for (size_t i = 0; i < want.size(); ++i) {
-      const double err = std::fabs(g.data(out)[i] - want[i]);
+    for (size_t i = 0; i < r.want.size(); ++i) {
+      const double err = std::fabs(r.got[i] - r.want[i]);
       worst = std::max(worst, err);
       squares += err * err;
     }
-    const double rms = std::sqrt(squares / static_cast<double>(want.size()));
+    const double rms = std::sqrt(squares / static_cast<double>(r.want.size()));
     EXPECT_LT(worst, 0.015) << kernels::isa_name(GetParam()) << " " << nq << "x" << nk;
     EXPECT_LT(rms, 0.004) << kernels::isa_name(GetParam()) << " " << nq << "x" << nk;
   }

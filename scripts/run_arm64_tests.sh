@@ -41,6 +41,12 @@ slow_tests=(
   'SyntheticModel\.ActivationsStayWellScaled'  # one inference of the full-size rover model
   'SyntheticModel\.DeterministicForASeed'
   'SplitEngine\.Int8StaticBlobRunsTheRestExactlyAsTheWholeEngine'  # an INT8 calibration, then two engines
+  # INT8 conversions (each evaluates its held-out frames with and without int8 attention): 12-140 s
+  # here; the int8 attention's NEON path runs in OpsPerIsa.AttentionS8* within a second.
+  'ConvertApi\.AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen'
+  'ConvertApi\.ReportStructMatchesItsJson'
+  'ConvertApi\.MissedMaxMseWritesNothing'
+  'Modes/SchedulerVsPolicy\.ZeroLatencyOnRawChunksMatchesPolicySelectAction/TemporalEnsembling'  # 83 s
 )
 exclude="^($(IFS='|'; echo "${slow_tests[*]}"))\$"
 

@@ -188,6 +188,7 @@ struct TimedRuns {
   double first_ms = 0;  ///< the first inference, before the warm-up
   double bench_ms = 0;  ///< wall time of the timed runs
   std::vector<act::InferenceTimings> runs, other_runs;
+  std::vector<std::vector<double>> op_ms;  ///< --op_profiling: [op][run] milliseconds
   act::DiffStats action_diff;  ///< ours against the other precision's
 };
 
@@ -309,6 +310,7 @@ class Benchmark {
     for (int i = 0; i < opt_.num_runs; ++i) {
       infer(*engine_, i, chunk);
       timed_.runs.push_back(engine_->last_timings());
+      if (opt_.op_profiling) record_op_times();
       if (other_) {  // interleaved run by run, so both see the same machine conditions
         infer(*other_, i, other_chunk);
         timed_.other_runs.push_back(other_->last_timings());
@@ -324,6 +326,18 @@ class Benchmark {
     }
     progress.finish();
     timed_.bench_ms = ms_since(bench_start);
+  }
+
+  // This run's time of each op: the growth of the engine's per-op sums since the last run (for the
+  // op table's medians, which a descheduled run on a shared machine does not drag like a mean).
+  void record_op_times() {
+    const std::vector<act::OpProfile> profile = engine_->op_profile();
+    timed_.op_ms.resize(profile.size());
+    op_totals_.resize(profile.size(), 0.0);
+    for (size_t op = 0; op < profile.size(); ++op) {
+      timed_.op_ms[op].push_back(profile[op].total_ms - op_totals_[op]);
+      op_totals_[op] = profile[op].total_ms;
+    }
   }
 
   // Statistics per stage, the achieved rate against this CPU's peak, the comparison, the memory.
@@ -354,7 +368,7 @@ class Benchmark {
     rss_ = act::peak_rss_bytes();
     if (opt_.op_profiling) {
       const std::vector<act::OpProfile> profile = engine_->op_profile();
-      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core * engine_->threads());
+      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core * engine_->threads(), timed_.op_ms);
     }
   }
 
@@ -485,6 +499,7 @@ class Benchmark {
   double gmac_ = 0, gmacs_per_s_ = 0;
   std::optional<Comparison> comparison_;
   std::optional<act::OpProfileTable> op_table_;
+  std::vector<double> op_totals_;  // --op_profiling: each op's summed time after the last run
   act::MachineInfo machine_;
   Peak peak_;
   double pct_peak_ = 0;

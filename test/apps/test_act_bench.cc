@@ -124,7 +124,7 @@ TEST(ActBench, OpProfileAndTrace) {
   const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 --precision int8 -n 2 -w 0 -t 2 " +
                              "--enable_op_profiling --json " + q(dir + "/p.json") + " --trace " + q(dir + "/t.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* section : {"op profile", "top 10 ops by time", "by kind", "gemm_s8"}) {
+  for (const char* section : {"op profile", "top 10 ops by median time", "by kind", "gemm_s8"}) {
     EXPECT_NE(r.output.find(section), std::string::npos) << section << "\n" << r.output;
   }
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/p.json"));
@@ -132,6 +132,8 @@ TEST(ActBench, OpProfileAndTrace) {
   double percent = 0, ms = 0;
   for (const auto& op : profile.at("ops")) {
     EXPECT_EQ(op.at("runs"), 2);
+    // The median of two runs is their mean: the per-run times add up to the engine's sums.
+    EXPECT_NEAR(op.at("p50_ms").get<double>(), op.at("mean_ms").get<double>(), 1e-9 + 1e-9 * op.at("mean_ms").get<double>());
     percent += op.at("percent").get<double>();
     ms += op.at("mean_ms").get<double>();
   }
@@ -172,6 +174,15 @@ TEST(OpProfileTable, MeansSharesRatesAndKinds) {
   EXPECT_EQ(top[0].name, "a");
   EXPECT_EQ(top[1].name, "b");
   EXPECT_DOUBLE_EQ(OpProfileTable::make(profile, 0.0).ops[0].percent_of_peak, 0.0) << "no peak, no % of peak";
+
+  // With per-run times: medians, the rates at the median, the top by median.
+  const OpProfileTable m = OpProfileTable::make(profile, 10.0, {{1.0, 5.0, 3.0}, {0.5, 1.5}, {}});
+  EXPECT_DOUBLE_EQ(m.ops[0].p50_ms, 3.0);
+  EXPECT_DOUBLE_EQ(m.ops[1].p50_ms, 1.0);
+  EXPECT_DOUBLE_EQ(m.ops[2].p50_ms, 1.0) << "no runs given: the mean";
+  EXPECT_DOUBLE_EQ(m.ops[0].mean_ms, 2.0) << "the mean stays the engine's";
+  EXPECT_DOUBLE_EQ(m.ops[0].gmacs_per_s, 1e6 / 3e6);
+  EXPECT_DOUBLE_EQ(m.kinds[0].p50_ms, 4.0);
 }
 
 TEST(ActBench, CompareWithABlobNeedsTheOtherPrecision) {

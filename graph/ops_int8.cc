@@ -360,22 +360,22 @@ void AttentionS8Op::run(const RunContext& ctx) const {
     float* scores = static_cast<float*>(at(layout_.scores));
     int8_t* p_s8 = static_cast<int8_t*>(at(layout_.p_s8));
     float* p_scale = static_cast<float*>(at(layout_.p_scale));
+    // scores = q k^T / sqrt(d), then p v; both [rows x n] = A [rows x k] times a packed operand.
+    const auto gemm = [&](int rows, int n, int k_len, const int8_t* a, size_t lda, const void* packed,
+                          const int32_t* a_zero_point, const float* a_scale, const float* w_scale, float* c, size_t ldc) {
+      const kernels::GemmS8Args args{.m = rows, .n = n, .k = k_len, .a = a, .lda = lda, .packed_w = packed,
+                                     .a_row_zero_point = a_zero_point};
+      const kernels::GemmS8OutF32 o{.c = c, .ldc = ldc, .w_scale = w_scale, .a_row_scale = a_scale};
+      kc.gemm_s8.f32out(args, o, 0, rows, 0, n);
+    };
     for (int r0 = 0; r0 < nq_; r0 += kAttentionS8BlockRows) {
       const int rows = std::min(kAttentionS8BlockRows, nq_ - r0);
       kernels::quantize_rows_dynamic_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
                                             head_dim, q_scale, q_zero_point);
-      // scores = q k^T / sqrt(d), then p v; both [rows x n] = A [rows x k] times a packed operand.
-      const auto gemm = [&](int n, int k_len, const int8_t* a, size_t lda, const void* packed, const int32_t* a_zero_point,
-                            const float* a_scale, const float* w_scale, float* c, size_t ldc) {
-        const kernels::GemmS8Args args{.m = rows, .n = n, .k = k_len, .a = a, .lda = lda, .packed_w = packed,
-                                       .a_row_zero_point = a_zero_point};
-        const kernels::GemmS8OutF32 o{.c = c, .ldc = ldc, .w_scale = w_scale, .a_row_scale = a_scale};
-        kc.gemm_s8.f32out(args, o, 0, rows, 0, n);
-      };
-      gemm(nk_, hd, q_s8, head_dim, at(layout_.packed_k), q_zero_point, q_scale, k_scale, scores, n_keys);
+      gemm(rows, nk_, hd, q_s8, head_dim, at(layout_.packed_k), q_zero_point, q_scale, k_scale, scores, n_keys);
       kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);
       // The probabilities' zero point is folded into the packed values: no per-row zero points.
-      gemm(hd, nk_, p_s8, n_keys, at(layout_.packed_v), nullptr, p_scale, v_scale,
+      gemm(rows, hd, nk_, p_s8, n_keys, at(layout_.packed_v), nullptr, p_scale, v_scale,
            out + static_cast<size_t>(r0) * static_cast<size_t>(dim_) + column, static_cast<size_t>(dim_));
     }
   });

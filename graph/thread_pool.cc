@@ -18,6 +18,10 @@ inline void cpu_relax() {
 #endif
 }
 
+// Pauses before the spin starts yielding: about a microsecond, long enough for a thread on another
+// core to arrive.
+constexpr unsigned kPureSpins = 64;
+
 }  // namespace
 
 int ThreadPool::hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
@@ -37,10 +41,6 @@ ThreadPool::~ThreadPool() {
   wake_.notify_all();
   for (auto& w : workers_) w.join();
 }
-
-// Pauses before the spin starts yielding: about a microsecond, long enough for a thread on another
-// core to arrive.
-constexpr unsigned kPureSpins = 64;
 
 template <class Done>
 bool ThreadPool::spin_until(Done done) {

@@ -307,10 +307,10 @@ class Converter {
     const double allowed = 1.0 + kInt8AttentionErrorBudget;
     const bool within_budget = e.mse <= allowed * err.mse && e.max_abs <= allowed * err.max_abs &&
                                (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
+    const bool keep = opt_.attention == AttentionPrecision::kInt8 || within_budget;
     progress(std::string("attention in int8: held-out MSE ") + fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (float: " +
-             fmt(err.mse) + ", " + fmt(err.max_abs) + ") -> " +
-             (opt_.attention == AttentionPrecision::kInt8 || within_budget ? "int8" : "float"));
-    if (opt_.attention == AttentionPrecision::kInt8 || within_budget) {
+             fmt(err.mse) + ", " + fmt(err.max_abs) + ") -> " + (keep ? "int8" : "float"));
+    if (keep) {
       quant = std::move(with);
       blob = std::move(candidate);
       err = e;

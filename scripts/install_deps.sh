@@ -22,6 +22,7 @@ if [ "$mode" != "--packaging" ]; then
     python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (engine/python) and its tests
     clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
     nodejs                    # ONNX Runtime (npm's onnxruntime-node) in the export tests
+    chromium                  # the web-page tests (HTML reports, act_drive's live view), headless
   )
 fi
 
@@ -40,7 +41,7 @@ else
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
 fi
 
-# ONNX Runtime for the export tests, from the npm registry into test/onnx/node_modules (not committed).
+# ONNX Runtime and the browser driver for the tests, from the npm registry into test/*/node_modules.
 if [ "$mode" != "--packaging" ]; then "$root/scripts/install_node_deps.sh"; fi
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then

@@ -4,6 +4,23 @@
 
 namespace act::kernels {
 
+namespace {
+
+// memcpy for the short runs of im2col (21 bytes for the 7x7 stem's kernel row, 64-576 for the
+// others), inline: 16-byte moves, the last one ending exactly at `bytes` (overlapping the one before)
+// so nothing outside either run is touched. The library call costs more than the copy at these sizes.
+inline void copy_run(int8_t* dst, const int8_t* src, size_t bytes) {
+  if (bytes < 16) {
+    std::memcpy(dst, src, bytes);
+    return;
+  }
+  size_t i = 0;
+  for (; i + 16 < bytes; i += 16) std::memcpy(dst + i, src + i, 16);
+  std::memcpy(dst + bytes - 16, src + bytes - 16, 16);
+}
+
+}  // namespace
+
 void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, int count, float* patches) {
   const size_t patch = static_cast<size_t>(s.patch_size());
   const size_t run = static_cast<size_t>(s.in_c);
@@ -45,7 +62,7 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
         if (iy < 0 || iy >= s.in_h) {
           std::memset(dst, pad_value, bytes);
         } else {
-          std::memcpy(dst, input + (static_cast<size_t>(iy) * s.in_w + ix0) * run, bytes);
+          copy_run(dst, input + (static_cast<size_t>(iy) * s.in_w + ix0) * run, bytes);
         }
         dst += bytes;
         continue;
@@ -55,7 +72,7 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
         if (ix < 0 || ix >= s.in_w) {  // rows outside the image were handled above
           std::memset(dst, pad_value, run);
         } else {
-          std::memcpy(dst, input + (static_cast<size_t>(iy) * s.in_w + ix) * run, run);
+          copy_run(dst, input + (static_cast<size_t>(iy) * s.in_w + ix) * run, run);
         }
       }
     }

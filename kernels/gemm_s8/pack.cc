@@ -1,6 +1,6 @@
 // The weight packers of every gemm_s8 variant. One generic routine; each named packer fixes the
-// layout (panel width nr, k-group kr, column order, weight shift). Plain C++ on purpose: it
-// runs once at load, on every architecture.
+// layout (panel width nr, k-group kr, column order, weight shift). Plain C++ on purpose, on every
+// architecture: it runs once at load for the weights, and at every run for attention's keys and values.
 #include <algorithm>
 #include <cstring>
 
@@ -40,10 +40,43 @@ size_t panel_bytes(const LayoutDesc& d, int k) {
   return round_up(8 * static_cast<size_t>(d.nr) + kp * static_cast<size_t>(d.nr), kGemmS8PackedAlign);
 }
 
+// One column's k-groups: column `slot` of group g sits at group_base[g * nr * kr]. KR is a constant
+// so that each whole group is a fixed-length copy the compiler turns into word moves (attention
+// packs its keys and values at every run); returns the column's sum of weights.
+template <int KR>
+int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* group_base) {
+  const auto flip = static_cast<int8_t>(d.w_plus128 ? 0x80 : 0);
+  const size_t group_stride = static_cast<size_t>(d.nr) * KR;
+  int64_t sum = 0;
+  int8_t* group = group_base;
+  int k0 = 0;
+  for (; k0 + KR <= k; k0 += KR, group += group_stride) {
+    int32_t group_sum = 0;
+    for (int r = 0; r < KR; ++r) {
+      const int8_t wv = wrow[k0 + r];
+      ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
+      group_sum += wv;
+      group[r] = static_cast<int8_t>(wv ^ flip);  // VNNI: W + 128 as u8
+    }
+    sum += group_sum;
+  }
+  // The ragged last group; its padding (k >= K, like columns past N) stays 0 in every layout, so
+  // over-read A bytes meet 0.
+  for (int r = 0; k0 + r < k; ++r) {
+    const int8_t wv = wrow[k0 + r];
+    ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
+    sum += wv;
+    group[r] = static_cast<int8_t>(wv ^ flip);
+  }
+  return sum;
+}
+
+template <int KR>
 void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw, const int32_t* bias,
                   int32_t a_zero_point, void* packed) {
   ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK && ldw >= static_cast<size_t>(k), "bad weight shape");
   ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
+  ACT_DCHECK(d.kr == KR, "layout and packer disagree on the k-group");
   const int kp = static_cast<int>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
   const size_t pbytes = panel_bytes(d, k);
   const int panels = (n + d.nr - 1) / d.nr;
@@ -69,23 +102,8 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
     for (int c = 0; c < d.nr; ++c) {
       const int col = p * d.nr + c;
       if (col >= n) break;  // columns past N stay zero
-      const int8_t* wrow = w + static_cast<size_t>(col) * ldw;
       const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
-      int64_t sum = 0;
-      // Column `slot` of k-group g sits at data[(g * nr + slot) * kr]: walk the groups, no division
-      // per byte (attention packs its keys and values at every run).
-      int8_t* group = data + static_cast<size_t>(slot) * d.kr;
-      const size_t group_stride = static_cast<size_t>(d.nr) * d.kr;
-      for (int k0 = 0; k0 < k; k0 += d.kr, group += group_stride) {
-        const int len = std::min(d.kr, k - k0);
-        for (int r = 0; r < len; ++r) {
-          const int8_t wv = wrow[k0 + r];
-          ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
-          sum += wv;
-          // Padding (k >= K, columns past N) stays 0 in every layout, so over-read A bytes meet 0.
-          group[r] = d.w_plus128 ? static_cast<int8_t>(wv ^ 0x80) : wv;
-        }
-      }
+      const int64_t sum = pack_column<KR>(d, k, w + static_cast<size_t>(col) * ldw, data + static_cast<size_t>(slot) * KR);
       // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
       const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sum;
       const auto ksum32 = static_cast<int32_t>(sum);
@@ -106,22 +124,22 @@ size_t gemm_s8_packed_size(GemmS8Layout layout, int n, int k) {
 
 void pack_w_s8_1x1_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                        void* packed) {
-  pack_generic(desc_of(GemmS8Layout::kRef1x1), n, k, w, ldw, bias, a_zero_point, packed);
+  pack_generic<1>(desc_of(GemmS8Layout::kRef1x1), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
 void pack_w_s8_8x8_goi_pair4(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                              void* packed) {
-  pack_generic(desc_of(GemmS8Layout::kAvx2_8x8), n, k, w, ldw, bias, a_zero_point, packed);
+  pack_generic<8>(desc_of(GemmS8Layout::kAvx2_8x8), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
 void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                             void* packed) {
-  pack_generic(desc_of(GemmS8Layout::kVnni64x4), n, k, w, ldw, bias, a_zero_point, packed);
+  pack_generic<4>(desc_of(GemmS8Layout::kVnni64x4), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed) {
-  pack_generic(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
+  pack_generic<4>(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
 }  // namespace act::kernels

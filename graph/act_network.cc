@@ -62,6 +62,20 @@ ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
   return converted_[t.id] = Tensor{y, false, {}, kNoValue};
 }
 
+float* ActNetwork::camera_input(size_t camera) {
+  const ValueId id = camera_inputs_.at(camera);
+  return graph_.value(id).dtype == DataType::kS8 ? nullptr : graph_.data(id);
+}
+
+int8_t* ActNetwork::camera_input_s8(size_t camera) {
+  const ValueId id = camera_inputs_.at(camera);
+  return graph_.value(id).dtype == DataType::kS8 ? graph_.data_s8(id) : nullptr;
+}
+
+kernels::QuantS8 ActNetwork::camera_input_quant(size_t camera) const {
+  return graph_.value(camera_inputs_.at(camera)).quant.value_or(kernels::QuantS8{});
+}
+
 ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
   if (t.s8) return t;
   if (auto it = converted_.find(t.id); it != converted_.end() && it->second.s8 && it->second.params == kNoValue) return it->second;
@@ -190,13 +204,26 @@ ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, Matri
 ValueId ActNetwork::backbone(size_t camera) {
   const CameraConfig& cam = config_.cameras[camera];
   const std::string p = cam_prefix(camera);
-  const ValueId image = graph_.add_input(p + "image", {cam.height, cam.width, 3});
-  camera_inputs_.push_back(image);
   camera_ = camera;
-  calibration_point(CalibrationRole::kCameraImage, image);
+  const std::vector<int64_t> image_shape = {cam.height, cam.width, 3};
+  // An int8 stem with static activations quantizes the image with fixed parameters: the engine
+  // writes those codes itself (what as_s8() would make of the float image), no float image.
+  const ActbTensor* stem_weight = tensors_.find(bn::conv_weight(config_.stem().name));
+  const bool s8_image = quant_.static_activations() && stem_weight != nullptr && stem_weight->dtype == DType::kI8;
+  Tensor image;
+  if (s8_image) {
+    const ActivationQuant& a = quant_.activation(p + "image");
+    const kernels::QuantS8 q{a.scale, a.zero_point};
+    image = Tensor{graph_.add_input(p + "image", image_shape, DataType::kS8), true, q, kNoValue};
+    graph_.value(image.id).quant = q;
+  } else {
+    image = Tensor{graph_.add_input(p + "image", image_shape), false, {}, kNoValue};
+    calibration_point(CalibrationRole::kCameraImage, image.id);
+  }
+  camera_inputs_.push_back(image.id);
 
   int h = cam.height, w = cam.width;
-  Tensor x = conv(config_.stem(), Tensor{image, false, {}, kNoValue}, h, w, true, nullptr, p + "backbone.stem");
+  Tensor x = conv(config_.stem(), image, h, w, true, nullptr, p + "backbone.stem");
   const int pooled_h = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1);
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   const std::string pool_name = p + "backbone.maxpool";

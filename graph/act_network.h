@@ -61,8 +61,14 @@ class ActNetwork {
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
   void run(ThreadPool& pool, RunProfile* profile = nullptr) { graph_.run(pool, kernels_, profile); }
 
-  /// [H, W, 3]; with an external backbone [h * w, dim_model]
-  float* camera_input(size_t camera) { return graph_.data(camera_inputs_.at(camera)); }
+  /// [H, W, 3] float; with an external backbone [h * w, dim_model]. Null when the camera's input is
+  /// int8 (camera_input_s8).
+  float* camera_input(size_t camera);
+  /// A static INT8 stem takes its [H, W, 3] image as int8 codes with the calibrated parameters of
+  /// camera_input_quant(), which the engine writes straight from the pixels (normalisation and
+  /// quantization in one table lookup, no float image); null when the input is float.
+  int8_t* camera_input_s8(size_t camera);
+  kernels::QuantS8 camera_input_quant(size_t camera) const;
   float* state_input() { return graph_.data(state_input_); }                          ///< [state_dim]
   float* env_state_input() { return graph_.data(env_input_); }                        ///< [env_state_dim]
   const float* actions_normalized() { return graph_.data(actions_); }                 ///< [T, A]

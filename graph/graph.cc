@@ -31,8 +31,8 @@ ValueId Graph::add_value(std::string name, std::vector<int64_t> shape, DataType 
   return static_cast<ValueId>(values_.size() - 1);
 }
 
-ValueId Graph::add_input(std::string name, std::vector<int64_t> shape) {
-  const ValueId id = add_value(std::move(name), std::move(shape));
+ValueId Graph::add_input(std::string name, std::vector<int64_t> shape, DataType dtype) {
+  const ValueId id = add_value(std::move(name), std::move(shape), dtype);
   values_.back().pinned = true;
   return id;
 }

@@ -117,7 +117,7 @@ class Graph {
   /// int8 values get kGemmS8ReadSlack addressable bytes after their last element (kernels over-read).
   ValueId add_value(std::string name, std::vector<int64_t> shape, DataType dtype = DataType::kF32);
   /// A value the caller writes before run() (pinned).
-  ValueId add_input(std::string name, std::vector<int64_t> shape);
+  ValueId add_input(std::string name, std::vector<int64_t> shape, DataType dtype = DataType::kF32);
   /// Keeps a value alive to the end of the run so the caller can read it.
   void mark_output(ValueId id);
   /// Appends an op; its inputs/outputs must already be set.

@@ -345,10 +345,14 @@ void AttentionS8Op::run(const RunContext& ctx) const {
     kernels::quantize_rows_symmetric_f32_s8(kc.quant, nk_, hd, k + column, k_.ld, k_s8, head_dim, k_scale);
     for (size_t j = 0; j < n_keys; ++j) k_scale[j] *= inv_sqrt_hd;
     kc.gemm_s8.pack(nk_, hd, k_s8, head_dim, nullptr, 0, at(layout_.packed_k));
-    // Values, transposed: one int8 row per channel (the output columns of p v).
-    for (size_t j = 0; j < n_keys; ++j) {
-      const float* vj = v + j * v_.ld + column;
-      for (size_t c = 0; c < head_dim; ++c) v_t[c * n_keys + j] = vj[c];
+    // Values, transposed: one int8 row per channel (the output columns of p v). In blocks of keys,
+    // so that each channel's row is written a cache line at a time rather than a float per line.
+    constexpr size_t kKeyBlock = 16;
+    for (size_t j0 = 0; j0 < n_keys; j0 += kKeyBlock) {
+      const size_t j1 = std::min(n_keys, j0 + kKeyBlock);
+      for (size_t c = 0; c < head_dim; ++c) {
+        for (size_t j = j0; j < j1; ++j) v_t[c * n_keys + j] = v[j * v_.ld + column + c];
+      }
     }
     kernels::quantize_rows_symmetric_f32_s8(kc.quant, hd, nk_, v_t, n_keys, v_t_s8, n_keys, v_scale);
     // The probabilities' zero point is the same for every row: fold it into the packed values.

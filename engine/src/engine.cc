@@ -163,7 +163,12 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
          ", the model expects " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
   }
   const InputNorm& norm = camera_norm_[camera];
-  float* dst = network_->camera_input(camera);
+  // A static INT8 stem takes int8 codes (ActNetwork::camera_input_s8): the same quantize kernel the
+  // graph would run on the normalised float image, applied to a 256-entry table for uint8 pixels,
+  // so the codes are bit-identical and no float image is written.
+  int8_t* dst_s8 = network_->camera_input_s8(camera);
+  const kernels::QuantS8 q = network_->camera_input_quant(camera);
+  const auto quantize = [&](size_t n, const float* x, int8_t* y) { kernels_.quant.quantize(n, x, 1.0f / q.scale, q.zero_point, y); };
   const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
   if (image.format == ImageView::Format::kRgbU8Hwc) {
     const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;
@@ -174,26 +179,45 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
       for (int v = 0; v < 256; ++v) lut[c][v] = norm.apply(static_cast<float>(v) / 255.0f, c);
     }
     const auto* src = static_cast<const uint8_t*>(image.data);
+    if (dst_s8 != nullptr) {
+      int8_t lut_s8[3][256];
+      for (size_t c = 0; c < 3; ++c) quantize(256, lut[c], lut_s8[c]);
+      for (size_t y = 0; y < h; ++y) {
+        const uint8_t* row = src + y * stride;
+        int8_t* out = dst_s8 + y * w * 3;
+        for (size_t x = 0; x < w; ++x) {
+          for (size_t c = 0; c < 3; ++c) out[3 * x + c] = lut_s8[c][row[3 * x + c]];
+        }
+      }
+      return;
+    }
+    float* dst = network_->camera_input(camera);
     for (size_t y = 0; y < h; ++y) {
       const uint8_t* row = src + y * stride;
       float* out = dst + y * w * 3;
-      for (size_t i = 0; i < w * 3; ++i) out[i] = lut[i % 3][row[i]];
-    }
-  } else {
-    const auto* src = static_cast<const float*>(image.data);
-    for (size_t c = 0; c < 3; ++c) {
-      for (size_t i = 0; i < h * w; ++i) {
-        const float v = src[c * h * w + i];
-        if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contains NaN or Inf");
-        if (v < -kFloatImageSlack || v > 1.0f + kFloatImageSlack) {
-          fail(ErrorCode::kInvalidArgument, what + " has the value " + std::to_string(v) + " (channel " +
-               std::to_string(c) + ", pixel " + std::to_string(i) + "): float images hold [0, 1]" +
-               (v > 2.0f ? " (a 0-255 image? divide it by 255, or pass it as uint8)" : ""));
-        }
-        dst[i * 3 + c] = norm.apply(v, c);
+      for (size_t x = 0; x < w; ++x) {
+        for (size_t c = 0; c < 3; ++c) out[3 * x + c] = lut[c][row[3 * x + c]];
       }
     }
+    return;
   }
+  // Float CHW in [0, 1]: normalised into the float input, or into a scratch image then quantized.
+  if (dst_s8 != nullptr) float_image_.resize(h * w * 3);
+  float* dst = dst_s8 != nullptr ? float_image_.data() : network_->camera_input(camera);
+  const auto* src = static_cast<const float*>(image.data);
+  for (size_t c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < h * w; ++i) {
+      const float v = src[c * h * w + i];
+      if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contains NaN or Inf");
+      if (v < -kFloatImageSlack || v > 1.0f + kFloatImageSlack) {
+        fail(ErrorCode::kInvalidArgument, what + " has the value " + std::to_string(v) + " (channel " +
+             std::to_string(c) + ", pixel " + std::to_string(i) + "): float images hold [0, 1]" +
+             (v > 2.0f ? " (a 0-255 image? divide it by 255, or pass it as uint8)" : ""));
+      }
+      dst[i * 3 + c] = norm.apply(v, c);
+    }
+  }
+  if (dst_s8 != nullptr) quantize(h * w * 3, dst, dst_s8);
 }
 
 void Engine::Impl::load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm,

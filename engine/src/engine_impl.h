@@ -75,6 +75,7 @@ class Engine::Impl {
   kernels::KernelConfig kernels_;  // before network_, which packs for it and runs with it
   std::unique_ptr<graph::ActNetwork> network_;
   std::vector<InputNorm> camera_norm_;
+  std::vector<float> float_image_;  // a float image normalised before it is quantized for an int8 stem
   InputNorm state_norm_, env_norm_;
   const float* unnorm_shift_ = nullptr;
   const float* unnorm_scale_ = nullptr;

@@ -1,5 +1,6 @@
 #include "kernels/common/im2col.h"
 
+#include <algorithm>
 #include <cstring>
 
 namespace act::kernels {
@@ -46,36 +47,43 @@ void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, 
 void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value, int pixel_begin, int count,
                     int8_t* patches, size_t ld) {
   const size_t run = static_cast<size_t>(s.in_c);
-  for (int i = 0; i < count; ++i) {
-    const int pixel = pixel_begin + i;
+  const size_t kernel_row_bytes = run * static_cast<size_t>(s.kernel_w);
+  // One output row at a time, one kernel row at a time: the input row and the padding decisions are
+  // made once per (output row, ky), and the inner loop only steps the source by stride * C bytes.
+  int8_t* tile_row = patches;
+  for (int pixel = pixel_begin; pixel < pixel_begin + count;) {
     const int oy = pixel / s.out_w;
-    const int ox = pixel % s.out_w;
-    int8_t* dst = patches + static_cast<size_t>(i) * ld;
-    const int ix0 = ox * s.stride - s.pad;
-    // Without dilation a kernel row inside the image is kernel_w consecutive NHWC pixels: one copy
-    // (the 7x7 stem with 3 channels would otherwise copy 3 bytes at a time).
-    const bool row_inside = s.dilation == 1 && ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
+    const int ox_begin = pixel % s.out_w;
+    const int n = std::min(s.out_w - ox_begin, pixel_begin + count - pixel);
     for (int ky = 0; ky < s.kernel_h; ++ky) {
       const int iy = oy * s.stride - s.pad + ky * s.dilation;
-      if (row_inside || iy < 0 || iy >= s.in_h) {
-        const size_t bytes = run * static_cast<size_t>(s.kernel_w);
-        if (iy < 0 || iy >= s.in_h) {
-          std::memset(dst, pad_value, bytes);
-        } else {
-          copy_run(dst, input + (static_cast<size_t>(iy) * s.in_w + ix0) * run, bytes);
-        }
-        dst += bytes;
+      int8_t* dst = tile_row + static_cast<size_t>(ky) * kernel_row_bytes;
+      if (iy < 0 || iy >= s.in_h) {
+        for (int j = 0; j < n; ++j) std::memset(dst + static_cast<size_t>(j) * ld, pad_value, kernel_row_bytes);
         continue;
       }
-      for (int kx = 0; kx < s.kernel_w; ++kx, dst += run) {
-        const int ix = ox * s.stride - s.pad + kx * s.dilation;
-        if (ix < 0 || ix >= s.in_w) {  // rows outside the image were handled above
-          std::memset(dst, pad_value, run);
-        } else {
-          copy_run(dst, input + (static_cast<size_t>(iy) * s.in_w + ix) * run, run);
+      const int8_t* input_row = input + static_cast<size_t>(iy) * static_cast<size_t>(s.in_w) * run;
+      for (int j = 0; j < n; ++j) {
+        int8_t* d = dst + static_cast<size_t>(j) * ld;
+        const int ix0 = (ox_begin + j) * s.stride - s.pad;
+        // Without dilation a kernel row inside the image is kernel_w consecutive NHWC pixels: one copy
+        // (the 7x7 stem with 3 channels would otherwise copy 3 bytes at a time).
+        if (s.dilation == 1 && ix0 >= 0 && ix0 + s.kernel_w <= s.in_w) {
+          copy_run(d, input_row + static_cast<size_t>(ix0) * run, kernel_row_bytes);
+          continue;
+        }
+        for (int kx = 0; kx < s.kernel_w; ++kx, d += run) {
+          const int ix = ix0 + kx * s.dilation;
+          if (ix < 0 || ix >= s.in_w) {
+            std::memset(d, pad_value, run);
+          } else {
+            copy_run(d, input_row + static_cast<size_t>(ix) * run, run);
+          }
         }
       }
     }
+    pixel += n;
+    tile_row += static_cast<size_t>(n) * ld;
   }
 }
 

@@ -169,7 +169,11 @@ class OnnxBuilder {
     const CameraConfig& cam = config_.cameras[c];
     declare(graph_->add_input(), cam.key, {1, 3, cam.height, cam.width});
     const ValueId image = g_.find("cam" + std::to_string(c) + ".image");
-    values_[image] = {normalize(cam.key, cam.key, {1, 3, 1, 1}, 3), true, std::nullopt};
+    const std::string normalized = normalize(cam.key, cam.key, {1, 3, 1, 1}, 3);
+    // A static INT8 stem's input is the image's int8 codes (the engine quantizes the pixels itself):
+    // here, as any static quantization, a QDQ pair with its parameters.
+    const std::optional<kernels::QuantS8>& q = g_.value(image).quant;
+    values_[image] = q ? OnnxValue{quantize(normalized, *q), true, q} : OnnxValue{normalized, true, std::nullopt};
   }
 
   void add_vector_input(const std::string& key, const std::string& value, int n) {

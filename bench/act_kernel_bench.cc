@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "graph/gemm_tiling.h"
 #include "graph/graph.h"
 #include "graph/ops_int8.h"
 #include "graph/thread_pool.h"
@@ -155,24 +156,6 @@ void run_timed(benchmark::State& state, const std::string& key, int threads, dou
   }
 }
 
-// Splits [0, m) x [0, n) into tiles for `threads` threads: rows in multiples of mr when there are
-// enough of them for >= 5 tiles per thread (XNNPACK's rule), else columns in multiples of nr.
-struct Tiling {
-  int tile_m, tile_n, tiles_m, tiles_n;
-  size_t count() const { return static_cast<size_t>(tiles_m) * tiles_n; }
-};
-Tiling tiling(int m, int n, int mr, int nr, int threads) {
-  const int want = 5 * threads;
-  if (threads == 1) return {m, n, 1, 1};
-  if (m >= want * mr) {
-    const int tm = (m / want + mr - 1) / mr * mr;
-    return {tm, n, (m + tm - 1) / tm, 1};
-  }
-  const int tn = std::max(nr, (n / want + nr - 1) / nr * nr);
-  const int tm = m >= 2 * mr * 8 ? (m / 2 + mr - 1) / mr * mr : m;  // few columns: split rows in two too
-  return {tm, tn, (m + tm - 1) / tm, (n + tn - 1) / tn};
-}
-
 void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double peak_gmacs, int threads,
              std::string key) {
   std::mt19937 rng(42);
@@ -217,12 +200,12 @@ void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double pe
     o8.scale = scale.data();
     o8.qmin = 0;  // ReLU, as most ResNet convolutions
   }
-  const Tiling t = tiling(s.m, s.n, v->mr, v->nr, threads);
+  const graph::GemmTiling t = graph::gemm_tiling(s.m, s.n, v->mr, v->nr, threads);
   ThreadPool& tp = pool(threads);
   run_timed(state, key, threads, static_cast<double>(s.macs()), peak_gmacs, [&] {
     tp.parallel_for(t.count(), [&](size_t task, int) {
-      const int m0 = static_cast<int>(task / t.tiles_n) * t.tile_m, n0 = static_cast<int>(task % t.tiles_n) * t.tile_n;
-      const int m1 = std::min(s.m, m0 + t.tile_m), n1 = std::min(s.n, n0 + t.tile_n);
+      int m0, m1, n0, n1;
+      t.rect(task, m0, m1, n0, n1);
       if (s.f32_out) {
         v->f32out(g, of, m0, m1, n0, n1);
       } else {

@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <limits>
 
+#include "graph/gemm_tiling.h"
 #include "weights/blob/error.h"
 
 namespace act::graph {
@@ -13,8 +14,6 @@ namespace act::graph {
 namespace {
 
 constexpr size_t kElementwiseChunk = 1 << 16;  // elements per quantize/dequantize task
-constexpr int kLinearTileRows = 120;           // a multiple of every gemm_s8 MR
-constexpr int kLinearTileCols = 256;           // a multiple of every gemm_s8 NR
 constexpr int kQuantizeTileRows = 32;
 constexpr size_t kChannelBlock = 64;           // a multiple of every gemm_s8 NR
 
@@ -265,14 +264,12 @@ void LinearS8Op::run(const RunContext& ctx) const {
       o.ldr = residual_.ld;
     }
   }
-  const size_t col_tiles = ceil_div(static_cast<size_t>(out_), kLinearTileCols);
-  const size_t row_tiles = ceil_div(static_cast<size_t>(rows_), kLinearTileRows);
-  ctx.pool().parallel_for(col_tiles * row_tiles, [&](size_t task, int) {
-    const int c0 = static_cast<int>(task % col_tiles) * kLinearTileCols;
-    const int r0 = static_cast<int>(task / col_tiles) * kLinearTileRows;
-    const int c1 = std::min(out_, c0 + kLinearTileCols);
-    const int r1 = std::min(rows_, r0 + kLinearTileRows);
-    ctx.kernels().gemm_s8.f32out(args, o, r0, r1, c0, c1);
+  const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
+  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads());
+  ctx.pool().parallel_for(tiling.count(), [&](size_t task, int) {
+    int r0, r1, c0, c1;
+    tiling.rect(task, r0, r1, c0, c1);
+    gemm.f32out(args, o, r0, r1, c0, c1);
     if (epilogue_ == Epilogue::kGelu) {
       for (int r = r0; r < r1; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), o.c + static_cast<size_t>(r) * o.ldc + c0);
     }

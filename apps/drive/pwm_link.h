@@ -20,7 +20,7 @@ inline constexpr const char* kPwmSysfsRoot = "/sys/class/pwm";
 inline constexpr int64_t kServoPeriodNs = 20'000'000;  // 50 Hz, what every hobby servo and ESC expects
 inline constexpr const char* kPwmOverlayHint =
     "on a Raspberry Pi add the line 'dtoverlay=pwm-2chan' to /boot/firmware/config.txt and reboot "
-    "(GPIO 18 = channel 0, GPIO 19 = channel 1)";
+    "(it puts hardware PWM on GPIO 18 and 19; which chip and channel numbers they get depends on the model and kernel)";
 
 /// `--pwm CHIP:STEERING,THROTTLE`, e.g. pwmchip0:0,1.
 struct PwmChannels {

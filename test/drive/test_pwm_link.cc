@@ -397,6 +397,14 @@ TEST(ActDrivePwm, DrivesThePinsAndEndsNeutralOnSigtermSigstopAndSigkill) {
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.output.find("no PWM chip " + tree.root() + "/pwmchip3"), std::string::npos) << missing.output;
   EXPECT_NE(missing.output.find("dtoverlay=pwm-2chan"), std::string::npos) << missing.output;
+  const auto both = run_command(std::string(ACT_DRIVE_BIN) + " -m m.actb --camera 0 --pwm pwmchip0:0,1 --serial /dev/ttyUSB0");
+  EXPECT_EQ(both.exit_code, 1);
+  EXPECT_NE(both.output.find("--pwm drives the pins itself: not with --serial"), std::string::npos) << both.output;
+  const auto typo = run_command(std::string(ACT_DRIVE_BIN) + " -m m.actb --camera 0 --pwm pwmchip0:0");
+  EXPECT_NE(typo.output.find("--pwm 'pwmchip0:0': expected CHIP:STEERING,THROTTLE"), std::string::npos) << typo.output;
+  const auto listed = run_command(std::string(ACT_DRIVE_BIN) + " --list-ports --pwm-sysfs-root " + q(tree.root()));
+  EXPECT_EQ(listed.exit_code, 0);
+  EXPECT_NE(listed.output.find("pwm: " + tree.root() + "/pwmchip0: 2 channels"), std::string::npos) << listed.output;
 }
 
 }  // namespace

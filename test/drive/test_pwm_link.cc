@@ -29,18 +29,6 @@ using std::chrono::milliseconds;
 using act::test::q;
 using act::test::run_command;
 
-constexpr auto kFaultDeadline = milliseconds(250);
-const PwmCommand kSafe{1500, 1500};
-const PwmCommand kDriving{1700, 1650};  // the fake model's 0.5 / 0.8 through the calibration below
-
-Calibration test_calibration() {
-  return Calibration::from_json(nlohmann::json::parse(R"({
-    "steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
-    "throttle": {"reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "max_forward": 0.5}})"),
-                                "test");
-}
-
-double ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
 PwmLinkOptions link_options(const FakePwmTree& tree, const std::string& channels = "pwmchip0:0,1") {
   PwmLinkOptions options;

@@ -38,18 +38,24 @@ bool write_text(int fd, const std::string& text) {
   return ::write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
 }
 
-// Writes `value` to the attribute file `path` once (setup); throws naming the file on failure.
-void write_attribute(const std::string& path, int64_t value) {
+// Writes `value` to the attribute file `path` once (setup): 0, or the errno of the failed write.
+// Throws naming the file when it cannot be opened.
+int try_write_attribute(const std::string& path, int64_t value) {
   const int fd = open_attribute(path);
   if (fd < 0) {
     const int err = errno;
     fail(ErrorCode::kIoError, "cannot open " + path + ": " + (err == EACCES ? kPermissionHint : std::strerror(err)));
   }
-  const bool ok = write_text(fd, format_value(value));
-  const int err = errno;
+  const int err = write_text(fd, format_value(value)) ? 0 : errno;
   ::close(fd);
-  check(ok, ErrorCode::kIoError, "cannot write " + std::to_string(value) + " to " + path + ": " + std::strerror(err));
+  return err;
 }
+
+void check_written(int err, const std::string& path, int64_t value) {
+  check(err == 0, ErrorCode::kIoError, "cannot write " + std::to_string(value) + " to " + path + ": " + std::strerror(err));
+}
+
+void write_attribute(const std::string& path, int64_t value) { check_written(try_write_attribute(path, value), path, value); }
 
 int64_t duty_ns(uint16_t pulse_us) { return static_cast<int64_t>(pulse_us) * 1000; }
 
@@ -134,9 +140,15 @@ void PwmSysfsLink::open_channel(Channel& channel, int number, uint16_t neutral_u
              (err == EACCES ? std::string(kPermissionHint)
                             : std::string(std::strerror(err)) + (err == ENOENT ? std::string("; ") + kPwmOverlayHint : "")));
   }
-  // Duty 0 first: the kernel refuses a period shorter than the duty cycle a previous user left.
-  write_attribute(channel.dir + "/duty_cycle", 0);
-  write_attribute(channel.dir + "/period", kServoPeriodNs);
+  // The kernel refuses a period shorter than the duty cycle a previous user left (and any duty cycle
+  // before a period is set): the period first, and after clearing the duty cycle when refused.
+  const std::string period = channel.dir + "/period";
+  err = try_write_attribute(period, kServoPeriodNs);
+  if (err == EINVAL) {
+    write_attribute(channel.dir + "/duty_cycle", 0);
+    err = try_write_attribute(period, kServoPeriodNs);
+  }
+  check_written(err, period, kServoPeriodNs);
   write_attribute(channel.dir + "/duty_cycle", duty_ns(neutral_us));
   write_attribute(channel.dir + "/enable", 1);
 }

@@ -17,7 +17,9 @@
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/control_loop.h"
+#include "apps/drive/emergency_neutral.h"
 #include "apps/drive/inference.h"
+#include "apps/drive/pwm_link.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
 #include "weights/blob/error.h"
@@ -32,17 +34,17 @@ static_assert(std::atomic<bool>::is_always_lock_free, "the signal handler needs 
 
 void request_stop(int) { g_stop.store(true); }
 
-// Any other signal that would end the process: the board is told to stop before the signal's own
-// action (it would also time out to failsafe by itself in 250 ms).
+// Any other signal that would end the process: the actuator is told to stop before the signal's own
+// action (the board would also time out to failsafe by itself in 250 ms, act_pwm_watchdog at once).
 void neutral_then_die(int signal) {
-  SerialLink::emergency_neutral();
+  emergency_neutral();
   std::signal(signal, SIG_DFL);
   std::raise(signal);
 }
 
 // Ctrl-Z and friends suspend the process, and nothing drives while it sleeps: neutral first.
 void neutral_then_suspend(int signal) {
-  SerialLink::emergency_neutral();
+  emergency_neutral();
   std::signal(signal, SIG_DFL);
   std::raise(signal);                          // stops here until SIGCONT
   std::signal(signal, neutral_then_suspend);  // resumed: the loop sends commands again
@@ -94,6 +96,8 @@ struct Options {
   int control_priority = 0, inference_priority = 0;
   std::vector<int> control_cpus, inference_cpus;
   bool dry_run = false, calibrate = false;
+  std::string pwm, pwm_sysfs_root = kPwmSysfsRoot;
+  bool list_ports = false;
   act::DeploymentOptions deployment;
 };
 
@@ -170,6 +174,16 @@ int drive(const Options& opt) {
   neutral_on_exit.safe = calibration.safe_command();
   if (opt.dry_run) {
     link = std::make_unique<DryRunLink>(std::cout);
+  } else if (!opt.pwm.empty()) {
+    PwmLinkOptions pwm_options;
+    pwm_options.channels = parse_pwm_channels(opt.pwm);
+    pwm_options.sysfs_root = opt.pwm_sysfs_root;
+    pwm_options.neutral = calibration.safe_command();
+    pwm_options.watchdog_path = default_watchdog_path();
+    auto pwm = std::make_unique<PwmSysfsLink>(pwm_options, std::cerr);
+    std::cerr << "act_drive: PWM " << opt.pwm_sysfs_root << "/" << opt.pwm << " at 50 Hz, neutral; watchdog pid "
+              << pwm->watchdog_pid() << "\n";
+    link = std::move(pwm);
   } else {
     SerialLinkOptions serial_options;
     serial_options.path = opt.serial;
@@ -233,6 +247,16 @@ void check_camera_kind(const std::string& camera) {
 // act_drive from the parsed options to its exit code: calibration, or driving.
 int run(const Options& opt) {
   try {
+    if (opt.list_ports) {
+      list_pwm_channels(opt.pwm_sysfs_root, std::cout);
+      return 0;
+    }
+    if (!opt.pwm.empty()) {
+      parse_pwm_channels(opt.pwm);  // a typo is the first thing said
+      act::check(opt.serial.empty() && !opt.dry_run && !opt.calibrate, act::ErrorCode::kInvalidArgument,
+                 "--pwm drives the pins itself: not with --serial, --dry-run or --calibrate (write the calibration "
+                 "file from act_drive --calibrate's template and check it with a --duration run)");
+    }
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
     }
@@ -241,8 +265,9 @@ int run(const Options& opt) {
     // Both checked before the camera opens, so the wrong kind of file is the first thing said.
     if (const std::string hint = act::not_a_blob_hint(opt.model); !hint.empty()) act::fail(act::ErrorCode::kInvalidArgument, hint);
     check_camera_kind(opt.camera);
-    if (opt.serial.empty() && !opt.dry_run) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
+    if (opt.serial.empty() && opt.pwm.empty() && !opt.dry_run) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --pwm for the Pi's own PWM pins, or --dry-run "
+                                                  "to print the commands)");
     }
     return drive(opt);
   } catch (const std::exception& e) {
@@ -296,6 +321,12 @@ int main(int argc, char** argv) {
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
                                              "calibration file to edit), then write --calibration");
+  // The Pi's own PWM pins instead of the Arduino (README "On the Pi's own PWM pins").
+  app.add_option("--pwm", opt.pwm, "drive the servo and ESC from Linux PWM channels CHIP:STEERING,THROTTLE, e.g. "
+                                   "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "
+                                   "if act_drive dies");
+  app.add_option("--pwm-sysfs-root", opt.pwm_sysfs_root, "where the PWM chips are (a test and expert knob)")->capture_default_str();
+  app.add_flag("--list-ports", opt.list_ports, "list the PWM chips and channels found, then exit");
   CLI11_PARSE(app, argc, argv);
 
   install_signal_handlers();

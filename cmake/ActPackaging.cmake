@@ -3,7 +3,7 @@
 #
 #   libactengine0     the shared libraries, in /usr/lib/<multiarch triplet>
 #   libactengine-dev  headers, static libraries, .so links, the CMake package, actengine.pc
-#   actengine-tools   act_convert, act_eval, act_bench, act_drive
+#   actengine-tools   act_convert, act_eval, act_bench, act_drive (and act_pwm_watchdog, which it starts)
 #
 #   cpack -G DEB (in a build tree)  -> <name>_<version>_<arch>.deb for each
 #

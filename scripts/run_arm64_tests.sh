@@ -99,7 +99,7 @@ if [ ! -f "$unpacked/usr/lib/aarch64-linux-gnu/libactengine.so.0" ]; then
   exit 1
 fi
 depends="$(dpkg-deb -f "$(ls "$build"/actengine-tools_*_arm64.deb)" Depends)"
-for app in act_bench act_eval act_convert act_drive; do
+for app in act_bench act_eval act_convert act_drive act_pwm_watchdog; do
   program="$unpacked/usr/bin/$app"
   if ! readelf -h "$program" 2>/dev/null | grep -q "Machine: *AArch64"; then
     echo "run_arm64_tests: the arm64 package has no aarch64 $app" >&2

@@ -5,12 +5,12 @@
 #include <termios.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <iomanip>
 #include <sstream>
 
+#include "apps/drive/emergency_neutral.h"
 #include "weights/blob/error.h"
 
 namespace act::drive {
@@ -37,11 +37,6 @@ int remaining_ms(Clock::time_point deadline) {
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
   return left > 0 ? static_cast<int>(left) : 0;
 }
-
-// The port and line a fatal-signal handler may write its neutral command to (see emergency_neutral).
-std::atomic<int> g_emergency_fd{-1};
-char g_emergency_line[ROVER_MAX_LINE + 1];
-size_t g_emergency_length = 0;
 
 const char* rover_error_name(unsigned code) {
   switch (code) {
@@ -165,7 +160,7 @@ SerialLink::SerialLink(SerialLinkOptions options, std::ostream& log) : options_(
 }
 
 SerialLink::~SerialLink() {
-  g_emergency_fd.store(-1);
+  disarm_emergency_writes();
 }
 
 void SerialLink::connect() {
@@ -213,7 +208,7 @@ bool SerialLink::try_open(Clock::time_point now) {
 }
 
 void SerialLink::fail_link(const std::string& why, Clock::time_point now) {
-  g_emergency_fd.store(-1);
+  disarm_emergency_writes();
   ++errors_;
   last_error_ = why;
   if (!connecting_) log_ << "act_drive: warning: serial " << options_.path << ": " << why << "; reconnecting every "
@@ -251,8 +246,10 @@ void SerialLink::become_ready() {
     ++reconnects_;
     log_ << "act_drive: serial " << options_.path << " reconnected\n";
   }
-  g_emergency_length = format_command('C', 0, options_.failsafe, g_emergency_line, sizeof g_emergency_line);
-  g_emergency_fd.store(port_.fd());
+  char line[ROVER_MAX_LINE + 1];
+  const size_t length = format_command('C', 0, options_.failsafe, line, sizeof line);
+  const EmergencyWrite neutral{port_.fd(), std::string_view(line, length)};
+  arm_emergency_writes({&neutral, 1});
 }
 
 void SerialLink::handle_line(const RoverLineReader& reader) {
@@ -358,7 +355,7 @@ void SerialLink::shutdown(PwmCommand neutral) {
       read_input(std::chrono::milliseconds(10), Clock::now());
     }
   }
-  g_emergency_fd.store(-1);
+  disarm_emergency_writes();
   port_.close();
   state_ = State::kDisconnected;
 }
@@ -370,14 +367,6 @@ std::string SerialLink::summary() const {
     << " ack timeouts, " << errors_ << " errors, "
     << reconnects_ << " reconnects";
   return s.str();
-}
-
-void SerialLink::emergency_neutral() noexcept {
-  const int fd = g_emergency_fd.load();
-  if (fd >= 0) {
-    const ssize_t ignored = ::write(fd, g_emergency_line, g_emergency_length);
-    (void)ignored;
-  }
 }
 
 // ---- DryRunLink ----

@@ -93,9 +93,6 @@ class SerialLink : public ActuatorLink {
   uint64_t watchdog_notices() const { return watchdog_notices_; }
   uint64_t ack_timeouts() const { return ack_timeouts_; }
 
-  /// Writes a neutral line to the open port with nothing but write(2): for fatal-signal handlers.
-  static void emergency_neutral() noexcept;
-
  private:
   enum class State { kDisconnected, kWaitingReady, kReady };
   bool try_open(Clock::time_point now);

@@ -17,6 +17,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/inference.h"
 
@@ -27,6 +28,21 @@ namespace act::drive::test {
 inline void report_fault_timing(const std::string& fault, double ms, const char* until = "neutral on the wire") {
   std::printf("[fault timing] %s: %.1f ms to %s\n", fault.c_str(), ms, until);
 }
+
+/// The control loop's fault tests (serial and PWM): the bound, the safe command, the calibration they
+/// drive through and what the fake model's default 0.5 / 0.8 becomes through it.
+constexpr auto kFaultDeadline = std::chrono::milliseconds(250);
+const PwmCommand kSafe{1500, 1500};
+const PwmCommand kDriving{1700, 1650};
+
+inline Calibration test_calibration() {
+  return Calibration::from_json(nlohmann::json::parse(R"({
+    "steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
+    "throttle": {"reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "max_forward": 0.5}})"),
+                                "test");
+}
+
+inline double ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
 /// What a FakeModel does; shared between the test and the model living on the worker thread.
 struct FakeModelControls {

@@ -20,20 +20,8 @@ namespace {
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 
-constexpr auto kFaultDeadline = milliseconds(250);
-const PwmCommand kSafe{1500, 1500};
-const PwmCommand kDriving{1700, 1650};  // the fake model's 0.5 / 0.8 through the calibration below
-
-Calibration test_calibration() {
-  return Calibration::from_json(nlohmann::json::parse(R"({
-    "steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
-    "throttle": {"reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "max_forward": 0.5}})"),
-                                "test");
-}
 
 bool is(const FakeArduino::Command& c, PwmCommand p) { return c.steering_us == p.steering_us && c.throttle_us == p.throttle_us; }
-
-double ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
 // The drive commands (C lines) in arrival order.
 std::vector<FakeArduino::Command> drive_commands(const FakeArduino& board) {

@@ -28,21 +28,24 @@ kernels::QuantS8 symmetric_quant(float absmax) {
 
 }  // namespace
 
-// ------------------------------------------------------------------------------ PackedWeights
+// ------------------------------------------------------------------ AlignedBuffer, PackedWeights
 
-void PackedWeights::Free::operator()(void* p) const { std::free(p); }
+void AlignedBuffer::Free::operator()(void* p) const { std::free(p); }
+
+AlignedBuffer::AlignedBuffer(size_t bytes) {
+  const size_t rounded = (bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
+  void* p = std::aligned_alloc(kernels::kGemmS8PackedAlign, std::max(rounded, kernels::kGemmS8PackedAlign));
+  if (p == nullptr) throw std::bad_alloc();
+  buffer_.reset(p);
+}
 
 PackedWeights::PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
                              int32_t a_zero_point) {
   check(k >= 1 && k <= kernels::kGemmS8MaxK, ErrorCode::kUnimplemented,
         "an int8 layer with " + std::to_string(k) + " inputs per output (the INT8 kernels take at most " +
             std::to_string(kernels::kGemmS8MaxK) + ")");
-  const size_t bytes = kernels.packed_size(n, k);
-  const size_t rounded = (bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
-  void* p = std::aligned_alloc(kernels::kGemmS8PackedAlign, rounded);
-  if (p == nullptr) throw std::bad_alloc();
-  buffer_.reset(p);
-  kernels.pack(n, k, w, static_cast<size_t>(k), bias, a_zero_point, p);
+  buffer_ = AlignedBuffer(kernels.packed_size(n, k));
+  kernels.pack(n, k, w, static_cast<size_t>(k), bias, a_zero_point, buffer_.data());
 }
 
 // --------------------------------------------------------------------------- Quantize / Dequantize
@@ -279,8 +282,25 @@ void LinearS8Op::run(const RunContext& ctx) const {
 // ---------------------------------------------------------------------------------- AttentionS8
 
 namespace {
-constexpr int kAttentionS8BlockRows = 120;  // query rows per block: a multiple of every gemm_s8 MR
+// Query rows per task: a multiple of every gemm_s8 MR, small enough that the encoder's 8 heads give
+// each of 2 threads many tasks (the tail of one late task is short), large enough for the GEMM.
+constexpr int kAttentionS8BlockRows = 48;
+
+// Lays out 64-byte aligned buffers one after another (packed weights must be aligned).
+struct RegionLayout {
+  size_t end = 0;
+  size_t add(size_t bytes) {
+    const size_t at = end;
+    end = (at + bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
+    return at;
+  }
+};
+
+uint8_t* aligned_scratch(const RunContext& ctx, int thread) {
+  const size_t misalignment = reinterpret_cast<uintptr_t>(ctx.scratch_s8(thread)) % kernels::kGemmS8PackedAlign;
+  return reinterpret_cast<uint8_t*>(ctx.scratch_s8(thread)) + (misalignment ? kernels::kGemmS8PackedAlign - misalignment : 0);
 }
+}  // namespace
 
 AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q,
                              MatrixRef k, MatrixRef v, ValueId output)
@@ -291,31 +311,30 @@ AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int 
   outputs = {output};
   const size_t hd = static_cast<size_t>(dim / heads), n_keys = static_cast<size_t>(nk);
   const size_t rows = kAttentionS8BlockRows;
-  size_t end = 0;
-  // Each buffer 64-byte aligned (packed weights must be); int8 matrices the GEMM reads as A get the
-  // kernels' over-read slack.
-  const auto region = [&](size_t bytes) {
-    const size_t at = end;
-    end = (at + bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
-    return at;
-  };
-  layout_.packed_k = region(kernels.packed_size(nk, static_cast<int>(hd)));
-  layout_.packed_v = region(kernels.packed_size(static_cast<int>(hd), nk));
-  layout_.k_scale = region(n_keys * sizeof(float));
-  layout_.v_scale = region(hd * sizeof(float));
-  layout_.k_s8 = region(n_keys * hd);
-  layout_.v_t = region(hd * n_keys * sizeof(float));
-  layout_.v_t_s8 = region(hd * n_keys);
-  layout_.q_s8 = region(rows * hd + kernels::kGemmS8ReadSlack);
-  layout_.q_scale = region(rows * sizeof(float));
-  layout_.q_zero_point = region(rows * sizeof(int32_t));
-  layout_.scores = region(rows * n_keys * sizeof(float));
-  layout_.p_s8 = region(rows * n_keys + kernels::kGemmS8ReadSlack);
-  layout_.p_scale = region(rows * sizeof(float));
-  layout_.bytes = end + kernels::kGemmS8PackedAlign;  // room to align the scratch's start
+  // Each head's packed keys and values, shared by the tasks of its query blocks.
+  RegionLayout head;
+  layout_.packed_k = head.add(kernels.packed_size(nk, static_cast<int>(hd)));
+  layout_.packed_v = head.add(kernels.packed_size(static_cast<int>(hd), nk));
+  layout_.k_scale = head.add(n_keys * sizeof(float));
+  layout_.v_scale = head.add(hd * sizeof(float));
+  layout_.head_bytes = head.end;
+  keys_values_ = AlignedBuffer(static_cast<size_t>(heads) * layout_.head_bytes);
+  // A thread's scratch: the packing stage's float and int8 copies, then one query block's buffers;
+  // int8 matrices the GEMM reads as A get the kernels' over-read slack.
+  RegionLayout packing, block;
+  layout_.k_s8 = packing.add(n_keys * hd);
+  layout_.v_t = packing.add(hd * n_keys * sizeof(float));
+  layout_.v_t_s8 = packing.add(hd * n_keys);
+  layout_.q_s8 = block.add(rows * hd + kernels::kGemmS8ReadSlack);
+  layout_.q_scale = block.add(rows * sizeof(float));
+  layout_.q_zero_point = block.add(rows * sizeof(int32_t));
+  layout_.scores = block.add(rows * n_keys * sizeof(float));
+  layout_.p_s8 = block.add(rows * n_keys + kernels::kGemmS8ReadSlack);
+  layout_.p_scale = block.add(rows * sizeof(float));
+  layout_.scratch_bytes = std::max(packing.end, block.end) + kernels::kGemmS8PackedAlign;  // room to align the start
 }
 
-size_t AttentionS8Op::scratch_per_thread() const { return ceil_div(layout_.bytes, sizeof(float)); }
+size_t AttentionS8Op::scratch_per_thread() const { return ceil_div(layout_.scratch_bytes, sizeof(float)); }
 
 void AttentionS8Op::run(const RunContext& ctx) const {
   const float* q = q_.resolve(ctx);
@@ -326,22 +345,23 @@ void AttentionS8Op::run(const RunContext& ctx) const {
   const int hd = dim_ / heads_;
   const float inv_sqrt_hd = 1.0f / std::sqrt(static_cast<float>(hd));
   const size_t n_keys = static_cast<size_t>(nk_), head_dim = static_cast<size_t>(hd);
+  uint8_t* keys_values = keys_values_.data();
+  const auto head_at = [&](size_t head, size_t offset) { return static_cast<void*>(keys_values + head * layout_.head_bytes + offset); };
+
+  // Stage 1, a task per head: its keys and values quantized and packed as the GEMM's weight side.
   ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t head, int thread) {
-    const size_t misalignment = reinterpret_cast<uintptr_t>(ctx.scratch_s8(thread)) % kernels::kGemmS8PackedAlign;
-    uint8_t* base = reinterpret_cast<uint8_t*>(ctx.scratch_s8(thread)) +
-                    (misalignment ? kernels::kGemmS8PackedAlign - misalignment : 0);
-    const auto at = [&](size_t offset) { return static_cast<void*>(base + offset); };
-    int8_t* k_s8 = static_cast<int8_t*>(at(layout_.k_s8));
-    float* k_scale = static_cast<float*>(at(layout_.k_scale));
-    float* v_t = static_cast<float*>(at(layout_.v_t));
-    int8_t* v_t_s8 = static_cast<int8_t*>(at(layout_.v_t_s8));
-    float* v_scale = static_cast<float*>(at(layout_.v_scale));
+    uint8_t* scratch = aligned_scratch(ctx, thread);
+    int8_t* k_s8 = reinterpret_cast<int8_t*>(scratch + layout_.k_s8);
+    float* v_t = reinterpret_cast<float*>(scratch + layout_.v_t);
+    int8_t* v_t_s8 = reinterpret_cast<int8_t*>(scratch + layout_.v_t_s8);
+    float* k_scale = static_cast<float*>(head_at(head, layout_.k_scale));
+    float* v_scale = static_cast<float*>(head_at(head, layout_.v_scale));
     const size_t column = head * head_dim;
 
     // Keys: one int8 row per token, the 1 / sqrt(d) of the scores folded into their scales.
     kernels::quantize_rows_symmetric_f32_s8(kc.quant, nk_, hd, k + column, k_.ld, k_s8, head_dim, k_scale);
     for (size_t j = 0; j < n_keys; ++j) k_scale[j] *= inv_sqrt_hd;
-    kc.gemm_s8.pack(nk_, hd, k_s8, head_dim, nullptr, 0, at(layout_.packed_k));
+    kc.gemm_s8.pack(nk_, hd, k_s8, head_dim, nullptr, 0, head_at(head, layout_.packed_k));
     // Values, transposed: one int8 row per channel (the output columns of p v). In blocks of keys,
     // so that each channel's row is written a cache line at a time rather than a float per line.
     constexpr size_t kKeyBlock = 16;
@@ -353,32 +373,40 @@ void AttentionS8Op::run(const RunContext& ctx) const {
     }
     kernels::quantize_rows_symmetric_f32_s8(kc.quant, hd, nk_, v_t, n_keys, v_t_s8, n_keys, v_scale);
     // The probabilities' zero point is the same for every row: fold it into the packed values.
-    kc.gemm_s8.pack(hd, nk_, v_t_s8, n_keys, nullptr, kernels::kSoftmaxS8ZeroPoint, at(layout_.packed_v));
+    kc.gemm_s8.pack(hd, nk_, v_t_s8, n_keys, nullptr, kernels::kSoftmaxS8ZeroPoint, head_at(head, layout_.packed_v));
+  });
 
-    int8_t* q_s8 = static_cast<int8_t*>(at(layout_.q_s8));
-    float* q_scale = static_cast<float*>(at(layout_.q_scale));
-    int32_t* q_zero_point = static_cast<int32_t*>(at(layout_.q_zero_point));
-    float* scores = static_cast<float*>(at(layout_.scores));
-    int8_t* p_s8 = static_cast<int8_t*>(at(layout_.p_s8));
-    float* p_scale = static_cast<float*>(at(layout_.p_scale));
-    // scores = q k^T / sqrt(d), then p v; both [rows x n] = A [rows x k] times a packed operand.
-    const auto gemm = [&](int rows, int n, int k_len, const int8_t* a, size_t lda, const void* packed,
-                          const int32_t* a_zero_point, const float* a_scale, const float* w_scale, float* c, size_t ldc) {
+  // Stage 2, a task per (head, block of query rows): scores = q k^T / sqrt(d), softmax, then p v;
+  // both GEMMs [rows x n] = A [rows x k] times a packed operand.
+  const size_t blocks = ceil_div(static_cast<size_t>(nq_), kAttentionS8BlockRows);
+  ctx.pool().parallel_for(static_cast<size_t>(heads_) * blocks, [&](size_t task, int thread) {
+    const size_t head = task / blocks;
+    const int r0 = static_cast<int>(task % blocks) * kAttentionS8BlockRows;
+    const int rows = std::min(kAttentionS8BlockRows, nq_ - r0);
+    uint8_t* scratch = aligned_scratch(ctx, thread);
+    int8_t* q_s8 = reinterpret_cast<int8_t*>(scratch + layout_.q_s8);
+    float* q_scale = reinterpret_cast<float*>(scratch + layout_.q_scale);
+    int32_t* q_zero_point = reinterpret_cast<int32_t*>(scratch + layout_.q_zero_point);
+    float* scores = reinterpret_cast<float*>(scratch + layout_.scores);
+    int8_t* p_s8 = reinterpret_cast<int8_t*>(scratch + layout_.p_s8);
+    float* p_scale = reinterpret_cast<float*>(scratch + layout_.p_scale);
+    const size_t column = head * head_dim;
+    const auto gemm = [&](int n, int k_len, const int8_t* a, size_t lda, const void* packed, const int32_t* a_zero_point,
+                          const float* a_scale, const float* w_scale, float* c, size_t ldc) {
       const kernels::GemmS8Args args{.m = rows, .n = n, .k = k_len, .a = a, .lda = lda, .packed_w = packed,
                                      .a_row_zero_point = a_zero_point};
       const kernels::GemmS8OutF32 o{.c = c, .ldc = ldc, .w_scale = w_scale, .a_row_scale = a_scale};
       kc.gemm_s8.f32out(args, o, 0, rows, 0, n);
     };
-    for (int r0 = 0; r0 < nq_; r0 += kAttentionS8BlockRows) {
-      const int rows = std::min(kAttentionS8BlockRows, nq_ - r0);
-      kernels::quantize_rows_dynamic_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
-                                            head_dim, q_scale, q_zero_point);
-      gemm(rows, nk_, hd, q_s8, head_dim, at(layout_.packed_k), q_zero_point, q_scale, k_scale, scores, n_keys);
-      kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);
-      // The probabilities' zero point is folded into the packed values: no per-row zero points.
-      gemm(rows, hd, nk_, p_s8, n_keys, at(layout_.packed_v), nullptr, p_scale, v_scale,
-           out + static_cast<size_t>(r0) * static_cast<size_t>(dim_) + column, static_cast<size_t>(dim_));
-    }
+    kernels::quantize_rows_dynamic_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
+                                          head_dim, q_scale, q_zero_point);
+    gemm(nk_, hd, q_s8, head_dim, head_at(head, layout_.packed_k), q_zero_point, q_scale,
+         static_cast<const float*>(head_at(head, layout_.k_scale)), scores, n_keys);
+    kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);
+    // The probabilities' zero point is folded into the packed values: no per-row zero points.
+    gemm(hd, nk_, p_s8, n_keys, head_at(head, layout_.packed_v), nullptr, p_scale,
+         static_cast<const float*>(head_at(head, layout_.v_scale)),
+         out + static_cast<size_t>(r0) * static_cast<size_t>(dim_) + column, static_cast<size_t>(dim_));
   });
 }
 

@@ -10,6 +10,8 @@
 //            conv inputs, per row (per token, asymmetric) for the transformer's linears.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -21,19 +23,30 @@
 
 namespace act::graph {
 
-/// Weights packed for one gemm_s8 variant, 64-byte aligned, owned by the op that uses them.
-class PackedWeights {
+/// A 64-byte aligned byte buffer owned by an op (packed weights, attention's packed keys and values).
+class AlignedBuffer {
  public:
-  /// Packs w [n x k] (int8) with an optional int32 bias and the activation zero point folded in.
-  PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
-                int32_t a_zero_point);
-  const void* data() const { return buffer_.get(); }
+  AlignedBuffer() = default;
+  explicit AlignedBuffer(size_t bytes);
+  uint8_t* data() const { return static_cast<uint8_t*>(buffer_.get()); }
 
  private:
   struct Free {
     void operator()(void* p) const;
   };
   std::unique_ptr<void, Free> buffer_;
+};
+
+/// Weights packed for one gemm_s8 variant, 64-byte aligned, owned by the op that uses them.
+class PackedWeights {
+ public:
+  /// Packs w [n x k] (int8) with an optional int32 bias and the activation zero point folded in.
+  PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
+                int32_t a_zero_point);
+  const void* data() const { return buffer_.data(); }
+
+ private:
+  AlignedBuffer buffer_;
 };
 
 /// float -> int8 per tensor. Static: with fixed parameters. Dynamic: symmetric (zero point 0,
@@ -137,11 +150,12 @@ class LinearS8Op : public Op {
 };
 
 /// softmax(q k^T / sqrt(d)) v per head with both matmuls on the int8 GEMM; AttentionOp is its float
-/// twin (same operands, same output layout). One task per head: its keys (per token) and values (per
-/// channel) are quantized symmetric, the GEMM's weight side, and packed into the thread's scratch;
-/// then, block of query rows by block, the queries are quantized per row (asymmetric) and the
-/// softmax writes its probabilities straight into int8 (softmax_rows_s8: all 256 codes cover
-/// [0, max p] of each row).
+/// twin (same operands, same output layout). Two stages: a task per head quantizes its keys (per
+/// token) and values (per channel) symmetric, the GEMM's weight side, and packs them into the op's
+/// own buffer; then a task per (head, block of query rows) quantizes the queries per row
+/// (asymmetric), and the softmax writes its probabilities straight into int8 (softmax_rows_s8: all
+/// 256 codes cover [0, max p] of each row). The op's buffer makes a run of it single-threaded at the
+/// graph level, as the graph's own arena already does.
 class AttentionS8Op : public Op {
  public:
   AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,
@@ -156,14 +170,18 @@ class AttentionS8Op : public Op {
   AttentionParams params() const { return {nq_, nk_, dim_, heads_, q_, k_, v_}; }
 
  private:
-  /// Where each buffer of one task lives in its thread's scratch (byte offsets, 64-byte aligned).
-  struct ScratchLayout {
-    size_t packed_k, packed_v, k_scale, v_scale, k_s8, v_t, v_t_s8, q_s8, q_scale, q_zero_point, scores, p_s8, p_scale,
-        bytes;
+  /// Byte offsets, each 64-byte aligned: of a head's packed keys and values and their scales in
+  /// keys_values_ (head_bytes apart), and of each task's buffers in its thread's scratch.
+  struct Layout {
+    size_t packed_k, packed_v, k_scale, v_scale, head_bytes;
+    size_t k_s8, v_t, v_t_s8;                                        // stage 1
+    size_t q_s8, q_scale, q_zero_point, scores, p_s8, p_scale;      // stage 2
+    size_t scratch_bytes;
   };
   int nq_, nk_, dim_, heads_;
   MatrixRef q_, k_, v_;
-  ScratchLayout layout_;
+  Layout layout_;
+  AlignedBuffer keys_values_;
 };
 
 }  // namespace act::graph

@@ -257,15 +257,15 @@ void int8_section(std::ostringstream& out, const Json& r) {
   if (layers.empty()) return;
   // One bar per layer, its length the SQNR (capped at 60 dB so that exact layers do not squash the rest).
   constexpr double kMaxDb = 60;
-  constexpr int kRow = 16, kLabel = 330, kBarWidth = 400;
+  constexpr int kRow = 16, kLabel = 300, kBarWidth = 380;
   const int height = kRow * static_cast<int>(layers.size()) + 30;
   out << "<h2>Per-layer SQNR (dB, INT8 output against FP32; longer is better)</h2>"
       << "<div class='legend'><span><i style='background:#1f77b4'></i>int8</span><span><i style='background:#ff7f0e'></i>kept in float</span></div>"
       << "<svg class='chart sqnr' width='" << kLabel + kBarWidth + 60 << "' height='" << height << "'>";
   for (size_t i = 0; i < layers.size(); ++i) {
     const Json& layer = layers[i];
-    const std::string name = layer.value("value", std::string());
-    const bool kept_float = std::find(float_layers.begin(), float_layers.end(), name) != float_layers.end();
+    const std::string name = layer.value("layer", std::string());
+    const bool kept_float = layer.value("kept_float", false);
     const double db = value_or_nan(layer["sqnr_db"]);
     const double w = std::isfinite(db) ? std::clamp(db, 0.0, kMaxDb) / kMaxDb * kBarWidth : 0;
     const int y = static_cast<int>(i) * kRow + 4;
@@ -282,6 +282,16 @@ void int8_section(std::ostringstream& out, const Json& r) {
     for (const auto& l : float_layers) out << "<li>" << escape(l) << "</li>";
     out << "</ul>";
   }
+  const Json& activations = r.contains("activations") ? r["activations"] : Json::array();
+  if (activations.empty()) return;
+  out << "<h2>Calibrated activations</h2><table><tr><th>value</th><th>scale</th><th>zero point</th>"
+         "<th>int8 range</th><th>range on the calibration frames</th></tr>";
+  for (const auto& a : activations) {
+    out << "<tr><td>" << escape(a.value("value", std::string())) << "</td><td>" << num(a["scale"]) << "</td><td>"
+        << a.value("zero_point", 0) << "</td><td>" << num(a["quantized_range"][0]) << " .. " << num(a["quantized_range"][1])
+        << "</td><td>" << num(a["observed_range"][0]) << " .. " << num(a["observed_range"][1]) << "</td></tr>";
+  }
+  out << "</table>";
 }
 
 }  // namespace

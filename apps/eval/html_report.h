@@ -12,7 +12,7 @@ namespace act::eval {
 /// Renders what `report` holds: "episode" (EpisodeEvaluation::to_json, with "episode_path" and
 /// "episode_kind"): actions over time per dimension, the error histogram and per-frame errors;
 /// "int8" (Int8Report::to_json, with "calibration_sources"): calibration settings, per-layer SQNR
-/// with the layers kept in float marked. "title" heads the page.
+/// with the layers kept in float marked, the calibrated activations. "title" heads the page.
 std::string render_html_report(const nlohmann::ordered_json& report);
 
 }  // namespace act::eval

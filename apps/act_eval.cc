@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <memory>
 
 #include "actengine/engine.h"
@@ -27,6 +28,8 @@ namespace {
 // Exit codes of --episode (also in --help).
 constexpr int kExitGateMissed = 2;
 constexpr int kExitNonFinite = 3;
+// How the engine refuses to hand out a non-finite output (engine/src/engine.cc, check_finite).
+constexpr const char* kEngineNonFiniteOutput = "values NaN or infinite";
 
 struct Options {
   std::vector<std::string> models;
@@ -175,8 +178,14 @@ int run_episode(const Options& o) {
     observation.state = frame.state;
     for (size_t m = 0; m < engines.size(); ++m) {
       const auto start = std::chrono::steady_clock::now();
-      act::throw_if_failed(engines[m]->infer(observation, chunks[m]), o.models[m] + " on " + frame.source);
+      const act::Status status = engines[m]->infer(observation, chunks[m]);
       evaluation.models[m].seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (!status.ok() && status.message().find(kEngineNonFiniteOutput) != std::string::npos) {
+        // Counted as the model's answer on this frame, so the report shows where it happened.
+        std::fill(chunks[m].begin(), chunks[m].end(), std::numeric_limits<float>::quiet_NaN());
+        continue;
+      }
+      act::throw_if_failed(status, o.models[m] + " on " + frame.source);
     }
     evaluation.add_frame(frame.source, frame.demonstration, chunks);
   }

@@ -143,13 +143,14 @@ ActionColumns action_columns(const CsvTable& table, int action_dim) {
     bad(table.path, std::to_string(out.names.size()) + " action columns (" + std::string(any_chunked ? "NAME@STEP counted once per NAME" : "one per dimension") +
         ") but the model's actions have " + std::to_string(action_dim) + " values");
   }
-  const size_t steps = chunked[out.names[0]].size();
+  size_t steps = 0;
+  for (const auto& [name, by_step] : chunked) steps = std::max(steps, by_step.size());
   for (size_t s = 0; s < steps; ++s) {
     out.column.emplace_back();
     for (const auto& name : out.names) {
       const auto& by_step = chunked[name];
       const auto it = by_step.find(s);
-      if (by_step.size() != steps || it == by_step.end()) {
+      if (it == by_step.end()) {
         bad(table.path, "action '" + name + "' lacks the column " + name + "@" + std::to_string(s) +
             " (a chunk row needs NAME@0..NAME@" + std::to_string(steps - 1) + " for every action)");
       }

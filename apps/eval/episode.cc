@@ -90,7 +90,9 @@ std::vector<std::string> split(const std::string& line) {
   return cells;
 }
 
-CsvTable read_csv(const std::string& path, const char* what) {
+// `recording`: a file a killed act_drive may have cut short: a last row with too few columns is
+// dropped (and counted in `cut_rows`) instead of being an error.
+CsvTable read_csv(const std::string& path, const char* what, bool recording = false, size_t* cut_rows = nullptr) {
   std::ifstream in(path);
   if (!in) fail(ErrorCode::kNotFound, std::string("cannot open the ") + what + " CSV " + path);
   CsvTable table{path, {}, {}};
@@ -98,6 +100,7 @@ CsvTable read_csv(const std::string& path, const char* what) {
   size_t number = 0;
   while (std::getline(in, line)) {
     ++number;
+    const bool last = in.peek() == std::char_traits<char>::eof();
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.find('"') != std::string::npos) bad(at_line(path, number), "quoted fields are not supported (names and numbers need no quotes)");
     if (line.empty()) continue;
@@ -108,6 +111,10 @@ CsvTable read_csv(const std::string& path, const char* what) {
         if (cells[c].empty() && c > 0) bad(at_line(path, number), "column " + std::to_string(c + 1) + " has no name");
       }
       table.header = std::move(cells);
+      continue;
+    }
+    if (recording && last && !table.header.empty() && cells.size() < table.header.size()) {
+      ++*cut_rows;
       continue;
     }
     if (cells.size() != table.header.size()) {
@@ -191,7 +198,8 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
   Episode ep{dir.string(), "act_drive recording", "", {}, {}, {}};
   check_state_model(model, ep.path);
   // The executed actions by tick, from ticks.csv's action.<i> columns.
-  const CsvTable ticks = read_csv((dir / "ticks.csv").string(), "ticks");
+  size_t cut_lines = 0;
+  const CsvTable ticks = read_csv((dir / "ticks.csv").string(), "ticks", true, &cut_lines);
   std::optional<size_t> tick_column;
   std::vector<size_t> action_column(static_cast<size_t>(model.action_dim), 0);
   for (size_t c = 0; c < ticks.header.size(); ++c) {
@@ -228,6 +236,10 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
     if (line.empty()) continue;
     const std::string where = at_line(log_path.string(), line_number);
     const nlohmann::json entry = nlohmann::json::parse(line, nullptr, false);
+    if (entry.is_discarded() && log.peek() == std::char_traits<char>::eof()) {
+      ++cut_lines;  // the last line of a run that was killed while writing it
+      continue;
+    }
     if (entry.is_discarded() || !entry.is_object()) bad(where, "not a JSON object");
     if (!entry.contains("frame") || !entry["frame"].is_string()) bad(where, "no \"frame\" file name");
     if (!entry.contains("tick") || !entry["tick"].is_number_integer()) bad(where, "no integer \"tick\"");
@@ -256,6 +268,7 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
     }
     ep.frames.push_back(std::move(frame));
   }
+  if (cut_lines > 0) ep.notes.push_back("skipped the last line of a file cut short (the recording was killed while writing)");
   if (without_action > 0) {
     ep.notes.push_back(std::to_string(without_action) + " frame(s) skipped: no action was executed at their tick (a safe action)");
   }

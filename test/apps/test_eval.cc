@@ -277,8 +277,9 @@ TEST(EvalEpisode, ActDriveRecordingByColumnNames) {
       ticks += std::to_string(t) + ",0.1,0.0,chunk," + std::to_string(t) + "," + std::to_string(-t) + ",1500,1500,1,policy,0\n";
     }
   }
-  write_text(dir + "/log.jsonl", log);
-  write_text(dir + "/ticks.csv", ticks);
+  // A killed run leaves its last lines cut short.
+  write_text(dir + "/log.jsonl", log + "{\"frame\":\"frames/0000");
+  write_text(dir + "/ticks.csv", ticks + "12,0.1,0.0,chu");
   const act::eval::Episode ep = act::eval::read_episode({dir, "", ""}, tiny_info());
   EXPECT_EQ(ep.kind, "act_drive recording");
   EXPECT_EQ(ep.action_names, (std::vector<std::string>{"action.0", "action.1"}));
@@ -289,6 +290,8 @@ TEST(EvalEpisode, ActDriveRecordingByColumnNames) {
   EXPECT_EQ(ep.frames[3].demonstration, (std::vector<float>{9, -9, 10, -10, 11, -11}));
   EXPECT_EQ(ep.frames[2].state, kStates[2]);
   EXPECT_EQ(ep.frames[0].source, "frames/000000.png");
+  ASSERT_EQ(ep.notes.size(), 1u);
+  EXPECT_NE(ep.notes[0].find("cut short"), std::string::npos) << ep.notes[0];
 }
 
 TEST(EvalEpisode, VideoFramesByIndex) {

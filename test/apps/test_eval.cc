@@ -1,5 +1,6 @@
 // act_eval on recorded episodes (apps/eval/): the episode readers, the metrics against values
-// computed here, the gates' exit codes, and the HTML report (also act_convert's) in headless chromium.
+// computed here, the gates' exit codes, the HTML reports' content (test/browser/run_report_pages.sh
+// renders them in headless chromium).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -456,33 +457,24 @@ TEST(ActEvalEpisodeCli, NonFiniteOutputFails) {
   EXPECT_TRUE(read_json(dir + "/e.json")["models"][0]["vs_demonstration"]["chunk"]["raw"]["mse"].is_null());
 }
 
-// The HTML of both tools in headless chromium: charts drawn, nothing external.
-void expect_report_renders(const std::string& html, const std::string& screenshot) {
-  ACT_REQUIRE_PATH(std::string(ACT_BROWSER_DIR) + "/node_modules/playwright-core/package.json");
-  const CommandResult r = run_command("node " + q(std::string(ACT_BROWSER_DIR) + "/report_page.js") + " " + q(html) + " " + q(screenshot));
-  EXPECT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("PASS"), std::string::npos) << r.output;
-  EXPECT_TRUE(fs::exists(screenshot));
-}
-
-TEST(ActEvalEpisodeCli, HtmlReportRendersInChromium) {
+TEST(ActEvalEpisodeCli, HtmlReportHoldsTheEpisode) {
+  // (test/browser/run_report_pages.sh renders it in chromium.)
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
   const std::string dir = act::test::scratch_dir();
-  const std::string fp32 = convert_tiny(dir, "fp32"), int8 = convert_tiny(dir, "int8", int8_flags());
+  const std::string fp32 = convert_tiny(dir, "fp32");
   const ImageEpisode ep = write_image_episode(dir);
-  write_text(dir + "/actions.csv", "frame,steer,throttle\n" + ep.keys[0] + ",0.1,0.2\n" + ep.keys[1] + ",0.2,0.1\n" +
-                                       ep.keys[2] + ",0.3,0\n" + ep.keys[3] + ",0.4,-0.1\n");
+  write_text(dir + "/actions.csv", "frame,steer,throttle\n" + ep.keys[0] + ",0.1,0.2\n" + ep.keys[1] + ",0.2,0.1\n");
   const std::string html = dir + "/report.html";
   const CommandResult r = run_command(std::string(ACT_EVAL_BIN) + " --episode " + q(ep.frames) + " --actions " +
-                                      q(dir + "/actions.csv") + " --states " + q(ep.states) + " -m " + q(fp32) + " -m " +
-                                      q(int8) + " --report " + q(html));
+                                      q(dir + "/actions.csv") + " --states " + q(ep.states) + " -m " + q(fp32) +
+                                      " --report " + q(html));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::vector<uint8_t> bytes = act::test::read_file(html);
   const std::string text(bytes.begin(), bytes.end());
   for (const char* part : {"<h3>steer</h3>", "<h3>throttle</h3>", "Error histogram", ep.keys[0].c_str(), "class='chart actions'"}) {
     EXPECT_NE(text.find(part), std::string::npos) << part;
   }
-  expect_report_renders(html, dir + "/report.png");
+  EXPECT_EQ(text.find("http"), std::string::npos);
 }
 
 TEST(ActConvertCli, KeepFloatAndHtmlReportUseOneLayerNaming) {
@@ -522,7 +514,7 @@ TEST(ActConvertCli, KeepFloatAndHtmlReportUseOneLayerNaming) {
   const std::string text(bytes.begin(), bytes.end());
   EXPECT_NE(text.find("backbone.conv1.weight (float)"), std::string::npos);
   EXPECT_NE(text.find("Calibrated activations"), std::string::npos);
-  expect_report_renders(html, dir + "/r.png");
+  EXPECT_EQ(text.find("http"), std::string::npos);
 }
 
 }  // namespace

@@ -154,7 +154,11 @@ int run_episode(const Options& o) {
     check_same_interface(engines[0]->model_info(), engines.back()->model_info(), o.models[0], path);
   }
   const act::ModelInfo& info = engines[0]->model_info();
-  const act::eval::Episode episode = act::eval::read_episode(o.episode, info);
+  act::eval::Episode episode = act::eval::read_episode(o.episode, info);
+  if (info.cameras.size() > 1) {
+    episode.notes.push_back("single-view episode: each of the model's " + std::to_string(info.cameras.size()) +
+                            " cameras was given the same frame");
+  }
 
   act::eval::EpisodeEvaluation evaluation;
   evaluation.action_names = episode.action_names;

@@ -8,11 +8,11 @@
 #include <fstream>
 #include <map>
 #include <optional>
-#include <set>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "apps/convert/calib_frames.h"
 #include "weights/blob/error.h"
 
 namespace act::eval {
@@ -20,15 +20,6 @@ namespace act::eval {
 namespace fs = std::filesystem;
 
 namespace {
-
-const std::set<std::string> kImageExtensions = {".png", ".jpg", ".jpeg", ".bmp"};
-const std::set<std::string> kVideoExtensions = {".mp4", ".avi", ".mkv", ".mov", ".webm"};
-
-std::string lower_extension(const fs::path& p) {
-  std::string e = p.extension().string();
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return e;
-}
 
 [[noreturn]] void bad(const std::string& where, const std::string& problem) {
   fail(ErrorCode::kInvalidArgument, where + ": " + problem);
@@ -167,15 +158,6 @@ ActionColumns action_columns(const CsvTable& table, int action_dim) {
   return out;
 }
 
-std::vector<fs::path> images_in(const fs::path& dir) {
-  std::vector<fs::path> out;
-  for (const auto& entry : fs::directory_iterator(dir)) {
-    if (entry.is_regular_file() && kImageExtensions.count(lower_extension(entry.path()))) out.push_back(entry.path());
-  }
-  std::sort(out.begin(), out.end());
-  return out;
-}
-
 // With one action per frame, frame i's chunk is the actions of frames i, i+1, ... (up to the model's chunk).
 void extend_demonstrations(std::vector<EpisodeFrame>& frames, const ModelInfo& model) {
   const size_t dim = static_cast<size_t>(model.action_dim);
@@ -279,7 +261,7 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
 Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& model) {
   const fs::path p(sources.episode);
   const bool is_video = !fs::is_directory(p);
-  if (is_video && !kVideoExtensions.count(lower_extension(p))) {
+  if (is_video && !is_video_file(p)) {
     bad(sources.episode, "not a folder (of images or an act_drive recording) nor a video (mp4, avi, mkv, mov, webm)");
   }
   Episode ep{p.string(), is_video ? "video + CSV" : "image folder + CSV", is_video ? p.string() : "", {}, {}, {}};
@@ -288,7 +270,7 @@ Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& mode
   if (model.state_dim > 0 && sources.states_csv.empty()) {
     bad(ep.path, "the model takes a robot state of " + std::to_string(model.state_dim) + " values: give --states FILE.csv");
   }
-  const std::vector<fs::path> images = is_video ? std::vector<fs::path>{} : images_in(p);
+  const std::vector<fs::path> images = is_video ? std::vector<fs::path>{} : files_in(p, is_image_file);
   if (!is_video && images.empty()) bad(ep.path, "the folder has no images (png, jpg, jpeg, bmp)");
 
   const CsvTable actions = read_csv(sources.actions_csv, "actions");

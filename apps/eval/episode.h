@@ -4,8 +4,8 @@
 //   - an act_drive --record folder: frames and states from log.jsonl, the actions executed from
 //     ticks.csv's "action.<i>" columns (looked up by name; other columns are ignored), matched by tick;
 //   - a folder of images or a video, with an actions CSV and (when the model has a state) a states CSV:
-//       first column: a frame (an image file name in the folder, or a 0-based frame index of the sorted
-//       images or of the video), then one named column per value. An actions row holds either one
+//       first column: a frame (an image's path in the folder, or a 0-based index of the folder's images,
+//       subfolders included, sorted by path, or of the video's frames), then one named column per value. An actions row holds either one
 //       action ("steer,throttle") or a chunk of future actions, its columns named NAME@K with K the
 //       steps ahead of the frame ("steer@0,throttle@0,steer@1,throttle@1,...").
 // With one action per row, a frame's demonstrated chunk is the actions of the rows that follow it.

@@ -16,10 +16,10 @@
 #include "actengine/vision.h"
 #include "apps/eval/episode.h"
 #include "apps/eval/metrics.h"
+#include "support/act_test_util.h"
 #include "support/command.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/import/safetensors.h"
 
 namespace fs = std::filesystem;
 
@@ -413,23 +413,6 @@ TEST(ActEvalEpisodeCli, GatesExitCodes) {
   EXPECT_NE(help.output.find("3 a model gave NaN"), std::string::npos) << help.output;
 }
 
-// A copy of safetensors file `src` with every value of tensor `name` set to `value`.
-void write_with_value(const std::string& src, const std::string& dst, const std::string& name, float value) {
-  const act::SafetensorsFile in = act::SafetensorsFile::open(src);
-  std::vector<std::vector<uint8_t>> copies;
-  std::vector<act::SafetensorsWriteTensor> out;
-  copies.reserve(in.names().size());
-  for (const std::string& n : in.names()) {
-    const act::SafetensorsTensor& t = in.get(n);
-    copies.emplace_back(t.data, t.data + t.nbytes);
-    if (n == name) {
-      for (size_t i = 0; i < t.elements(); ++i) reinterpret_cast<float*>(copies.back().data())[i] = value;
-    }
-    out.push_back({n, t.dtype, t.shape, copies.back().data(), t.nbytes});
-  }
-  act::write_safetensors(dst, out);
-}
-
 TEST(ActEvalEpisodeCli, NonFiniteOutputFails) {
   // The import refuses non-finite and huge weights, but not a huge (finite) action spread: with the
   // action head's bias at 1e6 and the action std at 3e38 every un-normalised action overflows.
@@ -442,8 +425,8 @@ TEST(ActEvalEpisodeCli, NonFiniteOutputFails) {
     const std::string name = entry.path().filename().string();
     if (name != model && name != stats) fs::create_symlink(entry.path(), ckpt + "/" + name);
   }
-  write_with_value(src + "/" + model, ckpt + "/" + model, "model.action_head.bias", 1e6f);
-  write_with_value(src + "/" + stats, ckpt + "/" + stats, "action.std", 3e38f);
+  act::test::write_with_values_replaced(src + "/" + model, ckpt + "/" + model, "model.action_head.bias", 0, 1e6f);
+  act::test::write_with_values_replaced(src + "/" + stats, ckpt + "/" + stats, "action.std", 0, 3e38f);
   const std::string blob = dir + "/overflow.actb";
   const CommandResult c = run_command(std::string(ACT_CONVERT_BIN) + " " + q(ckpt) + " -o " + q(blob) + " -q");
   ASSERT_EQ(c.exit_code, 0) << c.output;

@@ -16,6 +16,7 @@
 #include "apps/convert/calib_frames.h"
 #include "apps/convert/npy_file.h"
 #include "apps/deploy_package.h"
+#include "apps/eval/html_report.h"
 #include "apps/progress.h"
 #include "apps/pytorch_options.h"
 #include "apps/status_error.h"
@@ -75,9 +76,12 @@ void add_options(CLI::App& app, Options& o) {
                          "attention's matmuls: auto (default: int8 when that raises the held-out error by 25 % at "
                          "most), int8 or fp32")
       ->check(CLI::IsMember({"auto", "int8", "fp32"}));
+  int8_group->add_option("--keep-float", o.int8.keep_float, "layers to keep in float, comma-separated, named as the "
+                         "report's per-layer SQNR names them (their weights, e.g. backbone.conv1.weight)")->delimiter(',');
   int8_group->add_option("--target-mse", o.target_mse, "mixed: held-out action MSE to meet, normalised units");
   int8_group->add_option("--max-mse", o.max_mse, "fail, writing nothing, when the held-out action MSE (normalised) is above this");
-  int8_group->add_option("--report", o.report_path, "also write the accuracy report as JSON to this file");
+  int8_group->add_option("--report", o.report_path, "also write the accuracy report to this file: JSON, or a "
+                         "self-contained HTML page when the name ends in .html");
   int8_group->add_option("--threads", o.int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, 256));
   app.add_flag("-q,--quiet", o.quiet, "print nothing but errors");
 #ifdef ACT_ONNX_EXPORT
@@ -123,8 +127,8 @@ void check_options(const CLI::App& app, Options& o) {
     return;
   }
   if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
-                                app.count("--report") || app.count("--attention"))) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --max-mse and --report need --precision int8");
+                                app.count("--report") || app.count("--attention") || app.count("--keep-float"))) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --keep-float, --max-mse and --report need --precision int8");
   }
   if (!o.package.empty()) {
     if (!o.output.empty()) act::fail(act::ErrorCode::kInvalidArgument, "give either -o or --package (which writes " +
@@ -186,6 +190,13 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   return std::move(model).value();
 }
 
+// --report FILE.html: the conversion report as a page (the one renderer act_eval's reports use too).
+std::string html_report(const act::Int8Report& report, const Options& o) {
+  nlohmann::ordered_json int8 = nlohmann::ordered_json::parse(report.to_json());
+  int8["calibration_sources"] = o.calib_sources;
+  return act::eval::render_html_report({{"title", "act_convert: " + o.checkpoint + " -> " + o.output}, {"int8", int8}});
+}
+
 // Writes the blob (INT8: calibrated on the --calib frames, its report printed). Returns its size.
 uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
   if (o.precision != "int8") {
@@ -225,7 +236,8 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
   }
   act::throw_if_failed(report.status());
   if (report_file) {
-    report_file->write(report->to_json() + "\n");
+    report_file->write(std::filesystem::path(o.report_path).extension() == ".html" ? html_report(*report, o)
+                                                                                  : report->to_json() + "\n");
     report_file->commit();
   }
   if (!o.quiet) std::cout << report->to_text();

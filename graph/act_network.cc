@@ -113,7 +113,8 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     const Tensor xf = as_f32(x);
     const ValueId res = residual ? as_f32(*residual).id : kNoValue;
     const ValueId y = graph_.add_value(name, y_shape);
-    add(std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name);
+    add_layer(std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name, y,
+              bn::conv_weight(c.name), false);
     calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
@@ -130,7 +131,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     spec.s8_out = false;
     if (residual) spec.residual = as_f32(*residual).id;
     const ValueId y = graph_.add_value(name, y_shape);
-    add_int8(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, xq.id, y), name, y);
+    add_layer(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, xq.id, y), name, y, bn::conv_weight(c.name), true);
     calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
@@ -145,7 +146,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
   }
   const ValueId y = graph_.add_value(name, y_shape, DataType::kS8);
   graph_.value(y).quant = spec.output_q;
-  add_int8(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, xq.id, y), name, y);
+  add_layer(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, xq.id, y), name, y, bn::conv_weight(c.name), true);
   return Tensor{y, true, spec.output_q, kNoValue};
 }
 
@@ -155,8 +156,9 @@ void ActNetwork::add(std::unique_ptr<Op> op, const std::string& name) {
   graph_.add_op(std::move(op));
 }
 
-void ActNetwork::add_int8(std::unique_ptr<Op> op, const std::string& name, ValueId output) {
-  int8_layers_.push_back({op.get(), output});
+void ActNetwork::add_layer(std::unique_ptr<Op> op, const std::string& name, ValueId output, const std::string& weight_name,
+                           bool int8) {
+  layers_.push_back({op.get(), output, weight_name, int8});
   add(std::move(op), name);
 }
 
@@ -171,14 +173,14 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
     const ValueId qx = graph_.add_value(out_name + ".x_s8", {rows, in}, DataType::kS8);
     const ValueId row_scale = graph_.add_value(out_name + ".x_scale", {rows});
     const ValueId row_zero_point = graph_.add_value(out_name + ".x_zero_point", {rows}, DataType::kS32);
-    add_int8(std::make_unique<LinearS8Op>(kernels_.gemm_s8, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
-                                          q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale,
-                                          row_zero_point),
-             out_name, y);
+    add_layer(std::make_unique<LinearS8Op>(kernels_.gemm_s8, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
+                                           q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale,
+                                           row_zero_point),
+              out_name, y, weight_name, true);
     return y;
   }
   auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
-  add(std::move(op), out_name);
+  add_layer(std::move(op), out_name, y, weight_name, false);
   return y;
 }
 
@@ -231,7 +233,7 @@ ValueId ActNetwork::backbone(size_t camera) {
   if (x.s8) graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
   auto pool = std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.s8, x.id, pooled);
   if (x.s8) {
-    add_int8(std::move(pool), pool_name, pooled);
+    add_layer(std::move(pool), pool_name, pooled, "", true);
   } else {
     add(std::move(pool), pool_name);
     calibration_point(CalibrationRole::kMaxPoolOutput, pooled);
@@ -276,7 +278,7 @@ ValueId ActNetwork::backbone(size_t camera) {
     spec.input_q = x.q;
     spec.s8_out = false;
     const ValueId y = graph_.add_value(proj_name, {h * w, D});
-    add_int8(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, x.id, y), proj_name, y);
+    add_layer(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, x.id, y), proj_name, y, bn::kImgProjWeight, true);
     calibration_point(CalibrationRole::kImageProjection, y);
     return y;
   }

@@ -39,10 +39,15 @@ struct CalibrationPoint {
   ValueId value;
 };
 
-/// An op that computes in int8 (conv, max pool, linear) and its output, for the accuracy report.
-struct Int8Layer {
+/// A layer's op and output, for the accuracy report: every conv and linear layer, and the max pool
+/// when it computes in int8. `weight` names the layer as the blob does (its weight tensor, e.g.
+/// "backbone.layer1.0.conv1.weight": the name of QuantConfig::float_layers and --keep-float); empty
+/// for the max pool, which has none.
+struct NetworkLayer {
   const Op* op;
   ValueId output;
+  std::string weight;
+  bool int8;
 };
 
 class ActNetwork {
@@ -78,8 +83,8 @@ class ActNetwork {
   /// The float values of the camera branches, in graph order. Calibration reads them from an FP32
   /// network, where every value of the branches is float: a static INT8 blob records them all.
   const std::vector<CalibrationPoint>& calibration_points() const { return calibration_points_; }
-  /// The int8 layers, in graph order (empty for an FP32 network).
-  const std::vector<Int8Layer>& int8_layers() const { return int8_layers_; }
+  /// The conv and linear layers (and the int8 max pool), in graph order.
+  const std::vector<NetworkLayer>& layers() const { return layers_; }
 
  private:
   /// A backbone value as the builder tracks it: float, or int8 with static or run-time parameters.
@@ -102,8 +107,8 @@ class ActNetwork {
   Tensor conv(const ConvSpec& c, const Tensor& x, int& h, int& w, bool relu, const Tensor* residual, const std::string& name);
   /// Appends an op to the graph, named and tagged with the stage being built.
   void add(std::unique_ptr<Op> op, const std::string& name);
-  /// add() for an op computing in int8 (recorded in int8_layers_).
-  void add_int8(std::unique_ptr<Op> op, const std::string& name, ValueId output);
+  /// add() for a layer's op (recorded in layers_): `weight` its weight tensor ("" for the max pool).
+  void add_layer(std::unique_ptr<Op> op, const std::string& name, ValueId output, const std::string& weight, bool int8);
   /// Records a float value of camera `camera_` (the branch being built) as a calibration point.
   void calibration_point(CalibrationRole role, ValueId value);
   ValueId backbone(size_t camera);
@@ -134,7 +139,7 @@ class ActNetwork {
   Stage stage_ = Stage::kOther;  // the stage the builder is in (state tokens count as "other")
   size_t camera_ = 0;            // the camera branch being built (backbone stage)
   std::vector<CalibrationPoint> calibration_points_;
-  std::vector<Int8Layer> int8_layers_;
+  std::vector<NetworkLayer> layers_;
 };
 
 }  // namespace act::graph

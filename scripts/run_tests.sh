@@ -65,6 +65,8 @@ full_size='^(Presets/|Onnx)'
 # The host's Debian packages from the Release tree (test/consumer/run_package_test.sh): its libraries
 # and apps are built for it; the ASan stage's would not run outside their sanitizer runtime.
 packages='^debian_packages$'
+# The HTML reports in headless chromium (Node; Release only, like the ONNX Runtime tests).
+web_pages='^html_report_pages$'
 
 echo "== Release build of the full-size model tests, the kernel benchmarks and the packaged libraries and apps (-Werror) =="
 cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON \
@@ -73,7 +75,7 @@ cmake --build "$root/build" -j "$jobs" --target act_model_tests act_kernel_bench
   actengine actengine_convert actengine_vision act_convert act_eval act_bench act_drive
 stage_done release-build
 echo "== Release: full-size model tests, the Debian packages =="
-run_ctest "$root/build" -R "$full_size|$packages"
+run_ctest "$root/build" -R "$full_size|$packages|$web_pages"
 stage_done release-tests
 echo "== Release: the Python module (engine/python, pytest) =="
 cmake -S "$root" -B "$root/build" -DACT_BUILD_PYTHON=ON >/dev/null  # a missing pybind11 fails here, not skips
@@ -94,7 +96,7 @@ ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=Rel
 stage_done asan-build
 echo "== ASan + UBSan: every other test =="
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  run_ctest "$root/build-asan" -E "$full_size|$packages"
+  run_ctest "$root/build-asan" -E "$full_size|$packages|$web_pages"
 stage_done asan-tests
 
 if [ "${ACT_SKIP_ARM64:-0}" != "1" ]; then

@@ -33,15 +33,6 @@ std::string lower_extension(const fs::path& p) {
   return e;
 }
 
-std::vector<fs::path> files_with(const fs::path& dir, const std::set<std::string>& extensions) {
-  std::vector<fs::path> out;
-  for (const auto& entry : fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied)) {
-    if (entry.is_regular_file() && extensions.count(lower_extension(entry.path()))) out.push_back(entry.path());
-  }
-  std::sort(out.begin(), out.end());
-  return out;
-}
-
 // `count` indices spread evenly over [0, n).
 std::vector<size_t> spread(size_t n, size_t count) {
   std::vector<size_t> idx;
@@ -65,7 +56,7 @@ class Loader {
     switch (const FileKind kind = file_kind(source)) {
       case FileKind::kLeRobotCheckpoint:
       case FileKind::kTrainingCheckpoint:
-        if (!files_with(p, kImageExtensions).empty()) break;
+        if (!files_in(p, is_image_file).empty()) break;
         [[fallthrough]];
       case FileKind::kActb:
       case FileKind::kPyTorchZip:
@@ -78,10 +69,9 @@ class Loader {
       if (fs::exists(p / "log.jsonl")) return add_recording(p, max_frames);
       return add_image_folder(p, max_frames);
     }
-    const std::string ext = lower_extension(p);
-    if (ext == ".safetensors") return add_observation_file(p, max_frames);
-    if (kVideoExtensions.count(ext)) return add_video(p, max_frames);
-    if (kImageExtensions.count(ext)) return add_images({p}, max_frames, p.string());
+    if (lower_extension(p) == ".safetensors") return add_observation_file(p, max_frames);
+    if (is_video_file(p)) return add_video(p, max_frames);
+    if (is_image_file(p)) return add_images({p}, max_frames, p.string());
     fail(ErrorCode::kInvalidArgument, "calibration source " + source +
          " is not a folder, a video (mp4, avi, mkv, mov, webm), an image or an observation .safetensors file");
   }
@@ -128,7 +118,7 @@ class Loader {
   }
 
   void add_image_folder(const fs::path& dir, size_t max_frames) {
-    add_images(files_with(dir, kImageExtensions), max_frames, dir.string());
+    add_images(files_in(dir, is_image_file), max_frames, dir.string());
   }
 
   // Opens a video; throws naming it when OpenCV cannot.
@@ -179,7 +169,7 @@ class Loader {
     std::vector<std::vector<fs::path>> per_camera;
     for (const auto& cam : model_.cameras) {
       std::vector<fs::path> files;
-      for (const auto& f : files_with(dir / "videos", kVideoExtensions)) {
+      for (const auto& f : files_in(dir / "videos", is_video_file)) {
         for (const auto& part : f) {
           if (part.string() == cam.key) {
             files.push_back(f);
@@ -295,6 +285,18 @@ class Loader {
 };
 
 }  // namespace
+
+bool is_image_file(const fs::path& p) { return kImageExtensions.count(lower_extension(p)) > 0; }
+bool is_video_file(const fs::path& p) { return kVideoExtensions.count(lower_extension(p)) > 0; }
+
+std::vector<fs::path> files_in(const fs::path& dir, bool (*pick)(const fs::path&)) {
+  std::vector<fs::path> out;
+  for (const auto& entry : fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied)) {
+    if (entry.is_regular_file() && pick(entry.path())) out.push_back(entry.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
 
 CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames) {
   if (sources.empty()) fail(ErrorCode::kInvalidArgument, "no calibration sources given");

@@ -10,12 +10,20 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
 #include "actengine/convert.h"
 
 namespace act {
+
+/// Image files (png, jpg, jpeg, bmp) and videos (mp4, avi, mkv, mov, webm), by extension in any case:
+/// what act_convert and act_eval read.
+bool is_image_file(const std::filesystem::path& p);
+bool is_video_file(const std::filesystem::path& p);
+/// The files of a folder and its subfolders that `pick` accepts, sorted by path.
+std::vector<std::filesystem::path> files_in(const std::filesystem::path& dir, bool (*pick)(const std::filesystem::path&));
 
 /// Reads up to `max_frames` frames from the sources, spread evenly over what they hold, at the
 /// model's input size. Throws act::Error naming the source on anything unreadable or empty.

@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "support/act_test_util.h"
 #include "support/command.h"
-#include "weights/import/safetensors.h"
 #include "support/test_paths.h"
 
 namespace fs = std::filesystem;
@@ -78,25 +78,6 @@ TEST(ActEvalCli, CompareFailsBeyondTolerance) {
   EXPECT_NE(e.output.find("FAIL"), std::string::npos) << e.output;
 }
 
-// A copy of `src`'s tensors with every value of `name` from index `first` on replaced by `value`.
-void write_with_values_replaced(const std::string& src, const std::string& dst, const std::string& name, size_t first,
-                                float value) {
-  const act::SafetensorsFile in = act::SafetensorsFile::open(src);
-  std::vector<std::vector<uint8_t>> copies;
-  std::vector<act::SafetensorsWriteTensor> out;
-  copies.reserve(in.names().size());
-  for (const std::string& n : in.names()) {
-    const act::SafetensorsTensor& t = in.get(n);
-    copies.emplace_back(t.data, t.data + t.nbytes);
-    if (n == name) {
-      auto* values = reinterpret_cast<float*>(copies.back().data());
-      for (size_t i = first; i < t.elements(); ++i) values[i] = value;
-    }
-    out.push_back({n, t.dtype, t.shape, copies.back().data(), t.nbytes});
-  }
-  act::write_safetensors(dst, out);
-}
-
 TEST(ActEvalCli, CompareFailsOnNonFiniteValues) {
   // std::max skips NaN: a comparison built on it once printed PASS for a reference full of NaN.
   const std::string src = act::test::fixture_dir("act-tiny");
@@ -107,7 +88,7 @@ TEST(ActEvalCli, CompareFailsOnNonFiniteValues) {
   for (const size_t first : {size_t{0}, size_t{20}}) {
     for (const float value : {std::nanf(""), INFINITY}) {
       const std::string input = dir + "/reference_nan.safetensors";
-      write_with_values_replaced(src + "/reference.safetensors", input, "output.action", first, value);
+      act::test::write_with_values_replaced(src + "/reference.safetensors", input, "output.action", first, value);
       const CommandResult e = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -i " + q(input) + " --compare");
       EXPECT_EQ(e.exit_code, 1) << e.output;
       EXPECT_NE(e.output.find("NaN or infinite"), std::string::npos) << e.output;

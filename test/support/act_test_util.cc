@@ -69,4 +69,22 @@ void patch_checkpoint(const std::string& src, const std::string& dst, const std:
   std::ofstream(fs::path(dst) / "config.json") << config.dump(4);
 }
 
+void write_with_values_replaced(const std::string& src, const std::string& dst, const std::string& name, size_t first,
+                                float value) {
+  const SafetensorsFile in = SafetensorsFile::open(src);
+  std::vector<std::vector<uint8_t>> copies;
+  std::vector<SafetensorsWriteTensor> out;
+  copies.reserve(in.names().size());
+  for (const std::string& n : in.names()) {
+    const SafetensorsTensor& t = in.get(n);
+    copies.emplace_back(t.data, t.data + t.nbytes);
+    if (n == name) {
+      auto* values = reinterpret_cast<float*>(copies.back().data());
+      for (size_t i = first; i < t.elements(); ++i) values[i] = value;
+    }
+    out.push_back({n, t.dtype, t.shape, copies.back().data(), t.nbytes});
+  }
+  write_safetensors(dst, out);
+}
+
 }  // namespace act::test

@@ -24,6 +24,11 @@ std::vector<float> nchw_to_hwc(const float* src, int channels, int height, int w
 /// Asserts |ours - ref| <= tol * (1 + |ref|) elementwise; reports the worst element.
 ::testing::AssertionResult all_close(const std::string& what, const float* ours, const float* ref, size_t n, double tol);
 
+/// Writes a copy of safetensors file `src` to `dst` with every value of F32 tensor `name` from index
+/// `first` on replaced by `value`.
+void write_with_values_replaced(const std::string& src, const std::string& dst, const std::string& name, size_t first,
+                                float value);
+
 /// Copies a checkpoint folder into `dst` with config.json fields replaced by `config_patch` (a JSON
 /// object merged into the config); big files are symlinked.
 void patch_checkpoint(const std::string& src, const std::string& dst, const std::string& config_patch_json);

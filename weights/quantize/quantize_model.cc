@@ -49,7 +49,10 @@ ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant) {
   const std::vector<std::string> layers = quantizable_layers(model);
   const std::set<std::string> quantize(layers.begin(), layers.end());
   for (const auto& name : quant.float_layers) {
-    if (!quantize.count(name)) fail(ErrorCode::kInvalidArgument, "\"" + name + "\" is not a quantizable layer of this model");
+    if (!quantize.count(name)) {
+      fail(ErrorCode::kInvalidArgument, "\"" + name + "\" is not a quantizable layer of this model (the layers are "
+           "named by their weights, as the report's per-layer SQNR lists them, e.g. \"" + layers.front() + "\")");
+    }
   }
   const std::set<std::string> keep_float(quant.float_layers.begin(), quant.float_layers.end());
 

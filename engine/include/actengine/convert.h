@@ -178,6 +178,9 @@ struct Int8Options {
   /// held-out MSE and max |err| by at most kInt8AttentionErrorBudget (and, mixed, still meets the
   /// target); kInt8 and kFp32 force the choice.
   AttentionPrecision attention = AttentionPrecision::kAuto;
+  /// Layers kept in float, by their weight tensors' names (LayerSqnr::layer, Int8Report::float_layers,
+  /// e.g. "backbone.conv1.weight"); kMixed chooses more on top when the target needs them.
+  std::vector<std::string> keep_float;
   /// Called as the conversion goes (the library never prints); none if empty.
   std::function<void(const ConversionProgress&)> progress;
 };
@@ -195,9 +198,25 @@ struct ActionError {
 };
 
 struct LayerSqnr {
-  std::string value;  ///< the layer's output value
+  /// The layer's name, as float_layers and Int8Options::keep_float name it: its weight tensor
+  /// (e.g. "backbone.layer1.0.conv1.weight"); the max pool, which has none, by its output value.
+  std::string layer;
+  std::string value;  ///< the layer's output value (per camera: "cam0.backbone.layer1.0.conv1")
   std::string op;     ///< its op type, e.g. "conv2d_s8_s8"
-  double sqnr_db = 0;  ///< of the int8 output against the FP32 one (200 when they are equal)
+  bool kept_float = false;  ///< a layer kept in float (float_layers): its output's SQNR is the noise of the layers before it
+  double sqnr_db = 0;  ///< of the output against the FP32 one (200 when they are equal)
+};
+
+/// A calibrated activation: the int8 parameters chosen for a value and the range its float values
+/// took on the calibration frames (static and mixed modes).
+struct ActivationRange {
+  std::string value;  ///< e.g. "cam0.backbone.layer1.0.conv1"
+  float scale = 1;
+  int32_t zero_point = 0;
+  double observed_min = 0, observed_max = 0;  ///< over the calibration frames
+  /// What the int8 values can stand for: scale * (-128 - zero_point) .. scale * (127 - zero_point).
+  double quantized_min() const { return static_cast<double>(scale) * (-128 - zero_point); }
+  double quantized_max() const { return static_cast<double>(scale) * (127 - zero_point); }
 };
 
 struct LayerSensitivity {
@@ -221,6 +240,7 @@ struct Int8Report {
   int action_keys = 0;                    ///< action dimensions
   std::vector<LayerSensitivity> sensitivity;  ///< mixed, when the search ran: most sensitive first
   std::vector<LayerSqnr> layers;              ///< empty unless Int8Options::layer_report
+  std::vector<ActivationRange> activations;   ///< calibrated activations in graph order (empty for dynamic)
   double seconds = 0;                         ///< the conversion's wall time
 
   /// Everything above as a JSON object (act_convert --report), two-space indented.

@@ -82,6 +82,7 @@ class Converter {
 
     QuantConfig quant;
     quant.mode = quant_mode(opt_.mode);
+    quant.float_layers = opt_.keep_float;
     if (opt_.mode != Int8Mode::kDynamic) {
       quant.calibration = calibration_method_name(opt_.method);
       quant.activations = calibrate();
@@ -195,7 +196,11 @@ class Converter {
       }
     }
     std::map<std::string, ActivationQuant> out;
-    for (size_t k = 0; k < points.size(); ++k) out[g.value(points[k].value).name] = choose(observers[k], points[k].role);
+    for (size_t k = 0; k < points.size(); ++k) {
+      const std::string& name = g.value(points[k].value).name;
+      const ActivationQuant q = out[name] = choose(observers[k], points[k].role);
+      activations_.push_back({name, q.scale, q.zero_point, observers[k].min(), observers[k].max()});
+    }
     return out;
   }
 
@@ -248,12 +253,15 @@ class Converter {
     const double target = *opt_.target_mse;
     progress("all layers int8: held-out MSE " + fmt(err.mse) + " (target " + fmt(target) + ")");
     if (err.mse <= target) return;
-    const std::vector<std::string> layers = quantizable_layers(model_);
+    // The layers asked to stay float (Int8Options::keep_float) are already in quant.float_layers.
+    std::vector<std::string> layers;
+    for (const auto& l : quantizable_layers(model_)) {
+      if (std::find(quant.float_layers.begin(), quant.float_layers.end(), l) == quant.float_layers.end()) layers.push_back(l);
+    }
     const std::string task = "sensitivity search (one layer in int8 at a time)";
     progress(task, 0, layers.size(), "layers");
     for (size_t i = 0; i < layers.size(); ++i) {
       QuantConfig one = quant;
-      one.float_layers.clear();
       for (const auto& l : layers) {
         if (l != layers[i]) one.float_layers.push_back(l);
       }
@@ -335,14 +343,15 @@ class Converter {
     r.action_error = err;
     r.action_keys = fp32_->config().action_dim;
     r.sensitivity = std::move(sensitivity);
-    if (opt_.layer_report) r.layers = layer_sqnr(blob.path());
+    r.activations = activations_;
+    if (opt_.layer_report) r.layers = layer_sqnr(blob.path(), quant.float_layers);
     return r;
   }
 
-  // SQNR of every int8 layer's output against the FP32 network's value of the same name (both
-  // networks are built from one config, so a layer's output has one name in both), over (up to 4)
-  // held-out frames.
-  std::vector<LayerSqnr> layer_sqnr(const std::string& blob) {
+  // SQNR of every int8 layer's output, and of every layer kept in float, against the FP32 network's
+  // value of the same name (both networks are built from one config, so a layer's output has one
+  // name in both), over (up to 4) held-out frames.
+  std::vector<LayerSqnr> layer_sqnr(const std::string& blob, const std::vector<std::string>& float_layers) {
     EngineOptions eo;
     eo.threads = opt_.threads;
     eo.keep_intermediates = true;
@@ -355,10 +364,13 @@ class Converter {
       double signal = 0, noise = 0;
     };
     std::vector<Acc> acc;
-    for (const graph::Int8Layer& l : int8.network().int8_layers()) {
-      const graph::ValueId f = gf.find(gq.value(l.output).name);
-      check(f != graph::kNoValue, ErrorCode::kInternal, "int8 layer " + gq.value(l.output).name + " has no FP32 twin");
-      acc.push_back({{gq.value(l.output).name, l.op->type(), 0.0}, l.output, f});
+    for (const graph::NetworkLayer& l : int8.network().layers()) {
+      const bool kept_float = std::find(float_layers.begin(), float_layers.end(), l.weight) != float_layers.end();
+      if (!l.int8 && !kept_float) continue;  // always float (action head, state projections)
+      const std::string& value = gq.value(l.output).name;
+      const graph::ValueId f = gf.find(value);
+      check(f != graph::kNoValue, ErrorCode::kInternal, "layer " + value + " has no FP32 twin");
+      acc.push_back({{l.weight.empty() ? value : l.weight, value, l.op->type(), kept_float, 0.0}, l.output, f});
     }
     std::vector<float> tmp(chunk_values());
     for (size_t k = 0; k < std::min<size_t>(4, eval_.size()); ++k) {
@@ -391,6 +403,7 @@ class Converter {
   std::vector<size_t> calib_, eval_;
   Reference ref_;
   std::optional<ActionError> fp32_attention_error_, int8_attention_error_;
+  std::vector<ActivationRange> activations_;  // calibrate()'s choices, for the report
 };
 
 }  // namespace

@@ -50,7 +50,17 @@ std::string Int8Report::to_json() const {
     for (const auto& s : sensitivity) r["sensitivity"].push_back({{"layer", s.layer}, {"mse_alone_int8", s.mse_alone_int8}});
   }
   r["layers"] = nlohmann::json::array();
-  for (const auto& l : layers) r["layers"].push_back({{"value", l.value}, {"op", l.op}, {"sqnr_db", l.sqnr_db}});
+  for (const auto& l : layers) {
+    r["layers"].push_back({{"layer", l.layer}, {"value", l.value}, {"op", l.op}, {"kept_float", l.kept_float}, {"sqnr_db", l.sqnr_db}});
+  }
+  r["activations"] = nlohmann::json::array();
+  for (const auto& a : activations) {
+    r["activations"].push_back({{"value", a.value},
+                                {"scale", a.scale},
+                                {"zero_point", a.zero_point},
+                                {"quantized_range", {a.quantized_min(), a.quantized_max()}},
+                                {"observed_range", {a.observed_min, a.observed_max}}});
+  }
   r["seconds"] = seconds;
   return r.dump(2);
 }
@@ -82,8 +92,11 @@ std::string Int8Report::to_text() const {
   s << "layers in float " << (float_layers.empty() ? "none (besides the action head and state projections, always float)" : "")
     << "\n";
   for (const auto& l : float_layers) s << "  " << l << "\n";
-  s << "per-layer SQNR (dB, int8 vs fp32 output):\n";
-  for (const auto& l : layers) s << "  " << fmt(l.sqnr_db, "%6.1f") << "  " << l.value << " (" << l.op << ")\n";
+  s << "per-layer SQNR (dB, int8 vs fp32 output; layers named as float_layers and --keep-float name them):\n";
+  for (const auto& l : layers) {
+    s << "  " << fmt(l.sqnr_db, "%6.1f") << "  " << l.layer << " (" << l.value << ", " << l.op
+      << (l.kept_float ? ", kept in float" : "") << ")\n";
+  }
   for (const auto& n : notes) s << (n.rfind("warning: ", 0) == 0 ? "" : "note: ") << n << "\n";
   return s.str();
 }

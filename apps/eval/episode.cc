@@ -1,0 +1,368 @@
+#include "apps/eval/episode.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "apps/convert/calib_frames.h"
+#include "weights/blob/error.h"
+
+namespace act::eval {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+[[noreturn]] void bad(const std::string& where, const std::string& problem) {
+  fail(ErrorCode::kInvalidArgument, where + ": " + problem);
+}
+
+std::string at_line(const std::string& file, size_t line) { return file + " line " + std::to_string(line); }
+
+// A finite number, all of `text`; nullopt otherwise.
+std::optional<float> parse_number(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  errno = 0;
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
+  return static_cast<float>(v);
+}
+
+std::optional<size_t> parse_index(const std::string& text) {
+  if (text.empty() || text.size() > 12 || !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+    return std::nullopt;
+  }
+  return static_cast<size_t>(std::stoull(text));
+}
+
+// A comma-separated table with a header line. Fields are not quoted (names and numbers need no quotes).
+struct CsvTable {
+  std::string path;
+  std::vector<std::string> header;
+  struct Row {
+    size_t line = 0;
+    std::vector<std::string> cells;
+  };
+  std::vector<Row> rows;
+
+  // The number in row r, column c, or an error naming both.
+  float number(const Row& row, size_t c) const {
+    const std::optional<float> v = parse_number(row.cells[c]);
+    if (!v) {
+      bad(at_line(path, row.line) + " column " + std::to_string(c + 1) + " (" + header[c] + ")",
+          "'" + row.cells[c] + "' is not a finite number");
+    }
+    return *v;
+  }
+};
+
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> cells(1);
+  for (char ch : line) {
+    if (ch == ',') {
+      cells.emplace_back();
+    } else {
+      cells.back() += ch;
+    }
+  }
+  for (auto& cell : cells) {  // spaces around a value are not part of it
+    const size_t first = cell.find_first_not_of(" \t");
+    cell = first == std::string::npos ? "" : cell.substr(first, cell.find_last_not_of(" \t") - first + 1);
+  }
+  return cells;
+}
+
+// `recording`: a file a killed act_drive may have cut short: a last row with too few columns is
+// dropped (and counted in `cut_rows`) instead of being an error.
+CsvTable read_csv(const std::string& path, const char* what, bool recording = false, size_t* cut_rows = nullptr) {
+  std::ifstream in(path);
+  if (!in) fail(ErrorCode::kNotFound, std::string("cannot open the ") + what + " CSV " + path);
+  CsvTable table{path, {}, {}};
+  std::string line;
+  size_t number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const bool last = in.peek() == std::char_traits<char>::eof();
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.find('"') != std::string::npos) bad(at_line(path, number), "quoted fields are not supported (names and numbers need no quotes)");
+    if (line.empty()) continue;
+    std::vector<std::string> cells = split(line);
+    if (table.header.empty()) {
+      if (cells.size() < 2) bad(at_line(path, number), "the header needs a frame column and at least one value column");
+      for (size_t c = 0; c < cells.size(); ++c) {
+        if (cells[c].empty() && c > 0) bad(at_line(path, number), "column " + std::to_string(c + 1) + " has no name");
+      }
+      table.header = std::move(cells);
+      continue;
+    }
+    if (recording && last && !table.header.empty() && cells.size() < table.header.size()) {
+      ++*cut_rows;
+      continue;
+    }
+    if (cells.size() != table.header.size()) {
+      bad(at_line(path, number), std::to_string(cells.size()) + " columns where the header has " + std::to_string(table.header.size()));
+    }
+    table.rows.push_back({number, std::move(cells)});
+  }
+  if (table.header.empty()) bad(path, std::string("the ") + what + " CSV is empty");
+  if (table.rows.empty()) bad(path, std::string("the ") + what + " CSV has a header but no rows");
+  return table;
+}
+
+// The actions CSV's value columns: per action dimension and chunk step, the column holding it.
+struct ActionColumns {
+  std::vector<std::string> names;
+  std::vector<std::vector<size_t>> column;  // [step][dimension]
+};
+
+ActionColumns action_columns(const CsvTable& table, int action_dim) {
+  ActionColumns out;
+  std::map<std::string, std::map<size_t, size_t>> chunked;  // name -> step -> column
+  bool any_chunked = false;
+  for (size_t c = 1; c < table.header.size(); ++c) {
+    const std::string& h = table.header[c];
+    const size_t at = h.rfind('@');
+    const std::optional<size_t> step = at == std::string::npos ? std::nullopt : parse_index(h.substr(at + 1));
+    any_chunked |= step.has_value();
+    const std::string name = step ? h.substr(0, at) : h;
+    if (std::find(out.names.begin(), out.names.end(), name) == out.names.end()) out.names.push_back(name);
+    if (!chunked[name].emplace(step.value_or(0), c).second) bad(table.path, "column '" + h + "' appears twice");
+  }
+  if (out.names.size() != static_cast<size_t>(action_dim)) {
+    bad(table.path, std::to_string(out.names.size()) + " action columns (" + std::string(any_chunked ? "NAME@STEP counted once per NAME" : "one per dimension") +
+        ") but the model's actions have " + std::to_string(action_dim) + " values");
+  }
+  size_t steps = 0;
+  for (const auto& [name, by_step] : chunked) steps = std::max(steps, by_step.size());
+  for (size_t s = 0; s < steps; ++s) {
+    out.column.emplace_back();
+    for (const auto& name : out.names) {
+      const auto& by_step = chunked[name];
+      const auto it = by_step.find(s);
+      if (it == by_step.end()) {
+        bad(table.path, "action '" + name + "' lacks the column " + name + "@" + std::to_string(s) +
+            " (a chunk row needs NAME@0..NAME@" + std::to_string(steps - 1) + " for every action)");
+      }
+      out.column[s].push_back(it->second);
+    }
+  }
+  return out;
+}
+
+// With one action per frame, frame i's chunk is the actions of frames i, i+1, ... (up to the model's chunk).
+void extend_demonstrations(std::vector<EpisodeFrame>& frames, const ModelInfo& model) {
+  const size_t dim = static_cast<size_t>(model.action_dim);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    for (size_t j = i + 1; j < frames.size() && j < i + static_cast<size_t>(model.chunk_size); ++j) {
+      const auto& next = frames[j].demonstration;
+      frames[i].demonstration.insert(frames[i].demonstration.end(), next.begin(), next.begin() + static_cast<std::ptrdiff_t>(dim));
+    }
+  }
+}
+
+void check_state_model(const ModelInfo& model, const std::string& where) {
+  if (model.env_state_dim > 0) {
+    fail(ErrorCode::kUnimplemented, where + ": the model takes an environment state (" + model.env_state_key +
+         "), which act_eval's episodes do not carry yet");
+  }
+}
+
+Episode read_recording(const fs::path& dir, const ModelInfo& model) {
+  Episode ep{dir.string(), "act_drive recording", "", {}, {}, {}};
+  check_state_model(model, ep.path);
+  // The executed actions by tick, from ticks.csv's action.<i> columns.
+  size_t cut_lines = 0;
+  const CsvTable ticks = read_csv((dir / "ticks.csv").string(), "ticks", true, &cut_lines);
+  std::optional<size_t> tick_column;
+  std::vector<size_t> action_column(static_cast<size_t>(model.action_dim), 0);
+  for (size_t c = 0; c < ticks.header.size(); ++c) {
+    const std::string& h = ticks.header[c];
+    if (h == "tick") tick_column = c;
+    if (h.rfind("action.", 0) == 0) {
+      const std::optional<size_t> i = parse_index(h.substr(7));
+      if (i && *i < action_column.size()) action_column[*i] = c;
+    }
+  }
+  if (!tick_column) bad(ticks.path, "no 'tick' column");
+  for (size_t a = 0; a < action_column.size(); ++a) {
+    if (action_column[a] == 0) bad(ticks.path, "no 'action." + std::to_string(a) + "' column (the model's actions have " +
+                                   std::to_string(model.action_dim) + " values)");
+    ep.action_names.push_back(ticks.header[action_column[a]]);
+  }
+  std::map<int64_t, std::vector<float>> executed;  // ticks whose action was the policy's (a safe action has none)
+  for (const auto& row : ticks.rows) {
+    const std::optional<size_t> tick = parse_index(row.cells[*tick_column]);
+    if (!tick) bad(at_line(ticks.path, row.line) + " column 'tick'", "'" + row.cells[*tick_column] + "' is not a tick number");
+    if (row.cells[action_column[0]].empty()) continue;
+    std::vector<float> action;
+    for (size_t c : action_column) action.push_back(ticks.number(row, c));
+    executed[static_cast<int64_t>(*tick)] = std::move(action);
+  }
+  // The frames and their states, from log.jsonl.
+  const fs::path log_path = dir / "log.jsonl";
+  std::ifstream log(log_path);
+  if (!log) fail(ErrorCode::kNotFound, "cannot open " + log_path.string());
+  std::string line;
+  size_t line_number = 0, without_action = 0;
+  while (std::getline(log, line)) {
+    ++line_number;
+    if (line.empty()) continue;
+    const std::string where = at_line(log_path.string(), line_number);
+    const nlohmann::json entry = nlohmann::json::parse(line, nullptr, false);
+    if (entry.is_discarded() && log.peek() == std::char_traits<char>::eof()) {
+      ++cut_lines;  // the last line of a run that was killed while writing it
+      continue;
+    }
+    if (entry.is_discarded() || !entry.is_object()) bad(where, "not a JSON object");
+    if (!entry.contains("frame") || !entry["frame"].is_string()) bad(where, "no \"frame\" file name");
+    if (!entry.contains("tick") || !entry["tick"].is_number_integer()) bad(where, "no integer \"tick\"");
+    EpisodeFrame frame;
+    frame.source = entry["frame"].get<std::string>();
+    frame.image_path = (dir / frame.source).string();
+    if (model.state_dim > 0) {
+      const auto& state = entry.contains("state") ? entry["state"] : nlohmann::json();
+      if (!state.is_array() || state.size() != static_cast<size_t>(model.state_dim)) {
+        bad(where, "\"state\" must hold the model's " + std::to_string(model.state_dim) + " values");
+      }
+      for (const auto& v : state) {
+        if (!v.is_number() || !std::isfinite(v.get<double>())) bad(where, "\"state\" holds a value that is not a finite number");
+        frame.state.push_back(v.get<float>());
+      }
+    }
+    const int64_t tick = entry["tick"].get<int64_t>();
+    for (int64_t t = tick; t < tick + model.chunk_size; ++t) {
+      const auto it = executed.find(t);
+      if (it == executed.end()) break;  // the chunk ends where the robot stopped following a policy
+      frame.demonstration.insert(frame.demonstration.end(), it->second.begin(), it->second.end());
+    }
+    if (frame.demonstration.empty()) {
+      ++without_action;
+      continue;
+    }
+    ep.frames.push_back(std::move(frame));
+  }
+  if (cut_lines > 0) ep.notes.push_back("skipped the last line of a file cut short (the recording was killed while writing)");
+  if (without_action > 0) {
+    ep.notes.push_back(std::to_string(without_action) + " frame(s) skipped: no action was executed at their tick (a safe action)");
+  }
+  if (ep.frames.empty()) bad(ep.path, "no frame with an executed action to compare with");
+  return ep;
+}
+
+Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& model) {
+  const fs::path p(sources.episode);
+  const bool is_video = !fs::is_directory(p);
+  if (is_video && !is_video_file(p)) {
+    bad(sources.episode, "not a folder (of images or an act_drive recording) nor a video (mp4, avi, mkv, mov, webm)");
+  }
+  Episode ep{p.string(), is_video ? "video + CSV" : "image folder + CSV", is_video ? p.string() : "", {}, {}, {}};
+  check_state_model(model, ep.path);
+  if (sources.actions_csv.empty()) bad(ep.path, "an image folder or a video needs --actions FILE.csv (the demonstration)");
+  if (model.state_dim > 0 && sources.states_csv.empty()) {
+    bad(ep.path, "the model takes a robot state of " + std::to_string(model.state_dim) + " values: give --states FILE.csv");
+  }
+  const std::vector<fs::path> images = is_video ? std::vector<fs::path>{} : files_in(p, is_image_file);
+  if (!is_video && images.empty()) bad(ep.path, "the folder has no images (png, jpg, jpeg, bmp)");
+
+  const CsvTable actions = read_csv(sources.actions_csv, "actions");
+  const ActionColumns columns = action_columns(actions, model.action_dim);
+  ep.action_names = columns.names;
+  std::map<std::string, std::vector<float>> states;  // by the frame column's text
+  if (model.state_dim > 0) {
+    const CsvTable table = read_csv(sources.states_csv, "states");
+    if (table.header.size() - 1 != static_cast<size_t>(model.state_dim)) {
+      bad(table.path, std::to_string(table.header.size() - 1) + " state columns but the model's state has " +
+          std::to_string(model.state_dim) + " values");
+    }
+    for (const auto& row : table.rows) {
+      std::vector<float> values;
+      for (size_t c = 1; c < row.cells.size(); ++c) values.push_back(table.number(row, c));
+      if (!states.emplace(row.cells[0], std::move(values)).second) {
+        bad(at_line(table.path, row.line), "frame '" + row.cells[0] + "' appears twice");
+      }
+    }
+  }
+  std::optional<size_t> previous_video_index;
+  for (const auto& row : actions.rows) {
+    const std::string where = at_line(actions.path, row.line);
+    const std::string& key = row.cells[0];
+    EpisodeFrame frame;
+    if (is_video) {
+      const std::optional<size_t> index = parse_index(key);
+      if (!index) bad(where + " column 1", "'" + key + "' is not a frame index of the video");
+      if (previous_video_index && *index <= *previous_video_index) bad(where + " column 1", "video frame indices must increase");
+      previous_video_index = frame.video_index = *index;
+      frame.source = p.filename().string() + " frame " + key;
+    } else if (!key.empty() && fs::is_regular_file(p / key)) {
+      frame.image_path = (p / key).string();
+      frame.source = key;
+    } else if (const std::optional<size_t> index = parse_index(key); index && *index < images.size()) {
+      frame.image_path = images[*index].string();
+      frame.source = fs::relative(images[*index], p).string();
+    } else {
+      bad(where + " column 1", "'" + key + "' is neither an image in " + ep.path + " nor an index below its " +
+          std::to_string(images.size()) + " images");
+    }
+    if (model.state_dim > 0) {
+      const auto it = states.find(key);
+      if (it == states.end()) bad(where, "frame '" + key + "' has no row in " + sources.states_csv);
+      frame.state = it->second;
+    }
+    for (const auto& step : columns.column) {
+      for (size_t c : step) frame.demonstration.push_back(actions.number(row, c));
+    }
+    ep.frames.push_back(std::move(frame));
+  }
+  if (columns.column.size() == 1) extend_demonstrations(ep.frames, model);
+  return ep;
+}
+
+}  // namespace
+
+Episode read_episode(const EpisodeSources& sources, const ModelInfo& model) {
+  const fs::path p(sources.episode);
+  if (!fs::exists(p)) fail(ErrorCode::kNotFound, "episode not found: " + sources.episode);
+  if (fs::is_directory(p) && fs::exists(p / "log.jsonl")) {
+    if (!sources.actions_csv.empty() || !sources.states_csv.empty()) {
+      bad(sources.episode, "an act_drive recording carries its own states and actions: drop --states and --actions");
+    }
+    return read_recording(p, model);
+  }
+  return read_frames_and_csv(sources, model);
+}
+
+EpisodeImages::EpisodeImages(const Episode& episode) : episode_(episode) {
+  if (episode.video.empty()) return;
+  // FFmpeg only, as act_convert and act_drive read video files: the same decoder gives the same frames.
+  video_.open(episode.video, cv::CAP_FFMPEG);
+  if (!video_.isOpened()) fail(ErrorCode::kDataLoss, "cannot open video " + episode.video + " (OpenCV/FFmpeg)");
+}
+
+cv::Mat EpisodeImages::image(size_t i) {
+  const EpisodeFrame& frame = episode_.frames.at(i);
+  if (!frame.image_path.empty()) {
+    cv::Mat image = cv::imread(frame.image_path, cv::IMREAD_COLOR);
+    if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + frame.image_path);
+    return image;
+  }
+  cv::Mat image;
+  while (next_video_index_ <= frame.video_index) {
+    if (!video_.read(image)) {
+      fail(ErrorCode::kDataLoss, episode_.video + " has only " + std::to_string(next_video_index_) +
+           " frames; the actions CSV names frame " + std::to_string(frame.video_index));
+    }
+    ++next_video_index_;
+  }
+  return image;
+}
+
+}  // namespace act::eval

@@ -178,26 +178,23 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
     for (size_t c = 0; c < 3; ++c) {
       for (int v = 0; v < 256; ++v) lut[c][v] = norm.apply(static_cast<float>(v) / 255.0f, c);
     }
-    const auto* src = static_cast<const uint8_t*>(image.data);
+    // Each pixel's channel value through its channel's table, into the network's input (float or int8).
+    const auto map_pixels = [&](auto* dst, const auto& table) {
+      const auto* src = static_cast<const uint8_t*>(image.data);
+      for (size_t y = 0; y < h; ++y) {
+        const uint8_t* row = src + y * stride;
+        auto* out = dst + y * w * 3;
+        for (size_t x = 0; x < w; ++x) {
+          for (size_t c = 0; c < 3; ++c) out[3 * x + c] = table[c][row[3 * x + c]];
+        }
+      }
+    };
     if (dst_s8 != nullptr) {
       int8_t lut_s8[3][256];
       for (size_t c = 0; c < 3; ++c) quantize(256, lut[c], lut_s8[c]);
-      for (size_t y = 0; y < h; ++y) {
-        const uint8_t* row = src + y * stride;
-        int8_t* out = dst_s8 + y * w * 3;
-        for (size_t x = 0; x < w; ++x) {
-          for (size_t c = 0; c < 3; ++c) out[3 * x + c] = lut_s8[c][row[3 * x + c]];
-        }
-      }
-      return;
-    }
-    float* dst = network_->camera_input(camera);
-    for (size_t y = 0; y < h; ++y) {
-      const uint8_t* row = src + y * stride;
-      float* out = dst + y * w * 3;
-      for (size_t x = 0; x < w; ++x) {
-        for (size_t c = 0; c < 3; ++c) out[3 * x + c] = lut[c][row[3 * x + c]];
-      }
+      map_pixels(dst_s8, lut_s8);
+    } else {
+      map_pixels(network_->camera_input(camera), lut);
     }
     return;
   }

@@ -17,6 +17,7 @@
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/control_loop.h"
+#include "apps/drive/devices.h"
 #include "apps/drive/inference.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
@@ -75,20 +76,66 @@ struct NeutralOnExit {
   }
 };
 
-bool parse_size(const std::string& text, int& width, int& height) {
+// "HxW" (height first, as every size in the project).
+bool parse_size(const std::string& text, int& height, int& width) {
   const size_t x = text.find('x');
   if (x == std::string::npos) return false;
   try {
-    width = std::stoi(text.substr(0, x));
-    height = std::stoi(text.substr(x + 1));
+    height = std::stoi(text.substr(0, x));
+    width = std::stoi(text.substr(x + 1));
   } catch (const std::exception&) {
     return false;
   }
   return width > 0 && height > 0;
 }
 
+std::string hxw(int height, int width) { return std::to_string(height) + "x" + std::to_string(width); }
+
+bool same_aspect(int height_a, int width_a, int height_b, int width_b) {
+  return std::abs(static_cast<double>(width_a) / height_a - static_cast<double>(width_b) / height_b) <= 0.01;
+}
+
+// --camera-size is HxW; a size written WxH (the old order, and OpenCV's) is refused when only its
+// transpose fits what the camera delivered or what the model expects.
+void check_camera_size(const std::string& requested, int height, int width, const Camera& camera, const act::CameraInfo& input) {
+  if (height == width) return;
+  const std::string fix = ": --camera-size is HxW (height first); did you mean --camera-size " + hxw(width, height) + "?";
+  if (camera.height() == width && camera.width() == height) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size " + requested + " asks for height " + std::to_string(height) +
+              ", width " + std::to_string(width) + " but the camera delivers " + hxw(camera.height(), camera.width()) + fix);
+  }
+  if (!same_aspect(height, width, input.height, input.width) && same_aspect(width, height, input.height, input.width)) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size " + requested + " (height " + std::to_string(height) + ", width " +
+              std::to_string(width) + ") only fits the model's " + hxw(input.height, input.width) + " input transposed" + fix);
+  }
+}
+
+// --initial-state: "mean" (the training statistics' middle) or state_dim comma-separated numbers.
+std::vector<float> parse_initial_state(const std::string& text, const act::ModelInfo& info) {
+  if (text == "mean") return training_mean_state(info);
+  std::vector<float> values;
+  std::stringstream items(text);
+  for (std::string item; std::getline(items, item, ',');) {
+    try {
+      size_t used = 0;
+      values.push_back(std::stof(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--initial-state '" + text + "': '" + item + "' is not a number (expected "
+                "'mean' or " + std::to_string(info.state_dim) + " comma-separated values)");
+    }
+  }
+  if (values.size() != static_cast<size_t>(info.state_dim)) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--initial-state '" + text + "' has " + std::to_string(values.size()) +
+              " values but the model's state has " + std::to_string(info.state_dim) + " (or use --initial-state mean)");
+  }
+  return values;
+}
+
 struct Options {
   std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
+  std::string initial_state = "mean";
+  bool raw_endpoints = false, list_cameras = false, list_ports = false;
   double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
   int control_priority = 0, inference_priority = 0;
@@ -98,10 +145,10 @@ struct Options {
 };
 
 Calibration load_calibration(const Options& opt) {
-  if (opt.calibration_path.empty()) {
-    std::cerr << "act_drive: warning: no --calibration file: using 1000/1500/2000 us endpoints, no throttle cap "
-                 "(act_drive --calibrate helps write one)\n";
-    return Calibration{};
+  if (opt.calibration_path.empty()) {  // --dry-run or --raw-endpoints: run() refused every other case
+    std::cerr << "act_drive: warning: no --calibration file: using 1000/1500/2000 us endpoints, forward and reverse "
+                 "throttle capped at 0.3 (act_drive --calibrate helps write one)\n";
+    return Calibration::starting_template();
   }
   return Calibration::load(opt.calibration_path);
 }
@@ -142,8 +189,8 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
 int drive(const Options& opt) {
   const Calibration calibration = load_calibration(opt);
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
-  if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.width, camera_options.height)) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected WxH, e.g. 640x360");
+  if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.height, camera_options.width)) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
   }
   Camera camera(camera_options);
 
@@ -155,15 +202,16 @@ int drive(const Options& opt) {
   const act::ModelInfo info = with_deployment(worker.info(), opt.deployment);  // fails early on a bad override
   check_model(info, calibration, opt);
   const act::CameraInfo& input = info.cameras.front();
-  if (std::abs(static_cast<double>(camera.width()) / camera.height() - static_cast<double>(input.width) / input.height) > 0.01) {
-    std::cerr << "act_drive: warning: the camera delivers " << camera.width() << "x" << camera.height()
-              << " but the model expects " << input.width << "x" << input.height
-              << ": frames are stretched (use --camera-size with the training aspect ratio)\n";
+  if (!opt.camera_size.empty()) check_camera_size(opt.camera_size, camera_options.height, camera_options.width, camera, input);
+  if (!same_aspect(camera.height(), camera.width(), input.height, input.width)) {
+    std::cerr << "act_drive: warning: the camera delivers " << hxw(camera.height(), camera.width())
+              << " (HxW) but the model expects " << hxw(input.height, input.width)
+              << ": frames are stretched (use --camera-size HxW with the training aspect ratio)\n";
   }
   std::cerr << "act_drive: model " << info.summary << "; " << (info.temporal_ensembling ? "temporal ensembling" : "queue of ")
             << (info.temporal_ensembling ? "" : std::to_string(info.n_action_steps) + " of " + std::to_string(info.chunk_size) + " actions")
-            << "\nact_drive: camera " << opt.camera << " " << camera.width() << "x" << camera.height() << " -> "
-            << input.width << "x" << input.height << "\n";
+            << "\nact_drive: camera " << opt.camera << " " << hxw(camera.height(), camera.width()) << " -> "
+            << hxw(input.height, input.width) << " (HxW)\n";
 
   std::unique_ptr<ActuatorLink> link;
   NeutralOnExit neutral_on_exit;
@@ -194,6 +242,7 @@ int drive(const Options& opt) {
   control.stats_every_s = opt.stats_every;
   control.duration_s = opt.duration;
   control.state_source = opt.state == "zeros" ? ControlOptions::StateSource::kZeros : ControlOptions::StateSource::kLastAction;
+  control.initial_state = parse_initial_state(opt.initial_state, info);
   control.placement = {opt.control_priority, opt.control_cpus};
   control.deployment = opt.deployment;
   ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);
@@ -233,6 +282,11 @@ void check_camera_kind(const std::string& camera) {
 // act_drive from the parsed options to its exit code: calibration, or driving.
 int run(const Options& opt) {
   try {
+    if (opt.list_cameras || opt.list_ports) {
+      if (opt.list_cameras) list_cameras(std::cout);
+      if (opt.list_ports) list_ports(std::cout);
+      return 0;
+    }
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
     }
@@ -243,6 +297,12 @@ int run(const Options& opt) {
     check_camera_kind(opt.camera);
     if (opt.serial.empty() && !opt.dry_run) {
       act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --dry-run to print the commands)");
+    }
+    if (!opt.dry_run && opt.calibration_path.empty() && !opt.raw_endpoints) {
+      act::fail(act::ErrorCode::kInvalidArgument,
+                "--serial " + opt.serial + " without --calibration: refusing to drive a real car on guessed pulse widths. "
+                "Measure them with act_drive --calibrate --serial " + opt.serial + " -c calibration.json and pass "
+                "-c calibration.json, or accept raw 1000/1500/2000 us endpoints (throttle capped at 0.3) with --raw-endpoints");
     }
     return drive(opt);
   } catch (const std::exception& e) {
@@ -261,8 +321,9 @@ int main(int argc, char** argv) {
   app.add_option("-m,--model", opt.model, "the .actb model (act_convert output)");
   app.add_option("--camera", opt.camera, "camera: an index (0), a device (/dev/video0), a video file, an image "
                  "sequence (frames/%06d.png), a URL or a GStreamer pipeline ending in appsink");
-  app.add_option("--camera-size", opt.camera_size, "capture resolution WxH to request (default: the camera's); "
-                                                   "frames are then resized to the model's input");
+  app.add_option("--camera-size", opt.camera_size, "capture resolution HxW to request, height first like every size "
+                                                   "here, e.g. 480x640 (default: the camera's); frames are then resized "
+                                                   "to the model's input");
   app.add_option("--camera-fps", opt.camera_fps, "capture rate to request; a video file plays at this rate "
                                                  "(default: its own)")->check(CLI::NonNegativeNumber);
   app.add_option("--serial", opt.serial, "the Arduino's serial port, e.g. /dev/ttyUSB0 or /dev/ttyACM0");
@@ -278,6 +339,12 @@ int main(int argc, char** argv) {
   app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   act::add_deployment_options(app, opt.deployment);
+  app.add_option("--initial-state", opt.initial_state, "observation.state before the first action and after every hold: "
+                 "'mean' (the training mean from the model's statistics) or comma-separated values")->capture_default_str();
+  app.add_flag("--raw-endpoints", opt.raw_endpoints, "drive --serial without a calibration file: 1000/1500/2000 us "
+                                                     "endpoints, throttle capped at 0.3");
+  app.add_flag("--list-cameras", opt.list_cameras, "list the V4L2 cameras and exit");
+  app.add_flag("--list-ports", opt.list_ports, "list the serial ports (USB ones with maker and product) and exit");
   app.add_option("--state", opt.state, "the model's observation.state: the last action executed, or zeros")
       ->capture_default_str()->check(CLI::IsMember({"last-action", "zeros"}));
   app.add_option("--control-priority", opt.control_priority, "SCHED_FIFO priority of the control thread (1-99, 0 = off; "

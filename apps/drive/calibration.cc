@@ -124,6 +124,13 @@ Calibration Calibration::from_json(const nlohmann::json& json, const std::string
   return cal;
 }
 
+Calibration Calibration::starting_template() {
+  Calibration calibration;
+  calibration.max_forward = 0.3;
+  calibration.max_reverse = 0.3;
+  return calibration;
+}
+
 Calibration Calibration::load(const std::string& path) {
   try {
     return from_json(nlohmann::json(detail::read_json_file(path)), path);

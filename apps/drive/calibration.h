@@ -40,6 +40,11 @@ struct Calibration {
   double max_forward = 1.0;  ///< throttle cap, a fraction of full forward (0..1)
   double max_reverse = 1.0;  ///< throttle cap, a fraction of full reverse (0..1)
 
+  /// Where every calibration starts before its endpoints are measured (`act_drive --calibrate`'s
+  /// template, the package's drive_calibration.json, --raw-endpoints and --dry-run without a file):
+  /// 1000/1500/2000 us endpoints with the throttle capped at 0.3 of full either way, so that a
+  /// wrong guess cannot launch the car.
+  static Calibration starting_template();
   /// Parses and validates; throws act::Error naming `source` and the offending field. Fields whose
   /// name starts with '_' are comments; any other unknown field is an error (a typo must not fall
   /// back to a default silently).

@@ -48,6 +48,12 @@ double track_latency(double estimate, double sample) { return sample > estimate 
 
 }  // namespace
 
+std::vector<float> training_mean_state(const ModelInfo& info) {
+  std::vector<float> mean(info.state_low.size());
+  for (size_t i = 0; i < mean.size(); ++i) mean[i] = (info.state_low[i] + info.state_high[i]) / 2.0f;
+  return mean;
+}
+
 std::vector<float> safe_raw_action(const Calibration& calibration, int action_dim) {
   std::vector<float> action(static_cast<size_t>(action_dim), 0.0f);
   if (calibration.action_units == Calibration::Units::kMicroseconds) {
@@ -96,6 +102,24 @@ namespace {
 // jitter in the inference time (a busy machine).
 constexpr int kInferenceMarginTicks = 2;
 
+// How far from the training mean a state may go, in the statistics' half-widths, before the warning.
+constexpr double kTrainingRangeHalfWidths = 3.0;
+
+// ControlOptions::initial_state, or without one the safe action's first state_dim values.
+std::vector<float> initial_state(const ControlOptions& options, int state_dim, const std::vector<float>& safe_action) {
+  std::vector<float> state(static_cast<size_t>(state_dim), 0.0f);
+  if (options.state_source != ControlOptions::StateSource::kLastAction) return state;
+  if (!options.initial_state.empty()) {
+    if (options.initial_state.size() != state.size()) {
+      fail(ErrorCode::kInvalidArgument, "the initial state has " + std::to_string(options.initial_state.size()) +
+                                            " values, the model's state " + std::to_string(state_dim));
+    }
+    return options.initial_state;
+  }
+  std::copy_n(safe_action.begin(), std::min(state.size(), safe_action.size()), state.begin());
+  return state;
+}
+
 ChunkScheduler make_scheduler(const ModelInfo& info) {
   StatusOr<ChunkScheduler> scheduler = ChunkScheduler::create(info);
   throw_if_failed(scheduler.status(), "act_drive");
@@ -125,11 +149,11 @@ class ControlRun {
         period_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.control_hz))),
         period_s_(1.0 / options.control_hz),
         safe_(calibration.safe_command()),
-        safe_action_(safe_raw_action(calibration, info_.action_dim)),
         scheduler_(make_scheduler(info_)),
         limiter_(calibration),
         action_(static_cast<size_t>(info_.action_dim)),
-        last_action_(safe_action_) {}
+        initial_state_(initial_state(options, info_.state_dim, safe_raw_action(calibration, info_.action_dim))),
+        state_(initial_state_) {}
 
   DriveSummary run(const std::atomic<bool>& stop) {
     start_ = Clock::now();
@@ -249,7 +273,7 @@ class ControlRun {
       source = "safe:fault";
     } else if (scheduler_.action_at(tick.index, action_).ok()) {
       command = limiter_.step(calibration_.map(action_), period_s_);
-      last_action_ = action_;
+      follow_action();
       executing_ = true;
       source = "chunk";
       ++summary_.driving_ticks;
@@ -259,13 +283,34 @@ class ControlRun {
     if (source != "chunk") {
       overrunning_ = overrunning_ && fault_.empty();
       limiter_.reset(safe_);
-      last_action_ = safe_action_;
+      state_ = initial_state_;
       ++summary_.safe_ticks;
     } else {
       overrunning_ = false;
     }
     previous_fault_ = fault_;
     return source;
+  }
+
+  // With --state last-action the executed action becomes the next state (its first state_dim values,
+  // zero-padded); warns once when that leaves the training range.
+  void follow_action() {
+    if (options_.state_source != ControlOptions::StateSource::kLastAction) return;
+    std::fill(state_.begin(), state_.end(), 0.0f);
+    std::copy_n(action_.begin(), std::min(state_.size(), action_.size()), state_.begin());
+    if (warned_state_range_) return;
+    for (size_t i = 0; i < std::min(state_.size(), info_.state_low.size()); ++i) {
+      // Normalised -1 / +1 are the mean -/+ one standard deviation (or the min and max): 3 of those
+      // half-widths from the middle is well outside what the model was trained on.
+      const double middle = (info_.state_low[i] + info_.state_high[i]) / 2.0;
+      const double half = (info_.state_high[i] - info_.state_low[i]) / 2.0;
+      if (std::abs(state_[i] - middle) <= kTrainingRangeHalfWidths * std::abs(half)) continue;
+      warned_state_range_ = true;
+      log_ << "act_drive: warning: observation.state[" << i << "] = " << state_[i] << " left the training range ["
+           << middle - kTrainingRangeHalfWidths * std::abs(half) << ", " << middle + kTrainingRangeHalfWidths * std::abs(half)
+           << "] (the training mean -/+ 3 standard deviations): the policy is extrapolating (warned once)\n";
+      return;
+    }
   }
 
   // A fault drops every chunk; warns once per episode (a new kind of fault starts one).
@@ -313,11 +358,7 @@ class ControlRun {
     if (!fault_.empty() || inference_.busy()) return;
     const int lead_ticks = static_cast<int>(std::ceil(latency_ticks_)) + kInferenceMarginTicks;
     if (!scheduler_.wants_inference(tick, lead_ticks)) return;
-    std::vector<float> state(static_cast<size_t>(info_.state_dim), 0.0f);
-    if (options_.state_source == ControlOptions::StateSource::kLastAction) {
-      std::copy_n(last_action_.begin(), std::min(state.size(), last_action_.size()), state.begin());
-    }
-    inference_.request(std::move(state));
+    inference_.request(state_);
   }
 
   void report_stats(Clock::time_point now) {
@@ -356,7 +397,6 @@ class ControlRun {
   const Clock::duration period_;
   const double period_s_;
   const PwmCommand safe_;
-  const std::vector<float> safe_action_;
 
   ChunkScheduler scheduler_;
   RateLimiter limiter_;
@@ -364,7 +404,9 @@ class ControlRun {
   StageSamples capture_age_, preprocess_, infer_, serial_write_, jitter_;
   Clock::time_point start_, last_stats_;
   std::vector<float> action_;
-  std::vector<float> last_action_;  // the state the model sees (--state last-action)
+  const std::vector<float> initial_state_;
+  std::vector<float> state_;  // what the model sees as observation.state next
+  bool warned_state_range_ = false;
   double latency_ticks_ = 0;
   int consecutive_errors_ = 0;
   bool executing_ = false;    // a chunk was driving the last tick: running dry now is an overrun

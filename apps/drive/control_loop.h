@@ -33,6 +33,10 @@ struct ControlOptions {
   /// What the model gets as observation.state: the last raw action executed (its first state_dim
   /// values, zero-padded), or zeros.
   enum class StateSource { kLastAction, kZeros } state_source = StateSource::kLastAction;
+  /// The state before the first action and again after every hold (the rover restarts from a stop),
+  /// with kLastAction: state_dim values (act_drive's default is the training mean, --initial-state).
+  /// Empty = the safe action's first state_dim values.
+  std::vector<float> initial_state;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
   DeploymentOptions deployment;  ///< replaces the blob's n_action_steps / temporal ensembling
 };
@@ -79,6 +83,9 @@ class ControlLoop {
   Recorder* recorder_;
   std::ostream& log_;
 };
+
+/// The middle of the model's training statistics for observation.state (ModelInfo::state_low/high).
+std::vector<float> training_mean_state(const ModelInfo& info);
 
 /// The raw action that corresponds to the safe command (centre, neutral) in the model's units.
 std::vector<float> safe_raw_action(const Calibration& calibration, int action_dim);

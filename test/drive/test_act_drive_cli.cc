@@ -24,6 +24,7 @@
 #include "drive/fake_arduino.h"
 #include "drive/stalling_stream.h"
 #include "support/command.h"
+#include "weights/import/safetensors.h"
 #include "support/test_paths.h"
 
 namespace act::drive::test {
@@ -55,7 +56,8 @@ TEST(ActDriveCli, HelpListsTheOptions) {
   EXPECT_EQ(r.exit_code, 0);
   for (const char* flag : {"--model", "--camera", "--camera-size", "--serial", "--baud", "--calibration", "--control-hz",
                            "--max-frame-age", "--threads", "--control-priority", "--inference-cpus", "--stats-every",
-                           "--record", "--dry-run", "--calibrate", "--state", "--duration"}) {
+                           "--record", "--dry-run", "--calibrate", "--state", "--duration", "--initial-state",
+                           "--raw-endpoints", "--list-cameras", "--list-ports"}) {
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
   }
 }
@@ -85,16 +87,72 @@ TEST(ActDriveCli, ClearErrorsForModelAndSerialPort) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("none.actb"), std::string::npos) << r.output;
   const std::string blob = act_tiny_blob(dir);
-  r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE"));
+  r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE") + " --raw-endpoints");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("cannot open serial port " + dir + "/ttyNONE"), std::string::npos) << r.output;
   FakeArduino silent_board;
   silent_board.set_silent(true);
   r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(silent_board.port_path()) +
-                  " --ready-timeout 1.5");
+                  " --raw-endpoints --ready-timeout 1.5");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("no ready line from the board"), std::string::npos) << r.output;
   EXPECT_GT(silent_board.hellos(), 0);
+}
+
+TEST(ActDriveCli, RefusedDefaultsNameTheFix) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 30, 30, 160, 120);  // 120x160 (HxW)
+  const std::string blob = act_tiny_blob(dir);                                     // 96x128, 4:3 like the video
+  FakeArduino board;
+  // A real port without a calibration file: refused before the port is touched.
+  auto r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(board.port_path()));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("without --calibration"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("act_drive --calibrate --serial"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--raw-endpoints"), std::string::npos) << r.output;
+  EXPECT_EQ(board.hellos(), 0);
+  const std::string dry = kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 ";
+  // WxH where HxW is meant: the camera delivers the transpose.
+  r = run_command(dry + "--camera-size 160x120");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("did you mean --camera-size 120x160?"), std::string::npos) << r.output;
+  // A size that fits the model only transposed (a camera that ignores the request would otherwise stretch).
+  r = run_command(dry + "--camera-size 640x480");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("only fits the model's 96x128 input transposed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("did you mean --camera-size 480x640?"), std::string::npos) << r.output;
+  r = run_command(dry + "--initial-state 1,2,3");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("has 3 values but the model's state has 2 (or use --initial-state mean)"), std::string::npos) << r.output;
+  r = run_command(dry + "--initial-state 1,x");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("'x' is not a number"), std::string::npos) << r.output;
+}
+
+// The first observation's state is the training mean read from the checkpoint's own statistics (not
+// (0, 0), several standard deviations away for a real rover), or the values given.
+TEST(ActDriveCli, InitialStateIsTheTrainingMeanOrTheValuesGiven) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 15, 30, 128, 96);
+  const std::string blob = act_tiny_blob(dir);
+  const auto first_state = [&](const std::string& flags, const std::string& rec) {
+    const auto r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 --record " +
+                               q(rec) + " " + flags + " >/dev/null");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    std::ifstream log(rec + "/log.jsonl");
+    std::string line;
+    std::getline(log, line);
+    return nlohmann::json::parse(line)["state"].get<std::vector<float>>();
+  };
+  const SafetensorsFile stats = SafetensorsFile::open(act::test::fixture_dir("act-tiny") +
+                                                      "/policy_preprocessor_step_3_normalizer_processor.safetensors");
+  const std::vector<float> mean = stats.get("observation.state.mean").to_f32();
+  const std::vector<float> by_default = first_state("", dir + "/rec-mean");
+  ASSERT_EQ(by_default.size(), mean.size());
+  for (size_t i = 0; i < mean.size(); ++i) EXPECT_NEAR(by_default[i], mean[i], 1e-5f * (1 + std::abs(mean[i]))) << i;
+  EXPECT_EQ(first_state("--initial-state 0.25,-0.5", dir + "/rec-given"), (std::vector<float>{0.25f, -0.5f}));
 }
 
 TEST(ActDriveCli, DeploymentOptionsReplaceTheBlobs) {
@@ -187,7 +245,7 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
     const rlimit no_core_dump{0, 0};  // SIGQUIT's default action would write one
     ::setrlimit(RLIMIT_CORE, &no_core_dump);
     ::execl(kDrive.c_str(), kDrive.c_str(), "-m", blob.c_str(), "--camera", video.c_str(), "--serial", port.c_str(),
-            "--threads", "1", static_cast<char*>(nullptr));
+            "--raw-endpoints", "--threads", "1", static_cast<char*>(nullptr));
     ::_exit(127);
   }
   // Wait until it drives, then signal it.
@@ -344,6 +402,9 @@ TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {
   const auto r = run_command("(" + kDrive + " --calibrate > " + q(dir + "/cal.json") + ")");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_NE(r.output.find("Edit the pulse widths"), std::string::npos) << r.output;
+  const Calibration printed = Calibration::load(dir + "/cal.json");
+  EXPECT_EQ(printed.max_forward, 0.3);  // a guessed template never drives at full throttle
+  EXPECT_EQ(printed.max_reverse, 0.3);
   // What it prints is a valid calibration file.
   const auto check = run_command(kDrive + " -m m.actb --camera " + q(dir + "/none.avi") + " --dry-run -c " + q(dir + "/cal.json"));
   EXPECT_EQ(check.output.find("calibration"), std::string::npos) << check.output;
@@ -360,7 +421,7 @@ TEST(ActDriveCli, ThePackagesCalibrationTemplateIsAValidCalibrationFile) {
   EXPECT_EQ(calibration.max_forward, 0.3);
   const std::string text = read_text(dir + "/pkg/drive_calibration.json");
   EXPECT_NE(text.find("act_drive --calibrate"), std::string::npos) << text;
-  EXPECT_NE(text.find("--camera-size 128x96"), std::string::npos) << text;
+  EXPECT_NE(text.find("--camera-size 96x128"), std::string::npos) << text;  // HxW
 }
 
 TEST(ActDriveCli, CalibrateInteractivelyWritesTheEndpoints) {

@@ -233,7 +233,8 @@ int drive(const Options& opt) {
 
   std::optional<Recorder> recorder;
   if (!opt.record_dir.empty()) {
-    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, record_meta(opt, info, camera, calibration));
+    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, input.height, input.width,
+                     record_meta(opt, info, camera, calibration));
   }
 
   ControlOptions control;

@@ -191,6 +191,24 @@ PwmCommand Calibration::map(std::span<const float> action) const {
   return {us_from_normalized(steer, steering), us_from_normalized(throttle_value, throttle)};
 }
 
+PwmCommand Calibration::map_manual(double steering_value, double throttle_value) const {
+  if (!std::isfinite(steering_value) || !std::isfinite(throttle_value)) return safe_command();
+  return {us_from_normalized(std::clamp(steering_value, -1.0, 1.0), steering),
+          us_from_normalized(std::clamp(throttle_value, -max_reverse, max_forward), throttle)};
+}
+
+std::vector<float> Calibration::action_of(PwmCommand command, int action_dim) const {
+  std::vector<float> action(static_cast<size_t>(action_dim), 0.0f);
+  for (const auto& [ch, us] : {std::pair{&steering, command.steering_us}, std::pair{&throttle, command.throttle_us}}) {
+    if (ch->action_index >= action_dim) continue;
+    double v = normalized_from_us(us, *ch);
+    if (ch->invert) v = -v;
+    action[static_cast<size_t>(ch->action_index)] =
+        static_cast<float>(action_units == Units::kNormalized ? v : us_from_normalized(v, *ch));
+  }
+  return action;
+}
+
 RateLimiter::RateLimiter(const Calibration& calibration)
     : steering_rate_(calibration.steering.rate_limit_us_per_s),
       throttle_rate_(calibration.throttle.rate_limit_us_per_s),

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -59,6 +60,13 @@ struct Calibration {
   /// action gives safe_command(): this is the last step before the wire, and a non-finite number
   /// must never become a pulse width (it once became "$C,10,0,0").
   PwmCommand map(std::span<const float> action) const;
+  /// A human's command (a stick or the web page): -1 = full left / full reverse, +1 = full right /
+  /// full forward on this car (so `invert`, which is about the model, does not apply); clamped and
+  /// throttle-capped like map(). Non-finite values give safe_command().
+  PwmCommand map_manual(double steering_value, double throttle_value) const;
+  /// The raw action (action_dim values, in the model's units, zeros where no channel reads) that
+  /// map() would turn into `command`: what was actually executed, as a training target.
+  std::vector<float> action_of(PwmCommand command, int action_dim) const;
   /// The largest action index used (to check against the model's action_dim).
   int max_action_index() const;
   /// Throws act::Error(kInvalidArgument) when action_units cannot be the units of the model's

@@ -43,6 +43,12 @@ std::string format_stage(const char* name, const LatencySummary& s) {
 // per episode, not per tick.
 std::string fault_kind(const std::string& fault) { return fault.substr(0, fault.find(" (")); }
 
+// Who chose a tick's command, from its source ("chunk", "manual...", "safe:<reason>").
+std::string driver_of(const std::string& source) {
+  if (source == "chunk") return "ai";
+  return source.rfind("manual", 0) == 0 ? "manual" : "safe";
+}
+
 // Raises the estimate at once and lowers it slowly: a slow inference must not be forgotten quickly.
 double track_latency(double estimate, double sample) { return sample > estimate ? sample : 0.9 * estimate + 0.1 * sample; }
 
@@ -171,6 +177,7 @@ class ControlRun {
       const FrameSource::State source_state = frames_.state();
       check_camera(source_state, tick.now);
       PwmCommand command = safe_;
+      if (recorder_) tick_state_ = state_;  // the state before this tick's action, as a dataset has it
       const std::string source = choose_action(tick, command);
       send(tick, source, command);
       if (source_state == FrameSource::State::kEnded) {
@@ -349,7 +356,8 @@ class ControlRun {
     ++summary_.ticks;
     if (recorder_) {
       recorder_->add(TickRecord{tick.index, tick_time(tick.index), ms_between(tick.scheduled, tick.now), source,
-                                source == "chunk" ? action_ : std::vector<float>{}, command, sent});
+                                source == "chunk" ? action_ : std::vector<float>{}, command, sent, driver_of(source),
+                                tick_state_, calibration_.action_of(command, info_.action_dim), frames_.latest()});
     }
   }
 
@@ -406,6 +414,7 @@ class ControlRun {
   std::vector<float> action_;
   const std::vector<float> initial_state_;
   std::vector<float> state_;  // what the model sees as observation.state next
+  std::vector<float> tick_state_;  // state_ when the tick began (recorded)
   bool warned_state_range_ = false;
   double latency_ticks_ = 0;
   int consecutive_errors_ = 0;

@@ -99,7 +99,8 @@ struct Rig {
     worker_options.keep_model_inputs = !recording.empty();
     InferenceWorker worker([&] { return std::make_unique<FakeModel>(info, controls); }, frames, worker_options, log);
     std::optional<Recorder> recorder;
-    if (!recording.empty()) recorder.emplace(recording, info.state_dim, info.action_dim, nlohmann::ordered_json{{"test", 1}});
+    if (!recording.empty()) recorder.emplace(recording, info.state_dim, info.action_dim, info.cameras.front().height,
+                                               info.cameras.front().width, nlohmann::ordered_json{{"test", 1}});
     ControlLoop loop(options, calibration, frames, worker, link, recorder ? &*recorder : nullptr, log);
     DriveSummary summary;
     started = Clock::now();
@@ -319,7 +320,10 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   const auto observations = lines(rig.recording + "/log.jsonl");
   const auto ticks = lines(rig.recording + "/ticks.csv");
   ASSERT_GE(observations.size(), 2u);
-  EXPECT_EQ(ticks[0], "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,sent");
+  // Today's columns first (readers go by name, but nothing moved), then who drove, the frame, the state
+  // and the command in the model's units.
+  EXPECT_EQ(ticks[0], "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,sent,driver,frame,state.0,"
+                      "state.1,command.0,command.1");
   EXPECT_EQ(ticks.size() - 1, summary.ticks);
   size_t pngs = 0;
   for (const auto& e : fs::directory_iterator(rig.recording + "/frames")) {
@@ -335,9 +339,18 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   const cv::Mat first = cv::imread(rig.recording + "/frames/000000.png");
   EXPECT_EQ(first.cols, 64);
   EXPECT_EQ(first.rows, 48);
-  bool drove = false;
-  for (const auto& t : ticks) drove = drove || t.find(",chunk,0.5,0.800000012,1700,1650,1") != std::string::npos;
-  EXPECT_TRUE(drove) << ticks[ticks.size() / 2];
+  std::string driving_row;
+  for (const auto& t : ticks) {
+    if (t.find(",chunk,0.5,0.800000012,1700,1650,1,ai,tick_frames/") != std::string::npos) driving_row = t;
+  }
+  ASSERT_FALSE(driving_row.empty()) << ticks[ticks.size() / 2];
+  // The command sent, back in the model's units: 1700 us is steering +0.5; throttle 0.8 capped at
+  // max_forward 0.5 is 1650 us, +0.5.
+  EXPECT_EQ(driving_row.substr(driving_row.size() - 8), ",0.5,0.5") << driving_row;
+  const std::string frame = driving_row.substr(driving_row.find("tick_frames/"), 24);
+  const cv::Mat tick_frame = cv::imread(rig.recording + "/" + frame);
+  EXPECT_EQ(tick_frame.cols, 64) << frame;
+  EXPECT_EQ(tick_frame.rows, 48) << frame;
 }
 
 TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {

@@ -19,6 +19,7 @@
 #include "apps/drive/control_loop.h"
 #include "apps/drive/devices.h"
 #include "apps/drive/inference.h"
+#include "apps/drive/live_view.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
 #include "weights/blob/error.h"
@@ -135,6 +136,7 @@ std::vector<float> parse_initial_state(const std::string& text, const act::Model
 struct Options {
   std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
   std::string initial_state = "mean";
+  std::string http, mode = "ai";  // the live view and who drives (issue 18)
   bool raw_endpoints = false, list_cameras = false, list_ports = false;
   double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
@@ -237,7 +239,22 @@ int drive(const Options& opt) {
                      record_meta(opt, info, camera, calibration));
   }
 
+  // Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
+  std::optional<Cockpit> cockpit;
+  std::optional<LiveView> live_view;
+  if (!opt.http.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
+  if (!opt.http.empty()) {
+    LiveViewOptions view_options;
+    parse_http_address(opt.http, view_options);
+    view_options.image_height = input.height;
+    view_options.image_width = input.width;
+    live_view.emplace(view_options, *cockpit, camera);
+    std::cerr << "act_drive: live view on " << live_view->url() << " (token " << live_view->token()
+              << ": needed to resume, change mode or drive from the page; the e-stop needs none)\n";
+  }
+
   ControlOptions control;
+  control.cockpit = cockpit ? &*cockpit : nullptr;
   control.control_hz = opt.control_hz;
   control.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
   control.stats_every_s = opt.stats_every;
@@ -287,6 +304,10 @@ int run(const Options& opt) {
       if (opt.list_cameras) list_cameras(std::cout);
       if (opt.list_ports) list_ports(std::cout);
       return 0;
+    }
+    if (opt.mode != "ai" && opt.http.empty()) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
+                "(the page's stick and keys)");
     }
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
@@ -361,6 +382,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--record", opt.record_dir, "save frames, states, actions and timings to this new folder (README: "
                                              "recording format; usable as act_convert calibration input)");
+  app.add_option("--http", opt.http, "serve the live view (frame, gauges, e-stop, driving by hand) on [ADDR:]PORT, "
+                                     "e.g. 8887; 127.0.0.1 unless an address is given (0.0.0.0: every interface)");
+  app.add_option("--mode", opt.mode, "who drives: ai (the policy; manual input overrides it until resumed), manual "
+                                     "(by hand), ai-steer (the policy steers, the throttle is by hand)")
+      ->capture_default_str()->check(CLI::IsMember({"ai", "manual", "ai-steer"}));
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
                                              "calibration file to edit), then write --calibration");

@@ -191,6 +191,8 @@ PwmCommand Calibration::map(std::span<const float> action) const {
   return {us_from_normalized(steer, steering), us_from_normalized(throttle_value, throttle)};
 }
 
+double position_of(double us, const ChannelCalibration& ch) { return normalized_from_us(us, ch); }
+
 PwmCommand Calibration::map_manual(double steering_value, double throttle_value) const {
   if (!std::isfinite(steering_value) || !std::isfinite(throttle_value)) return safe_command();
   return {us_from_normalized(std::clamp(steering_value, -1.0, 1.0), steering),

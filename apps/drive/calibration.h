@@ -75,6 +75,10 @@ struct Calibration {
   void check_units(const ModelInfo& model) const;
 };
 
+/// Where a pulse width lies on its channel: -1 at low_us (full left / reverse), 0 at mid_us, +1 at
+/// high_us (unclamped).
+double position_of(double us, const ChannelCalibration& ch);
+
 /// Limits how fast each pulse width may change between control ticks (calibration rate limits).
 class RateLimiter {
  public:

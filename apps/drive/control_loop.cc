@@ -43,10 +43,14 @@ std::string format_stage(const char* name, const LatencySummary& s) {
 // per episode, not per tick.
 std::string fault_kind(const std::string& fault) { return fault.substr(0, fault.find(" (")); }
 
+// The policy steers, a human holds the throttle (--mode ai-steer).
+constexpr const char* kAiSteerSource = "chunk+manual-throttle";
+
 // Who chose a tick's command, from its source ("chunk", "manual...", "safe:<reason>").
 std::string driver_of(const std::string& source) {
   if (source == "chunk") return "ai";
-  return source.rfind("manual", 0) == 0 ? "manual" : "safe";
+  if (source == kAiSteerSource) return "ai-steer";
+  return source == "manual" ? "manual" : "safe";
 }
 
 // Raises the estimate at once and lowers it slowly: a slow inference must not be forgotten quickly.
@@ -82,7 +86,9 @@ std::string DriveSummary::to_string() const {
                 static_cast<unsigned long long>(overrun_ticks), static_cast<unsigned long long>(overrun_events),
                 static_cast<unsigned long long>(inferences), static_cast<unsigned long long>(inference_errors),
                 static_cast<unsigned long long>(stale_frames), static_cast<unsigned long long>(link_down_ticks));
-  s << line << format_stage("capture age", capture_age_ms) << format_stage("preprocess", preprocess_ms)
+  s << line;
+  if (manual_ticks > 0) s << "  " << manual_ticks << " ticks driven by hand\n";
+  s << format_stage("capture age", capture_age_ms) << format_stage("preprocess", preprocess_ms)
     << format_stage("infer", infer_ms) << format_stage("serial write", serial_write_ms)
     << format_stage("tick jitter", jitter_ms) << "  " << link_summary << "\n";
   return s.str();
@@ -185,6 +191,7 @@ class ControlRun {
         break;
       }
       request_inference(tick.index);
+      if (options_.cockpit) publish(tick, source, command);
       report_stats(tick.now);
     }
     return finish();
@@ -233,6 +240,9 @@ class ControlRun {
     capture_age_.add(result->frame_age_ms);
     preprocess_.add(result->preprocess_ms);
     infer_.add(result->infer_ms);
+    last_capture_age_ms_ = result->frame_age_ms;
+    last_preprocess_ms_ = result->preprocess_ms;
+    last_infer_ms_ = result->infer_ms;
     if (!result->error.empty()) return inference_failed(result->error, tick.now);
     const int64_t observation_tick = std::min(tick.index, tick_of(result->frame_captured));
     if (const Status added = scheduler_.add(result->chunk, observation_tick); !added.ok()) {
@@ -271,23 +281,43 @@ class ControlRun {
     }
   }
 
-  // This tick's action into `command` (left safe unless a chunk drives); returns its source for the
-  // recording: "chunk", "safe:fault", "safe:overrun" or "safe:waiting".
+  // This tick's action into `command` (left safe unless someone drives); returns its source for the
+  // recording: "chunk", "chunk+manual-throttle" (ai-steer), "manual", "safe:e-stop", "safe:fault",
+  // "safe:overrun" or "safe:waiting".
   std::string choose_action(const Tick& tick, PwmCommand& command) {
+    pilot_ = options_.cockpit ? options_.cockpit->input(tick.now) : PilotInput{};
     std::string source;
-    if (!fault_.empty()) {
+    if (pilot_.estopped || pilot_.manual_drives()) {
+      scheduler_.clear();  // the policy starts afresh when it drives again
+      executing_ = false;
+    }
+    if (pilot_.estopped) {
+      source = "safe:e-stop";
+    } else if (pilot_.manual_drives()) {
+      command = limiter_.step(calibration_.map_manual(pilot_.steering, pilot_.throttle), period_s_);
+      follow_action(calibration_.action_of(command, info_.action_dim));
+      ++summary_.manual_ticks;
+      overrunning_ = false;
+      previous_fault_.clear();
+      return "manual";
+    } else if (!fault_.empty()) {
       hold_for_fault(tick.now);
       source = "safe:fault";
     } else if (scheduler_.action_at(tick.index, action_).ok()) {
-      command = limiter_.step(calibration_.map(action_), period_s_);
-      follow_action();
-      executing_ = true;
+      PwmCommand target = calibration_.map(action_);
       source = "chunk";
+      if (pilot_.mode == DriveMode::kAiSteer) {
+        target.throttle_us = calibration_.map_manual(0, pilot_.throttle).throttle_us;
+        source = kAiSteerSource;
+      }
+      command = limiter_.step(target, period_s_);
+      follow_action(source == "chunk" ? action_ : calibration_.action_of(command, info_.action_dim));
+      executing_ = true;
       ++summary_.driving_ticks;
     } else {
       source = run_dry();
     }
-    if (source != "chunk") {
+    if (source.rfind("safe:", 0) == 0) {
       overrunning_ = overrunning_ && fault_.empty();
       limiter_.reset(safe_);
       state_ = initial_state_;
@@ -301,10 +331,10 @@ class ControlRun {
 
   // With --state last-action the executed action becomes the next state (its first state_dim values,
   // zero-padded); warns once when that leaves the training range.
-  void follow_action() {
+  void follow_action(const std::vector<float>& action) {
     if (options_.state_source != ControlOptions::StateSource::kLastAction) return;
     std::fill(state_.begin(), state_.end(), 0.0f);
-    std::copy_n(action_.begin(), std::min(state_.size(), action_.size()), state_.begin());
+    std::copy_n(action.begin(), std::min(state_.size(), action.size()), state_.begin());
     if (warned_state_range_) return;
     for (size_t i = 0; i < std::min(state_.size(), info_.state_low.size()); ++i) {
       // Normalised -1 / +1 are the mean -/+ one standard deviation (or the min and max): 3 of those
@@ -356,17 +386,47 @@ class ControlRun {
     ++summary_.ticks;
     if (recorder_) {
       recorder_->add(TickRecord{tick.index, tick_time(tick.index), ms_between(tick.scheduled, tick.now), source,
-                                source == "chunk" ? action_ : std::vector<float>{}, command, sent, driver_of(source),
+                                source.rfind("chunk", 0) == 0 ? action_ : std::vector<float>{}, command, sent, driver_of(source),
                                 tick_state_, calibration_.action_of(command, info_.action_dim), frames_.latest()});
     }
   }
 
   // Keeps the next chunk coming while this one executes.
   void request_inference(int64_t tick) {
-    if (!fault_.empty() || inference_.busy()) return;
+    if (!fault_.empty() || pilot_.estopped || pilot_.manual_drives() || inference_.busy()) return;
     const int lead_ticks = static_cast<int>(std::ceil(latency_ticks_)) + kInferenceMarginTicks;
     if (!scheduler_.wants_inference(tick, lead_ticks)) return;
     inference_.request(state_);
+  }
+
+  // The status for the live page: this tick, and the policy's commands ahead of it.
+  void publish(const Tick& tick, const std::string& source, const PwmCommand& command) {
+    LiveStatus status;
+    status.tick = tick.index;
+    status.time_s = tick_time(tick.index);
+    status.source = source;
+    status.driver = driver_of(source);
+    status.fault = pilot_.estopped ? "e-stop (resume to drive)" : fault_;
+    status.command = command;
+    status.steering = position_of(command.steering_us, calibration_.steering);
+    status.throttle = position_of(command.throttle_us, calibration_.throttle);
+    std::vector<float> ahead(action_.size());
+    for (int64_t t = tick.index; scheduler_.action_at(t, ahead).ok(); ++t) {
+      const PwmCommand planned = calibration_.map(ahead);
+      status.steering_ahead.push_back(static_cast<float>(position_of(planned.steering_us, calibration_.steering)));
+      status.throttle_ahead.push_back(static_cast<float>(position_of(planned.throttle_us, calibration_.throttle)));
+    }
+    status.capture_age_ms = last_capture_age_ms_;
+    status.preprocess_ms = last_preprocess_ms_;
+    status.infer_ms = last_infer_ms_;
+    status.jitter_ms = ms_between(tick.scheduled, tick.now);
+    status.ticks = summary_.ticks;
+    status.inferences = summary_.inferences;
+    status.overruns = summary_.overrun_events;
+    if (const auto frame = frames_.latest()) status.frame_index = frame->index;
+    status.pilot = pilot_;
+    status.control_hz = options_.control_hz;
+    options_.cockpit->publish(std::move(status));
   }
 
   void report_stats(Clock::time_point now) {
@@ -416,6 +476,8 @@ class ControlRun {
   std::vector<float> state_;  // what the model sees as observation.state next
   std::vector<float> tick_state_;  // state_ when the tick began (recorded)
   bool warned_state_range_ = false;
+  PilotInput pilot_;  // this tick's e-stop, mode and manual input
+  double last_capture_age_ms_ = 0, last_preprocess_ms_ = 0, last_infer_ms_ = 0;  // for the live page
   double latency_ticks_ = 0;
   int consecutive_errors_ = 0;
   bool executing_ = false;    // a chunk was driving the last tick: running dry now is an overrun

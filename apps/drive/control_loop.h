@@ -14,6 +14,7 @@
 #include "apps/bench_support.h"
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
+#include "apps/drive/cockpit.h"
 #include "apps/drive/inference.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
@@ -37,6 +38,9 @@ struct ControlOptions {
   /// with kLastAction: state_dim values (act_drive's default is the training mean, --initial-state).
   /// Empty = the safe action's first state_dim values.
   std::vector<float> initial_state;
+  /// The live page and gamepad: e-stop, modes, driving by hand, and where the status goes. Null =
+  /// the policy drives alone.
+  Cockpit* cockpit = nullptr;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
   DeploymentOptions deployment;  ///< replaces the blob's n_action_steps / temporal ensembling
 };
@@ -55,6 +59,7 @@ struct DriveSummary {
   int exit_code = 0;
   std::string end_reason;
   uint64_t ticks = 0, driving_ticks = 0, safe_ticks = 0;
+  uint64_t manual_ticks = 0;  ///< ticks a human drove (part of neither of the two above)
   uint64_t missed_ticks = 0;  ///< ticks skipped because the loop woke up a whole period late
   uint64_t overrun_ticks = 0, overrun_events = 0;  ///< the chunk ran out before the next was ready
   uint64_t inferences = 0, inference_errors = 0, stale_frames = 0, link_down_ticks = 0;

@@ -18,6 +18,7 @@
 #include "apps/drive/camera.h"
 #include "apps/drive/control_loop.h"
 #include "apps/drive/devices.h"
+#include "apps/drive/gamepad.h"
 #include "apps/drive/inference.h"
 #include "apps/drive/live_view.h"
 #include "apps/drive/recorder.h"
@@ -136,7 +137,7 @@ std::vector<float> parse_initial_state(const std::string& text, const act::Model
 struct Options {
   std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
   std::string initial_state = "mean";
-  std::string http, mode = "ai";  // the live view and who drives (issue 18)
+  std::string http, mode = "ai", gamepad;  // the live view, who drives, a gamepad (issue 18)
   bool raw_endpoints = false, list_cameras = false, list_ports = false;
   double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
@@ -242,7 +243,13 @@ int drive(const Options& opt) {
   // Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
   std::optional<Cockpit> cockpit;
   std::optional<LiveView> live_view;
-  if (!opt.http.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
+  std::optional<Gamepad> gamepad;
+  if (!opt.http.empty() || !opt.gamepad.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
+  if (!opt.gamepad.empty()) {
+    gamepad.emplace(opt.gamepad, *cockpit, std::cerr);
+    std::cerr << "act_drive: gamepad " << opt.gamepad << " (" << gamepad->name() << "): left stick steers, right stick "
+              << "throttle, B e-stop, Start resume\n";
+  }
   if (!opt.http.empty()) {
     LiveViewOptions view_options;
     parse_http_address(opt.http, view_options);
@@ -305,9 +312,9 @@ int run(const Options& opt) {
       if (opt.list_ports) list_ports(std::cout);
       return 0;
     }
-    if (opt.mode != "ai" && opt.http.empty()) {
+    if (opt.mode != "ai" && opt.http.empty() && opt.gamepad.empty()) {
       act::fail(act::ErrorCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
-                "(the page's stick and keys)");
+                "(the page's stick and keys) or --gamepad /dev/input/eventN");
     }
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
@@ -384,6 +391,8 @@ int main(int argc, char** argv) {
                                              "recording format; usable as act_convert calibration input)");
   app.add_option("--http", opt.http, "serve the live view (frame, gauges, e-stop, driving by hand) on [ADDR:]PORT, "
                                      "e.g. 8887; 127.0.0.1 unless an address is given (0.0.0.0: every interface)");
+  app.add_option("--gamepad", opt.gamepad, "drive by hand with this evdev gamepad (/dev/input/eventN): left stick "
+                                           "steers, right stick throttle, B e-stop, Start resume");
   app.add_option("--mode", opt.mode, "who drives: ai (the policy; manual input overrides it until resumed), manual "
                                      "(by hand), ai-steer (the policy steers, the throttle is by hand)")
       ->capture_default_str()->check(CLI::IsMember({"ai", "manual", "ai-steer"}));

@@ -54,7 +54,7 @@ function post(path, withToken) {
     return r.status;
   });
 }
-$('estop').onclick = () => post('/estop', false);
+$('estop').onclick = () => { $('estop').dataset.clickedAt = Date.now(); post('/estop', false); };
 $('resume').onclick = () => post('/resume', true);
 $('set-mode').onclick = () => post('/mode?mode=' + $('mode').value, true);
 

@@ -45,8 +45,8 @@ withPage(async (page, external) => {
   }
   result.frame_changed = (await shownFrame(page)) !== firstFrame;
 
-  result.t_estop = Date.now();
   result.estop_status = await clickAndWaitForReply(page, '#estop');
+  result.t_estop = Number(await page.$eval('#estop', (b) => b.dataset.clickedAt));  // the page's own click time
   await sleep(1000);
   result.resume_without_token_status = await clickAndWaitForReply(page, '#resume');  // the token field is empty
   await sleep(500);

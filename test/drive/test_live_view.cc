@@ -73,7 +73,7 @@ TEST(ActDriveLiveView, EstopResumeAndDrivingByHandFromTheBrowser) {
   std::ofstream(dir + "/cal.json") << R"({"steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
     "throttle": {"reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "max_forward": 0.5}})";
   FakeArduino board;
-  const std::string port = board.port_path(), log_path = dir + "/log.txt", cal = dir + "/cal.json";
+  const std::string port = board.port_path(), log_path = dir + "/log.txt", cal = dir + "/cal.json", rec = dir + "/rec";
   const pid_t pid = fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {
@@ -81,7 +81,7 @@ TEST(ActDriveLiveView, EstopResumeAndDrivingByHandFromTheBrowser) {
     ::dup2(log, 1);
     ::dup2(log, 2);
     ::execl(ACT_DRIVE_BIN, ACT_DRIVE_BIN, "-m", blob.c_str(), "--camera", video.c_str(), "--serial", port.c_str(), "-c",
-            cal.c_str(), "--threads", "1", "--http", "127.0.0.1:0", static_cast<char*>(nullptr));
+            cal.c_str(), "--threads", "1", "--http", "127.0.0.1:0", "--record", rec.c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
   }
   std::smatch found;
@@ -152,6 +152,29 @@ TEST(ActDriveLiveView, EstopResumeAndDrivingByHandFromTheBrowser) {
   }
   const std::string final_log = read_text(log_path);
   EXPECT_NE(final_log.find("ticks driven by hand"), std::string::npos) << final_log;
+
+  // The recording of this drive: act_convert calibrates on it, and its manual part becomes a LeRobot
+  // dataset (through a stand-in of LeRobotDataset: LeRobot is not installed here).
+  const auto calibrated = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                      q(dir + "/int8.actb") + " --precision int8 --calib " + q(rec) + " --calib-samples 8 -q");
+  EXPECT_EQ(calibrated.exit_code, 0) << calibrated.output;
+  const auto dataset = run_command("PYTHONPATH=" + q(std::string(ACT_DRIVE_TEST_DIR) + "/lerobot_standin") + " /usr/bin/python3 " +
+                                   q(std::string(ACT_DRIVE_APP_DIR) + "/recording_to_lerobot.py") + " " + q(rec) +
+                                   " --repo-id test/rover --root " + q(dir + "/dataset") + " --min-frames 10");
+  ASSERT_EQ(dataset.exit_code, 0) << dataset.output;
+  const nlohmann::json d = nlohmann::json::parse(read_text(dir + "/dataset/standin.json"));
+  EXPECT_EQ(d["fps"], 30);
+  EXPECT_EQ(d["features"]["observation.images.front"]["shape"], (std::vector<int>{96, 128, 3}));
+  // From the keys going down to the end (never resumed): one episode of manual ticks, each with
+  // the command sent in the model's units: keys (full right, throttle capped at 0.5), released
+  // (neutral), stick (full left).
+  ASSERT_EQ(d["episodes"].size(), 1u) << dataset.output;
+  std::set<std::vector<double>> actions;
+  for (const auto& frame : d["episodes"][0]) actions.insert(frame["action"].get<std::vector<double>>());
+  for (const std::vector<double>& expected : {std::vector<double>{1, 0.5}, {0, 0}, {-1, 0}}) {
+    EXPECT_TRUE(actions.count(expected)) << expected[0] << ", " << expected[1] << " in " << d["episodes"][0].size() << " frames";
+  }
+  EXPECT_EQ(d["episodes"][0][0]["task"], "drive the track");
 }
 
 }  // namespace

@@ -137,7 +137,7 @@ std::vector<float> parse_initial_state(const std::string& text, const act::Model
 struct Options {
   std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
   std::string initial_state = "mean";
-  std::string http, mode = "ai", gamepad;  // the live view, who drives, a gamepad (issue 18)
+  std::string http, mode = "ai", gamepad, overlay_video;  // the live view, who drives, a gamepad, a video (issue 18)
   bool raw_endpoints = false, list_cameras = false, list_ports = false;
   double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
@@ -260,8 +260,12 @@ int drive(const Options& opt) {
               << ": needed to resume, change mode or drive from the page; the e-stop needs none)\n";
   }
 
+  std::optional<OverlayVideo> overlay;
+  if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width);
+
   ControlOptions control;
   control.cockpit = cockpit ? &*cockpit : nullptr;
+  control.overlay = overlay ? &*overlay : nullptr;
   control.control_hz = opt.control_hz;
   control.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
   control.stats_every_s = opt.stats_every;
@@ -276,6 +280,12 @@ int drive(const Options& opt) {
     recorder->close();
     std::cerr << "act_drive: recorded to " << opt.record_dir;
     if (recorder->dropped_frames() > 0) std::cerr << " (" << recorder->dropped_frames() << " frames dropped: disk too slow)";
+    std::cerr << "\n";
+  }
+  if (overlay) {
+    overlay->close();
+    std::cerr << "act_drive: overlay video " << opt.overlay_video << ": " << overlay->frames_written() << " ticks";
+    if (overlay->dropped() > 0) std::cerr << " (" << overlay->dropped() << " dropped: the encoder was too slow)";
     std::cerr << "\n";
   }
   std::cerr << summary.to_string();
@@ -396,6 +406,8 @@ int main(int argc, char** argv) {
   app.add_option("--mode", opt.mode, "who drives: ai (the policy; manual input overrides it until resumed), manual "
                                      "(by hand), ai-steer (the policy steers, the throttle is by hand)")
       ->capture_default_str()->check(CLI::IsMember({"ai", "manual", "ai-steer"}));
+  app.add_option("--overlay-video", opt.overlay_video, "write every tick as a video frame: the model's view with the "
+                                                      "gauges, the chunk ahead and who drove (e.g. out.mp4)");
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
                                              "calibration file to edit), then write --calibration");

@@ -186,12 +186,12 @@ class ControlRun {
       if (recorder_) tick_state_ = state_;  // the state before this tick's action, as a dataset has it
       const std::string source = choose_action(tick, command);
       send(tick, source, command);
+      if (options_.cockpit || options_.overlay) publish(tick, source, command);
       if (source_state == FrameSource::State::kEnded) {
         summary_.end_reason = frames_.problem();
         break;
       }
       request_inference(tick.index);
-      if (options_.cockpit) publish(tick, source, command);
       report_stats(tick.now);
     }
     return finish();
@@ -399,7 +399,7 @@ class ControlRun {
     inference_.request(state_);
   }
 
-  // The status for the live page: this tick, and the policy's commands ahead of it.
+  // The status for the live page and the overlay video: this tick, and the policy's commands ahead of it.
   void publish(const Tick& tick, const std::string& source, const PwmCommand& command) {
     LiveStatus status;
     status.tick = tick.index;
@@ -423,10 +423,12 @@ class ControlRun {
     status.ticks = summary_.ticks;
     status.inferences = summary_.inferences;
     status.overruns = summary_.overrun_events;
-    if (const auto frame = frames_.latest()) status.frame_index = frame->index;
+    std::shared_ptr<const Frame> frame = frames_.latest();
+    if (frame) status.frame_index = frame->index;
     status.pilot = pilot_;
     status.control_hz = options_.control_hz;
-    options_.cockpit->publish(std::move(status));
+    if (options_.overlay) options_.overlay->add(status, std::move(frame));
+    if (options_.cockpit) options_.cockpit->publish(std::move(status));
   }
 
   void report_stats(Clock::time_point now) {

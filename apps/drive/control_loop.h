@@ -16,6 +16,7 @@
 #include "apps/drive/camera.h"
 #include "apps/drive/cockpit.h"
 #include "apps/drive/inference.h"
+#include "apps/drive/overlay_video.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
 
@@ -41,6 +42,8 @@ struct ControlOptions {
   /// The live page and gamepad: e-stop, modes, driving by hand, and where the status goes. Null =
   /// the policy drives alone.
   Cockpit* cockpit = nullptr;
+  /// Every tick drawn into a video (--overlay-video); null = none.
+  OverlayVideo* overlay = nullptr;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
   DeploymentOptions deployment;  ///< replaces the blob's n_action_steps / temporal ensembling
 };

@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
@@ -153,6 +154,46 @@ TEST(ActDriveCli, InitialStateIsTheTrainingMeanOrTheValuesGiven) {
   ASSERT_EQ(by_default.size(), mean.size());
   for (size_t i = 0; i < mean.size(); ++i) EXPECT_NEAR(by_default[i], mean[i], 1e-5f * (1 + std::abs(mean[i]))) << i;
   EXPECT_EQ(first_state("--initial-state 0.25,-0.5", dir + "/rec-given"), (std::vector<float>{0.25f, -0.5f}));
+}
+
+// --overlay-video: one video frame per tick, the steering gauge's marker where the command sent puts it.
+TEST(ActDriveCli, OverlayVideoDrawsEveryTick) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 60, 30, 128, 96);
+  const std::string blob = act_tiny_blob(dir);
+  const auto r = run_command("(" + kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 --overlay-video " +
+                             q(dir + "/overlay.mp4") + " 2>" + q(dir + "/stderr.txt") + ")");
+  const std::string log = read_text(dir + "/stderr.txt");
+  ASSERT_EQ(r.exit_code, 0) << log;
+  // The commands on stdout: the first is the neutral sent before the first tick, then one per tick.
+  std::vector<RoverMessage> sent;
+  std::istringstream lines(r.output);
+  for (std::string time, line; lines >> time >> line;) {
+    RoverMessage m{};
+    ASSERT_EQ(rover_parse(line.c_str(), line.size(), &m), ROVER_OK) << line;
+    sent.push_back(m);
+  }
+  cv::VideoCapture overlay(dir + "/overlay.mp4");
+  ASSERT_TRUE(overlay.isOpened());
+  std::vector<cv::Mat> frames;
+  for (cv::Mat frame; overlay.read(frame);) frames.push_back(frame.clone());
+  EXPECT_NE(log.find("overlay video " + dir + "/overlay.mp4: " + std::to_string(frames.size()) + " ticks"), std::string::npos) << log;
+  EXPECT_NE(log.find(" s: " + std::to_string(frames.size()) + " ticks ("), std::string::npos) << log;  // every tick
+  ASSERT_GT(sent.size(), frames.size());
+  ASSERT_GT(frames.size(), 30u);
+  EXPECT_EQ(frames[0].cols, 128 * 4);
+  EXPECT_EQ(frames[0].rows, 96 * 4 + 120);
+  int checked = 0;
+  for (size_t k = 0; k < frames.size(); k += 7) {
+    // The steering gauge spans x 10..251 at y 404..420 (-1..+1); the template's 1000..2000 us endpoints.
+    const double position = (sent[k + 1].fields[1] - 1500) / 500.0;
+    const int x = 10 + 120 + static_cast<int>(position * 120);
+    const cv::Vec3b pixel = frames[k].at<cv::Vec3b>(96 * 4 + 28, x);
+    EXPECT_GT(pixel[0], 180) << "tick " << k << " steering " << sent[k + 1].fields[1];  // the marker's blue
+    ++checked;
+  }
+  EXPECT_GT(checked, 4);
 }
 
 TEST(ActDriveCli, DeploymentOptionsReplaceTheBlobs) {

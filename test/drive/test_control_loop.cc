@@ -353,6 +353,28 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   EXPECT_EQ(tick_frame.rows, 48) << frame;
 }
 
+// The first observation gets the initial state; the executed actions follow, and the one that leaves
+// the training range (mean -/+ 3 standard deviations) is warned about once.
+TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
+  Rig rig;
+  rig.recording = rig.dir + "/rec";
+  rig.info.state_low = {-0.1f, 0.7f};  // steering mean 0, std 0.1: 0.5 is 5 std away; throttle 0.8 +/- 0.1
+  rig.info.state_high = {0.1f, 0.9f};
+  rig.options.initial_state = {0.0f, 0.8f};
+  auto camera = video_camera(rig.dir, 150);
+  rig.run(*camera, [] { sleep_ms(1000); });
+  std::ifstream observations(rig.recording + "/log.jsonl");
+  std::string first, line, last;
+  std::getline(observations, first);
+  while (std::getline(observations, line)) last = line;
+  EXPECT_EQ(nlohmann::json::parse(first)["state"], (std::vector<float>{0.0f, 0.8f}));
+  EXPECT_EQ(nlohmann::json::parse(last)["state"], (std::vector<float>{0.5f, 0.8f}));  // the fake model's action
+  const std::string log = rig.log.str();
+  const std::string warning = "observation.state[0] = 0.5 left the training range [-0.3, 0.3]";
+  ASSERT_NE(log.find(warning), std::string::npos) << log;
+  EXPECT_EQ(log.find(warning, log.find(warning) + 1), std::string::npos) << "warned more than once: " << log;
+}
+
 TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {
   std::ostringstream log;
   std::thread([&] { apply_thread_placement({0, {1000}}, "test", log); }).join();  // no CPU 1000 here

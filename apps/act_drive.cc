@@ -204,6 +204,7 @@ int drive(const Options& opt) {
   InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options, std::cerr);
   const act::ModelInfo info = with_deployment(worker.info(), opt.deployment);  // fails early on a bad override
   check_model(info, calibration, opt);
+  const std::vector<float> initial_state = parse_initial_state(opt.initial_state, info);
   const act::CameraInfo& input = info.cameras.front();
   if (!opt.camera_size.empty()) check_camera_size(opt.camera_size, camera_options.height, camera_options.width, camera, input);
   if (!same_aspect(camera.height(), camera.width(), input.height, input.width)) {
@@ -215,6 +216,27 @@ int drive(const Options& opt) {
             << (info.temporal_ensembling ? "" : std::to_string(info.n_action_steps) + " of " + std::to_string(info.chunk_size) + " actions")
             << "\nact_drive: camera " << opt.camera << " " << hxw(camera.height(), camera.width()) << " -> "
             << hxw(input.height, input.width) << " (HxW)\n";
+
+  // Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
+  // Set up before the board is touched, so that a busy port or a wrong gamepad fails first.
+  std::optional<Cockpit> cockpit;
+  std::optional<LiveView> live_view;
+  std::optional<Gamepad> gamepad;
+  if (!opt.http.empty() || !opt.gamepad.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
+  if (!opt.gamepad.empty()) {
+    gamepad.emplace(opt.gamepad, *cockpit, std::cerr);
+    std::cerr << "act_drive: gamepad " << opt.gamepad << " (" << gamepad->name() << "): left stick steers, right stick "
+              << "throttle, B e-stop, Start resume\n";
+  }
+  if (!opt.http.empty()) {
+    LiveViewOptions view_options;
+    parse_http_address(opt.http, view_options);
+    view_options.image_height = input.height;
+    view_options.image_width = input.width;
+    live_view.emplace(view_options, *cockpit, camera);
+    std::cerr << "act_drive: live view on " << live_view->url() << " (token " << live_view->token()
+              << ": needed to resume, change mode or drive from the page; the e-stop needs none)\n";
+  }
 
   std::unique_ptr<ActuatorLink> link;
   NeutralOnExit neutral_on_exit;
@@ -240,26 +262,6 @@ int drive(const Options& opt) {
                      record_meta(opt, info, camera, calibration));
   }
 
-  // Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
-  std::optional<Cockpit> cockpit;
-  std::optional<LiveView> live_view;
-  std::optional<Gamepad> gamepad;
-  if (!opt.http.empty() || !opt.gamepad.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
-  if (!opt.gamepad.empty()) {
-    gamepad.emplace(opt.gamepad, *cockpit, std::cerr);
-    std::cerr << "act_drive: gamepad " << opt.gamepad << " (" << gamepad->name() << "): left stick steers, right stick "
-              << "throttle, B e-stop, Start resume\n";
-  }
-  if (!opt.http.empty()) {
-    LiveViewOptions view_options;
-    parse_http_address(opt.http, view_options);
-    view_options.image_height = input.height;
-    view_options.image_width = input.width;
-    live_view.emplace(view_options, *cockpit, camera);
-    std::cerr << "act_drive: live view on " << live_view->url() << " (token " << live_view->token()
-              << ": needed to resume, change mode or drive from the page; the e-stop needs none)\n";
-  }
-
   std::optional<OverlayVideo> overlay;
   if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width);
 
@@ -271,7 +273,7 @@ int drive(const Options& opt) {
   control.stats_every_s = opt.stats_every;
   control.duration_s = opt.duration;
   control.state_source = opt.state == "zeros" ? ControlOptions::StateSource::kZeros : ControlOptions::StateSource::kLastAction;
-  control.initial_state = parse_initial_state(opt.initial_state, info);
+  control.initial_state = initial_state;
   control.placement = {opt.control_priority, opt.control_cpus};
   control.deployment = opt.deployment;
   ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);

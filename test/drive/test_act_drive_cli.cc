@@ -21,6 +21,7 @@
 
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
+#include "drive/drive_cli_util.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 #include "drive/stalling_stream.h"
@@ -36,21 +37,6 @@ using act::test::q;
 using act::test::run_command;
 
 const std::string kDrive = ACT_DRIVE_BIN;
-
-// act-tiny (one 96x128 camera, state 2, action 2, chunk 10) converted into `dir`.
-std::string act_tiny_blob(const std::string& dir) {
-  const std::string blob = (fs::path(dir) / "act-tiny.actb").string();
-  const auto r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " + q(blob) + " -q");
-  EXPECT_EQ(r.exit_code, 0) << r.output;
-  return blob;
-}
-
-std::string read_text(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 TEST(ActDriveCli, HelpListsTheOptions) {
   const auto r = run_command(kDrive + " --help");
@@ -277,18 +263,8 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
   FakeArduino board;
   const std::string port = board.port_path();
   const std::string log_path = dir + "/log.txt";
-  const pid_t pid = fork();
+  const pid_t pid = start_act_drive({"-m", blob, "--camera", video, "--serial", port, "--raw-endpoints", "--threads", "1"}, log_path);
   ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(log, 1);
-    ::dup2(log, 2);
-    const rlimit no_core_dump{0, 0};  // SIGQUIT's default action would write one
-    ::setrlimit(RLIMIT_CORE, &no_core_dump);
-    ::execl(kDrive.c_str(), kDrive.c_str(), "-m", blob.c_str(), "--camera", video.c_str(), "--serial", port.c_str(),
-            "--raw-endpoints", "--threads", "1", static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
   // Wait until it drives, then signal it.
   const auto deadline = Clock::now() + std::chrono::seconds(20);
   while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));

@@ -2,7 +2,6 @@
 // the model's frames and the gauges, its e-stop puts neutral on the serial line within 250 ms and holds
 // it, resume needs the token, and driving by hand from the page reaches the serial line.
 #include <gtest/gtest.h>
-#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -16,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "drive/drive_cli_util.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 #include "support/command.h"
@@ -27,13 +27,6 @@ namespace {
 namespace fs = std::filesystem;
 using act::test::q;
 using act::test::run_command;
-
-std::string read_text(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 // The board's commands as (epoch milliseconds, command): the page's clicks are timed with Date.now().
 struct TimedCommand {
@@ -64,9 +57,7 @@ TEST(ActDriveLiveView, EstopResumeAndDrivingByHandFromTheBrowser) {
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
   ACT_REQUIRE_PATH(std::string(ACT_BROWSER_DIR) + "/node_modules/playwright-core");
   const std::string dir = act::test::scratch_dir();
-  const std::string blob = dir + "/act-tiny.actb";
-  const auto converted = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " + q(blob) + " -q");
-  ASSERT_EQ(converted.exit_code, 0) << converted.output;
+  const std::string blob = act_tiny_blob(dir);
   const std::string video = write_test_video(dir + "/v.avi", 900, 30, 128, 96);  // 30 s, longer than the test
   // Steering 1100..1900 us, throttle 1300..1800 us capped at half forward: full right and full
   // forward by hand are 1900 / 1650 us.
@@ -74,16 +65,9 @@ TEST(ActDriveLiveView, EstopResumeAndDrivingByHandFromTheBrowser) {
     "throttle": {"reverse_us": 1300, "neutral_us": 1500, "forward_us": 1800, "max_forward": 0.5}})";
   FakeArduino board;
   const std::string port = board.port_path(), log_path = dir + "/log.txt", cal = dir + "/cal.json", rec = dir + "/rec";
-  const pid_t pid = fork();
+  const pid_t pid = start_act_drive({"-m", blob, "--camera", video, "--serial", port, "-c", cal, "--threads", "1", "--http",
+                                     "127.0.0.1:0", "--record", rec}, log_path);
   ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(log, 1);
-    ::dup2(log, 2);
-    ::execl(ACT_DRIVE_BIN, ACT_DRIVE_BIN, "-m", blob.c_str(), "--camera", video.c_str(), "--serial", port.c_str(), "-c",
-            cal.c_str(), "--threads", "1", "--http", "127.0.0.1:0", "--record", rec.c_str(), static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
   std::smatch found;
   const std::regex announced("live view on (http://127\\.0\\.0\\.1:[0-9]+/) \\(token ([0-9a-f]+)");
   std::string log;

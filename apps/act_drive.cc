@@ -137,7 +137,7 @@ std::vector<float> parse_initial_state(const std::string& text, const act::Model
 struct Options {
   std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
   std::string initial_state = "mean";
-  std::string http, mode = "ai", gamepad, overlay_video;  // the live view, who drives, a gamepad, a video (issue 18)
+  std::string http, mode = "ai", gamepad, overlay_video, realtime = "on";  // issue 18: live view, driving by hand, replays
   bool raw_endpoints = false, list_cameras = false, list_ports = false;
   double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
@@ -192,6 +192,7 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
 int drive(const Options& opt) {
   const Calibration calibration = load_calibration(opt);
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
+  camera_options.stepped = opt.realtime == "off";
   if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.height, camera_options.width)) {
     act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
   }
@@ -199,6 +200,7 @@ int drive(const Options& opt) {
 
   InferenceWorkerOptions worker_options;
   worker_options.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
+  if (opt.realtime == "off") worker_options.max_frame_age = std::chrono::hours(24);  // a replay's frames have no age
   worker_options.placement = {opt.inference_priority, opt.inference_cpus};
   worker_options.keep_model_inputs = !opt.record_dir.empty();
   InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options, std::cerr);
@@ -268,6 +270,7 @@ int drive(const Options& opt) {
   ControlOptions control;
   control.cockpit = cockpit ? &*cockpit : nullptr;
   control.overlay = overlay ? &*overlay : nullptr;
+  control.realtime = opt.realtime == "on";
   control.control_hz = opt.control_hz;
   control.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
   control.stats_every_s = opt.stats_every;
@@ -323,6 +326,9 @@ int run(const Options& opt) {
       if (opt.list_cameras) list_cameras(std::cout);
       if (opt.list_ports) list_ports(std::cout);
       return 0;
+    }
+    if (opt.realtime == "off" && !opt.dry_run) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--realtime off replays a file faster than real time: only with --dry-run");
     }
     if (opt.mode != "ai" && opt.http.empty() && opt.gamepad.empty()) {
       act::fail(act::ErrorCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
@@ -410,6 +416,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::IsMember({"ai", "manual", "ai-steer"}));
   app.add_option("--overlay-video", opt.overlay_video, "write every tick as a video frame: the model's view with the "
                                                       "gauges, the chunk ahead and who drove (e.g. out.mp4)");
+  app.add_option("--realtime", opt.realtime, "off: replay a video file or image sequence as fast as the machine allows, "
+                                             "each inference waited for (with --dry-run, e.g. for --overlay-video)")
+      ->capture_default_str()->check(CLI::IsMember({"on", "off"}));
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
                                              "calibration file to edit), then write --calibration");

@@ -206,6 +206,11 @@ class ControlRun {
   // Sleeps until tick `index` is due. Woken up a whole period late (a stalled machine), it skips the
   // missed ticks instead of bursting: the tick returned is then a later one.
   Tick wait_for(int64_t index) {
+    if (!options_.realtime) {  // a replay: no waiting, the camera steps to the tick's time
+      frames_.advance_to(static_cast<double>(index) / options_.control_hz);  // exact: period_ is rounded to ns
+      const auto now = Clock::now();
+      return {index, now, now};
+    }
     Clock::time_point scheduled = start_ + period_ * index;
     std::this_thread::sleep_until(scheduled);
     const auto now = Clock::now();
@@ -222,7 +227,8 @@ class ControlRun {
   // Why the run ends at this tick, or "" to go on.
   std::string end_reason(const Tick& tick, const std::atomic<bool>& stop) const {
     if (stop.load()) return "stopped by a signal";
-    if (options_.duration_s > 0 && tick.now - start_ >= std::chrono::duration<double>(options_.duration_s)) {
+    const double elapsed_s = options_.realtime ? std::chrono::duration<double>(tick.now - start_).count() : tick_time(tick.index);
+    if (options_.duration_s > 0 && elapsed_s >= options_.duration_s) {
       return "--duration reached";
     }
     return "";
@@ -244,7 +250,8 @@ class ControlRun {
     last_preprocess_ms_ = result->preprocess_ms;
     last_infer_ms_ = result->infer_ms;
     if (!result->error.empty()) return inference_failed(result->error, tick.now);
-    const int64_t observation_tick = std::min(tick.index, tick_of(result->frame_captured));
+    // A replay's inference ran on the frame of the tick that asked for it, the tick before this one.
+    const int64_t observation_tick = options_.realtime ? std::min(tick.index, tick_of(result->frame_captured)) : tick.index - 1;
     if (const Status added = scheduler_.add(result->chunk, observation_tick); !added.ok()) {
       return inference_failed("the model returned an unusable chunk: " + added.message(), tick.now);
     }
@@ -275,7 +282,8 @@ class ControlRun {
   void check_camera(FrameSource::State source_state, Clock::time_point now) {
     if (source_state != FrameSource::State::kRunning) {
       fault_ = frames_.problem();
-    } else if (const auto frame = frames_.latest(); !frame || now - frame->captured > options_.max_frame_age) {
+    } else if (const auto frame = frames_.latest();
+               !frame || (options_.realtime && now - frame->captured > options_.max_frame_age)) {  // a replay's have no age
       fault_ = "stale frame (newest is " + (frame ? std::to_string(std::lround(ms_between(frame->captured, now))) : "none") +
                " ms old, --max-frame-age " + std::to_string(options_.max_frame_age.count()) + " ms)";
     }
@@ -397,6 +405,7 @@ class ControlRun {
     const int lead_ticks = static_cast<int>(std::ceil(latency_ticks_)) + kInferenceMarginTicks;
     if (!scheduler_.wants_inference(tick, lead_ticks)) return;
     inference_.request(state_);
+    if (!options_.realtime) inference_.wait_for_result();
   }
 
   // The status for the live page and the overlay video: this tick, and the policy's commands ahead of it.

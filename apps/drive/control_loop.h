@@ -42,6 +42,10 @@ struct ControlOptions {
   /// The live page and gamepad: e-stop, modes, driving by hand, and where the status goes. Null =
   /// the policy drives alone.
   Cockpit* cockpit = nullptr;
+  /// False: an offline replay of a file as fast as the machine allows (--realtime off, dry runs
+  /// only). Ticks follow each other at once, each advances the camera to its time, and each
+  /// inference is waited for, so a replay is the same however fast the machine is.
+  bool realtime = true;
   /// Every tick drawn into a video (--overlay-video); null = none.
   OverlayVideo* overlay = nullptr;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())

@@ -375,6 +375,39 @@ TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
   EXPECT_EQ(log.find(warning, log.find(warning) + 1), std::string::npos) << "warned more than once: " << log;
 }
 
+// --mode ai-steer: the policy's steering (0.5: 1700 us) with the throttle by hand (0.25: 1575 us), then
+// an e-stop holds neutral.
+TEST(ControlLoop, AiSteerTakesTheThrottleByHandAndEstopHoldsNeutral) {
+  Rig rig;
+  Cockpit cockpit(DriveMode::kAiSteer);
+  rig.options.cockpit = &cockpit;
+  auto camera = video_camera(rig.dir, 150);
+  Clock::time_point estopped;
+  const DriveSummary summary = rig.run(*camera, [&] {
+    for (int i = 0; i < 15; ++i) {  // a held stick: sent 10 times a second
+      cockpit.manual(0, 0.25);
+      sleep_ms(100);
+    }
+    cockpit.estop();
+    estopped = Clock::now();
+    for (int i = 0; i < 5; ++i) {
+      cockpit.manual(0, 0.25);  // the e-stop wins over manual input
+      sleep_ms(100);
+    }
+  });
+  size_t steered = 0;
+  for (const auto& c : drive_commands(*rig.board)) {
+    if (c.when < rig.started + milliseconds(700)) continue;  // the first chunk
+    if (c.when < estopped) {
+      steered += is(c, PwmCommand{1700, 1575});
+    } else if (c.when > estopped + milliseconds(250)) {  // the e-stop bound
+      EXPECT_TRUE(is(c, kSafe)) << c.steering_us << "/" << c.throttle_us;
+    }
+  }
+  EXPECT_GT(steered, 15u) << rig.log.str();
+  EXPECT_EQ(summary.manual_ticks, 0u);  // ai-steer is the policy driving
+}
+
 TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {
   std::ostringstream log;
   std::thread([&] { apply_thread_placement({0, {1000}}, "test", log); }).join();  // no CPU 1000 here

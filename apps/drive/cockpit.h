@@ -6,7 +6,6 @@
 // reader is copying just skips publishing).
 #pragma once
 
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <mutex>

@@ -17,8 +17,11 @@
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/control_loop.h"
+#include "apps/drive/devices.h"
 #include "apps/drive/emergency_neutral.h"
+#include "apps/drive/gamepad.h"
 #include "apps/drive/inference.h"
+#include "apps/drive/live_view.h"
 #include "apps/drive/pwm_link.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
@@ -77,35 +80,81 @@ struct NeutralOnExit {
   }
 };
 
-bool parse_size(const std::string& text, int& width, int& height) {
+// "HxW" (height first, as every size in the project).
+bool parse_size(const std::string& text, int& height, int& width) {
   const size_t x = text.find('x');
   if (x == std::string::npos) return false;
   try {
-    width = std::stoi(text.substr(0, x));
-    height = std::stoi(text.substr(x + 1));
+    height = std::stoi(text.substr(0, x));
+    width = std::stoi(text.substr(x + 1));
   } catch (const std::exception&) {
     return false;
   }
   return width > 0 && height > 0;
 }
 
+std::string hxw(int height, int width) { return std::to_string(height) + "x" + std::to_string(width); }
+
+bool same_aspect(int height_a, int width_a, int height_b, int width_b) {
+  return std::abs(static_cast<double>(width_a) / height_a - static_cast<double>(width_b) / height_b) <= 0.01;
+}
+
+// --camera-size is HxW; a size written WxH (the old order, and OpenCV's) is refused when only its
+// transpose fits what the camera delivered or what the model expects.
+void check_camera_size(const std::string& requested, int height, int width, const Camera& camera, const act::CameraInfo& input) {
+  if (height == width) return;
+  const std::string fix = ": --camera-size is HxW (height first); did you mean --camera-size " + hxw(width, height) + "?";
+  if (camera.height() == width && camera.width() == height) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size " + requested + " asks for height " + std::to_string(height) +
+              ", width " + std::to_string(width) + " but the camera delivers " + hxw(camera.height(), camera.width()) + fix);
+  }
+  if (!same_aspect(height, width, input.height, input.width) && same_aspect(width, height, input.height, input.width)) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size " + requested + " (height " + std::to_string(height) + ", width " +
+              std::to_string(width) + ") only fits the model's " + hxw(input.height, input.width) + " input transposed" + fix);
+  }
+}
+
+// --initial-state: "mean" (the training statistics' middle) or state_dim comma-separated numbers.
+std::vector<float> parse_initial_state(const std::string& text, const act::ModelInfo& info) {
+  if (text == "mean") return training_mean_state(info);
+  std::vector<float> values;
+  std::stringstream items(text);
+  for (std::string item; std::getline(items, item, ',');) {
+    try {
+      size_t used = 0;
+      values.push_back(std::stof(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--initial-state '" + text + "': '" + item + "' is not a number (expected "
+                "'mean' or " + std::to_string(info.state_dim) + " comma-separated values)");
+    }
+  }
+  if (values.size() != static_cast<size_t>(info.state_dim)) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--initial-state '" + text + "' has " + std::to_string(values.size()) +
+              " values but the model's state has " + std::to_string(info.state_dim) + " (or use --initial-state mean)");
+  }
+  return values;
+}
+
 struct Options {
   std::string model, camera, serial, calibration_path, record_dir, camera_size, state = "last-action";
+  std::string initial_state = "mean";
+  std::string http, mode = "ai", gamepad, overlay_video, realtime = "on";  // live view, driving by hand, replays
+  bool raw_endpoints = false, list_cameras = false, list_ports = false;
   double camera_fps = 0, control_hz = 30, stats_every = 0, duration = 0, ready_timeout = 5.0;
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
   int control_priority = 0, inference_priority = 0;
   std::vector<int> control_cpus, inference_cpus;
   bool dry_run = false, calibrate = false;
   std::string pwm, pwm_sysfs_root = kPwmSysfsRoot;
-  bool list_ports = false;
   act::DeploymentOptions deployment;
 };
 
 Calibration load_calibration(const Options& opt) {
-  if (opt.calibration_path.empty()) {
-    std::cerr << "act_drive: warning: no --calibration file: using 1000/1500/2000 us endpoints, no throttle cap "
-                 "(act_drive --calibrate helps write one)\n";
-    return Calibration{};
+  if (opt.calibration_path.empty()) {  // --dry-run or --raw-endpoints: run() refused every other case
+    std::cerr << "act_drive: warning: no --calibration file: using 1000/1500/2000 us endpoints, forward and reverse "
+                 "throttle capped at 0.3 (act_drive --calibrate helps write one)\n";
+    return Calibration::starting_template();
   }
   return Calibration::load(opt.calibration_path);
 }
@@ -146,28 +195,53 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
 int drive(const Options& opt) {
   const Calibration calibration = load_calibration(opt);
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
-  if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.width, camera_options.height)) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected WxH, e.g. 640x360");
+  camera_options.stepped = opt.realtime == "off";
+  if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.height, camera_options.width)) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
   }
   Camera camera(camera_options);
 
   InferenceWorkerOptions worker_options;
   worker_options.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
+  if (opt.realtime == "off") worker_options.max_frame_age = std::chrono::hours(24);  // a replay's frames have no age
   worker_options.placement = {opt.inference_priority, opt.inference_cpus};
   worker_options.keep_model_inputs = !opt.record_dir.empty();
   InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options, std::cerr);
   const act::ModelInfo info = with_deployment(worker.info(), opt.deployment);  // fails early on a bad override
   check_model(info, calibration, opt);
+  const std::vector<float> initial_state = parse_initial_state(opt.initial_state, info);
   const act::CameraInfo& input = info.cameras.front();
-  if (std::abs(static_cast<double>(camera.width()) / camera.height() - static_cast<double>(input.width) / input.height) > 0.01) {
-    std::cerr << "act_drive: warning: the camera delivers " << camera.width() << "x" << camera.height()
-              << " but the model expects " << input.width << "x" << input.height
-              << ": frames are stretched (use --camera-size with the training aspect ratio)\n";
+  if (!opt.camera_size.empty()) check_camera_size(opt.camera_size, camera_options.height, camera_options.width, camera, input);
+  if (!same_aspect(camera.height(), camera.width(), input.height, input.width)) {
+    std::cerr << "act_drive: warning: the camera delivers " << hxw(camera.height(), camera.width())
+              << " (HxW) but the model expects " << hxw(input.height, input.width)
+              << ": frames are stretched (use --camera-size HxW with the training aspect ratio)\n";
   }
   std::cerr << "act_drive: model " << info.summary << "; " << (info.temporal_ensembling ? "temporal ensembling" : "queue of ")
             << (info.temporal_ensembling ? "" : std::to_string(info.n_action_steps) + " of " + std::to_string(info.chunk_size) + " actions")
-            << "\nact_drive: camera " << opt.camera << " " << camera.width() << "x" << camera.height() << " -> "
-            << input.width << "x" << input.height << "\n";
+            << "\nact_drive: camera " << opt.camera << " " << hxw(camera.height(), camera.width()) << " -> "
+            << hxw(input.height, input.width) << " (HxW)\n";
+
+  // Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
+  // Set up before the board is touched, so that a busy port or a wrong gamepad fails first.
+  std::optional<Cockpit> cockpit;
+  std::optional<LiveView> live_view;
+  std::optional<Gamepad> gamepad;
+  if (!opt.http.empty() || !opt.gamepad.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
+  if (!opt.gamepad.empty()) {
+    gamepad.emplace(opt.gamepad, *cockpit, std::cerr);
+    std::cerr << "act_drive: gamepad " << opt.gamepad << " (" << gamepad->name() << "): left stick steers, right stick "
+              << "throttle, B e-stop, Start resume\n";
+  }
+  if (!opt.http.empty()) {
+    LiveViewOptions view_options;
+    parse_http_address(opt.http, view_options);
+    view_options.image_height = input.height;
+    view_options.image_width = input.width;
+    live_view.emplace(view_options, *cockpit, camera);
+    std::cerr << "act_drive: live view on " << live_view->url() << " (token " << live_view->token()
+              << ": needed to resume, change mode or drive from the page; the e-stop needs none)\n";
+  }
 
   std::unique_ptr<ActuatorLink> link;
   NeutralOnExit neutral_on_exit;
@@ -199,15 +273,23 @@ int drive(const Options& opt) {
 
   std::optional<Recorder> recorder;
   if (!opt.record_dir.empty()) {
-    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, record_meta(opt, info, camera, calibration));
+    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, input.height, input.width,
+                     record_meta(opt, info, camera, calibration));
   }
 
+  std::optional<OverlayVideo> overlay;
+  if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width);
+
   ControlOptions control;
+  control.cockpit = cockpit ? &*cockpit : nullptr;
+  control.overlay = overlay ? &*overlay : nullptr;
+  control.realtime = opt.realtime == "on";
   control.control_hz = opt.control_hz;
   control.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
   control.stats_every_s = opt.stats_every;
   control.duration_s = opt.duration;
   control.state_source = opt.state == "zeros" ? ControlOptions::StateSource::kZeros : ControlOptions::StateSource::kLastAction;
+  control.initial_state = initial_state;
   control.placement = {opt.control_priority, opt.control_cpus};
   control.deployment = opt.deployment;
   ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);
@@ -216,6 +298,12 @@ int drive(const Options& opt) {
     recorder->close();
     std::cerr << "act_drive: recorded to " << opt.record_dir;
     if (recorder->dropped_frames() > 0) std::cerr << " (" << recorder->dropped_frames() << " frames dropped: disk too slow)";
+    std::cerr << "\n";
+  }
+  if (overlay) {
+    overlay->close();
+    std::cerr << "act_drive: overlay video " << opt.overlay_video << ": " << overlay->frames_written() << " ticks";
+    if (overlay->dropped() > 0) std::cerr << " (" << overlay->dropped() << " dropped: the encoder was too slow)";
     std::cerr << "\n";
   }
   std::cerr << summary.to_string();
@@ -247,8 +335,12 @@ void check_camera_kind(const std::string& camera) {
 // act_drive from the parsed options to its exit code: calibration, or driving.
 int run(const Options& opt) {
   try {
-    if (opt.list_ports) {
-      list_pwm_channels(opt.pwm_sysfs_root, std::cout);
+    if (opt.list_cameras || opt.list_ports) {
+      if (opt.list_cameras) list_cameras(std::cout);
+      if (opt.list_ports) {
+        list_ports(std::cout);
+        list_pwm_channels(opt.pwm_sysfs_root, std::cout);
+      }
       return 0;
     }
     if (!opt.pwm.empty()) {
@@ -256,6 +348,13 @@ int run(const Options& opt) {
       act::check(opt.serial.empty() && !opt.dry_run && !opt.calibrate, act::ErrorCode::kInvalidArgument,
                  "--pwm drives the pins itself: not with --serial, --dry-run or --calibrate (write the calibration "
                  "file from act_drive --calibrate's template and check it with a --duration run)");
+    }
+    if (opt.realtime == "off" && !opt.dry_run) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--realtime off replays a file faster than real time: only with --dry-run");
+    }
+    if (opt.mode != "ai" && opt.http.empty() && opt.gamepad.empty()) {
+      act::fail(act::ErrorCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
+                "(the page's stick and keys) or --gamepad /dev/input/eventN");
     }
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
@@ -268,6 +367,13 @@ int run(const Options& opt) {
     if (opt.serial.empty() && opt.pwm.empty() && !opt.dry_run) {
       act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --pwm for the Pi's own PWM pins, or --dry-run "
                                                   "to print the commands)");
+    }
+    if (!opt.dry_run && opt.calibration_path.empty() && !opt.raw_endpoints) {
+      act::fail(act::ErrorCode::kInvalidArgument,
+                (opt.pwm.empty() ? "--serial " + opt.serial : "--pwm " + opt.pwm) +
+                " without --calibration: refusing to drive a real car on guessed pulse widths. "
+                "Measure them with act_drive --calibrate --serial PORT -c calibration.json and pass "
+                "-c calibration.json, or accept raw 1000/1500/2000 us endpoints (throttle capped at 0.3) with --raw-endpoints");
     }
     return drive(opt);
   } catch (const std::exception& e) {
@@ -286,8 +392,9 @@ int main(int argc, char** argv) {
   app.add_option("-m,--model", opt.model, "the .actb model (act_convert output)");
   app.add_option("--camera", opt.camera, "camera: an index (0), a device (/dev/video0), a video file, an image "
                  "sequence (frames/%06d.png), a URL or a GStreamer pipeline ending in appsink");
-  app.add_option("--camera-size", opt.camera_size, "capture resolution WxH to request (default: the camera's); "
-                                                   "frames are then resized to the model's input");
+  app.add_option("--camera-size", opt.camera_size, "capture resolution HxW to request, height first like every size "
+                                                   "here, e.g. 480x640 (default: the camera's); frames are then resized "
+                                                   "to the model's input");
   app.add_option("--camera-fps", opt.camera_fps, "capture rate to request; a video file plays at this rate "
                                                  "(default: its own)")->check(CLI::NonNegativeNumber);
   app.add_option("--serial", opt.serial, "the Arduino's serial port, e.g. /dev/ttyUSB0 or /dev/ttyACM0");
@@ -303,6 +410,13 @@ int main(int argc, char** argv) {
   app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   act::add_deployment_options(app, opt.deployment);
+  app.add_option("--initial-state", opt.initial_state, "observation.state before the first action and after every hold: "
+                 "'mean' (the training mean from the model's statistics) or comma-separated values")->capture_default_str();
+  app.add_flag("--raw-endpoints", opt.raw_endpoints, "drive --serial without a calibration file: 1000/1500/2000 us "
+                                                     "endpoints, throttle capped at 0.3");
+  app.add_flag("--list-cameras", opt.list_cameras, "list the V4L2 cameras and exit");
+  app.add_flag("--list-ports", opt.list_ports, "list the serial ports (USB ones with maker and product) and the PWM chips "
+               "and channels (--pwm), then exit");
   app.add_option("--state", opt.state, "the model's observation.state: the last action executed, or zeros")
       ->capture_default_str()->check(CLI::IsMember({"last-action", "zeros"}));
   app.add_option("--control-priority", opt.control_priority, "SCHED_FIFO priority of the control thread (1-99, 0 = off; "
@@ -318,6 +432,18 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--record", opt.record_dir, "save frames, states, actions and timings to this new folder (README: "
                                              "recording format; usable as act_convert calibration input)");
+  app.add_option("--http", opt.http, "serve the live view (frame, gauges, e-stop, driving by hand) on [ADDR:]PORT, "
+                                     "e.g. 8887; 127.0.0.1 unless an address is given (0.0.0.0: every interface)");
+  app.add_option("--gamepad", opt.gamepad, "drive by hand with this evdev gamepad (/dev/input/eventN): left stick "
+                                           "steers, right stick throttle, B e-stop, Start resume");
+  app.add_option("--mode", opt.mode, "who drives: ai (the policy; manual input overrides it until resumed), manual "
+                                     "(by hand), ai-steer (the policy steers, the throttle is by hand)")
+      ->capture_default_str()->check(CLI::IsMember({"ai", "manual", "ai-steer"}));
+  app.add_option("--overlay-video", opt.overlay_video, "write every tick as a video frame: the model's view with the "
+                                                      "gauges, the chunk ahead and who drove (e.g. out.mp4)");
+  app.add_option("--realtime", opt.realtime, "off: replay a video file or image sequence as fast as the machine allows, "
+                                             "each inference waited for (with --dry-run, e.g. for --overlay-video)")
+      ->capture_default_str()->check(CLI::IsMember({"on", "off"}));
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
                                              "calibration file to edit), then write --calibration");
@@ -326,7 +452,6 @@ int main(int argc, char** argv) {
                                    "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "
                                    "if act_drive dies");
   app.add_option("--pwm-sysfs-root", opt.pwm_sysfs_root, "where the PWM chips are (a test and expert knob)")->capture_default_str();
-  app.add_flag("--list-ports", opt.list_ports, "list the PWM chips and channels found, then exit");
   CLI11_PARSE(app, argc, argv);
 
   install_signal_handlers();

@@ -24,9 +24,7 @@ void write_text(const fs::path& path, const std::string& text) {
 // act_drive's calibration file (apps/drive/calibration.h) with placeholder endpoints and a low
 // throttle cap, plus comments on what to measure and which act_drive flags set the rest.
 std::string calibration_template(const ModelInfo& m) {
-  drive::Calibration calibration;
-  calibration.max_forward = 0.3;
-  calibration.max_reverse = 0.3;
+  const drive::Calibration calibration = drive::Calibration::starting_template();
   nlohmann::ordered_json j;
   j["_comment"] = "Written by act_convert --package: act_drive's calibration file (README, act_drive). The pulse "
                   "widths are placeholders: measure your servo and ESC with act_drive --calibrate --serial PORT -c "
@@ -36,7 +34,7 @@ std::string calibration_template(const ModelInfo& m) {
                       std::to_string(calibration.throttle.action_index) + "), n_action_steps " +
                       std::to_string(m.n_action_steps);
   for (const CameraInfo& camera : m.cameras) {
-    const std::string size = std::to_string(camera.width) + "x" + std::to_string(camera.height);
+    const std::string size = std::to_string(camera.height) + "x" + std::to_string(camera.width);  // HxW, as everywhere
     model += ", camera " + camera.key + " " + size + " (act_drive --camera-size " + size + ")";
   }
   j["_model"] = model;

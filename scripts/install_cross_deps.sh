@@ -20,7 +20,8 @@
 set -euo pipefail
 
 host_packages=(g++-aarch64-linux-gnu)
-arm64_packages=(libc6 libstdc++6 zlib1g-dev libcpuinfo0)
+arm64_packages=(libc6 libstdc++6 zlib1g-dev libcpuinfo0
+                libserialport-dev libevdev-dev libcpp-httplib-dev)  # act_drive (--list-ports, --gamepad, --http)
 if [ "${1:-}" != "--packaging" ]; then  # the tests under emulation; --packaging: only the arm64 packages' build
   host_packages+=(qemu-user)
   arm64_packages+=(libgtest-dev libgmock-dev)

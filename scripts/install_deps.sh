@@ -11,6 +11,7 @@ packages=(  # the library, the apps and their Debian packages (dpkg-shlibdeps, f
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libxsimd-dev nlohmann-json3-dev libcli11-dev libcpuinfo-dev zlib1g-dev
   libopencv-dev
+  libcpp-httplib-dev libserialport-dev libevdev-dev  # act_drive: live view server, port listing, gamepads
   libonnx-dev libprotobuf-dev  # act_convert --export-onnx: ONNX's protobuf classes, checker, shape inference
   dpkg-dev file
 )
@@ -19,6 +20,7 @@ if [ "$mode" != "--packaging" ]; then
     git libgtest-dev libgmock-dev libbenchmark-dev
     gcc-avr avr-libc arduino-core-avr
     python3 python3-numpy python3-torch
+    python3-pil               # act_drive's recording_to_lerobot.py and its test
     python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (engine/python) and its tests
     clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
     nodejs                    # ONNX Runtime (npm's onnxruntime-node) in the export tests

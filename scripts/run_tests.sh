@@ -65,16 +65,17 @@ full_size='^(Presets/|Onnx)'
 # The host's Debian packages from the Release tree (test/consumer/run_package_test.sh): its libraries
 # and apps are built for it; the ASan stage's would not run outside their sanitizer runtime.
 packages='^debian_packages$'
-# The HTML reports in headless chromium (Node; Release only, like the ONNX Runtime tests).
-web_pages='^html_report_pages$'
+# The web pages in headless chromium (Node; Release only, like the ONNX Runtime tests): the HTML
+# reports and act_drive's live view.
+web_pages='^html_report_pages$|^ActDriveLiveView\.'
 
 echo "== Release build of the full-size model tests, the kernel benchmarks and the packaged libraries and apps (-Werror) =="
 cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON \
   -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints" >/dev/null
 cmake --build "$root/build" -j "$jobs" --target act_model_tests act_kernel_bench \
-  actengine actengine_convert actengine_vision act_convert act_eval act_bench act_drive
+  actengine actengine_convert actengine_vision act_convert act_eval act_bench act_drive act_drive_browser_tests
 stage_done release-build
-echo "== Release: full-size model tests, the Debian packages =="
+echo "== Release: full-size model tests, the Debian packages, the web pages =="
 run_ctest "$root/build" -R "$full_size|$packages|$web_pages"
 stage_done release-tests
 echo "== Release: the Python module (engine/python, pytest) =="

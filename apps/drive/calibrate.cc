@@ -28,7 +28,7 @@ constexpr const char* kTemplateNotes =
     "  steering.left_us / center_us / right_us     where the wheels point full left, straight, full right\n"
     "  throttle.reverse_us / neutral_us / forward_us  full reverse, stopped, full forward\n"
     "  invert          true if the model's +1 should mean left / reverse on this car\n"
-    "  max_forward / max_reverse   throttle cap as a fraction of full (start low, e.g. 0.3)\n"
+    "  max_forward / max_reverse   throttle cap as a fraction of full (0.3 here: raise it slowly)\n"
     "  rate_limit_us_per_s         largest pulse change per second (0 = unlimited)\n"
     "  action_index    which action value drives the channel; action_units: normalized (-1..1) or microseconds\n"
     "Or run: act_drive --calibrate --serial /dev/ttyUSB0 -c calibration.json to find them interactively.\n";
@@ -75,7 +75,7 @@ int run_calibration(const CalibrateOptions& options, const std::atomic<bool>& st
                     std::ostream& log) {
   const std::string output = options.output_path.empty() ? "calibration.json" : options.output_path;
   // Start from the file being edited, so one channel can be re-measured without losing the other.
-  Calibration calibration = std::filesystem::exists(output) ? Calibration::load(output) : Calibration{};
+  Calibration calibration = std::filesystem::exists(output) ? Calibration::load(output) : Calibration::starting_template();
   if (options.serial.empty()) {
     out << calibration.to_json().dump(2) << "\n";
     log << kTemplateNotes;

@@ -124,6 +124,13 @@ Calibration Calibration::from_json(const nlohmann::json& json, const std::string
   return cal;
 }
 
+Calibration Calibration::starting_template() {
+  Calibration calibration;
+  calibration.max_forward = 0.3;
+  calibration.max_reverse = 0.3;
+  return calibration;
+}
+
 Calibration Calibration::load(const std::string& path) {
   try {
     return from_json(nlohmann::json(detail::read_json_file(path)), path);
@@ -182,6 +189,26 @@ PwmCommand Calibration::map(std::span<const float> action) const {
   const double steer = normalized(steering);
   const double throttle_value = std::clamp(normalized(throttle), -max_reverse, max_forward);
   return {us_from_normalized(steer, steering), us_from_normalized(throttle_value, throttle)};
+}
+
+double position_of(double us, const ChannelCalibration& ch) { return normalized_from_us(us, ch); }
+
+PwmCommand Calibration::map_manual(double steering_value, double throttle_value) const {
+  if (!std::isfinite(steering_value) || !std::isfinite(throttle_value)) return safe_command();
+  return {us_from_normalized(std::clamp(steering_value, -1.0, 1.0), steering),
+          us_from_normalized(std::clamp(throttle_value, -max_reverse, max_forward), throttle)};
+}
+
+std::vector<float> Calibration::action_of(PwmCommand command, int action_dim) const {
+  std::vector<float> action(static_cast<size_t>(action_dim), 0.0f);
+  for (const auto& [ch, us] : {std::pair{&steering, command.steering_us}, std::pair{&throttle, command.throttle_us}}) {
+    if (ch->action_index >= action_dim) continue;
+    double v = normalized_from_us(us, *ch);
+    if (ch->invert) v = -v;
+    action[static_cast<size_t>(ch->action_index)] =
+        static_cast<float>(action_units == Units::kNormalized ? v : us_from_normalized(v, *ch));
+  }
+  return action;
 }
 
 RateLimiter::RateLimiter(const Calibration& calibration)

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -40,6 +41,11 @@ struct Calibration {
   double max_forward = 1.0;  ///< throttle cap, a fraction of full forward (0..1)
   double max_reverse = 1.0;  ///< throttle cap, a fraction of full reverse (0..1)
 
+  /// Where every calibration starts before its endpoints are measured (`act_drive --calibrate`'s
+  /// template, the package's drive_calibration.json, --raw-endpoints and --dry-run without a file):
+  /// 1000/1500/2000 us endpoints with the throttle capped at 0.3 of full either way, so that a
+  /// wrong guess cannot launch the car.
+  static Calibration starting_template();
   /// Parses and validates; throws act::Error naming `source` and the offending field. Fields whose
   /// name starts with '_' are comments; any other unknown field is an error (a typo must not fall
   /// back to a default silently).
@@ -54,6 +60,13 @@ struct Calibration {
   /// action gives safe_command(): this is the last step before the wire, and a non-finite number
   /// must never become a pulse width (it once became "$C,10,0,0").
   PwmCommand map(std::span<const float> action) const;
+  /// A human's command (a stick or the web page): -1 = full left / full reverse, +1 = full right /
+  /// full forward on this car (so `invert`, which is about the model, does not apply); clamped and
+  /// throttle-capped like map(). Non-finite values give safe_command().
+  PwmCommand map_manual(double steering_value, double throttle_value) const;
+  /// The raw action (action_dim values, in the model's units, zeros where no channel reads) that
+  /// map() would turn into `command`: what was actually executed, as a training target.
+  std::vector<float> action_of(PwmCommand command, int action_dim) const;
   /// The largest action index used (to check against the model's action_dim).
   int max_action_index() const;
   /// Throws act::Error(kInvalidArgument) when action_units cannot be the units of the model's
@@ -61,6 +74,10 @@ struct Calibration {
   /// [-1, 1], or "normalized" for one whose actions are pulse widths. Either would drive at full lock.
   void check_units(const ModelInfo& model) const;
 };
+
+/// Where a pulse width lies on its channel: -1 at low_us (full left / reverse), 0 at mid_us, +1 at
+/// high_us (unclamped).
+double position_of(double us, const ChannelCalibration& ch);
 
 /// Limits how fast each pulse width may change between control ticks (calibration rate limits).
 class RateLimiter {

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cctype>
 #include <condition_variable>
+#include <cmath>
 #include <filesystem>
 #include <mutex>
 #include <vector>
@@ -93,6 +94,8 @@ struct Camera::Shared {
   std::string problem;
   bool stop_requested = false;
   bool thread_ended = false;
+  uint64_t wanted = 0;     // stepped: the newest frame index advance_to asked for
+  double file_fps = 30;    // a file's frame rate (its own, or CameraOptions::fps); set before run()
 };
 
 Camera::Camera(CameraOptions options) {
@@ -101,6 +104,10 @@ Camera::Camera(CameraOptions options) {
   const std::string& source = shared_->options.source;
   cv::VideoCapture& video = shared_->video;
   is_file_ = kind == SourceKind::kFile;
+  if (shared_->options.stepped && kind != SourceKind::kFile) {
+    fail(ErrorCode::kInvalidArgument, "--realtime off replays a video file or an image sequence; '" + source +
+                                          "' is a live source");
+  }
   open_capture(video, shared_->options, kind);
   if (!video.isOpened()) {
     const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) && !std::filesystem::exists(source);
@@ -119,6 +126,8 @@ Camera::Camera(CameraOptions options) {
   width_ = first.cols;
   height_ = first.rows;
   shared_->latest = std::make_shared<const Frame>(Frame{first, Clock::now(), 0});
+  const double fps = shared_->options.fps > 0 ? shared_->options.fps : video.get(cv::CAP_PROP_FPS);
+  if (fps > 0 && fps < 1000) shared_->file_fps = fps;
   thread_ = std::thread([shared = shared_] {
     shared->run();
     std::lock_guard lock(shared->mutex);
@@ -153,6 +162,16 @@ std::shared_ptr<const Frame> Camera::latest() const {
   return shared_->latest;
 }
 
+void Camera::advance_to(double time_s) const {
+  if (!shared_->options.stepped) return;
+  Shared& s = *shared_;
+  const auto wanted = static_cast<uint64_t>(std::floor(time_s * s.file_fps + 1e-6));
+  std::unique_lock lock(s.mutex);
+  s.wanted = std::max(s.wanted, wanted);
+  s.changed.notify_all();
+  s.changed.wait(lock, [&] { return s.latest->index >= wanted || s.state == State::kEnded || s.thread_ended; });
+}
+
 FrameSource::State Camera::state() const {
   std::lock_guard lock(shared_->mutex);
   return shared_->state;
@@ -177,25 +196,32 @@ bool Camera::Shared::wait_for_stop(Clock::time_point deadline) {
 void Camera::Shared::run() {
   const bool is_file = kind == SourceKind::kFile;
   // A video file plays at its own rate (or --camera-fps), not as fast as it decodes.
-  double file_fps = options.fps > 0 ? options.fps : video.get(cv::CAP_PROP_FPS);
-  if (!(file_fps > 0 && file_fps < 1000)) file_fps = 30;
   const auto file_start = Clock::now();
   const auto file_frame_due = [&](uint64_t i) {
     return file_start +
            std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(static_cast<double>(i) / file_fps));
   };
+  // Stepped: a frame when advance_to asks for it.
+  const auto frame_wanted = [this](uint64_t i) {
+    std::unique_lock lock(mutex);
+    changed.wait(lock, [&] { return stop_requested || wanted >= i; });
+    return !stop_requested;
+  };
   uint64_t index = 1;
   // A live source is read at once, a file's frame when it is due; a stop request ends either wait.
-  while (!wait_for_stop(is_file ? file_frame_due(index) : Clock::time_point{})) {
+  while (options.stepped ? frame_wanted(index) : !wait_for_stop(is_file ? file_frame_due(index) : Clock::time_point{})) {
     cv::Mat image;
     const auto read_start = Clock::now();
     const bool ok = video.read(image) && !image.empty();
     if (ok) {
       auto frame = std::make_shared<const Frame>(Frame{std::move(image), Clock::now(), index++});
-      std::lock_guard lock(mutex);
-      latest = std::move(frame);
-      state = State::kRunning;
-      problem.clear();
+      {
+        std::lock_guard lock(mutex);
+        latest = std::move(frame);
+        state = State::kRunning;
+        problem.clear();
+      }
+      changed.notify_all();  // advance_to waits for it
       continue;
     }
     if (is_file) {

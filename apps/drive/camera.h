@@ -35,6 +35,9 @@ class FrameSource {
   virtual State state() const = 0;
   /// Why the source is not running (empty while it runs).
   virtual std::string problem() const = 0;
+  /// An offline replay: makes the frame for `time_s` (seconds since the first frame) the latest,
+  /// waiting for it to be read. Sources that run in real time ignore it.
+  virtual void advance_to(double /*time_s*/) const {}
 };
 
 struct CameraOptions {
@@ -49,6 +52,9 @@ struct CameraOptions {
   /// 30 s for each). Opening covers FFmpeg's probing, which can read a few seconds of a live stream.
   std::chrono::milliseconds open_timeout{10000};
   std::chrono::milliseconds read_timeout{2000};
+  /// A file's frames are read only when advance_to() asks for them, not at their rate (an offline
+  /// replay, --realtime off). Refused for a live source.
+  bool stepped = false;
 };
 
 class Camera : public FrameSource {
@@ -74,6 +80,7 @@ class Camera : public FrameSource {
   std::shared_ptr<const Frame> latest() const override;
   State state() const override;
   std::string problem() const override;
+  void advance_to(double time_s) const override;
   /// The size frames arrive in (after the driver applied the request).
   int width() const { return width_; }
   int height() const { return height_; }

@@ -43,10 +43,26 @@ std::string format_stage(const char* name, const LatencySummary& s) {
 // per episode, not per tick.
 std::string fault_kind(const std::string& fault) { return fault.substr(0, fault.find(" (")); }
 
+// The policy steers, a human holds the throttle (--mode ai-steer).
+constexpr const char* kAiSteerSource = "chunk+manual-throttle";
+
+// Who chose a tick's command, from its source ("chunk", "manual...", "safe:<reason>").
+std::string driver_of(const std::string& source) {
+  if (source == "chunk") return "ai";
+  if (source == kAiSteerSource) return "ai-steer";
+  return source == "manual" ? "manual" : "safe";
+}
+
 // Raises the estimate at once and lowers it slowly: a slow inference must not be forgotten quickly.
 double track_latency(double estimate, double sample) { return sample > estimate ? sample : 0.9 * estimate + 0.1 * sample; }
 
 }  // namespace
+
+std::vector<float> training_mean_state(const ModelInfo& info) {
+  std::vector<float> mean(info.state_low.size());
+  for (size_t i = 0; i < mean.size(); ++i) mean[i] = (info.state_low[i] + info.state_high[i]) / 2.0f;
+  return mean;
+}
 
 std::vector<float> safe_raw_action(const Calibration& calibration, int action_dim) {
   std::vector<float> action(static_cast<size_t>(action_dim), 0.0f);
@@ -70,7 +86,9 @@ std::string DriveSummary::to_string() const {
                 static_cast<unsigned long long>(overrun_ticks), static_cast<unsigned long long>(overrun_events),
                 static_cast<unsigned long long>(inferences), static_cast<unsigned long long>(inference_errors),
                 static_cast<unsigned long long>(stale_frames), static_cast<unsigned long long>(link_down_ticks));
-  s << line << format_stage("capture age", capture_age_ms) << format_stage("preprocess", preprocess_ms)
+  s << line;
+  if (manual_ticks > 0) s << "  " << manual_ticks << " ticks driven by hand\n";
+  s << format_stage("capture age", capture_age_ms) << format_stage("preprocess", preprocess_ms)
     << format_stage("infer", infer_ms) << format_stage("serial write", serial_write_ms)
     << format_stage("tick jitter", jitter_ms) << "  " << link_summary << "\n";
   return s.str();
@@ -95,6 +113,24 @@ namespace {
 // Ticks of margin on top of the measured inference latency before the chunk runs out: they absorb
 // jitter in the inference time (a busy machine).
 constexpr int kInferenceMarginTicks = 2;
+
+// How far from the training mean a state may go, in the statistics' half-widths, before the warning.
+constexpr double kTrainingRangeHalfWidths = 3.0;
+
+// ControlOptions::initial_state, or without one the safe action's first state_dim values.
+std::vector<float> initial_state(const ControlOptions& options, int state_dim, const std::vector<float>& safe_action) {
+  std::vector<float> state(static_cast<size_t>(state_dim), 0.0f);
+  if (options.state_source != ControlOptions::StateSource::kLastAction) return state;
+  if (!options.initial_state.empty()) {
+    if (options.initial_state.size() != state.size()) {
+      fail(ErrorCode::kInvalidArgument, "the initial state has " + std::to_string(options.initial_state.size()) +
+                                            " values, the model's state " + std::to_string(state_dim));
+    }
+    return options.initial_state;
+  }
+  std::copy_n(safe_action.begin(), std::min(state.size(), safe_action.size()), state.begin());
+  return state;
+}
 
 ChunkScheduler make_scheduler(const ModelInfo& info) {
   StatusOr<ChunkScheduler> scheduler = ChunkScheduler::create(info);
@@ -125,11 +161,11 @@ class ControlRun {
         period_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.control_hz))),
         period_s_(1.0 / options.control_hz),
         safe_(calibration.safe_command()),
-        safe_action_(safe_raw_action(calibration, info_.action_dim)),
         scheduler_(make_scheduler(info_)),
         limiter_(calibration),
         action_(static_cast<size_t>(info_.action_dim)),
-        last_action_(safe_action_) {}
+        initial_state_(initial_state(options, info_.state_dim, safe_raw_action(calibration, info_.action_dim))),
+        state_(initial_state_) {}
 
   DriveSummary run(const std::atomic<bool>& stop) {
     start_ = Clock::now();
@@ -147,8 +183,10 @@ class ControlRun {
       const FrameSource::State source_state = frames_.state();
       check_camera(source_state, tick.now);
       PwmCommand command = safe_;
+      if (recorder_) tick_state_ = state_;  // the state before this tick's action, as a dataset has it
       const std::string source = choose_action(tick, command);
       send(tick, source, command);
+      if (options_.cockpit || options_.overlay) publish(tick, source, command);
       if (source_state == FrameSource::State::kEnded) {
         summary_.end_reason = frames_.problem();
         break;
@@ -168,6 +206,11 @@ class ControlRun {
   // Sleeps until tick `index` is due. Woken up a whole period late (a stalled machine), it skips the
   // missed ticks instead of bursting: the tick returned is then a later one.
   Tick wait_for(int64_t index) {
+    if (!options_.realtime) {  // a replay: no waiting, the camera steps to the tick's time
+      frames_.advance_to(static_cast<double>(index) / options_.control_hz);  // exact: period_ is rounded to ns
+      const auto now = Clock::now();
+      return {index, now, now};
+    }
     Clock::time_point scheduled = start_ + period_ * index;
     std::this_thread::sleep_until(scheduled);
     const auto now = Clock::now();
@@ -184,7 +227,8 @@ class ControlRun {
   // Why the run ends at this tick, or "" to go on.
   std::string end_reason(const Tick& tick, const std::atomic<bool>& stop) const {
     if (stop.load()) return "stopped by a signal";
-    if (options_.duration_s > 0 && tick.now - start_ >= std::chrono::duration<double>(options_.duration_s)) {
+    const double elapsed_s = options_.realtime ? std::chrono::duration<double>(tick.now - start_).count() : tick_time(tick.index);
+    if (options_.duration_s > 0 && elapsed_s >= options_.duration_s) {
       return "--duration reached";
     }
     return "";
@@ -202,8 +246,12 @@ class ControlRun {
     capture_age_.add(result->frame_age_ms);
     preprocess_.add(result->preprocess_ms);
     infer_.add(result->infer_ms);
+    last_capture_age_ms_ = result->frame_age_ms;
+    last_preprocess_ms_ = result->preprocess_ms;
+    last_infer_ms_ = result->infer_ms;
     if (!result->error.empty()) return inference_failed(result->error, tick.now);
-    const int64_t observation_tick = std::min(tick.index, tick_of(result->frame_captured));
+    // A replay's inference ran on the frame of the tick that asked for it, the tick before this one.
+    const int64_t observation_tick = options_.realtime ? std::min(tick.index, tick_of(result->frame_captured)) : tick.index - 1;
     if (const Status added = scheduler_.add(result->chunk, observation_tick); !added.ok()) {
       return inference_failed("the model returned an unusable chunk: " + added.message(), tick.now);
     }
@@ -234,38 +282,80 @@ class ControlRun {
   void check_camera(FrameSource::State source_state, Clock::time_point now) {
     if (source_state != FrameSource::State::kRunning) {
       fault_ = frames_.problem();
-    } else if (const auto frame = frames_.latest(); !frame || now - frame->captured > options_.max_frame_age) {
+    } else if (const auto frame = frames_.latest();
+               !frame || (options_.realtime && now - frame->captured > options_.max_frame_age)) {  // a replay's have no age
       fault_ = "stale frame (newest is " + (frame ? std::to_string(std::lround(ms_between(frame->captured, now))) : "none") +
                " ms old, --max-frame-age " + std::to_string(options_.max_frame_age.count()) + " ms)";
     }
   }
 
-  // This tick's action into `command` (left safe unless a chunk drives); returns its source for the
-  // recording: "chunk", "safe:fault", "safe:overrun" or "safe:waiting".
+  // This tick's action into `command` (left safe unless someone drives); returns its source for the
+  // recording: "chunk", "chunk+manual-throttle" (ai-steer), "manual", "safe:e-stop", "safe:fault",
+  // "safe:overrun" or "safe:waiting".
   std::string choose_action(const Tick& tick, PwmCommand& command) {
+    pilot_ = options_.cockpit ? options_.cockpit->input(tick.now) : PilotInput{};
     std::string source;
-    if (!fault_.empty()) {
+    if (pilot_.estopped || pilot_.manual_drives()) {
+      scheduler_.clear();  // the policy starts afresh when it drives again
+      executing_ = false;
+    }
+    if (pilot_.estopped) {
+      source = "safe:e-stop";
+    } else if (pilot_.manual_drives()) {
+      command = limiter_.step(calibration_.map_manual(pilot_.steering, pilot_.throttle), period_s_);
+      follow_action(calibration_.action_of(command, info_.action_dim));
+      ++summary_.manual_ticks;
+      overrunning_ = false;
+      previous_fault_.clear();
+      return "manual";
+    } else if (!fault_.empty()) {
       hold_for_fault(tick.now);
       source = "safe:fault";
     } else if (scheduler_.action_at(tick.index, action_).ok()) {
-      command = limiter_.step(calibration_.map(action_), period_s_);
-      last_action_ = action_;
-      executing_ = true;
+      PwmCommand target = calibration_.map(action_);
       source = "chunk";
+      if (pilot_.mode == DriveMode::kAiSteer) {
+        target.throttle_us = calibration_.map_manual(0, pilot_.throttle).throttle_us;
+        source = kAiSteerSource;
+      }
+      command = limiter_.step(target, period_s_);
+      follow_action(source == "chunk" ? action_ : calibration_.action_of(command, info_.action_dim));
+      executing_ = true;
       ++summary_.driving_ticks;
     } else {
       source = run_dry();
     }
-    if (source != "chunk") {
+    if (source.rfind("safe:", 0) == 0) {
       overrunning_ = overrunning_ && fault_.empty();
       limiter_.reset(safe_);
-      last_action_ = safe_action_;
+      state_ = initial_state_;
       ++summary_.safe_ticks;
     } else {
       overrunning_ = false;
     }
     previous_fault_ = fault_;
     return source;
+  }
+
+  // With --state last-action the executed action becomes the next state (its first state_dim values,
+  // zero-padded); warns once when that leaves the training range.
+  void follow_action(const std::vector<float>& action) {
+    if (options_.state_source != ControlOptions::StateSource::kLastAction) return;
+    std::fill(state_.begin(), state_.end(), 0.0f);
+    std::copy_n(action.begin(), std::min(state_.size(), action.size()), state_.begin());
+    if (warned_state_range_) return;
+    for (size_t i = 0; i < std::min(state_.size(), info_.state_low.size()); ++i) {
+      // Normalised -1 / +1 are the mean -/+ one standard deviation (or the min and max): 3 of those
+      // half-widths from the middle is well outside what the model was trained on.
+      const double middle = (info_.state_low[i] + info_.state_high[i]) / 2.0;
+      const double half = (info_.state_high[i] - info_.state_low[i]) / 2.0;
+      if (std::abs(state_[i] - middle) <= kTrainingRangeHalfWidths * std::abs(half)) continue;
+      warned_state_range_ = true;
+      log_ << "act_drive: warning: observation.state[" << i << "] = " << state_[i] << " left the training range ["
+           << middle - kTrainingRangeHalfWidths * std::abs(half) << ", " << middle + kTrainingRangeHalfWidths * std::abs(half)
+           << "] (the training mean -/+ 3 standard deviations): the policy is extrapolating (warned once)\n";
+      return;
+    }
   }
 
   // A fault drops every chunk; warns once per episode (a new kind of fault starts one).
@@ -304,20 +394,50 @@ class ControlRun {
     ++summary_.ticks;
     if (recorder_) {
       recorder_->add(TickRecord{tick.index, tick_time(tick.index), ms_between(tick.scheduled, tick.now), source,
-                                source == "chunk" ? action_ : std::vector<float>{}, command, sent});
+                                source.rfind("chunk", 0) == 0 ? action_ : std::vector<float>{}, command, sent, driver_of(source),
+                                tick_state_, calibration_.action_of(command, info_.action_dim), frames_.latest()});
     }
   }
 
   // Keeps the next chunk coming while this one executes.
   void request_inference(int64_t tick) {
-    if (!fault_.empty() || inference_.busy()) return;
+    if (!fault_.empty() || pilot_.estopped || pilot_.manual_drives() || inference_.busy()) return;
     const int lead_ticks = static_cast<int>(std::ceil(latency_ticks_)) + kInferenceMarginTicks;
     if (!scheduler_.wants_inference(tick, lead_ticks)) return;
-    std::vector<float> state(static_cast<size_t>(info_.state_dim), 0.0f);
-    if (options_.state_source == ControlOptions::StateSource::kLastAction) {
-      std::copy_n(last_action_.begin(), std::min(state.size(), last_action_.size()), state.begin());
+    inference_.request(state_);
+    if (!options_.realtime) inference_.wait_for_result();
+  }
+
+  // The status for the live page and the overlay video: this tick, and the policy's commands ahead of it.
+  void publish(const Tick& tick, const std::string& source, const PwmCommand& command) {
+    LiveStatus status;
+    status.tick = tick.index;
+    status.time_s = tick_time(tick.index);
+    status.source = source;
+    status.driver = driver_of(source);
+    status.fault = pilot_.estopped ? "e-stop (resume to drive)" : fault_;
+    status.command = command;
+    status.steering = position_of(command.steering_us, calibration_.steering);
+    status.throttle = position_of(command.throttle_us, calibration_.throttle);
+    std::vector<float> ahead(action_.size());
+    for (int64_t t = tick.index; scheduler_.action_at(t, ahead).ok(); ++t) {
+      const PwmCommand planned = calibration_.map(ahead);
+      status.steering_ahead.push_back(static_cast<float>(position_of(planned.steering_us, calibration_.steering)));
+      status.throttle_ahead.push_back(static_cast<float>(position_of(planned.throttle_us, calibration_.throttle)));
     }
-    inference_.request(std::move(state));
+    status.capture_age_ms = last_capture_age_ms_;
+    status.preprocess_ms = last_preprocess_ms_;
+    status.infer_ms = last_infer_ms_;
+    status.jitter_ms = ms_between(tick.scheduled, tick.now);
+    status.ticks = summary_.ticks;
+    status.inferences = summary_.inferences;
+    status.overruns = summary_.overrun_events;
+    std::shared_ptr<const Frame> frame = frames_.latest();
+    if (frame) status.frame_index = frame->index;
+    status.pilot = pilot_;
+    status.control_hz = options_.control_hz;
+    if (options_.overlay) options_.overlay->add(status, std::move(frame));
+    if (options_.cockpit) options_.cockpit->publish(std::move(status));
   }
 
   void report_stats(Clock::time_point now) {
@@ -356,7 +476,6 @@ class ControlRun {
   const Clock::duration period_;
   const double period_s_;
   const PwmCommand safe_;
-  const std::vector<float> safe_action_;
 
   ChunkScheduler scheduler_;
   RateLimiter limiter_;
@@ -364,7 +483,12 @@ class ControlRun {
   StageSamples capture_age_, preprocess_, infer_, serial_write_, jitter_;
   Clock::time_point start_, last_stats_;
   std::vector<float> action_;
-  std::vector<float> last_action_;  // the state the model sees (--state last-action)
+  const std::vector<float> initial_state_;
+  std::vector<float> state_;  // what the model sees as observation.state next
+  std::vector<float> tick_state_;  // state_ when the tick began (recorded)
+  bool warned_state_range_ = false;
+  PilotInput pilot_;  // this tick's e-stop, mode and manual input
+  double last_capture_age_ms_ = 0, last_preprocess_ms_ = 0, last_infer_ms_ = 0;  // for the live page
   double latency_ticks_ = 0;
   int consecutive_errors_ = 0;
   bool executing_ = false;    // a chunk was driving the last tick: running dry now is an overrun

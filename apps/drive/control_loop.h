@@ -14,7 +14,9 @@
 #include "apps/bench_support.h"
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
+#include "apps/drive/cockpit.h"
 #include "apps/drive/inference.h"
+#include "apps/drive/overlay_video.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
 
@@ -33,6 +35,19 @@ struct ControlOptions {
   /// What the model gets as observation.state: the last raw action executed (its first state_dim
   /// values, zero-padded), or zeros.
   enum class StateSource { kLastAction, kZeros } state_source = StateSource::kLastAction;
+  /// The state before the first action and again after every hold (the rover restarts from a stop),
+  /// with kLastAction: state_dim values (act_drive's default is the training mean, --initial-state).
+  /// Empty = the safe action's first state_dim values.
+  std::vector<float> initial_state;
+  /// The live page and gamepad: e-stop, modes, driving by hand, and where the status goes. Null =
+  /// the policy drives alone.
+  Cockpit* cockpit = nullptr;
+  /// False: an offline replay of a file as fast as the machine allows (--realtime off, dry runs
+  /// only). Ticks follow each other at once, each advances the camera to its time, and each
+  /// inference is waited for, so a replay is the same however fast the machine is.
+  bool realtime = true;
+  /// Every tick drawn into a video (--overlay-video); null = none.
+  OverlayVideo* overlay = nullptr;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
   DeploymentOptions deployment;  ///< replaces the blob's n_action_steps / temporal ensembling
 };
@@ -51,6 +66,7 @@ struct DriveSummary {
   int exit_code = 0;
   std::string end_reason;
   uint64_t ticks = 0, driving_ticks = 0, safe_ticks = 0;
+  uint64_t manual_ticks = 0;  ///< ticks a human drove (part of neither of the two above)
   uint64_t missed_ticks = 0;  ///< ticks skipped because the loop woke up a whole period late
   uint64_t overrun_ticks = 0, overrun_events = 0;  ///< the chunk ran out before the next was ready
   uint64_t inferences = 0, inference_errors = 0, stale_frames = 0, link_down_ticks = 0;
@@ -79,6 +95,9 @@ class ControlLoop {
   Recorder* recorder_;
   std::ostream& log_;
 };
+
+/// The middle of the model's training statistics for observation.state (ModelInfo::state_low/high).
+std::vector<float> training_mean_state(const ModelInfo& info);
 
 /// The raw action that corresponds to the safe command (centre, neutral) in the model's units.
 std::vector<float> safe_raw_action(const Calibration& calibration, int action_dim);

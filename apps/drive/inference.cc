@@ -106,6 +106,11 @@ std::optional<InferenceResult> InferenceWorker::take_result() {
   return out;
 }
 
+void InferenceWorker::wait_for_result() {
+  std::unique_lock lock(mutex_);
+  wake_.wait(lock, [this] { return !busy_ || result_.has_value(); });
+}
+
 void InferenceWorker::run(ModelFactory factory) {
   std::unique_ptr<ChunkModel> model;
   try {
@@ -139,8 +144,11 @@ void InferenceWorker::run(ModelFactory factory) {
     } catch (const std::exception& e) {  // a frame the preprocessing cannot take, out of memory...
       result.error = std::string("inference failed: ") + e.what();
     }
-    std::lock_guard lock(mutex_);
-    result_ = std::move(result);
+    {
+      std::lock_guard lock(mutex_);
+      result_ = std::move(result);
+    }
+    wake_.notify_all();  // wait_for_result
   }
 }
 

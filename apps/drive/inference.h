@@ -79,6 +79,9 @@ class InferenceWorker {
   void request(std::vector<float> state);
   /// The finished result, if there is one (never blocks).
   std::optional<InferenceResult> take_result();
+  /// Blocks until the requested result is ready (an offline replay's lockstep; the real-time loop
+  /// never calls it).
+  void wait_for_result();
 
  private:
   void run(ModelFactory factory);

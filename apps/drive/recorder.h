@@ -5,7 +5,12 @@
 //   DIR/log.jsonl         one line per inference: {"frame": "frames/NNNNNN.png", "state": [...],
 //                         "tick", "time_s", "frame_index", "frame_age_ms"} (what act_convert
 //                         --calib reads from a recording)
-//   DIR/ticks.csv         one row per control tick: the action, where it came from, the PWM sent
+//   DIR/ticks.csv         one row per control tick: the action, where it came from, the PWM sent;
+//                         then who chose it (driver: ai, manual or safe), the tick's camera frame,
+//                         the state and the command actually sent in the model's units (what
+//                         scripts/recording_to_lerobot.py trains on, manual driving included)
+//   DIR/tick_frames/NNNNNNNN.png  each camera frame a tick saw (the camera's frame index), at the
+//                         model's input size, preprocessed as the model sees it
 //
 // A writer thread does the file work so the control loop never waits on the disk. Rows are flushed
 // after every batch and frames appear by atomic rename, so a killed or crashed run leaves complete
@@ -16,7 +21,9 @@
 #include <cstdint>
 #include <cstdio>
 #include <deque>
+#include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <variant>
@@ -25,6 +32,7 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/drive/calibration.h"
+#include "apps/drive/camera.h"
 
 namespace act::drive {
 
@@ -46,12 +54,18 @@ struct TickRecord {
   std::vector<float> action;  ///< the raw action (empty for a safe action)
   PwmCommand pwm;
   bool sent = false;          ///< false when the link was down
+  std::string driver;         ///< who chose the command: "ai", "manual" or "safe"
+  std::vector<float> state;   ///< observation.state at this tick
+  std::vector<float> command; ///< the command sent, as a raw action (Calibration::action_of)
+  std::shared_ptr<const Frame> frame;  ///< the newest camera frame (null before the first)
 };
 
 class Recorder {
  public:
   /// Creates DIR (which must not exist or be empty) and its files; throws act::Error otherwise.
-  Recorder(const std::string& dir, int state_dim, int action_dim, const nlohmann::ordered_json& meta);
+  /// Tick frames are stored at image_height x image_width (the model's input).
+  Recorder(const std::string& dir, int state_dim, int action_dim, int image_height, int image_width,
+           const nlohmann::ordered_json& meta);
   ~Recorder();
   Recorder(const Recorder&) = delete;
   Recorder& operator=(const Recorder&) = delete;
@@ -70,10 +84,11 @@ class Recorder {
   void write(const TickRecord& record);
 
   std::string dir_;
-  int state_dim_, action_dim_;
+  int state_dim_, action_dim_, image_height_, image_width_;
   std::FILE* log_ = nullptr;
   std::FILE* ticks_ = nullptr;
   uint64_t observations_written_ = 0;  // writer thread only
+  std::optional<uint64_t> last_tick_frame_;  // writer thread only: the camera index last stored
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   std::deque<Item> queue_;     // guarded by mutex_

@@ -59,6 +59,15 @@ float Engine::Impl::InputNorm::apply(float x, size_t i) const {
   return x;
 }
 
+float Engine::Impl::InputNorm::invert(float z, size_t i) const {
+  switch (mode) {
+    case NormMode::kIdentity: return z;
+    case NormMode::kMeanStd: return z * div[i] + sub[i];
+    case NormMode::kMinMax: return (z + 1.0f) / 2.0f * div[i] + sub[i];
+  }
+  return z;
+}
+
 Engine::Impl::InputNorm Engine::Impl::input_norm(const std::string& key, size_t size) {
   InputNorm n;
   n.mode = config_.input_norm_mode(key);
@@ -118,6 +127,10 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
   info_.action_high.assign(action_dim, 1.0f);
   unnormalize(info_.action_low, info_.action_low, 1);
   unnormalize(info_.action_high, info_.action_high, 1);
+  for (size_t i = 0; i < static_cast<size_t>(config_.state_dim); ++i) {
+    info_.state_low.push_back(state_norm_.invert(-1.0f, i));
+    info_.state_high.push_back(state_norm_.invert(1.0f, i));
+  }
   info_.isa = kernels::isa_name(kernels_.isa);
   info_.kernels = kernels_.describe();
   if (config_.precision == Precision::kInt8) info_.precision += std::string(" ") + blob_.config()["quantization"].value("mode", "?");

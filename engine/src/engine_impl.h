@@ -56,6 +56,7 @@ class Engine::Impl {
     const float* sub = nullptr;
     const float* div = nullptr;
     float apply(float x, size_t i) const;
+    float invert(float z, size_t i) const;  ///< the raw value that normalises to z
   };
   /// The statistics of input feature `key` (`size` values), read at open.
   InputNorm input_norm(const std::string& key, size_t size);

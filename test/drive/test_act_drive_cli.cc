@@ -17,13 +17,16 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
+#include "drive/drive_cli_util.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 #include "drive/stalling_stream.h"
 #include "support/command.h"
+#include "weights/import/safetensors.h"
 #include "support/test_paths.h"
 
 namespace act::drive::test {
@@ -35,27 +38,13 @@ using act::test::run_command;
 
 const std::string kDrive = ACT_DRIVE_BIN;
 
-// act-tiny (one 96x128 camera, state 2, action 2, chunk 10) converted into `dir`.
-std::string act_tiny_blob(const std::string& dir) {
-  const std::string blob = (fs::path(dir) / "act-tiny.actb").string();
-  const auto r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " + q(blob) + " -q");
-  EXPECT_EQ(r.exit_code, 0) << r.output;
-  return blob;
-}
-
-std::string read_text(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 TEST(ActDriveCli, HelpListsTheOptions) {
   const auto r = run_command(kDrive + " --help");
   EXPECT_EQ(r.exit_code, 0);
   for (const char* flag : {"--model", "--camera", "--camera-size", "--serial", "--baud", "--calibration", "--control-hz",
                            "--max-frame-age", "--threads", "--control-priority", "--inference-cpus", "--stats-every",
-                           "--record", "--dry-run", "--calibrate", "--state", "--duration"}) {
+                           "--record", "--dry-run", "--calibrate", "--state", "--duration", "--initial-state",
+                           "--raw-endpoints", "--list-cameras", "--list-ports"}) {
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
   }
 }
@@ -85,16 +74,142 @@ TEST(ActDriveCli, ClearErrorsForModelAndSerialPort) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("none.actb"), std::string::npos) << r.output;
   const std::string blob = act_tiny_blob(dir);
-  r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE"));
+  r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE") + " --raw-endpoints");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("cannot open serial port " + dir + "/ttyNONE"), std::string::npos) << r.output;
   FakeArduino silent_board;
   silent_board.set_silent(true);
   r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(silent_board.port_path()) +
-                  " --ready-timeout 1.5");
+                  " --raw-endpoints --ready-timeout 1.5");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("no ready line from the board"), std::string::npos) << r.output;
   EXPECT_GT(silent_board.hellos(), 0);
+}
+
+TEST(ActDriveCli, RefusedDefaultsNameTheFix) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 30, 30, 160, 120);  // 120x160 (HxW)
+  const std::string blob = act_tiny_blob(dir);                                     // 96x128, 4:3 like the video
+  FakeArduino board;
+  // A real port without a calibration file: refused before the port is touched.
+  auto r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(board.port_path()));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("without --calibration"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("act_drive --calibrate --serial"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--raw-endpoints"), std::string::npos) << r.output;
+  EXPECT_EQ(board.hellos(), 0);
+  const std::string dry = kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 ";
+  // WxH where HxW is meant: the camera delivers the transpose.
+  r = run_command(dry + "--camera-size 160x120");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("did you mean --camera-size 120x160?"), std::string::npos) << r.output;
+  // A size that fits the model only transposed (a camera that ignores the request would otherwise stretch).
+  r = run_command(dry + "--camera-size 640x480");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("only fits the model's 96x128 input transposed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("did you mean --camera-size 480x640?"), std::string::npos) << r.output;
+  r = run_command(dry + "--initial-state 1,2,3");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("has 3 values but the model's state has 2 (or use --initial-state mean)"), std::string::npos) << r.output;
+  r = run_command(dry + "--initial-state 1,x");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("'x' is not a number"), std::string::npos) << r.output;
+}
+
+// The first observation's state is the training mean read from the checkpoint's own statistics (not
+// (0, 0), several standard deviations away for a real rover), or the values given.
+TEST(ActDriveCli, InitialStateIsTheTrainingMeanOrTheValuesGiven) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 15, 30, 128, 96);
+  const std::string blob = act_tiny_blob(dir);
+  const auto first_state = [&](const std::string& flags, const std::string& rec) {
+    const auto r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 --record " +
+                               q(rec) + " " + flags + " >/dev/null");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    std::ifstream log(rec + "/log.jsonl");
+    std::string line;
+    std::getline(log, line);
+    return nlohmann::json::parse(line)["state"].get<std::vector<float>>();
+  };
+  const SafetensorsFile stats = SafetensorsFile::open(act::test::fixture_dir("act-tiny") +
+                                                      "/policy_preprocessor_step_3_normalizer_processor.safetensors");
+  const std::vector<float> mean = stats.get("observation.state.mean").to_f32();
+  const std::vector<float> by_default = first_state("", dir + "/rec-mean");
+  ASSERT_EQ(by_default.size(), mean.size());
+  for (size_t i = 0; i < mean.size(); ++i) EXPECT_NEAR(by_default[i], mean[i], 1e-5f * (1 + std::abs(mean[i]))) << i;
+  EXPECT_EQ(first_state("--initial-state 0.25,-0.5", dir + "/rec-given"), (std::vector<float>{0.25f, -0.5f}));
+}
+
+// --overlay-video: one video frame per tick, the steering gauge's marker where the command sent puts it.
+TEST(ActDriveCli, OverlayVideoDrawsEveryTick) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 60, 30, 128, 96);
+  const std::string blob = act_tiny_blob(dir);
+  const auto r = run_command("(" + kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --threads 1 --overlay-video " +
+                             q(dir + "/overlay.mp4") + " 2>" + q(dir + "/stderr.txt") + ")");
+  const std::string log = read_text(dir + "/stderr.txt");
+  ASSERT_EQ(r.exit_code, 0) << log;
+  // The commands on stdout: the first is the neutral sent before the first tick, then one per tick.
+  std::vector<RoverMessage> sent;
+  std::istringstream lines(r.output);
+  for (std::string time, line; lines >> time >> line;) {
+    RoverMessage m{};
+    ASSERT_EQ(rover_parse(line.c_str(), line.size(), &m), ROVER_OK) << line;
+    sent.push_back(m);
+  }
+  cv::VideoCapture overlay(dir + "/overlay.mp4");
+  ASSERT_TRUE(overlay.isOpened());
+  std::vector<cv::Mat> frames;
+  for (cv::Mat frame; overlay.read(frame);) frames.push_back(frame.clone());
+  EXPECT_NE(log.find("overlay video " + dir + "/overlay.mp4: " + std::to_string(frames.size()) + " ticks"), std::string::npos) << log;
+  EXPECT_NE(log.find(" s: " + std::to_string(frames.size()) + " ticks ("), std::string::npos) << log;  // every tick
+  ASSERT_GT(sent.size(), frames.size());
+  ASSERT_GT(frames.size(), 30u);
+  EXPECT_EQ(frames[0].cols, 128 * 4);
+  EXPECT_EQ(frames[0].rows, 96 * 4 + 120);
+  int checked = 0;
+  for (size_t k = 0; k < frames.size(); k += 7) {
+    // The steering gauge spans x 10..251 at y 404..420 (-1..+1); the template's 1000..2000 us endpoints.
+    const double position = (sent[k + 1].fields[1] - 1500) / 500.0;
+    const int x = 10 + 120 + static_cast<int>(position * 120);
+    const cv::Vec3b pixel = frames[k].at<cv::Vec3b>(96 * 4 + 28, x);
+    EXPECT_GT(pixel[0], 180) << "tick " << k << " steering " << sent[k + 1].fields[1];  // the marker's blue
+    ++checked;
+  }
+  EXPECT_GT(checked, 4);
+}
+
+// --realtime off: the video replayed in lockstep, so two runs send the same commands, every frame
+// gets its tick and none is missed, however loaded the machine.
+TEST(ActDriveCli, RealtimeOffReplaysAFileTheSameEveryTime) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 90, 30, 128, 96);
+  const std::string blob = act_tiny_blob(dir);
+  const std::string replay = kDrive + " -m " + q(blob) + " --camera " + q(video) + " --threads 1 --realtime off";
+  const auto commands_of = [&](const std::string& name) {
+    const auto r = run_command("(" + replay + " --dry-run 2>" + q(dir + "/" + name + ".log") + ")");
+    EXPECT_EQ(r.exit_code, 0) << read_text(dir + "/" + name + ".log");
+    std::vector<std::string> lines;
+    std::istringstream out(r.output);
+    for (std::string time, line; out >> time >> line;) lines.push_back(line);  // without the times
+    return lines;
+  };
+  const std::vector<std::string> first = commands_of("first"), second = commands_of("second");
+  EXPECT_EQ(first, second);
+  const std::string log = read_text(dir + "/first.log");
+  // Frames 0..89 one per tick, the first tick waiting for the first chunk, one more seeing the end.
+  EXPECT_NE(log.find(": 91 ticks (89 driving, 2 safe, 0 missed)"), std::string::npos) << log;
+  // Only for a file, only in a dry run.
+  auto r = run_command(replay);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--realtime off replays a file faster than real time: only with --dry-run"), std::string::npos) << r.output;
+  r = run_command(kDrive + " -m " + q(blob) + " --camera 0 --dry-run --realtime off");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("'0' is a live source"), std::string::npos) << r.output;
 }
 
 TEST(ActDriveCli, DeploymentOptionsReplaceTheBlobs) {
@@ -178,18 +293,8 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
   FakeArduino board;
   const std::string port = board.port_path();
   const std::string log_path = dir + "/log.txt";
-  const pid_t pid = fork();
+  const pid_t pid = start_act_drive({"-m", blob, "--camera", video, "--serial", port, "--raw-endpoints", "--threads", "1"}, log_path);
   ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(log, 1);
-    ::dup2(log, 2);
-    const rlimit no_core_dump{0, 0};  // SIGQUIT's default action would write one
-    ::setrlimit(RLIMIT_CORE, &no_core_dump);
-    ::execl(kDrive.c_str(), kDrive.c_str(), "-m", blob.c_str(), "--camera", video.c_str(), "--serial", port.c_str(),
-            "--threads", "1", static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
   // Wait until it drives, then signal it.
   const auto deadline = Clock::now() + std::chrono::seconds(20);
   while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -344,6 +449,9 @@ TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {
   const auto r = run_command("(" + kDrive + " --calibrate > " + q(dir + "/cal.json") + ")");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_NE(r.output.find("Edit the pulse widths"), std::string::npos) << r.output;
+  const Calibration printed = Calibration::load(dir + "/cal.json");
+  EXPECT_EQ(printed.max_forward, 0.3);  // a guessed template never drives at full throttle
+  EXPECT_EQ(printed.max_reverse, 0.3);
   // What it prints is a valid calibration file.
   const auto check = run_command(kDrive + " -m m.actb --camera " + q(dir + "/none.avi") + " --dry-run -c " + q(dir + "/cal.json"));
   EXPECT_EQ(check.output.find("calibration"), std::string::npos) << check.output;
@@ -360,7 +468,7 @@ TEST(ActDriveCli, ThePackagesCalibrationTemplateIsAValidCalibrationFile) {
   EXPECT_EQ(calibration.max_forward, 0.3);
   const std::string text = read_text(dir + "/pkg/drive_calibration.json");
   EXPECT_NE(text.find("act_drive --calibrate"), std::string::npos) << text;
-  EXPECT_NE(text.find("--camera-size 128x96"), std::string::npos) << text;
+  EXPECT_NE(text.find("--camera-size 96x128"), std::string::npos) << text;  // HxW
 }
 
 TEST(ActDriveCli, CalibrateInteractivelyWritesTheEndpoints) {

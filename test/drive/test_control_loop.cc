@@ -87,7 +87,8 @@ struct Rig {
     worker_options.keep_model_inputs = !recording.empty();
     InferenceWorker worker([&] { return std::make_unique<FakeModel>(info, controls); }, frames, worker_options, log);
     std::optional<Recorder> recorder;
-    if (!recording.empty()) recorder.emplace(recording, info.state_dim, info.action_dim, nlohmann::ordered_json{{"test", 1}});
+    if (!recording.empty()) recorder.emplace(recording, info.state_dim, info.action_dim, info.cameras.front().height,
+                                               info.cameras.front().width, nlohmann::ordered_json{{"test", 1}});
     ControlLoop loop(options, calibration, frames, worker, link, recorder ? &*recorder : nullptr, log);
     DriveSummary summary;
     started = Clock::now();
@@ -307,7 +308,10 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   const auto observations = lines(rig.recording + "/log.jsonl");
   const auto ticks = lines(rig.recording + "/ticks.csv");
   ASSERT_GE(observations.size(), 2u);
-  EXPECT_EQ(ticks[0], "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,sent");
+  // Today's columns first (readers go by name, but nothing moved), then who drove, the frame, the state
+  // and the command in the model's units.
+  EXPECT_EQ(ticks[0], "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,sent,driver,frame,state.0,"
+                      "state.1,command.0,command.1");
   EXPECT_EQ(ticks.size() - 1, summary.ticks);
   size_t pngs = 0;
   for (const auto& e : fs::directory_iterator(rig.recording + "/frames")) {
@@ -323,9 +327,73 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   const cv::Mat first = cv::imread(rig.recording + "/frames/000000.png");
   EXPECT_EQ(first.cols, 64);
   EXPECT_EQ(first.rows, 48);
-  bool drove = false;
-  for (const auto& t : ticks) drove = drove || t.find(",chunk,0.5,0.800000012,1700,1650,1") != std::string::npos;
-  EXPECT_TRUE(drove) << ticks[ticks.size() / 2];
+  std::string driving_row;
+  for (const auto& t : ticks) {
+    if (t.find(",chunk,0.5,0.800000012,1700,1650,1,ai,tick_frames/") != std::string::npos) driving_row = t;
+  }
+  ASSERT_FALSE(driving_row.empty()) << ticks[ticks.size() / 2];
+  // The command sent, back in the model's units: 1700 us is steering +0.5; throttle 0.8 capped at
+  // max_forward 0.5 is 1650 us, +0.5.
+  EXPECT_EQ(driving_row.substr(driving_row.size() - 8), ",0.5,0.5") << driving_row;
+  const std::string frame = driving_row.substr(driving_row.find("tick_frames/"), 24);
+  const cv::Mat tick_frame = cv::imread(rig.recording + "/" + frame);
+  EXPECT_EQ(tick_frame.cols, 64) << frame;
+  EXPECT_EQ(tick_frame.rows, 48) << frame;
+}
+
+// The first observation gets the initial state; the executed actions follow, and the one that leaves
+// the training range (mean -/+ 3 standard deviations) is warned about once.
+TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
+  Rig rig;
+  rig.recording = rig.dir + "/rec";
+  rig.info.state_low = {-0.1f, 0.7f};  // steering mean 0, std 0.1: 0.5 is 5 std away; throttle 0.8 +/- 0.1
+  rig.info.state_high = {0.1f, 0.9f};
+  rig.options.initial_state = {0.0f, 0.8f};
+  auto camera = video_camera(rig.dir, 150);
+  rig.run(*camera, [] { sleep_ms(1000); });
+  std::ifstream observations(rig.recording + "/log.jsonl");
+  std::string first, line, last;
+  std::getline(observations, first);
+  while (std::getline(observations, line)) last = line;
+  EXPECT_EQ(nlohmann::json::parse(first)["state"], (std::vector<float>{0.0f, 0.8f}));
+  EXPECT_EQ(nlohmann::json::parse(last)["state"], (std::vector<float>{0.5f, 0.8f}));  // the fake model's action
+  const std::string log = rig.log.str();
+  const std::string warning = "observation.state[0] = 0.5 left the training range [-0.3, 0.3]";
+  ASSERT_NE(log.find(warning), std::string::npos) << log;
+  EXPECT_EQ(log.find(warning, log.find(warning) + 1), std::string::npos) << "warned more than once: " << log;
+}
+
+// --mode ai-steer: the policy's steering (0.5: 1700 us) with the throttle by hand (0.25: 1575 us), then
+// an e-stop holds neutral.
+TEST(ControlLoop, AiSteerTakesTheThrottleByHandAndEstopHoldsNeutral) {
+  Rig rig;
+  Cockpit cockpit(DriveMode::kAiSteer);
+  rig.options.cockpit = &cockpit;
+  auto camera = video_camera(rig.dir, 150);
+  Clock::time_point estopped;
+  const DriveSummary summary = rig.run(*camera, [&] {
+    for (int i = 0; i < 15; ++i) {  // a held stick: sent 10 times a second
+      cockpit.manual(0, 0.25);
+      sleep_ms(100);
+    }
+    cockpit.estop();
+    estopped = Clock::now();
+    for (int i = 0; i < 5; ++i) {
+      cockpit.manual(0, 0.25);  // the e-stop wins over manual input
+      sleep_ms(100);
+    }
+  });
+  size_t steered = 0;
+  for (const auto& c : drive_commands(*rig.board)) {
+    if (c.when < rig.started + milliseconds(700)) continue;  // the first chunk
+    if (c.when < estopped) {
+      steered += is(c, PwmCommand{1700, 1575});
+    } else if (c.when > estopped + milliseconds(250)) {  // the e-stop bound
+      EXPECT_TRUE(is(c, kSafe)) << c.steering_us << "/" << c.throttle_us;
+    }
+  }
+  EXPECT_GT(steered, 15u) << rig.log.str();
+  EXPECT_EQ(summary.manual_ticks, 0u);  // ai-steer is the policy driving
 }
 
 TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {

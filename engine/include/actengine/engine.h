@@ -98,6 +98,10 @@ struct ModelInfo {
   /// (MEAN_STD: mean -/+ std; MIN_MAX: min and max; no normalisation: -1 and +1): the scale of the
   /// model's actions, e.g. to tell pulse widths in microseconds from values around 0.
   std::vector<float> action_low, action_high;
+  /// The same for the robot state (state_dim values each): the raw states that normalised -1 and +1
+  /// stand for. Their middle is the training mean (MEAN_STD) or mid-range (MIN_MAX), e.g. a sensible
+  /// state before the robot has acted.
+  std::vector<float> state_low, state_high;
   bool temporal_ensembling = false;
   double temporal_ensemble_coeff = 0.0;
   std::string precision;  ///< "fp32", "int8 static", "int8 dynamic" or "int8 mixed"

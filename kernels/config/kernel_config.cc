@@ -20,8 +20,7 @@ IsaTables isa_tables(Isa isa) {
     case Isa::kAvx512Vnni:
       return {gemm_s8_table_avx512vnni(), nullptr, nullptr, nullptr, nullptr};
     case Isa::kNeon:
-      // AArch64's baseline (ref) Eigen GEMM is already NEON, so gemm_f32 has no separate variant.
-      return {nullptr, nullptr, quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
+      return {nullptr, gemm_f32_table_neon(), quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
     case Isa::kNeonDot:
       return {gemm_s8_table_neondot(), nullptr, nullptr, nullptr, nullptr};
   }
@@ -30,7 +29,8 @@ IsaTables isa_tables(Isa isa) {
 
 std::string KernelConfig::describe() const {
   return std::string(isa_name(isa)) + ": gemm_s8 " + std::to_string(gemm_s8.mr) + "x" + std::to_string(gemm_s8.nr) +
-         "c" + std::to_string(gemm_s8.kr) + " " + isa_name(gemm_s8.isa) + ", " + gemm_f32.name + ", quant " +
+         "c" + std::to_string(gemm_s8.kr) + " " + isa_name(gemm_s8.isa) + ", " + gemm_f32.packed_name + ", " + gemm_f32.name +
+         ", quant " +
          isa_name(quant.isa) + ", elementwise " + isa_name(elementwise.isa) + ", maxpool_s8 " +
          isa_name(maxpool_s8.isa);
 }

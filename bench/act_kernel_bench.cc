@@ -234,6 +234,42 @@ void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double pe
                  " N=" + std::to_string(s.n) + " K=" + std::to_string(s.k));
 }
 
+// The packed FP32 GEMM on a shape's float GEMM view: weights packed once, bias and ReLU fused (as
+// the convolutions and linears run it); threads split the output as bm_gemm does.
+void bm_gemm_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Shape s, double peak_gmacs, int threads,
+                 std::string key) {
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> a(static_cast<size_t>(s.m) * s.k), w(static_cast<size_t>(s.n) * s.k), bias(static_cast<size_t>(s.n));
+  for (auto* v : {&a, &w, &bias}) {
+    for (float& x : *v) x = u(rng);
+  }
+  std::vector<float> packed(kernels::gemm_f32_packed_floats(g->nr, s.n, s.k)), c(static_cast<size_t>(s.m) * s.n);
+  kernels::gemm_f32_pack(g->nr, s.n, s.k, w.data(), static_cast<size_t>(s.k), packed.data());
+  const Tiling t = tiling(s.m, s.n, g->mr, g->nr, threads);
+  ThreadPool& tp = pool(threads);
+  run_timed(state, key, threads, static_cast<double>(s.macs()), peak_gmacs, [&] {
+    tp.parallel_for(t.count(), [&](size_t task, int) {
+      const int m0 = static_cast<int>(task / t.tiles_n) * t.tile_m, n0 = static_cast<int>(task % t.tiles_n) * t.tile_n;
+      kernels::GemmF32PackedArgs args;
+      args.m = std::min(s.m - m0, t.tile_m);
+      args.n = std::min(s.n - n0, t.tile_n);
+      args.k = s.k;
+      args.a = a.data() + static_cast<size_t>(m0) * s.k;
+      args.lda = static_cast<size_t>(s.k);
+      args.packed_b = packed.data();
+      args.col0 = n0;
+      args.c = c.data() + static_cast<size_t>(m0) * s.n + n0;
+      args.ldc = static_cast<size_t>(s.n);
+      args.epilogue.bias = bias.data() + n0;
+      args.epilogue.activation = kernels::GemmF32Activation::kRelu;
+      g->packed(args);
+    });
+  });
+  state.SetLabel(std::string(g->packed_name) + " M=" + std::to_string(s.m) + " N=" + std::to_string(s.n) +
+                 " K=" + std::to_string(s.k));
+}
+
 // ---- convolutions -----------------------------------------------------------------------------
 
 struct ConvBench {
@@ -460,7 +496,7 @@ int main(int argc, char** argv) {
   const char* shapes_env = std::getenv("ACT_BENCH_SHAPES");
   const std::vector<bench::Shape> shapes = bench::read_shapes(shapes_env != nullptr ? shapes_env : ACT_BENCH_SHAPES_FILE);
 
-  std::map<kernels::Isa, double> peak;
+  std::map<kernels::Isa, double> peak, peak_f32;  // by ISA: the int8 and the float FMA probes
   for (int i = 0; i < kernels::kPeakProbeCount; ++i) {
     const kernels::PeakProbe& p = kernels::kPeakProbes[i];
     if (!kernels::cpu_supports(p.isa) || p.fn(1) == 0) continue;
@@ -468,9 +504,10 @@ int main(int argc, char** argv) {
         ->UseRealTime()
         ->ComputeStatistics("max", bench::stat_max)
         ->ComputeStatistics("min", bench::stat_min);
-    if (p.is_isa_peak && p.kind == kernels::PeakKind::kInt8) {
-      peak[p.isa] = kernels::measure_peak_gmacs(p);
-      benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps", std::to_string(peak[p.isa]));
+    if (p.is_isa_peak) {
+      (p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa] = kernels::measure_peak_gmacs(p);
+      benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps",
+                                  std::to_string((p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa]));
     }
   }
   const bench::Shape* smallest = shapes.empty() ? nullptr : &shapes[0];
@@ -497,6 +534,21 @@ int main(int argc, char** argv) {
       for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : max_threads); ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
         reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm, v, s, pk, t, key));
+      }
+    }
+  }
+  // The packed FP32 GEMM on every shape, % of the float FMA probe of its ISA.
+  for (kernels::Isa isa : isas) {
+    const kernels::GemmF32Kernels* g = kernels::isa_tables(isa).gemm_f32;
+    if (g == nullptr) continue;
+    const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
+    const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
+    for (const bench::Shape& s : shapes) {
+      if (isa == kernels::Isa::kRef && &s != smallest) continue;
+      const std::string key = std::string("gemm_f32/") + kernels::isa_name(isa) + "/" + s.name;
+      for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : max_threads); ++t) {
+        const std::string name = key + "/threads:" + std::to_string(t);
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, s, pk, t, key));
       }
     }
   }

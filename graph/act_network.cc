@@ -99,7 +99,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     const Tensor xf = as_f32(x);
     const ValueId res = residual ? as_f32(*residual).id : kNoValue;
     const ValueId y = graph_.add_value(name, y_shape);
-    add(std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name);
+    add(std::make_unique<Conv2dOp>(kernels_.gemm_f32, s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name);
     calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
@@ -163,7 +163,7 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
              out_name, y);
     return y;
   }
-  auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
+  auto op = std::make_unique<LinearOp>(kernels_.gemm_f32, rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
   add(std::move(op), out_name);
   return y;
 }

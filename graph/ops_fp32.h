@@ -6,6 +6,7 @@
 
 #include "graph/graph.h"
 #include "kernels/common/conv2d_shape.h"
+#include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/fp32_kernels.h"
 
 namespace act::graph {
@@ -24,15 +25,28 @@ struct LinearParams {
   Epilogue epilogue = Epilogue::kNone;
 };
 
+/// Float weights [n x k] packed once, at graph build time, into the panels of one gemm_f32
+/// variant (its nr); owned by the op that uses them.
+class PackedF32Weights {
+ public:
+  PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n, int k, const float* w);
+  /// The panels, for the variant about to run them; an error when its panels are not these.
+  const float* for_kernels(const kernels::GemmF32Kernels& kernels) const;
+
+ private:
+  int nr_;
+  std::vector<float> panels_;
+};
+
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
-/// Weights [out_c, kh, kw, in_c]. Tiles of output pixels; im2col of one tile into per-thread scratch
-/// (a 1x1 stride-1 conv reads its input directly).
+/// Weights [out_c, kh, kw, in_c], packed at build time for `gemm`. Tiles of output pixels
+/// (kernels/fp32/conv_f32.h: im2col of one tile into per-thread scratch, or the input in place).
 class Conv2dOp : public Op {
  public:
-  Conv2dOp(const kernels::Conv2dShape& shape, const float* weight, const float* bias, bool relu, ValueId input,
-           ValueId residual, ValueId output);
+  Conv2dOp(const kernels::GemmF32Kernels& gemm, const kernels::Conv2dShape& shape, const float* weight, const float* bias,
+           bool relu, ValueId input, ValueId residual, ValueId output);
   const char* type() const override { return "conv2d_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.packed_name; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
@@ -43,12 +57,13 @@ class Conv2dOp : public Op {
   ValueId residual() const { return residual_; }
 
  private:
-  bool direct() const;
   kernels::Conv2dShape s_;
   const float* weight_;
   const float* bias_;
   bool relu_;
   ValueId residual_;
+  int tile_pixels_;
+  PackedF32Weights packed_;
 };
 
 /// 2-D max-pool over NHWC, float32 or int8 (max commutes with the monotonic quantization: an int8
@@ -70,14 +85,14 @@ class MaxPoolOp : public Op {
   bool s8_;
 };
 
-/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in]; bias is a vector (ld 0) or a
-/// per-row table; the residual may be a broadcast row.
+/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in], packed at build time for `gemm`;
+/// bias is a vector (ld 0) or a per-row table; the residual may be a broadcast row.
 class LinearOp : public Op {
  public:
-  LinearOp(int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias, MatrixRef residual,
-           Epilogue epilogue, ValueId output);
+  LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias,
+           MatrixRef residual, Epilogue epilogue, ValueId output);
   const char* type() const override { return "linear_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.packed_name; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
@@ -88,6 +103,7 @@ class LinearOp : public Op {
   MatrixRef x_, bias_, residual_;
   const float* weight_;
   Epilogue epilogue_;
+  PackedF32Weights packed_;
 };
 
 /// GLU over the last axis: y = a * sigmoid(b), a the first half of each row, b the second.

@@ -11,10 +11,11 @@
 //           gemm_f32_eigen.inc) — otherwise the linker could merge an AVX-512 instantiation into
 //           the baseline path. AArch64's baseline Eigen is already NEON; the neon table reuses it.
 //
-// Tolerance of every packed variant against the reference (test_gemm_f32.cc): the same products
-// summed in another order (blocks of k, fused multiply-adds), so per output
-// |c - c_ref| <= 4 k eps sum_p |a_p b_p| (plus the epilogue's own rounding; GELU is the element-wise
-// table's of the same ISA, elementwise_f32.h).
+// Numerics (test_gemm_f32.cc): each SIMD variant computes every output as one chain of fused
+// multiply-adds in k order (then bias, residual, activation), whatever its tile and blocking, so
+// they all give the same bits; the reference multiplies and adds separately. Against the exact
+// product, |c - c_exact| <= 4 k eps sum_p |a_p b_p| (plus the epilogue's own rounding; GELU is the
+// element-wise table's of the same ISA, elementwise_f32.h).
 #pragma once
 
 #include <cstddef>

@@ -28,7 +28,7 @@ void gemm_packed_avx2(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx2, a
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_avx2() {
-  static const GemmF32Kernels table{Isa::kAvx2, "gemm_f32_eigen_avx2", gemm_nt, gemm_nn, 6, Packed::NR,
+  static const GemmF32Kernels table{Isa::kAvx2, "gemm_f32_eigen_avx2", gemm_nt, gemm_nn, Packed::kMr, Packed::NR,
                                     "gemm_f32 6x16 avx2", gemm_packed_avx2};
   return &table;
 }

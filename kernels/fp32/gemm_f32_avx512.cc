@@ -1,5 +1,5 @@
 // FP32 GEMM with this file's avx512 flags (cmake/ActLayer.cmake): Eigen for nt / nn, and the packed
-// micro-kernels of gemm_f32_packed.inc on a 14x32 register tile.
+// micro-kernels of gemm_f32_packed.inc on a 8x32 register tile.
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__x86_64__)
@@ -23,13 +23,20 @@ namespace act::kernels {
 #include "kernels/fp32/gemm_f32_packed.inc"
 
 namespace {
-using Packed = PackedGemm<xsimd::avx512f, 14, 2>;
+template <>
+xsimd::batch<float, xsimd::avx512f> multiply_add<xsimd::avx512f>(const xsimd::batch<float, xsimd::avx512f>& a,
+                                                               const xsimd::batch<float, xsimd::avx512f>& b,
+                                                               const xsimd::batch<float, xsimd::avx512f>& c) {
+  return _mm512_fmadd_ps(a, b, c);
+}
+
+using Packed = PackedGemm<xsimd::avx512f, 8, 2>;
 void gemm_packed_avx512(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_avx512() {
-  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32_eigen_avx512", gemm_nt, gemm_nn, 14, Packed::NR,
-                                    "gemm_f32 14x32 avx512", gemm_packed_avx512};
+  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32_eigen_avx512", gemm_nt, gemm_nn, Packed::kMr, Packed::NR,
+                                    "gemm_f32 8x32 avx512", gemm_packed_avx512};
   return &table;
 }
 }  // namespace act::kernels

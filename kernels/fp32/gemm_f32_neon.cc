@@ -20,8 +20,8 @@ void gemm_packed_neon(const GemmF32PackedArgs& args) { Packed::run(Isa::kNeon, a
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_neon() {
-  static const GemmF32Kernels table{Isa::kNeon, gemm_f32_table_ref()->name, gemm_f32_table_ref()->nt, gemm_f32_table_ref()->nn, 8,
-                                    Packed::NR, "gemm_f32 8x12 neon", gemm_packed_neon};
+  static const GemmF32Kernels table{Isa::kNeon, gemm_f32_table_ref()->name, gemm_f32_table_ref()->nt, gemm_f32_table_ref()->nn,
+                                    Packed::kMr, Packed::NR, "gemm_f32 8x12 neon", gemm_packed_neon};
   return &table;
 }
 }  // namespace act::kernels

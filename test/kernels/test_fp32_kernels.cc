@@ -1,5 +1,5 @@
 // The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
-// stride / padding / dilation the ResNet backbones use: im2col + every FP32 GEMM variant this CPU
+// stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM) and the Eigen GEMM, every variant this CPU
 // runs, the max-pool, and the element-wise reference (test_elementwise_f32.cc holds the SIMD
 // element-wise variants to it).
 #include <gtest/gtest.h>
@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <random>
 
-#include "kernels/common/im2col.h"
+#include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/elementwise_f32.h"
 #include "kernels/fp32/fp32_kernels.h"
 #include "kernels/fp32/gemm_f32.h"
@@ -48,7 +48,7 @@ struct ConvCase {
   int h, w, cin, cout, kernel, stride, pad, dilation;
 };
 
-TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
+TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
   std::mt19937 rng(7);
   const ConvCase cases[] = {
       {13, 17, 3, 8, 7, 2, 3, 1},   // stem, odd sizes
@@ -58,6 +58,7 @@ TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
       {7, 6, 3, 4, 3, 1, 2, 2},     // dilated 3x3 (layer4 with dilation)
       {1, 1, 3, 2, 3, 1, 1, 1},     // a single pixel: everything but the centre tap is padding
       {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
+      {6, 5, 7, 9, 1, 1, 0, 1},     // 1x1/1: reads the input in place
   };
   for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
@@ -68,17 +69,17 @@ TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
       const auto expected = conv_naive(s, x, w);
       const int pixels = s.out_h * s.out_w;
       std::vector<float> y(static_cast<size_t>(pixels) * c.cout, NAN);
-      // Ragged tiles: 5 pixels at a time.
+      std::vector<float> packed(gemm_f32_packed_floats(gemm.nr, c.cout, s.patch_size()));
+      gemm_f32_pack(gemm.nr, c.cout, s.patch_size(), w.data(), static_cast<size_t>(s.patch_size()), packed.data());
+      const ConvF32 conv{s, &gemm, packed.data()};
+      // Ragged tiles: 5 pixels at a time, through conv_f32 (im2col into scratch, or in place).
+      std::vector<float> scratch(conv_f32_scratch_floats(s, 5) + 1, NAN);
       for (int p0 = 0; p0 < pixels; p0 += 5) {
-        const int count = std::min(5, pixels - p0);
-        std::vector<float> patches(static_cast<size_t>(count) * s.patch_size(), NAN);
-        im2col_nhwc_f32(s, x.data(), p0, count, patches.data());
-        gemm.nt(count, c.cout, s.patch_size(), patches.data(), static_cast<size_t>(s.patch_size()), w.data(),
-                static_cast<size_t>(s.patch_size()), y.data() + static_cast<size_t>(p0) * c.cout, static_cast<size_t>(c.cout));
+        conv_f32(conv, x.data(), y.data(), GemmF32Epilogue{}, p0, std::min(5, pixels - p0), scratch.data());
       }
       for (size_t i = 0; i < y.size(); ++i) {
         ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
-            << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
+            << gemm.packed_name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
       }
     }
   }

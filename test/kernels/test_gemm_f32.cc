@@ -2,7 +2,9 @@
 // against a double-precision product with the epilogue, on exact tile multiples, ragged edges, k
 // across the kernels' k blocks, column blocks wider than one cache block, and sub-rectangles of a
 // larger layer (col0, row offsets, strides, sentinels around C); the SIMD variants record which
-// tiles ran. Tolerance (gemm_f32.h): 4 k eps sum |a b| per output, plus GELU's own (4 ulp or 1e-7).
+// tiles ran. Tolerance (gemm_f32.h): 4 k eps sum |a b| per output, plus GELU's own (4 ulp or 1e-7);
+// the SIMD variants, whatever their tile and blocking, give exactly one fused multiply-add chain in k
+// order per output (so they agree bit for bit with each other).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -92,6 +94,18 @@ uint32_t check_case(const GemmF32Kernels& g, const Case& c, std::mt19937& rng) {
       if (c.activation == GemmF32Activation::kGelu) {
         want = 0.5 * sum * (1.0 + std::erf(sum / std::sqrt(2.0)));
         tol = 1.2 * tol + 4.0 * eps * std::fabs(want) + 1e-7;
+      }
+      if (g.isa != Isa::kRef && c.activation != GemmF32Activation::kGelu) {
+        // The SIMD variants: one fused multiply-add chain in k order per output, then the epilogue.
+        float chain = 0.0f;
+        for (int p = 0; p < c.k; ++p) chain = std::fmaf(a[static_cast<size_t>(r) * lda + p], b[col * static_cast<size_t>(c.k) + p], chain);
+        if (c.bias) chain += bias[(c.bias == 1 ? 0 : static_cast<size_t>(r) * c.cols) + col];
+        if (c.residual) chain += residual[(c.residual == 2 ? 0 : static_cast<size_t>(r) * c.cols) + col];
+        if (c.activation == GemmF32Activation::kRelu) chain = chain < 0.0f ? 0.0f : chain;
+        if (got != chain && ++failures <= 3) {
+          ADD_FAILURE() << g.packed_name << " " << describe(c) << ": C(" << r << "," << col << ") = " << got
+                        << ", not the k-order fused multiply-add chain " << chain;
+        }
       }
       if (!(std::fabs(got - want) <= tol) && ++failures <= 3) {
         ADD_FAILURE() << g.packed_name << " " << describe(c) << ": C(" << r << "," << col << ") = " << got << ", want "

@@ -6,12 +6,15 @@
 //   - conv_s8/<isa>/<HxW>/<layer>/threads:T: every distinct ResNet18 convolution of a 480x640 and a
 //     360x640 camera through conv_s8_s8out (tiled im2col + gemm_s8, ReLU fused), shapes derived
 //     from the image size;
+//   - gemm_f32/<isa>/<linear>/<tokens>/threads:T and conv_f32/<isa>/<HxW>/<layer>/threads:T: the
+//     FP32 path's transformer linears (default and rover token counts) and convolutions (packed
+//     gemm_f32, bias and ReLU fused), pct_peak against the float FMA probe of the ISA;
 //   - attention_f32/<isa>/<tokens>/threads:T: 8 heads of QK^T (gemm_f32_nt), softmax, PV
 //     (gemm_f32_nn), head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
 //     LayerNorm, softmax (bytes/s).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
-// sustained int8 probe rate, measured once at start-up by thread CPU time; int8 kernels only),
+// sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time),
 // at T = 1 also GMAC/s_cpu and pct_peak_cpu (by the thread's CPU time: what to read on a shared,
 // loaded machine, where wall time includes time spent descheduled) and, for T > 1, speedup_vs_1t
 // (the same benchmark's best single-thread time / this one's). Threads split the output into tiles
@@ -42,6 +45,7 @@
 #include "graph/thread_pool.h"
 #include "kernels/peak/peak_probe.h"
 #include "kernels/conv_s8/conv_s8.h"
+#include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/elementwise_f32.h"
 #include "kernels/config/kernel_config.h"
 #include "kernels/fp32/gemm_f32.h"
@@ -347,6 +351,42 @@ void bm_conv(benchmark::State& state, const GemmS8Kernels* v, ConvBench cb, doub
                  " tile " + std::to_string(tile));
 }
 
+// The float convolution as the FP32 graph runs it (kernels/fp32/conv_f32.h: tiles of output pixels,
+// im2col into per-thread scratch, packed gemm_f32 with bias and ReLU fused).
+void bm_conv_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, ConvBench cb, double peak_gmacs, int threads,
+                 std::string key) {
+  const kernels::Conv2dShape& s = cb.shape;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> x(static_cast<size_t>(s.in_h) * s.in_w * s.in_c), w(static_cast<size_t>(s.out_c) * s.patch_size()),
+      bias(static_cast<size_t>(s.out_c));
+  for (auto* v : {&x, &w, &bias}) {
+    for (float& e : *v) e = u(rng);
+  }
+  std::vector<float> packed(kernels::gemm_f32_packed_floats(g->nr, s.out_c, s.patch_size()));
+  kernels::gemm_f32_pack(g->nr, s.out_c, s.patch_size(), w.data(), static_cast<size_t>(s.patch_size()), packed.data());
+  const kernels::ConvF32 conv{s, g, packed.data()};
+  const int pixels = s.out_h * s.out_w;
+  const int tile = kernels::conv_f32_tile_pixels(s);
+  const int tiles = (pixels + tile - 1) / tile;
+  std::vector<std::vector<float>> scratch(static_cast<size_t>(threads), std::vector<float>(kernels::conv_f32_scratch_floats(s, tile)));
+  std::vector<float> y(static_cast<size_t>(pixels) * s.out_c);
+  kernels::GemmF32Epilogue epilogue;
+  epilogue.bias = bias.data();
+  epilogue.activation = kernels::GemmF32Activation::kRelu;
+  ThreadPool& tp = pool(threads);
+  run_timed(state, key, threads, static_cast<double>(cb.macs()), peak_gmacs, [&] {
+    tp.parallel_for(static_cast<size_t>(tiles), [&](size_t t, int thread) {
+      const int p0 = static_cast<int>(t) * tile;
+      kernels::conv_f32(conv, x.data(), y.data(), epilogue, p0, std::min(tile, pixels - p0), scratch[thread].data());
+    });
+  });
+  state.SetLabel(std::string(g->packed_name) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
+                 std::to_string(s.in_c) + " -> " + std::to_string(s.out_h) + "x" + std::to_string(s.out_w) + "x" +
+                 std::to_string(s.out_c) + " k" + std::to_string(s.kernel_h) + "/" + std::to_string(s.stride) +
+                 " tile " + std::to_string(tile));
+}
+
 // ---- attention (f32) ---------------------------------------------------------------------------
 
 constexpr int kHeads = 8, kHeadDim = 64;
@@ -537,18 +577,36 @@ int main(int argc, char** argv) {
       }
     }
   }
-  // The packed FP32 GEMM on every shape, % of the float FMA probe of its ISA.
+  // The FP32 path's products, % of the float FMA probe of their ISA: the packed GEMM on every
+  // transformer linear (the f32-out shapes) of the default config (302 tokens) and the rover's
+  // (360x640: 242 tokens; the decoder's 100 queries are the same), then every convolution of both
+  // cameras through conv_f32. SIMD variants only (the reference is checked by the tests).
   for (kernels::Isa isa : isas) {
     const kernels::GemmF32Kernels* g = kernels::isa_tables(isa).gemm_f32;
-    if (g == nullptr) continue;
+    if (g == nullptr || isa == kernels::Isa::kRef) continue;
     const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
     const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
     for (const bench::Shape& s : shapes) {
-      if (isa == kernels::Isa::kRef && &s != smallest) continue;
-      const std::string key = std::string("gemm_f32/") + kernels::isa_name(isa) + "/" + s.name;
-      for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : max_threads); ++t) {
-        const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, s, pk, t, key));
+      if (!s.f32_out) continue;
+      for (const int tokens : {302, 242}) {
+        if (tokens != 302 && s.m != 302) continue;
+        bench::Shape linear = s;
+        if (s.m == 302) linear.m = tokens;
+        const std::string key = std::string("gemm_f32/") + kernels::isa_name(isa) + "/" + s.name + "/" + std::to_string(linear.m);
+        for (int t = 1; t <= max_threads; ++t) {
+          const std::string name = key + "/threads:" + std::to_string(t);
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, linear, pk, t, key));
+        }
+      }
+    }
+    for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
+      for (const bench::ConvBench& cb : bench::resnet18_convs(h, w)) {
+        const std::string key = std::string("conv_f32/") + kernels::isa_name(isa) + "/" + std::to_string(h) + "x" +
+                                std::to_string(w) + "/" + cb.name;
+        for (int t = 1; t <= max_threads; ++t) {
+          const std::string name = key + "/threads:" + std::to_string(t);
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv_f32, g, cb, pk, t, key));
+        }
       }
     }
   }

@@ -7,7 +7,10 @@
 // order per output (so they agree bit for bit with each other).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -142,6 +145,21 @@ TEST(GemmF32Packed, EveryVariantMatchesTheDoubleProduct) {
     for (const Case& c : cases) paths |= check_case(g, c, rng);
     if (isa != Isa::kRef) {
       EXPECT_EQ(paths, kPathFullTile | kPathRowTail | kPathPartialCols) << g.packed_name << " did not run every tile kind";
+    }
+  }
+}
+
+// At every level CI requires (ACT_TEST_REQUIRE_ISAS), an Engine runs a SIMD packed GEMM, not the
+// scalar reference, and it is among the variants tested above.
+TEST(GemmF32Packed, RequiredLevelsRunSimdVariants) {
+  const std::vector<Isa> tested = test::isas_under_test(&IsaTables::gemm_f32);
+  for (const std::optional<Isa>& isa : test::required_isas()) {
+    ASSERT_TRUE(isa.has_value()) << "ACT_TEST_REQUIRE_ISAS names an unknown ISA";
+    ASSERT_TRUE(cpu_supports(*isa)) << isa_name(*isa) << " is required but this CPU does not run it";
+    const GemmF32Kernels& v = variant_for(*isa, &IsaTables::gemm_f32);
+    EXPECT_NE(v.packed, gemm_f32_table_ref()->packed) << "no SIMD packed GEMM at " << isa_name(*isa);
+    if (std::getenv("ACT_ISA") == nullptr) {
+      EXPECT_NE(std::find(tested.begin(), tested.end(), v.isa), tested.end()) << isa_name(v.isa) << " was not tested";
     }
   }
 }

@@ -1,7 +1,7 @@
 // The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
-// stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM) and the Eigen GEMM, every variant this CPU
-// runs, the max-pool, and the element-wise reference (test_elementwise_f32.cc holds the SIMD
-// element-wise variants to it).
+// stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM)
+// and the Eigen GEMM, every variant this CPU runs, the max-pool, and the element-wise reference
+// (test_elementwise_f32.cc holds the SIMD element-wise variants to it).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -9,8 +9,8 @@
 //   - gemm_f32/<isa>/<linear>/<tokens>/threads:T and conv_f32/<isa>/<HxW>/<layer>/threads:T: the
 //     FP32 path's transformer linears (default and rover token counts) and convolutions (packed
 //     gemm_f32, bias and ReLU fused), pct_peak against the float FMA probe of the ISA;
-//   - attention_f32/<isa>/<tokens>/threads:T: 8 heads of QK^T (gemm_f32_nt), softmax, PV
-//     (gemm_f32_nn), head dim 64, at 302 and 242 tokens;
+//   - attention_f32/<isa>/<tokens>/threads:T: the float attention op, 8 heads of QK^T, softmax,
+//     PV on the packed gemm_f32, head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
 //     LayerNorm, softmax (bytes/s).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
@@ -391,29 +391,26 @@ void bm_conv_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Conv
 
 constexpr int kHeads = 8, kHeadDim = 64;
 
-// QK^T, softmax, PV for 8 heads of T tokens; Q, K, V as [T x 512] with head h in columns
-// [64h, 64h + 64) (the layout of the fused QKV projection). Threads split the heads.
-void bm_attention(benchmark::State& state, const kernels::GemmF32Kernels* g, const kernels::ElementwiseF32Kernels* e,
-                  int tokens, int threads, std::string key) {
+// The float attention op (graph/ops_fp32.h: per head tile, keys and values packed, QK^T and PV on
+// the packed gemm_f32, softmax between) with the kernels an Engine of this ISA level runs; Q, K, V
+// column slices of one [T x 1536] value (the fused QKV projection's layout).
+void bm_attention(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
   const int d = kHeads * kHeadDim;
+  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
+  graph::Graph g;
+  const graph::ValueId qkv = g.add_input("qkv", {tokens, 3 * d});
+  const graph::ValueId out = g.add_value("out", {tokens, d});
+  g.add_op(std::make_unique<graph::AttentionOp>(config.gemm_f32, tokens, tokens, d, kHeads, graph::MatrixRef::of(qkv, 3 * d, 0),
+                                                graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
+  g.mark_output(out);
+  g.plan(threads, false);
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::vector<float> q(static_cast<size_t>(tokens) * d), kmat(q.size()), vmat(q.size()), out(q.size());
-  for (auto* m : {&q, &kmat, &vmat})
-    for (auto& x : *m) x = u(rng);
-  std::vector<std::vector<float>> scores(static_cast<size_t>(kHeads), std::vector<float>(static_cast<size_t>(tokens) * tokens));
+  for (size_t i = 0; i < static_cast<size_t>(tokens) * 3 * d; ++i) g.data(qkv)[i] = u(rng);
   ThreadPool& tp = pool(threads);
   const double macs = 2.0 * kHeads * tokens * static_cast<double>(tokens) * kHeadDim;
-  run_timed(state, key, threads, macs, 0.0, [&] {
-    tp.parallel_for(kHeads, [&](size_t h, int) {
-      const size_t off = h * kHeadDim;
-      float* sc = scores[h].data();
-      g->nt(tokens, tokens, kHeadDim, q.data() + off, d, kmat.data() + off, d, sc, tokens);
-      e->softmax_rows(tokens, tokens, sc, tokens);
-      g->nn(tokens, kHeadDim, tokens, sc, tokens, vmat.data() + off, d, out.data() + off, d);
-    });
-  });
-  state.SetLabel(std::string(g->name) + " + " + e->softmax_name + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
+  run_timed(state, key, threads, macs, peak_gmacs, [&] { g.run(tp, config); });
+  state.SetLabel(g.ops()[0]->kernel(config) + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
 }
 
 // The int8 attention op (graph/ops_int8.h: both matmuls on gemm_s8, keys and values packed per
@@ -629,13 +626,14 @@ int main(int argc, char** argv) {
   for (kernels::Isa isa : isas) {
     const kernels::ElementwiseF32Kernels* e = kernels::isa_tables(isa).elementwise;
     if (e == nullptr) continue;
-    // Attention with the FP32 GEMM an Engine pairs with this element-wise variant.
-    const kernels::GemmF32Kernels* g = &kernels::kernel_config_for(isa).gemm_f32;
+    // The float attention op at the level of this element-wise variant, % of its float FMA probe.
+    const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
+    const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_f32/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
       for (int t = 1; t <= max_threads; ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, g, e, tokens, t, key));
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, isa, tokens, pk, t, key));
       }
     }
     const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);

@@ -182,7 +182,7 @@ ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, Matri
   if (config_.precision == Precision::kInt8 && quant_.int8_attention) {
     add(std::make_unique<AttentionS8Op>(kernels_.gemm_s8, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
   } else {
-    add(std::make_unique<AttentionOp>(nq, nk, D, config_.n_heads, q, k, v, y), out_name);
+    add(std::make_unique<AttentionOp>(kernels_.gemm_f32, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
   }
   return y;
 }

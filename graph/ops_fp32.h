@@ -142,12 +142,14 @@ struct AttentionParams {
 };
 
 /// Multi-head scaled dot-product attention, no mask: out[:, head] = softmax(q_h k_h^T / sqrt(d)) v_h.
+/// Both products on the packed gemm_f32 of `gemm` (each task packs its head's keys and values).
 class AttentionOp : public Op {
  public:
-  AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k, MatrixRef v, ValueId output);
+  AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,
+              MatrixRef v, ValueId output);
   const char* type() const override { return "attention_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override {
-    return std::string(k.gemm_f32.name) + " + " + k.elementwise.softmax_name;
+    return std::string(k.gemm_f32.packed_name) + " + " + k.elementwise.softmax_name;
   }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
@@ -157,6 +159,7 @@ class AttentionOp : public Op {
  private:
   int nq_, nk_, dim_, heads_;
   MatrixRef q_, k_, v_;
+  int nr_;  ///< the panel width scratch is sized for
 };
 
 /// Stacks row blocks (graph values or constant rows) into one [rows, cols] value.

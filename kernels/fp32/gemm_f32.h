@@ -67,6 +67,8 @@ struct GemmF32Kernels {
 size_t gemm_f32_packed_floats(int nr, int n, int k);
 /// Packs B [n x k] (row stride ldb): panel j holds columns [j nr, j nr + nr) as k rows of nr floats.
 void gemm_f32_pack(int nr, int n, int k, const float* b, size_t ldb, float* packed);
+/// The same panels from B^T stored [k x n] (row stride ldb), e.g. attention's values for P V.
+void gemm_f32_pack_transposed(int nr, int n, int k, const float* bt, size_t ldb, float* packed);
 
 /// The variant compiled for each ISA on this target, or nullptr (not built for this architecture).
 const GemmF32Kernels* gemm_f32_table_ref();

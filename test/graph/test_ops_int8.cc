@@ -262,7 +262,7 @@ AttentionRun run_attention(const kernels::KernelConfig& k, ThreadPool& pool, boo
   if (int8) {
     g.add_op(std::make_unique<AttentionS8Op>(k.gemm_s8, nq, nk, dim, heads, qr, kr, vr, out));
   } else {
-    g.add_op(std::make_unique<AttentionOp>(nq, nk, dim, heads, qr, kr, vr, out));
+    g.add_op(std::make_unique<AttentionOp>(k.gemm_f32, nq, nk, dim, heads, qr, kr, vr, out));
   }
   g.mark_output(out);
   g.plan(pool.threads(), false);

@@ -164,6 +164,21 @@ TEST(GemmF32Packed, RequiredLevelsRunSimdVariants) {
   }
 }
 
+TEST(GemmF32Packed, PackingFromTheTransposeGivesTheSamePanels) {
+  const int n = 13, k = 7, nr = 8;
+  std::vector<float> b(static_cast<size_t>(n) * k), bt(static_cast<size_t>(k) * (n + 2));
+  for (int c = 0; c < n; ++c) {
+    for (int p = 0; p < k; ++p) {
+      b[static_cast<size_t>(c) * k + p] = static_cast<float>(c * 100 + p);
+      bt[static_cast<size_t>(p) * (n + 2) + c] = static_cast<float>(c * 100 + p);
+    }
+  }
+  std::vector<float> from_b(gemm_f32_packed_floats(nr, n, k), -1.0f), from_bt(from_b.size(), -2.0f);
+  gemm_f32_pack(nr, n, k, b.data(), static_cast<size_t>(k), from_b.data());
+  gemm_f32_pack_transposed(nr, n, k, bt.data(), static_cast<size_t>(n + 2), from_bt.data());
+  EXPECT_EQ(from_b, from_bt);
+}
+
 TEST(GemmF32Packed, PackingPadsPanelsWithZeros) {
   const int n = 5, k = 3, nr = 4;
   std::vector<float> b(static_cast<size_t>(n) * k);

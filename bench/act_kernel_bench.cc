@@ -270,7 +270,7 @@ void bm_gemm_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Shap
       g->packed(args);
     });
   });
-  state.SetLabel(std::string(g->packed_name) + " M=" + std::to_string(s.m) + " N=" + std::to_string(s.n) +
+  state.SetLabel(std::string(g->name) + " M=" + std::to_string(s.m) + " N=" + std::to_string(s.n) +
                  " K=" + std::to_string(s.k));
 }
 
@@ -381,7 +381,7 @@ void bm_conv_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Conv
       kernels::conv_f32(conv, x.data(), y.data(), epilogue, p0, std::min(tile, pixels - p0), scratch[thread].data());
     });
   });
-  state.SetLabel(std::string(g->packed_name) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
+  state.SetLabel(std::string(g->name) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
                  std::to_string(s.in_c) + " -> " + std::to_string(s.out_h) + "x" + std::to_string(s.out_w) + "x" +
                  std::to_string(s.out_c) + " k" + std::to_string(s.kernel_h) + "/" + std::to_string(s.stride) +
                  " tile " + std::to_string(tile));

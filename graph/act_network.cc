@@ -42,8 +42,18 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
     std::copy(f, f + w.size(), w.begin());
   }
   std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
-  kernels_.gemm_f32.nt(rows, pos_cols, D, pos, static_cast<size_t>(D), w.data(), static_cast<size_t>(D), out.data(),
-                       static_cast<size_t>(width));
+  std::vector<float> packed(kernels::gemm_f32_packed_floats(kernels_.gemm_f32.nr, pos_cols, D));
+  kernels::gemm_f32_pack(kernels_.gemm_f32.nr, pos_cols, D, w.data(), static_cast<size_t>(D), packed.data());
+  kernels::GemmF32PackedArgs product;
+  product.m = rows;
+  product.n = pos_cols;
+  product.k = D;
+  product.a = pos;
+  product.lda = static_cast<size_t>(D);
+  product.packed_b = packed.data();
+  product.c = out.data();
+  product.ldc = static_cast<size_t>(width);
+  kernels_.gemm_f32.packed(product);
   for (int r = 0; r < rows; ++r) {
     float* row = out.data() + static_cast<size_t>(r) * width;
     for (int c = 0; c < width; ++c) row[c] = c < pos_cols ? row[c] + bias[c] : bias[c];

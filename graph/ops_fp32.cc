@@ -39,7 +39,7 @@ PackedF32Weights::PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n
 
 const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernels) const {
   check(kernels.nr == nr_, ErrorCode::kInternal,
-        std::string("float weights packed in panels of ") + std::to_string(nr_) + " columns, run by " + kernels.packed_name);
+        std::string("float weights packed in panels of ") + std::to_string(nr_) + " columns, run by " + kernels.name);
   return panels_.data();
 }
 
@@ -214,7 +214,7 @@ size_t AttentionOp::scratch_per_thread() const {
 void AttentionOp::run(const RunContext& ctx) const {
   const kernels::GemmF32Kernels& gemm = ctx.kernels().gemm_f32;
   check(gemm.nr == nr_, ErrorCode::kInternal,
-        "attention scratch sized for panels of " + std::to_string(nr_) + " columns, run by " + gemm.packed_name);
+        "attention scratch sized for panels of " + std::to_string(nr_) + " columns, run by " + gemm.name);
   const float* q = q_.resolve(ctx);
   const float* k = k_.resolve(ctx);
   const float* v = v_.resolve(ctx);

@@ -46,7 +46,7 @@ class Conv2dOp : public Op {
   Conv2dOp(const kernels::GemmF32Kernels& gemm, const kernels::Conv2dShape& shape, const float* weight, const float* bias,
            bool relu, ValueId input, ValueId residual, ValueId output);
   const char* type() const override { return "conv2d_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.packed_name; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
@@ -92,7 +92,7 @@ class LinearOp : public Op {
   LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias,
            MatrixRef residual, Epilogue epilogue, ValueId output);
   const char* type() const override { return "linear_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.packed_name; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
@@ -149,7 +149,7 @@ class AttentionOp : public Op {
               MatrixRef v, ValueId output);
   const char* type() const override { return "attention_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override {
-    return std::string(k.gemm_f32.packed_name) + " + " + k.elementwise.softmax_name;
+    return std::string(k.gemm_f32.name) + " + " + k.elementwise.softmax_name;
   }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;

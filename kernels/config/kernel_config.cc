@@ -29,8 +29,7 @@ IsaTables isa_tables(Isa isa) {
 
 std::string KernelConfig::describe() const {
   return std::string(isa_name(isa)) + ": gemm_s8 " + std::to_string(gemm_s8.mr) + "x" + std::to_string(gemm_s8.nr) +
-         "c" + std::to_string(gemm_s8.kr) + " " + isa_name(gemm_s8.isa) + ", " + gemm_f32.packed_name + ", " + gemm_f32.name +
-         ", quant " +
+         "c" + std::to_string(gemm_s8.kr) + " " + isa_name(gemm_s8.isa) + ", " + gemm_f32.name + ", quant " +
          isa_name(quant.isa) + ", elementwise " + isa_name(elementwise.isa) + ", maxpool_s8 " +
          isa_name(maxpool_s8.isa);
 }

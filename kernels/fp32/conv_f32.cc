@@ -14,7 +14,7 @@ constexpr size_t kTargetScratchBytes = 256 * 1024;
 int conv_f32_tile_pixels(const Conv2dShape& s) {
   const size_t per_pixel = static_cast<size_t>(s.patch_size()) * sizeof(float);
   const int fit = static_cast<int>(kTargetScratchBytes / per_pixel) / kTileQuantum * kTileQuantum;
-  return std::clamp(fit, kTileQuantum, 16 * kTileQuantum);
+  return std::clamp(fit, kTileQuantum, 8 * kTileQuantum);  // at most 192 pixels, as the int8 conv's tiles
 }
 
 size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels) {

@@ -18,7 +18,8 @@ struct ConvF32 {
 };
 
 /// Output pixels per tile: a multiple of every gemm_f32 variant's MR (24) that keeps the patch
-/// buffer near 256 KB (L2-resident while the weights stream past it).
+/// buffer near 256 KB (L2-resident while the weights stream past it), at most 192 (small images
+/// still split into several tiles for the pool).
 int conv_f32_tile_pixels(const Conv2dShape& s);
 /// Floats of scratch conv_f32 needs for tiles of `tile_pixels` pixels (0 when it reads in place).
 size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels);

@@ -1,15 +1,9 @@
 // FP32 GEMM variants, one table per instruction set (baseline, AVX2+FMA, AVX-512 F/BW/VL, NEON);
-// an Engine runs the one its KernelConfig chose. Two kinds of product:
-//
-//   packed  C = act(A B^T + bias + residual) with B (a layer's weights, [n x k]) packed once at load
-//           into the micro-kernel's panels (gemm_f32_pack): the float convolutions and linears.
-//           Our own micro-kernels (gemm_f32_packed.inc, written once with xsimd) of mr x nr
-//           register tiles, blocked for the caches; the scalar reference is the plain triple loop.
-//   nt, nn  both operands computed at run time (attention's q k^T and p v, the encoder's position
-//           table): Eigen's GEMM compiled per ISA. Eigen picks its SIMD width at compile time, so
-//           each ISA file compiles its own copy of Eigen in a renamed namespace (see
-//           gemm_f32_eigen.inc) — otherwise the linker could merge an AVX-512 instantiation into
-//           the baseline path. AArch64's baseline Eigen is already NEON; the neon table reuses it.
+// an Engine runs the one its KernelConfig chose. C = act(A B^T + bias + residual) with B packed
+// into the micro-kernel's panels (gemm_f32_pack): a layer's weights once at load (convolutions,
+// linears), attention's keys and values per run. Our own micro-kernels (gemm_f32_packed.inc,
+// written once with xsimd) of mr x nr register tiles, blocked for the caches; the scalar reference
+// is the plain triple loop.
 //
 // Numerics (test_gemm_f32.cc): each SIMD variant computes every output as one chain of fused
 // multiply-adds in k order (then bias, residual, activation), whatever its tile and blocking, so
@@ -53,13 +47,8 @@ struct GemmF32PackedArgs {
 
 struct GemmF32Kernels {
   Isa isa;
-  const char* name;  ///< of nt / nn, e.g. "gemm_f32_eigen_avx2"
-  /// C[m x n] = A[m x k] * B^T, B stored [n x k]; overwrites C.
-  void (*nt)(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c, size_t ldc);
-  /// C[m x n] = A[m x k] * B[k x n]; overwrites C.
-  void (*nn)(int m, int n, int k, const float* a, size_t lda, const float* b, size_t ldb, float* c, size_t ldc);
-  int mr, nr;               ///< the packed product's register tile (nr: columns per packed panel)
-  const char* packed_name;  ///< e.g. "gemm_f32 14x32 avx512"
+  const char* name;  ///< e.g. "gemm_f32 8x32 avx512"
+  int mr, nr;        ///< the register tile (nr: columns per packed panel)
   void (*packed)(const GemmF32PackedArgs& args);
 };
 

@@ -1,13 +1,9 @@
-// FP32 GEMM with this file's avx2 flags (cmake/ActLayer.cmake): Eigen for nt / nn, and the packed
-// micro-kernels of gemm_f32_packed.inc on a 6x16 register tile.
+// FP32 GEMM with this file's avx2 flags (cmake/ActLayer.cmake): the packed micro-kernels of
+// gemm_f32_packed.inc on a 6x16 register tile.
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__x86_64__)
 #include <algorithm>
-
-#define Eigen act_eigen_avx2
-#include "kernels/fp32/gemm_f32_eigen.inc"
-#undef Eigen
 
 // GCC 12's AVX-512 headers initialise their pass-through operands with themselves, reported as
 // (maybe-)uninitialized wherever xsimd's wrappers inline them (as in elementwise_f32_avx512.cc).
@@ -28,8 +24,7 @@ void gemm_packed_avx2(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx2, a
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_avx2() {
-  static const GemmF32Kernels table{Isa::kAvx2, "gemm_f32_eigen_avx2", gemm_nt, gemm_nn, Packed::kMr, Packed::NR,
-                                    "gemm_f32 6x16 avx2", gemm_packed_avx2};
+  static const GemmF32Kernels table{Isa::kAvx2, "gemm_f32 6x16 avx2", Packed::kMr, Packed::NR, gemm_packed_avx2};
   return &table;
 }
 }  // namespace act::kernels

@@ -1,13 +1,9 @@
-// FP32 GEMM with this file's avx512 flags (cmake/ActLayer.cmake): Eigen for nt / nn, and the packed
-// micro-kernels of gemm_f32_packed.inc on a 8x32 register tile.
+// FP32 GEMM with this file's avx512 flags (cmake/ActLayer.cmake): the packed micro-kernels of
+// gemm_f32_packed.inc on a 8x32 register tile.
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__x86_64__)
 #include <algorithm>
-
-#define Eigen act_eigen_avx512
-#include "kernels/fp32/gemm_f32_eigen.inc"
-#undef Eigen
 
 // GCC 12's AVX-512 headers initialise their pass-through operands with themselves, reported as
 // (maybe-)uninitialized wherever xsimd's wrappers inline them (as in elementwise_f32_avx512.cc).
@@ -35,8 +31,7 @@ void gemm_packed_avx512(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx51
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_avx512() {
-  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32_eigen_avx512", gemm_nt, gemm_nn, Packed::kMr, Packed::NR,
-                                    "gemm_f32 8x32 avx512", gemm_packed_avx512};
+  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32 8x32 avx512", Packed::kMr, Packed::NR, gemm_packed_avx512};
   return &table;
 }
 }  // namespace act::kernels

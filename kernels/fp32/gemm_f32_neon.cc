@@ -1,5 +1,5 @@
 // FP32 GEMM on AArch64 NEON: the packed micro-kernels of gemm_f32_packed.inc on an 8x12 register
-// tile (24 accumulators of 4 floats, 3 of B); nt / nn are the baseline Eigen build's (already NEON).
+// tile (24 accumulators of 4 floats, 3 of B).
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__aarch64__)
@@ -20,8 +20,7 @@ void gemm_packed_neon(const GemmF32PackedArgs& args) { Packed::run(Isa::kNeon, a
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_neon() {
-  static const GemmF32Kernels table{Isa::kNeon, gemm_f32_table_ref()->name, gemm_f32_table_ref()->nt, gemm_f32_table_ref()->nn,
-                                    Packed::kMr, Packed::NR, "gemm_f32 8x12 neon", gemm_packed_neon};
+  static const GemmF32Kernels table{Isa::kNeon, "gemm_f32 8x12 neon", Packed::kMr, Packed::NR, gemm_packed_neon};
   return &table;
 }
 }  // namespace act::kernels

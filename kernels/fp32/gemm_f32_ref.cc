@@ -1,12 +1,8 @@
-// FP32 GEMM at the target's baseline ISA: Eigen (SSE2 on x86-64, NEON on AArch64) for nt / nn, and
-// the scalar reference of the packed product: each output one sum over k in order, then the epilogue.
+// The scalar reference of the packed FP32 GEMM: each output one sum over k in order (separate
+// multiplies and adds), then the epilogue.
 #include "kernels/fp32/gemm_f32.h"
 
 #include "kernels/fp32/elementwise_f32.h"
-
-#define Eigen act_eigen_baseline
-#include "kernels/fp32/gemm_f32_eigen.inc"
-#undef Eigen
 
 namespace act::kernels {
 
@@ -36,8 +32,7 @@ void gemm_packed_ref(const GemmF32PackedArgs& g) {
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_ref() {
-  static const GemmF32Kernels table{Isa::kRef, "gemm_f32_eigen_ref", gemm_nt, gemm_nn, 1, kRefNr, "gemm_f32 1x8 ref",
-                                    gemm_packed_ref};
+  static const GemmF32Kernels table{Isa::kRef, "gemm_f32 1x8 ref", 1, kRefNr, gemm_packed_ref};
   return &table;
 }
 

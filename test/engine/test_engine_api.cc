@@ -425,14 +425,23 @@ TEST_F(EngineApiTest, ProfilerTimesEveryOpAndTracesEveryThread) {
   EXPECT_NEAR(stage_ms["encoder"], t.encoder_ms, 1e-9 * t.total_ms);
   EXPECT_NEAR(stage_ms["decoder"], t.decoder_ms, 1e-9 * t.total_ms);
 
-  const auto trace = e.chrome_trace();
-  ASSERT_TRUE(trace.ok()) << trace.status().to_string();
-  const nlohmann::json j = nlohmann::json::parse(*trace);
+  // One inference of the tiny model takes a millisecond or two: on a loaded machine the worker may
+  // not be scheduled in time to take a tile of any op, so trace further inferences until it does.
   std::map<int, std::vector<nlohmann::json>> lanes;
   std::set<int> named_lanes;
-  for (const auto& ev : j.at("traceEvents")) {
-    if (ev.at("ph") == "X") lanes[ev.at("tid").get<int>()].push_back(ev);
-    if (ev.at("ph") == "M") named_lanes.insert(ev.at("tid").get<int>());
+  for (int attempt = 0; attempt < 100 && lanes[1].empty(); ++attempt) {
+    if (attempt > 0) {
+      ASSERT_TRUE(e.infer(observation(), chunk_out).ok());
+    }
+    const auto trace = e.chrome_trace();
+    ASSERT_TRUE(trace.ok()) << trace.status().to_string();
+    lanes.clear();
+    named_lanes.clear();
+    const nlohmann::json j = nlohmann::json::parse(*trace);
+    for (const auto& ev : j.at("traceEvents")) {
+      if (ev.at("ph") == "X") lanes[ev.at("tid").get<int>()].push_back(ev);
+      if (ev.at("ph") == "M") named_lanes.insert(ev.at("tid").get<int>());
+    }
   }
   EXPECT_EQ(named_lanes, (std::set<int>{0, 1}));
   const std::vector<nlohmann::json>& caller = lanes[0];

@@ -1,7 +1,7 @@
 // The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
 // stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM)
-// and the Eigen GEMM, every variant this CPU runs, the max-pool, and the element-wise reference
-// (test_elementwise_f32.cc holds the SIMD element-wise variants to it).
+// with every variant this CPU runs, the max-pool, and the element-wise reference
+// (test_elementwise_f32.cc holds the SIMD element-wise variants to it; test_gemm_f32.cc the GEMM).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -79,38 +79,7 @@ TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
       }
       for (size_t i = 0; i < y.size(); ++i) {
         ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
-            << gemm.packed_name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
-      }
-    }
-  }
-}
-
-TEST(Fp32Kernels, GemmWithStridesMatchesNaive) {
-  std::mt19937 rng(3);
-  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
-    const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
-    for (int m : {1, 7, 33}) {
-      for (int n : {1, 5, 64}) {
-        for (int k : {1, 9, 100}) {
-          const size_t lda = k + 3, ldb = k + 1, ldc = n + 2;
-          const auto a = random_vector(m * lda, rng), b = random_vector(n * ldb, rng);
-          std::vector<float> c(m * ldc, 42.0f);
-          gemm.nt(m, n, k, a.data(), lda, b.data(), ldb, c.data(), ldc);
-          std::vector<float> bt(static_cast<size_t>(k) * (n + 4));  // B^T, row-major [k x n], ld n+4
-          for (int i = 0; i < n; ++i)
-            for (int j = 0; j < k; ++j) bt[j * (n + 4) + i] = b[i * ldb + j];
-          std::vector<float> c2(m * ldc, 42.0f);
-          gemm.nn(m, n, k, a.data(), lda, bt.data(), n + 4, c2.data(), ldc);
-          for (int i = 0; i < m; ++i) {
-            for (int j = 0; j < n; ++j) {
-              double acc = 0;
-              for (int t = 0; t < k; ++t) acc += static_cast<double>(a[i * lda + t]) * b[j * ldb + t];
-              ASSERT_NEAR(c[i * ldc + j], acc, 1e-5 * k) << gemm.name;
-              ASSERT_NEAR(c2[i * ldc + j], acc, 1e-5 * k) << gemm.name;
-            }
-            for (size_t j = n; j < ldc; ++j) ASSERT_EQ(c[i * ldc + j], 42.0f) << "wrote past n";
-          }
-        }
+            << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
       }
     }
   }
@@ -169,43 +138,6 @@ TEST(Fp32Kernels, LayerNormSoftmaxAndActivations) {
   std::vector<float> r = {-1.0f, 0.0f, 2.0f};
   ref.relu(r.size(), r.data());
   EXPECT_EQ(r, (std::vector<float>{0.0f, 0.0f, 2.0f}));
-}
-
-}  // namespace
-}  // namespace act::kernels
-
-namespace act::kernels {
-namespace {
-
-// Every FP32 GEMM variant this machine can run agrees with the baseline one.
-TEST(GemmF32Variants, AgreeWithTheBaseline) {
-  const GemmF32Kernels* ref = gemm_f32_table_ref();
-  ASSERT_NE(ref, nullptr);
-  int variants = 0;
-  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
-    if (isa == Isa::kRef) continue;
-    const GemmF32Kernels* v = &test::table_of(isa, &IsaTables::gemm_f32);
-    ++variants;
-    std::mt19937 rng(11);
-    for (int m : {1, 5, 64, 77}) {
-      for (int n : {1, 17, 128}) {
-        for (int k : {1, 9, 576}) {
-          const auto a = random_vector(static_cast<size_t>(m) * (k + 1), rng), b = random_vector(static_cast<size_t>(n) * k, rng);
-          std::vector<float> c_ref(static_cast<size_t>(m) * n), c(static_cast<size_t>(m) * n);
-          ref->nt(m, n, k, a.data(), k + 1, b.data(), k, c_ref.data(), n);
-          v->nt(m, n, k, a.data(), k + 1, b.data(), k, c.data(), n);
-          for (size_t i = 0; i < c.size(); ++i) ASSERT_NEAR(c[i], c_ref[i], 1e-5 * k) << v->name << " nt " << m << "x" << n << "x" << k;
-          ref->nn(m, n, k, a.data(), k + 1, b.data(), n, c_ref.data(), n);  // B read as [k x n]
-          v->nn(m, n, k, a.data(), k + 1, b.data(), n, c.data(), n);
-          for (size_t i = 0; i < c.size(); ++i) ASSERT_NEAR(c[i], c_ref[i], 1e-5 * k) << v->name << " nn";
-        }
-      }
-    }
-  }
-  // On a CPU with AVX2 the AVX2 build must have been compiled in and tested.
-  if (cpu_supports(Isa::kAvx2) && std::getenv("ACT_ISA") == nullptr) {
-    EXPECT_GE(variants, 1);
-  }
 }
 
 }  // namespace

@@ -106,12 +106,12 @@ uint32_t check_case(const GemmF32Kernels& g, const Case& c, std::mt19937& rng) {
         if (c.residual) chain += residual[(c.residual == 2 ? 0 : static_cast<size_t>(r) * c.cols) + col];
         if (c.activation == GemmF32Activation::kRelu) chain = chain < 0.0f ? 0.0f : chain;
         if (got != chain && ++failures <= 3) {
-          ADD_FAILURE() << g.packed_name << " " << describe(c) << ": C(" << r << "," << col << ") = " << got
+          ADD_FAILURE() << g.name << " " << describe(c) << ": C(" << r << "," << col << ") = " << got
                         << ", not the k-order fused multiply-add chain " << chain;
         }
       }
       if (!(std::fabs(got - want) <= tol) && ++failures <= 3) {
-        ADD_FAILURE() << g.packed_name << " " << describe(c) << ": C(" << r << "," << col << ") = " << got << ", want "
+        ADD_FAILURE() << g.name << " " << describe(c) << ": C(" << r << "," << col << ") = " << got << ", want "
                       << want << " within " << tol;
       }
     }
@@ -144,7 +144,7 @@ TEST(GemmF32Packed, EveryVariantMatchesTheDoubleProduct) {
     uint32_t paths = 0;
     for (const Case& c : cases) paths |= check_case(g, c, rng);
     if (isa != Isa::kRef) {
-      EXPECT_EQ(paths, kPathFullTile | kPathRowTail | kPathPartialCols) << g.packed_name << " did not run every tile kind";
+      EXPECT_EQ(paths, kPathFullTile | kPathRowTail | kPathPartialCols) << g.name << " did not run every tile kind";
     }
   }
 }

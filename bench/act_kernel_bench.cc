@@ -391,17 +391,16 @@ void bm_conv_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Conv
 
 constexpr int kHeads = 8, kHeadDim = 64;
 
-// The float attention op (graph/ops_fp32.h: per head tile, keys and values packed, QK^T and PV on
-// the packed gemm_f32, softmax between) with the kernels an Engine of this ISA level runs; Q, K, V
-// column slices of one [T x 1536] value (the fused QKV projection's layout).
-void bm_attention(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
+// An attention op of `config` over one [T x 1536] value (Q, K, V its column slices: the fused QKV
+// projection's layout), 8 heads of 64, as a one-op graph: `make(q, k, v, out)` builds the op.
+template <class MakeOp>
+void bm_attention_op(benchmark::State& state, const kernels::KernelConfig& config, int tokens, double peak_gmacs,
+                     int threads, const std::string& key, MakeOp make) {
   const int d = kHeads * kHeadDim;
-  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
   graph::Graph g;
   const graph::ValueId qkv = g.add_input("qkv", {tokens, 3 * d});
   const graph::ValueId out = g.add_value("out", {tokens, d});
-  g.add_op(std::make_unique<graph::AttentionOp>(config.gemm_f32, tokens, tokens, d, kHeads, graph::MatrixRef::of(qkv, 3 * d, 0),
-                                                graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
+  g.add_op(make(graph::MatrixRef::of(qkv, 3 * d, 0), graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
   g.mark_output(out);
   g.plan(threads, false);
   std::mt19937 rng(3);
@@ -413,25 +412,22 @@ void bm_attention(benchmark::State& state, kernels::Isa isa, int tokens, double 
   state.SetLabel(g.ops()[0]->kernel(config) + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
 }
 
-// The int8 attention op (graph/ops_int8.h: both matmuls on gemm_s8, keys and values packed per
-// run) on the same shape, with the kernels an Engine of this ISA level runs.
-void bm_attention_s8(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
-  const int d = kHeads * kHeadDim;
+// The float attention op (graph/ops_fp32.h: per head, keys and values packed, QK^T and PV on the
+// packed gemm_f32, softmax between) with the kernels an Engine of this ISA level runs.
+void bm_attention(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
   const kernels::KernelConfig config = kernels::kernel_config_for(isa);
-  graph::Graph g;
-  const graph::ValueId qkv = g.add_input("qkv", {tokens, 3 * d});
-  const graph::ValueId out = g.add_value("out", {tokens, d});
-  g.add_op(std::make_unique<graph::AttentionS8Op>(config.gemm_s8, tokens, tokens, d, kHeads, graph::MatrixRef::of(qkv, 3 * d, 0),
-                                                  graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
-  g.mark_output(out);
-  g.plan(threads, false);
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  for (size_t i = 0; i < static_cast<size_t>(tokens) * 3 * d; ++i) g.data(qkv)[i] = u(rng);
-  ThreadPool& tp = pool(threads);
-  const double macs = 2.0 * kHeads * tokens * static_cast<double>(tokens) * kHeadDim;
-  run_timed(state, key, threads, macs, peak_gmacs, [&] { g.run(tp, config); });
-  state.SetLabel(g.ops()[0]->kernel(config) + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
+  bm_attention_op(state, config, tokens, peak_gmacs, threads, key, [&](auto q, auto k, auto v, graph::ValueId out) {
+    return std::make_unique<graph::AttentionOp>(config.gemm_f32, tokens, tokens, kHeads * kHeadDim, kHeads, q, k, v, out);
+  });
+}
+
+// The int8 attention op (graph/ops_int8.h: both matmuls on gemm_s8, keys and values packed per
+// run) on the same shape.
+void bm_attention_s8(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
+  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
+  bm_attention_op(state, config, tokens, peak_gmacs, threads, key, [&](auto q, auto k, auto v, graph::ValueId out) {
+    return std::make_unique<graph::AttentionS8Op>(config.gemm_s8, tokens, tokens, kHeads * kHeadDim, kHeads, q, k, v, out);
+  });
 }
 
 // ---- element-wise ops around the GEMMs (single thread, bytes/s of input + output) ---------------

@@ -44,16 +44,8 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
   std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
   std::vector<float> packed(kernels::gemm_f32_packed_floats(kernels_.gemm_f32.nr, pos_cols, D));
   kernels::gemm_f32_pack(kernels_.gemm_f32.nr, pos_cols, D, w.data(), static_cast<size_t>(D), packed.data());
-  kernels::GemmF32PackedArgs product;
-  product.m = rows;
-  product.n = pos_cols;
-  product.k = D;
-  product.a = pos;
-  product.lda = static_cast<size_t>(D);
-  product.packed_b = packed.data();
-  product.c = out.data();
-  product.ldc = static_cast<size_t>(width);
-  kernels_.gemm_f32.packed(product);
+  kernels_.gemm_f32.packed({.m = rows, .n = pos_cols, .k = D, .a = pos, .lda = static_cast<size_t>(D),
+                             .packed_b = packed.data(), .c = out.data(), .ldc = static_cast<size_t>(width), .epilogue = {}});
   for (int r = 0; r < rows; ++r) {
     float* row = out.data() + static_cast<size_t>(r) * width;
     for (int c = 0; c < width; ++c) row[c] = c < pos_cols ? row[c] + bias[c] : bias[c];

@@ -237,27 +237,11 @@ void AttentionOp::run(const RunContext& ctx) const {
     }
     kernels::gemm_f32_pack(nr_, nk_, hd, k + static_cast<size_t>(h) * hd, k_.ld, packed_k);
     kernels::gemm_f32_pack_transposed(nr_, hd, nk_, v + static_cast<size_t>(h) * hd, v_.ld, packed_v);
-    kernels::GemmF32PackedArgs qk;
-    qk.m = rows;
-    qk.n = nk_;
-    qk.k = hd;
-    qk.a = q_scaled;
-    qk.lda = static_cast<size_t>(hd);
-    qk.packed_b = packed_k;
-    qk.c = scores;
-    qk.ldc = static_cast<size_t>(nk_);
-    gemm.packed(qk);
+    gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
+                 .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
     ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
-    kernels::GemmF32PackedArgs pv;
-    pv.m = rows;
-    pv.n = hd;
-    pv.k = nk_;
-    pv.a = scores;
-    pv.lda = static_cast<size_t>(nk_);
-    pv.packed_b = packed_v;
-    pv.c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd;
-    pv.ldc = static_cast<size_t>(dim_);
-    gemm.packed(pv);
+    gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
+                 .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_), .epilogue = {}});
   });
 }
 

@@ -6,12 +6,15 @@
 //   - conv_s8/<isa>/<HxW>/<layer>/threads:T: every distinct ResNet18 convolution of a 480x640 and a
 //     360x640 camera through conv_s8_s8out (tiled im2col + gemm_s8, ReLU fused), shapes derived
 //     from the image size;
-//   - attention_f32/<isa>/<tokens>/threads:T: 8 heads of QK^T (gemm_f32_nt), softmax, PV
-//     (gemm_f32_nn), head dim 64, at 302 and 242 tokens;
+//   - gemm_f32/<isa>/<linear>/<tokens>/threads:T and conv_f32/<isa>/<HxW>/<layer>/threads:T: the
+//     FP32 path's transformer linears (default and rover token counts) and convolutions (packed
+//     gemm_f32, bias and ReLU fused), pct_peak against the float FMA probe of the ISA;
+//   - attention_f32/<isa>/<tokens>/threads:T: the float attention op, 8 heads of QK^T, softmax,
+//     PV on the packed gemm_f32, head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
 //     LayerNorm, softmax (bytes/s).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
-// sustained int8 probe rate, measured once at start-up by thread CPU time; int8 kernels only),
+// sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time),
 // at T = 1 also GMAC/s_cpu and pct_peak_cpu (by the thread's CPU time: what to read on a shared,
 // loaded machine, where wall time includes time spent descheduled) and, for T > 1, speedup_vs_1t
 // (the same benchmark's best single-thread time / this one's). Threads split the output into tiles
@@ -43,6 +46,7 @@
 #include "graph/thread_pool.h"
 #include "kernels/peak/peak_probe.h"
 #include "kernels/conv_s8/conv_s8.h"
+#include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/elementwise_f32.h"
 #include "kernels/config/kernel_config.h"
 #include "kernels/fp32/gemm_f32.h"
@@ -217,6 +221,42 @@ void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double pe
                  " N=" + std::to_string(s.n) + " K=" + std::to_string(s.k));
 }
 
+// The packed FP32 GEMM on a shape's float GEMM view: weights packed once, bias and ReLU fused (as
+// the convolutions and linears run it); threads split the output as bm_gemm does.
+void bm_gemm_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Shape s, double peak_gmacs, int threads,
+                 std::string key) {
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> a(static_cast<size_t>(s.m) * s.k), w(static_cast<size_t>(s.n) * s.k), bias(static_cast<size_t>(s.n));
+  for (auto* v : {&a, &w, &bias}) {
+    for (float& x : *v) x = u(rng);
+  }
+  std::vector<float> packed(kernels::gemm_f32_packed_floats(g->nr, s.n, s.k)), c(static_cast<size_t>(s.m) * s.n);
+  kernels::gemm_f32_pack(g->nr, s.n, s.k, w.data(), static_cast<size_t>(s.k), packed.data());
+  const Tiling t = tiling(s.m, s.n, g->mr, g->nr, threads);
+  ThreadPool& tp = pool(threads);
+  run_timed(state, key, threads, static_cast<double>(s.macs()), peak_gmacs, [&] {
+    tp.parallel_for(t.count(), [&](size_t task, int) {
+      const int m0 = static_cast<int>(task / t.tiles_n) * t.tile_m, n0 = static_cast<int>(task % t.tiles_n) * t.tile_n;
+      kernels::GemmF32PackedArgs args;
+      args.m = std::min(s.m - m0, t.tile_m);
+      args.n = std::min(s.n - n0, t.tile_n);
+      args.k = s.k;
+      args.a = a.data() + static_cast<size_t>(m0) * s.k;
+      args.lda = static_cast<size_t>(s.k);
+      args.packed_b = packed.data();
+      args.col0 = n0;
+      args.c = c.data() + static_cast<size_t>(m0) * s.n + n0;
+      args.ldc = static_cast<size_t>(s.n);
+      args.epilogue.bias = bias.data() + n0;
+      args.epilogue.activation = kernels::GemmF32Activation::kRelu;
+      g->packed(args);
+    });
+  });
+  state.SetLabel(std::string(g->name) + " M=" + std::to_string(s.m) + " N=" + std::to_string(s.n) +
+                 " K=" + std::to_string(s.k));
+}
+
 // ---- convolutions -----------------------------------------------------------------------------
 
 struct ConvBench {
@@ -294,45 +334,56 @@ void bm_conv(benchmark::State& state, const GemmS8Kernels* v, ConvBench cb, doub
                  " tile " + std::to_string(tile));
 }
 
+// The float convolution as the FP32 graph runs it (kernels/fp32/conv_f32.h: tiles of output pixels,
+// im2col into per-thread scratch, packed gemm_f32 with bias and ReLU fused).
+void bm_conv_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, ConvBench cb, double peak_gmacs, int threads,
+                 std::string key) {
+  const kernels::Conv2dShape& s = cb.shape;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> x(static_cast<size_t>(s.in_h) * s.in_w * s.in_c), w(static_cast<size_t>(s.out_c) * s.patch_size()),
+      bias(static_cast<size_t>(s.out_c));
+  for (auto* v : {&x, &w, &bias}) {
+    for (float& e : *v) e = u(rng);
+  }
+  std::vector<float> packed(kernels::gemm_f32_packed_floats(g->nr, s.out_c, s.patch_size()));
+  kernels::gemm_f32_pack(g->nr, s.out_c, s.patch_size(), w.data(), static_cast<size_t>(s.patch_size()), packed.data());
+  const kernels::ConvF32 conv{s, g, packed.data()};
+  const int pixels = s.out_h * s.out_w;
+  const int tile = kernels::conv_f32_tile_pixels(s);
+  const int tiles = (pixels + tile - 1) / tile;
+  std::vector<std::vector<float>> scratch(static_cast<size_t>(threads), std::vector<float>(kernels::conv_f32_scratch_floats(s, tile)));
+  std::vector<float> y(static_cast<size_t>(pixels) * s.out_c);
+  kernels::GemmF32Epilogue epilogue;
+  epilogue.bias = bias.data();
+  epilogue.activation = kernels::GemmF32Activation::kRelu;
+  ThreadPool& tp = pool(threads);
+  run_timed(state, key, threads, static_cast<double>(cb.macs()), peak_gmacs, [&] {
+    tp.parallel_for(static_cast<size_t>(tiles), [&](size_t t, int thread) {
+      const int p0 = static_cast<int>(t) * tile;
+      kernels::conv_f32(conv, x.data(), y.data(), epilogue, p0, std::min(tile, pixels - p0), scratch[thread].data());
+    });
+  });
+  state.SetLabel(std::string(g->name) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
+                 std::to_string(s.in_c) + " -> " + std::to_string(s.out_h) + "x" + std::to_string(s.out_w) + "x" +
+                 std::to_string(s.out_c) + " k" + std::to_string(s.kernel_h) + "/" + std::to_string(s.stride) +
+                 " tile " + std::to_string(tile));
+}
+
 // ---- attention (f32) ---------------------------------------------------------------------------
 
 constexpr int kHeads = 8, kHeadDim = 64;
 
-// QK^T, softmax, PV for 8 heads of T tokens; Q, K, V as [T x 512] with head h in columns
-// [64h, 64h + 64) (the layout of the fused QKV projection). Threads split the heads.
-void bm_attention(benchmark::State& state, const kernels::GemmF32Kernels* g, const kernels::ElementwiseF32Kernels* e,
-                  int tokens, int threads, std::string key) {
+// An attention op of `config` over one [T x 1536] value (Q, K, V its column slices: the fused QKV
+// projection's layout), 8 heads of 64, as a one-op graph: `make(q, k, v, out)` builds the op.
+template <class MakeOp>
+void bm_attention_op(benchmark::State& state, const kernels::KernelConfig& config, int tokens, double peak_gmacs,
+                     int threads, const std::string& key, MakeOp make) {
   const int d = kHeads * kHeadDim;
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::vector<float> q(static_cast<size_t>(tokens) * d), kmat(q.size()), vmat(q.size()), out(q.size());
-  for (auto* m : {&q, &kmat, &vmat})
-    for (auto& x : *m) x = u(rng);
-  std::vector<std::vector<float>> scores(static_cast<size_t>(kHeads), std::vector<float>(static_cast<size_t>(tokens) * tokens));
-  ThreadPool& tp = pool(threads);
-  const double macs = 2.0 * kHeads * tokens * static_cast<double>(tokens) * kHeadDim;
-  run_timed(state, key, threads, macs, 0.0, [&] {
-    tp.parallel_for(kHeads, [&](size_t h, int) {
-      const size_t off = h * kHeadDim;
-      float* sc = scores[h].data();
-      g->nt(tokens, tokens, kHeadDim, q.data() + off, d, kmat.data() + off, d, sc, tokens);
-      e->softmax_rows(tokens, tokens, sc, tokens);
-      g->nn(tokens, kHeadDim, tokens, sc, tokens, vmat.data() + off, d, out.data() + off, d);
-    });
-  });
-  state.SetLabel(std::string(g->name) + " + " + e->softmax_name + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
-}
-
-// The int8 attention op (graph/ops_int8.h: both matmuls on gemm_s8, keys and values packed per
-// run) on the same shape, with the kernels an Engine of this ISA level runs.
-void bm_attention_s8(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
-  const int d = kHeads * kHeadDim;
-  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
   graph::Graph g;
   const graph::ValueId qkv = g.add_input("qkv", {tokens, 3 * d});
   const graph::ValueId out = g.add_value("out", {tokens, d});
-  g.add_op(std::make_unique<graph::AttentionS8Op>(config.gemm_s8, tokens, tokens, d, kHeads, graph::MatrixRef::of(qkv, 3 * d, 0),
-                                                  graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
+  g.add_op(make(graph::MatrixRef::of(qkv, 3 * d, 0), graph::MatrixRef::of(qkv, 3 * d, d), graph::MatrixRef::of(qkv, 3 * d, 2 * d), out));
   g.mark_output(out);
   g.plan(threads, false);
   std::mt19937 rng(3);
@@ -342,6 +393,24 @@ void bm_attention_s8(benchmark::State& state, kernels::Isa isa, int tokens, doub
   const double macs = 2.0 * kHeads * tokens * static_cast<double>(tokens) * kHeadDim;
   run_timed(state, key, threads, macs, peak_gmacs, [&] { g.run(tp, config); });
   state.SetLabel(g.ops()[0]->kernel(config) + ", 8 heads x " + std::to_string(tokens) + "^2 x 64");
+}
+
+// The float attention op (graph/ops_fp32.h: per head, keys and values packed, QK^T and PV on the
+// packed gemm_f32, softmax between) with the kernels an Engine of this ISA level runs.
+void bm_attention(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
+  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
+  bm_attention_op(state, config, tokens, peak_gmacs, threads, key, [&](auto q, auto k, auto v, graph::ValueId out) {
+    return std::make_unique<graph::AttentionOp>(config.gemm_f32, tokens, tokens, kHeads * kHeadDim, kHeads, q, k, v, out);
+  });
+}
+
+// The int8 attention op (graph/ops_int8.h: both matmuls on gemm_s8, keys and values packed per
+// run) on the same shape.
+void bm_attention_s8(benchmark::State& state, kernels::Isa isa, int tokens, double peak_gmacs, int threads, std::string key) {
+  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
+  bm_attention_op(state, config, tokens, peak_gmacs, threads, key, [&](auto q, auto k, auto v, graph::ValueId out) {
+    return std::make_unique<graph::AttentionS8Op>(config.gemm_s8, tokens, tokens, kHeads * kHeadDim, kHeads, q, k, v, out);
+  });
 }
 
 // ---- element-wise ops around the GEMMs (single thread, bytes/s of input + output) ---------------
@@ -443,7 +512,7 @@ int main(int argc, char** argv) {
   const char* shapes_env = std::getenv("ACT_BENCH_SHAPES");
   const std::vector<bench::Shape> shapes = bench::read_shapes(shapes_env != nullptr ? shapes_env : ACT_BENCH_SHAPES_FILE);
 
-  std::map<kernels::Isa, double> peak;
+  std::map<kernels::Isa, double> peak, peak_f32;  // by ISA: the int8 and the float FMA probes
   for (int i = 0; i < kernels::kPeakProbeCount; ++i) {
     const kernels::PeakProbe& p = kernels::kPeakProbes[i];
     if (!kernels::cpu_supports(p.isa) || p.fn(1) == 0) continue;
@@ -451,9 +520,10 @@ int main(int argc, char** argv) {
         ->UseRealTime()
         ->ComputeStatistics("max", bench::stat_max)
         ->ComputeStatistics("min", bench::stat_min);
-    if (p.is_isa_peak && p.kind == kernels::PeakKind::kInt8) {
-      peak[p.isa] = kernels::measure_peak_gmacs(p);
-      benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps", std::to_string(peak[p.isa]));
+    if (p.is_isa_peak) {
+      (p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa] = kernels::measure_peak_gmacs(p);
+      benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps",
+                                  std::to_string((p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa]));
     }
   }
   const bench::Shape* smallest = shapes.empty() ? nullptr : &shapes[0];
@@ -483,6 +553,39 @@ int main(int argc, char** argv) {
       }
     }
   }
+  // The FP32 path's products, % of the float FMA probe of their ISA: the packed GEMM on every
+  // transformer linear (the f32-out shapes) of the default config (302 tokens) and the rover's
+  // (360x640: 242 tokens; the decoder's 100 queries are the same), then every convolution of both
+  // cameras through conv_f32. SIMD variants only (the reference is checked by the tests).
+  for (kernels::Isa isa : isas) {
+    const kernels::GemmF32Kernels* g = kernels::isa_tables(isa).gemm_f32;
+    if (g == nullptr || isa == kernels::Isa::kRef) continue;
+    const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
+    const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
+    for (const bench::Shape& s : shapes) {
+      if (!s.f32_out) continue;
+      for (const int tokens : {302, 242}) {
+        if (tokens != 302 && s.m != 302) continue;
+        bench::Shape linear = s;
+        if (s.m == 302) linear.m = tokens;
+        const std::string key = std::string("gemm_f32/") + kernels::isa_name(isa) + "/" + s.name + "/" + std::to_string(linear.m);
+        for (int t = 1; t <= max_threads; ++t) {
+          const std::string name = key + "/threads:" + std::to_string(t);
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, linear, pk, t, key));
+        }
+      }
+    }
+    for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
+      for (const bench::ConvBench& cb : bench::resnet18_convs(h, w)) {
+        const std::string key = std::string("conv_f32/") + kernels::isa_name(isa) + "/" + std::to_string(h) + "x" +
+                                std::to_string(w) + "/" + cb.name;
+        for (int t = 1; t <= max_threads; ++t) {
+          const std::string name = key + "/threads:" + std::to_string(t);
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv_f32, g, cb, pk, t, key));
+        }
+      }
+    }
+  }
   // Convolutions: the SIMD variants only (the reference's GEMM is checked by the tests).
   for (kernels::Isa isa : isas) {
     const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
@@ -502,13 +605,14 @@ int main(int argc, char** argv) {
   for (kernels::Isa isa : isas) {
     const kernels::ElementwiseF32Kernels* e = kernels::isa_tables(isa).elementwise;
     if (e == nullptr) continue;
-    // Attention with the FP32 GEMM an Engine pairs with this element-wise variant.
-    const kernels::GemmF32Kernels* g = &kernels::kernel_config_for(isa).gemm_f32;
+    // The float attention op at the level of this element-wise variant, % of its float FMA probe.
+    const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
+    const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_f32/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
       for (int t = 1; t <= max_threads; ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, g, e, tokens, t, key));
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, isa, tokens, pk, t, key));
       }
     }
     const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);

@@ -42,8 +42,10 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
     std::copy(f, f + w.size(), w.begin());
   }
   std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
-  kernels_.gemm_f32.nt(rows, pos_cols, D, pos, static_cast<size_t>(D), w.data(), static_cast<size_t>(D), out.data(),
-                       static_cast<size_t>(width));
+  std::vector<float> packed(kernels::gemm_f32_packed_floats(kernels_.gemm_f32.nr, pos_cols, D));
+  kernels::gemm_f32_pack(kernels_.gemm_f32.nr, pos_cols, D, w.data(), static_cast<size_t>(D), packed.data());
+  kernels_.gemm_f32.packed({.m = rows, .n = pos_cols, .k = D, .a = pos, .lda = static_cast<size_t>(D),
+                             .packed_b = packed.data(), .c = out.data(), .ldc = static_cast<size_t>(width), .epilogue = {}});
   for (int r = 0; r < rows; ++r) {
     float* row = out.data() + static_cast<size_t>(r) * width;
     for (int c = 0; c < width; ++c) row[c] = c < pos_cols ? row[c] + bias[c] : bias[c];
@@ -113,8 +115,8 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     const Tensor xf = as_f32(x);
     const ValueId res = residual ? as_f32(*residual).id : kNoValue;
     const ValueId y = graph_.add_value(name, y_shape);
-    add_layer(std::make_unique<Conv2dOp>(s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y), name, y,
-              bn::conv_weight(c.name), false);
+    add_layer(std::make_unique<Conv2dOp>(kernels_.gemm_f32, s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y),
+              name, y, bn::conv_weight(c.name), false);
     calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
@@ -179,7 +181,7 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
               out_name, y, weight_name, true);
     return y;
   }
-  auto op = std::make_unique<LinearOp>(rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
+  auto op = std::make_unique<LinearOp>(kernels_.gemm_f32, rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
   add_layer(std::move(op), out_name, y, weight_name, false);
   return y;
 }
@@ -198,7 +200,7 @@ ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, Matri
   if (config_.precision == Precision::kInt8 && quant_.int8_attention) {
     add(std::make_unique<AttentionS8Op>(kernels_.gemm_s8, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
   } else {
-    add(std::make_unique<AttentionOp>(nq, nk, D, config_.n_heads, q, k, v, y), out_name);
+    add(std::make_unique<AttentionOp>(kernels_.gemm_f32, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
   }
   return y;
 }

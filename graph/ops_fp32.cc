@@ -4,80 +4,75 @@
 #include <cmath>
 #include <cstring>
 
-#include "kernels/common/im2col.h"
 #include "kernels/pool_s8/maxpool_s8.h"
+#include "weights/blob/error.h"
 
 namespace act::graph {
 
 namespace {
 
-constexpr int kConvTilePixels = 64;   // output pixels per conv task: im2col tile stays in L2
-constexpr int kLinearTileCols = 128;  // output columns per linear task
+constexpr int kLinearTileCols = 128;  // output columns per linear task (rounded up to the panel width)
 constexpr int kLinearTileRows = 128;
 
 size_t ceil_div(size_t a, size_t b) { return (a + b - 1) / b; }
 
-// bias + residual + activation over a [rows, cols] tile of y (row stride ldy), rows from row0.
-void apply_epilogue(const kernels::ElementwiseF32Kernels& k, float* y, size_t ldy, int row0, int rows, int col0, int cols,
-                    const float* bias, size_t bias_ld, const float* residual, size_t residual_ld, Epilogue epilogue) {
-  for (int r = 0; r < rows; ++r) {
-    float* yr = y + static_cast<size_t>(r) * ldy;
-    const size_t row = static_cast<size_t>(row0 + r);
-    if (bias) {
-      const float* br = bias + row * bias_ld + col0;
-      for (int c = 0; c < cols; ++c) yr[c] += br[c];
-    }
-    if (residual) {
-      const float* rr = residual + row * residual_ld + col0;
-      for (int c = 0; c < cols; ++c) yr[c] += rr[c];
-    }
-    if (epilogue == Epilogue::kRelu) k.relu(static_cast<size_t>(cols), yr);
-    if (epilogue == Epilogue::kGelu) k.gelu(static_cast<size_t>(cols), yr);
+kernels::GemmF32Activation activation_of(Epilogue e) {
+  switch (e) {
+    case Epilogue::kRelu:
+      return kernels::GemmF32Activation::kRelu;
+    case Epilogue::kGelu:
+      return kernels::GemmF32Activation::kGelu;
+    case Epilogue::kNone:
+      break;
   }
+  return kernels::GemmF32Activation::kNone;
 }
 
 }  // namespace
 
 // ------------------------------------------------------------------------------------- Conv2d
 
-Conv2dOp::Conv2dOp(const kernels::Conv2dShape& shape, const float* weight, const float* bias, bool relu, ValueId input,
-                   ValueId residual, ValueId output)
-    : s_(shape), weight_(weight), bias_(bias), relu_(relu), residual_(residual) {
+PackedF32Weights::PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n, int k, const float* w)
+    : nr_(kernels.nr), panels_(kernels::gemm_f32_packed_floats(kernels.nr, n, k)) {
+  kernels::gemm_f32_pack(nr_, n, k, w, static_cast<size_t>(k), panels_.data());
+}
+
+const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernels) const {
+  check(kernels.nr == nr_, ErrorCode::kInternal,
+        std::string("float weights packed in panels of ") + std::to_string(nr_) + " columns, run by " + kernels.name);
+  return panels_.data();
+}
+
+Conv2dOp::Conv2dOp(const kernels::GemmF32Kernels& gemm, const kernels::Conv2dShape& shape, const float* weight,
+                   const float* bias, bool relu, ValueId input, ValueId residual, ValueId output)
+    : s_(shape), weight_(weight), bias_(bias), relu_(relu), residual_(residual),
+      tile_pixels_(kernels::conv_f32_tile_pixels(shape)), packed_(gemm, shape.out_c, shape.patch_size(), weight) {
   inputs = {input};
   if (residual != kNoValue) inputs.push_back(residual);
   outputs = {output};
 }
 
-bool Conv2dOp::direct() const { return s_.kernel_h == 1 && s_.kernel_w == 1 && s_.stride == 1 && s_.pad == 0; }
-
-size_t Conv2dOp::scratch_per_thread() const {
-  return direct() ? 0 : static_cast<size_t>(kConvTilePixels) * s_.patch_size();
-}
+size_t Conv2dOp::scratch_per_thread() const { return kernels::conv_f32_scratch_floats(s_, tile_pixels_); }
 
 double Conv2dOp::macs() const {
   return static_cast<double>(s_.out_h) * s_.out_w * s_.out_c * s_.patch_size();
 }
 
 void Conv2dOp::run(const RunContext& ctx) const {
+  const kernels::ConvF32 conv{s_, &ctx.kernels().gemm_f32, packed_.for_kernels(ctx.kernels().gemm_f32)};
   const float* x = ctx.data(inputs[0]);
-  const float* residual = residual_ == kNoValue ? nullptr : ctx.data(residual_);
   float* y = ctx.data(outputs[0]);
+  kernels::GemmF32Epilogue epilogue;
+  epilogue.bias = bias_;
+  if (residual_ != kNoValue) {
+    epilogue.residual = ctx.data(residual_);
+    epilogue.residual_ld = static_cast<size_t>(s_.out_c);
+  }
+  epilogue.activation = relu_ ? kernels::GemmF32Activation::kRelu : kernels::GemmF32Activation::kNone;
   const int pixels = s_.out_h * s_.out_w;
-  const int k = s_.patch_size();
-  const size_t n = static_cast<size_t>(s_.out_c);
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(pixels), kConvTilePixels), [&](size_t task, int thread) {
-    const int p0 = static_cast<int>(task) * kConvTilePixels;
-    const int count = std::min(kConvTilePixels, pixels - p0);
-    const float* a = x + static_cast<size_t>(p0) * s_.in_c;
-    if (!direct()) {
-      float* patches = ctx.scratch(thread);
-      kernels::im2col_nhwc_f32(s_, x, p0, count, patches);
-      a = patches;
-    }
-    float* yt = y + static_cast<size_t>(p0) * n;
-    ctx.kernels().gemm_f32.nt(count, s_.out_c, k, a, static_cast<size_t>(k), weight_, static_cast<size_t>(k), yt, n);
-    apply_epilogue(ctx.kernels().elementwise, yt, n, 0, count, 0, s_.out_c, bias_, 0, residual ? residual + static_cast<size_t>(p0) * n : nullptr, n,
-                   relu_ ? Epilogue::kRelu : Epilogue::kNone);
+  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(pixels), static_cast<size_t>(tile_pixels_)), [&](size_t task, int thread) {
+    const int p0 = static_cast<int>(task) * tile_pixels_;
+    kernels::conv_f32(conv, x, y, epilogue, p0, std::min(tile_pixels_, pixels - p0), ctx.scratch(thread));
   });
 }
 
@@ -109,9 +104,10 @@ void MaxPoolOp::run(const RunContext& ctx) const {
 
 // ------------------------------------------------------------------------------------- Linear
 
-LinearOp::LinearOp(int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias, MatrixRef residual,
-                   Epilogue epilogue, ValueId output)
-    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), weight_(weight), epilogue_(epilogue) {
+LinearOp::LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int out, MatrixRef x, const float* weight,
+                   MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output)
+    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), weight_(weight), epilogue_(epilogue),
+      packed_(gemm, out, in, weight) {
   for (const MatrixRef* r : {&x_, &bias_, &residual_}) {
     if (r->value != kNoValue) inputs.push_back(r->value);
   }
@@ -119,24 +115,38 @@ LinearOp::LinearOp(int rows, int in, int out, MatrixRef x, const float* weight, 
 }
 
 void LinearOp::run(const RunContext& ctx) const {
+  const kernels::GemmF32Kernels& gemm = ctx.kernels().gemm_f32;
+  const float* packed = packed_.for_kernels(gemm);
   const float* x = x_.resolve(ctx);
   const bool has_bias = bias_.value != kNoValue || bias_.constant != nullptr;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
   const float* bias = has_bias ? bias_.resolve(ctx) : nullptr;
   const float* residual = has_residual ? residual_.resolve(ctx) : nullptr;
   float* y = ctx.data(outputs[0]);
-  const size_t col_tiles = ceil_div(static_cast<size_t>(out_), kLinearTileCols);
+  const int tile_cols = (kLinearTileCols + gemm.nr - 1) / gemm.nr * gemm.nr;  // whole panels
+  const size_t col_tiles = ceil_div(static_cast<size_t>(out_), static_cast<size_t>(tile_cols));
   const size_t row_tiles = ceil_div(static_cast<size_t>(rows_), kLinearTileRows);
   const size_t ldy = static_cast<size_t>(out_);
   ctx.pool().parallel_for(col_tiles * row_tiles, [&](size_t task, int) {
-    const int c0 = static_cast<int>(task % col_tiles) * kLinearTileCols;
+    const int c0 = static_cast<int>(task % col_tiles) * tile_cols;
     const int r0 = static_cast<int>(task / col_tiles) * kLinearTileRows;
-    const int cols = std::min(kLinearTileCols, out_ - c0);
-    const int rows = std::min(kLinearTileRows, rows_ - r0);
-    float* yt = y + static_cast<size_t>(r0) * ldy + c0;
-    ctx.kernels().gemm_f32.nt(rows, cols, in_, x + static_cast<size_t>(r0) * x_.ld, x_.ld,
-                         weight_ + static_cast<size_t>(c0) * in_, static_cast<size_t>(in_), yt, ldy);
-    apply_epilogue(ctx.kernels().elementwise, yt, ldy, r0, rows, c0, cols, bias, bias_.ld, residual, residual_.ld, epilogue_);
+    kernels::GemmF32PackedArgs args;
+    args.m = std::min(kLinearTileRows, rows_ - r0);
+    args.n = std::min(tile_cols, out_ - c0);
+    args.k = in_;
+    args.a = x + static_cast<size_t>(r0) * x_.ld;
+    args.lda = x_.ld;
+    args.packed_b = packed;
+    args.col0 = c0;
+    args.c = y + static_cast<size_t>(r0) * ldy + static_cast<size_t>(c0);
+    args.ldc = ldy;
+    if (bias) args.epilogue = {bias + static_cast<size_t>(r0) * bias_.ld + static_cast<size_t>(c0), bias_.ld};
+    if (residual) {
+      args.epilogue.residual = residual + static_cast<size_t>(r0) * residual_.ld + static_cast<size_t>(c0);
+      args.epilogue.residual_ld = residual_.ld;
+    }
+    args.epilogue.activation = activation_of(epilogue_);
+    gemm.packed(args);
   });
 }
 
@@ -180,8 +190,9 @@ void LayerNormOp::run(const RunContext& ctx) const {
 
 // ---------------------------------------------------------------------------------- Attention
 
-AttentionOp::AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k, MatrixRef v, ValueId output)
-    : nq_(nq), nk_(nk), dim_(dim), heads_(heads), q_(q), k_(k), v_(v) {
+AttentionOp::AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, int dim, int heads, MatrixRef q,
+                         MatrixRef k, MatrixRef v, ValueId output)
+    : nq_(nq), nk_(nk), dim_(dim), heads_(heads), q_(q), k_(k), v_(v), nr_(gemm.nr) {
   for (const MatrixRef* r : {&q_, &k_, &v_}) {
     if (r->value != kNoValue) inputs.push_back(r->value);
   }
@@ -189,15 +200,21 @@ AttentionOp::AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, Matrix
 }
 
 namespace {
-constexpr int kAttentionTileRows = 128;  // queries per task: K and V are packed once per task, so few big tiles
+// Queries per task: each task packs its head's keys and values, so one tile per head at ACT's 302
+// (or 242) tokens; 8 heads still keep 2-4 threads busy.
+constexpr int kAttentionTileRows = 320;
 }
 
 size_t AttentionOp::scratch_per_thread() const {
-  const size_t hd = static_cast<size_t>(dim_ / heads_);
-  return static_cast<size_t>(kAttentionTileRows) * (static_cast<size_t>(nk_) + hd);
+  const int hd = dim_ / heads_;
+  return static_cast<size_t>(kAttentionTileRows) * (static_cast<size_t>(nk_) + static_cast<size_t>(hd)) +
+         kernels::gemm_f32_packed_floats(nr_, nk_, hd) + kernels::gemm_f32_packed_floats(nr_, hd, nk_);
 }
 
 void AttentionOp::run(const RunContext& ctx) const {
+  const kernels::GemmF32Kernels& gemm = ctx.kernels().gemm_f32;
+  check(gemm.nr == nr_, ErrorCode::kInternal,
+        "attention scratch sized for panels of " + std::to_string(nr_) + " columns, run by " + gemm.name);
   const float* q = q_.resolve(ctx);
   const float* k = k_.resolve(ctx);
   const float* v = v_.resolve(ctx);
@@ -209,18 +226,22 @@ void AttentionOp::run(const RunContext& ctx) const {
     const int h = static_cast<int>(task % static_cast<size_t>(heads_));
     const int r0 = static_cast<int>(task / static_cast<size_t>(heads_)) * kAttentionTileRows;
     const int rows = std::min(kAttentionTileRows, nq_ - r0);
-    float* scores = ctx.scratch(thread);                        // [rows, nk]
+    float* scores = ctx.scratch(thread);                                       // [rows, nk]
     float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * nk_;  // [rows, hd]
+    float* packed_k = q_scaled + static_cast<size_t>(kAttentionTileRows) * hd;
+    float* packed_v = packed_k + kernels::gemm_f32_packed_floats(nr_, nk_, hd);
     // PyTorch scales q before q k^T; do the same so rounding matches.
     for (int r = 0; r < rows; ++r) {
       const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
       for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
     }
-    ctx.kernels().gemm_f32.nt(rows, nk_, hd, q_scaled, static_cast<size_t>(hd), k + static_cast<size_t>(h) * hd, k_.ld, scores,
-                         static_cast<size_t>(nk_));
+    kernels::gemm_f32_pack(nr_, nk_, hd, k + static_cast<size_t>(h) * hd, k_.ld, packed_k);
+    kernels::gemm_f32_pack_transposed(nr_, hd, nk_, v + static_cast<size_t>(h) * hd, v_.ld, packed_v);
+    gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
+                 .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
     ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
-    ctx.kernels().gemm_f32.nn(rows, hd, nk_, scores, static_cast<size_t>(nk_), v + static_cast<size_t>(h) * hd, v_.ld,
-                         out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, static_cast<size_t>(dim_));
+    gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
+                 .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_), .epilogue = {}});
   });
 }
 

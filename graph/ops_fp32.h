@@ -6,6 +6,7 @@
 
 #include "graph/graph.h"
 #include "kernels/common/conv2d_shape.h"
+#include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/fp32_kernels.h"
 
 namespace act::graph {
@@ -24,13 +25,26 @@ struct LinearParams {
   Epilogue epilogue = Epilogue::kNone;
 };
 
+/// Float weights [n x k] packed once, at graph build time, into the panels of one gemm_f32
+/// variant (its nr); owned by the op that uses them.
+class PackedF32Weights {
+ public:
+  PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n, int k, const float* w);
+  /// The panels, for the variant about to run them; an error when its panels are not these.
+  const float* for_kernels(const kernels::GemmF32Kernels& kernels) const;
+
+ private:
+  int nr_;
+  std::vector<float> panels_;
+};
+
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
-/// Weights [out_c, kh, kw, in_c]. Tiles of output pixels; im2col of one tile into per-thread scratch
-/// (a 1x1 stride-1 conv reads its input directly).
+/// Weights [out_c, kh, kw, in_c], packed at build time for `gemm`. Tiles of output pixels
+/// (kernels/fp32/conv_f32.h: im2col of one tile into per-thread scratch, or the input in place).
 class Conv2dOp : public Op {
  public:
-  Conv2dOp(const kernels::Conv2dShape& shape, const float* weight, const float* bias, bool relu, ValueId input,
-           ValueId residual, ValueId output);
+  Conv2dOp(const kernels::GemmF32Kernels& gemm, const kernels::Conv2dShape& shape, const float* weight, const float* bias,
+           bool relu, ValueId input, ValueId residual, ValueId output);
   const char* type() const override { return "conv2d_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
@@ -43,12 +57,13 @@ class Conv2dOp : public Op {
   ValueId residual() const { return residual_; }
 
  private:
-  bool direct() const;
   kernels::Conv2dShape s_;
   const float* weight_;
   const float* bias_;
   bool relu_;
   ValueId residual_;
+  int tile_pixels_;
+  PackedF32Weights packed_;
 };
 
 /// 2-D max-pool over NHWC, float32 or int8 (max commutes with the monotonic quantization: an int8
@@ -70,12 +85,12 @@ class MaxPoolOp : public Op {
   bool s8_;
 };
 
-/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in]; bias is a vector (ld 0) or a
-/// per-row table; the residual may be a broadcast row.
+/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in], packed at build time for `gemm`;
+/// bias is a vector (ld 0) or a per-row table; the residual may be a broadcast row.
 class LinearOp : public Op {
  public:
-  LinearOp(int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias, MatrixRef residual,
-           Epilogue epilogue, ValueId output);
+  LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias,
+           MatrixRef residual, Epilogue epilogue, ValueId output);
   const char* type() const override { return "linear_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
@@ -88,6 +103,7 @@ class LinearOp : public Op {
   MatrixRef x_, bias_, residual_;
   const float* weight_;
   Epilogue epilogue_;
+  PackedF32Weights packed_;
 };
 
 /// GLU over the last axis: y = a * sigmoid(b), a the first half of each row, b the second.
@@ -126,9 +142,11 @@ struct AttentionParams {
 };
 
 /// Multi-head scaled dot-product attention, no mask: out[:, head] = softmax(q_h k_h^T / sqrt(d)) v_h.
+/// Both products on the packed gemm_f32 of `gemm` (each task packs its head's keys and values).
 class AttentionOp : public Op {
  public:
-  AttentionOp(int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k, MatrixRef v, ValueId output);
+  AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,
+              MatrixRef v, ValueId output);
   const char* type() const override { return "attention_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override {
     return std::string(k.gemm_f32.name) + " + " + k.elementwise.softmax_name;
@@ -141,6 +159,7 @@ class AttentionOp : public Op {
  private:
   int nq_, nk_, dim_, heads_;
   MatrixRef q_, k_, v_;
+  int nr_;  ///< the panel width scratch is sized for
 };
 
 /// Stacks row blocks (graph values or constant rows) into one [rows, cols] value.

@@ -10,6 +10,8 @@ struct Conv2dShape {
   int kernel_h = 1, kernel_w = 1;
   int stride = 1, pad = 0, dilation = 1;
   int patch_size() const { return kernel_h * kernel_w * in_c; }
+  /// True when the patches are the input's own pixels (1x1, stride 1, no padding): no im2col.
+  bool reads_input_in_place() const { return kernel_h == 1 && kernel_w == 1 && stride == 1 && pad == 0; }
   /// Output size of one spatial dim, as PyTorch computes it.
   static int out_dim(int in, int kernel, int stride, int pad, int dilation) {
     return (in + 2 * pad - dilation * (kernel - 1) - 1) / stride + 1;

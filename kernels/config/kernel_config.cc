@@ -20,8 +20,7 @@ IsaTables isa_tables(Isa isa) {
     case Isa::kAvx512Vnni:
       return {gemm_s8_table_avx512vnni(), nullptr, nullptr, nullptr, nullptr};
     case Isa::kNeon:
-      // AArch64's baseline (ref) Eigen GEMM is already NEON, so gemm_f32 has no separate variant.
-      return {nullptr, nullptr, quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
+      return {nullptr, gemm_f32_table_neon(), quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
     case Isa::kNeonDot:
       return {gemm_s8_table_neondot(), nullptr, nullptr, nullptr, nullptr};
   }

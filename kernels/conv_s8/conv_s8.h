@@ -19,9 +19,7 @@ struct ConvS8 {
   const void* packed_w = nullptr;
   int8_t input_zero_point = 0;  ///< also the padding value
   /// True when the conv reads its input in place (1x1, stride 1, no padding).
-  bool direct() const {
-    return shape.kernel_h == 1 && shape.kernel_w == 1 && shape.stride == 1 && shape.pad == 0;
-  }
+  bool direct() const { return shape.reads_input_in_place(); }
 };
 
 /// Output pixels per tile for this conv: a multiple of every variant's MR (12) that keeps the

@@ -1,8 +1,8 @@
 // The float element-wise kernels on AArch64 NEON (the kNeon variant): elementwise_f32_xsimd.inc instantiated for xsimd's
 // xsimd::neon64. Rules for ISA files (kernels/gemm_s8/README.md): internal linkage only.
 // (xsimd 8.1's NEON wrappers, e.g. xsimd::kernel::wrap::vreinterpretq_*, are plain inline functions
-// and so weak symbols here; harmless: no other file includes xsimd on AArch64, and this file has
-// the baseline flags.)
+// and so weak symbols here; harmless: the only other file including xsimd on AArch64,
+// gemm_f32_neon.cc, has the same baseline flags.)
 #include "kernels/fp32/elementwise_f32.h"
 
 #if defined(__aarch64__)

@@ -1,14 +1,37 @@
-// FP32 GEMM, Eigen compiled with this file's avx512 flags (cmake/ActLayer.cmake).
+// FP32 GEMM with this file's avx512 flags (cmake/ActLayer.cmake): the packed micro-kernels of
+// gemm_f32_packed.inc on a 8x32 register tile.
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__x86_64__)
-#define Eigen act_eigen_avx512
-#include "kernels/fp32/gemm_f32_eigen.inc"
-#undef Eigen
+#include <algorithm>
+
+// GCC 12's AVX-512 headers initialise their pass-through operands with themselves, reported as
+// (maybe-)uninitialized wherever xsimd's wrappers inline them (as in elementwise_f32_avx512.cc).
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <xsimd/xsimd.hpp>
+
+#include "kernels/common/check.h"
+#include "kernels/fp32/elementwise_f32.h"
 
 namespace act::kernels {
+
+#include "kernels/fp32/gemm_f32_packed.inc"
+
+namespace {
+template <>
+xsimd::batch<float, xsimd::avx512f> multiply_add<xsimd::avx512f>(const xsimd::batch<float, xsimd::avx512f>& a,
+                                                               const xsimd::batch<float, xsimd::avx512f>& b,
+                                                               const xsimd::batch<float, xsimd::avx512f>& c) {
+  return _mm512_fmadd_ps(a, b, c);
+}
+
+using Packed = PackedGemm<xsimd::avx512f, 8, 2>;
+void gemm_packed_avx512(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
+}  // namespace
+
 const GemmF32Kernels* gemm_f32_table_avx512() {
-  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32_eigen_avx512", gemm_nt, gemm_nn};
+  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32 8x32 avx512", Packed::kMr, Packed::NR, gemm_packed_avx512};
   return &table;
 }
 }  // namespace act::kernels

@@ -1,14 +1,38 @@
-// FP32 GEMM, Eigen at the target's baseline ISA (SSE2 on x86-64, NEON on AArch64).
+// The scalar reference of the packed FP32 GEMM: each output one sum over k in order (separate
+// multiplies and adds), then the epilogue.
 #include "kernels/fp32/gemm_f32.h"
 
-#define Eigen act_eigen_baseline
-#include "kernels/fp32/gemm_f32_eigen.inc"
-#undef Eigen
+#include "kernels/fp32/elementwise_f32.h"
 
 namespace act::kernels {
 
+namespace {
+
+constexpr int kRefNr = 8;
+
+void gemm_packed_ref(const GemmF32PackedArgs& g) {
+  const GemmF32Epilogue& e = g.epilogue;
+  for (int i = 0; i < g.m; ++i) {
+    float* ci = g.c + static_cast<size_t>(i) * g.ldc;
+    for (int j = 0; j < g.n; ++j) {
+      const int col = g.col0 + j;
+      const float* panel = g.packed_b + static_cast<size_t>(col / kRefNr) * static_cast<size_t>(g.k) * kRefNr +
+                           static_cast<size_t>(col % kRefNr);
+      float sum = 0.0f;
+      for (int p = 0; p < g.k; ++p) sum += g.a[static_cast<size_t>(i) * g.lda + static_cast<size_t>(p)] * panel[static_cast<size_t>(p) * kRefNr];
+      if (e.bias) sum += e.bias[static_cast<size_t>(i) * e.bias_ld + static_cast<size_t>(j)];
+      if (e.residual) sum += e.residual[static_cast<size_t>(i) * e.residual_ld + static_cast<size_t>(j)];
+      if (e.activation == GemmF32Activation::kRelu) sum = sum < 0.0f ? 0.0f : sum;
+      ci[j] = sum;
+    }
+    if (e.activation == GemmF32Activation::kGelu) elementwise_f32_table_ref()->gelu(static_cast<size_t>(g.n), ci);
+  }
+}
+
+}  // namespace
+
 const GemmF32Kernels* gemm_f32_table_ref() {
-  static const GemmF32Kernels table{Isa::kRef, "gemm_f32_eigen_ref", gemm_nt, gemm_nn};
+  static const GemmF32Kernels table{Isa::kRef, "gemm_f32 1x8 ref", 1, kRefNr, gemm_packed_ref};
   return &table;
 }
 

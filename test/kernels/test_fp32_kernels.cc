@@ -1,14 +1,14 @@
 // The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
-// stride / padding / dilation the ResNet backbones use: im2col + every FP32 GEMM variant this CPU
-// runs, the max-pool, and the element-wise reference (test_elementwise_f32.cc holds the SIMD
-// element-wise variants to it).
+// stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM)
+// with every variant this CPU runs, the max-pool, and the element-wise reference
+// (test_elementwise_f32.cc holds the SIMD element-wise variants to it; test_gemm_f32.cc the GEMM).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <random>
 
-#include "kernels/common/im2col.h"
+#include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/elementwise_f32.h"
 #include "kernels/fp32/fp32_kernels.h"
 #include "kernels/fp32/gemm_f32.h"
@@ -48,7 +48,7 @@ struct ConvCase {
   int h, w, cin, cout, kernel, stride, pad, dilation;
 };
 
-TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
+TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
   std::mt19937 rng(7);
   const ConvCase cases[] = {
       {13, 17, 3, 8, 7, 2, 3, 1},   // stem, odd sizes
@@ -58,6 +58,7 @@ TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
       {7, 6, 3, 4, 3, 1, 2, 2},     // dilated 3x3 (layer4 with dilation)
       {1, 1, 3, 2, 3, 1, 1, 1},     // a single pixel: everything but the centre tap is padding
       {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
+      {6, 5, 7, 9, 1, 1, 0, 1},     // 1x1/1: reads the input in place
   };
   for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
@@ -68,48 +69,17 @@ TEST(Fp32Kernels, Im2colGemmEqualsDirectConvolution) {
       const auto expected = conv_naive(s, x, w);
       const int pixels = s.out_h * s.out_w;
       std::vector<float> y(static_cast<size_t>(pixels) * c.cout, NAN);
-      // Ragged tiles: 5 pixels at a time.
+      std::vector<float> packed(gemm_f32_packed_floats(gemm.nr, c.cout, s.patch_size()));
+      gemm_f32_pack(gemm.nr, c.cout, s.patch_size(), w.data(), static_cast<size_t>(s.patch_size()), packed.data());
+      const ConvF32 conv{s, &gemm, packed.data()};
+      // Ragged tiles: 5 pixels at a time, through conv_f32 (im2col into scratch, or in place).
+      std::vector<float> scratch(conv_f32_scratch_floats(s, 5) + 1, NAN);
       for (int p0 = 0; p0 < pixels; p0 += 5) {
-        const int count = std::min(5, pixels - p0);
-        std::vector<float> patches(static_cast<size_t>(count) * s.patch_size(), NAN);
-        im2col_nhwc_f32(s, x.data(), p0, count, patches.data());
-        gemm.nt(count, c.cout, s.patch_size(), patches.data(), static_cast<size_t>(s.patch_size()), w.data(),
-                static_cast<size_t>(s.patch_size()), y.data() + static_cast<size_t>(p0) * c.cout, static_cast<size_t>(c.cout));
+        conv_f32(conv, x.data(), y.data(), GemmF32Epilogue{}, p0, std::min(5, pixels - p0), scratch.data());
       }
       for (size_t i = 0; i < y.size(); ++i) {
         ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
             << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
-      }
-    }
-  }
-}
-
-TEST(Fp32Kernels, GemmWithStridesMatchesNaive) {
-  std::mt19937 rng(3);
-  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
-    const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
-    for (int m : {1, 7, 33}) {
-      for (int n : {1, 5, 64}) {
-        for (int k : {1, 9, 100}) {
-          const size_t lda = k + 3, ldb = k + 1, ldc = n + 2;
-          const auto a = random_vector(m * lda, rng), b = random_vector(n * ldb, rng);
-          std::vector<float> c(m * ldc, 42.0f);
-          gemm.nt(m, n, k, a.data(), lda, b.data(), ldb, c.data(), ldc);
-          std::vector<float> bt(static_cast<size_t>(k) * (n + 4));  // B^T, row-major [k x n], ld n+4
-          for (int i = 0; i < n; ++i)
-            for (int j = 0; j < k; ++j) bt[j * (n + 4) + i] = b[i * ldb + j];
-          std::vector<float> c2(m * ldc, 42.0f);
-          gemm.nn(m, n, k, a.data(), lda, bt.data(), n + 4, c2.data(), ldc);
-          for (int i = 0; i < m; ++i) {
-            for (int j = 0; j < n; ++j) {
-              double acc = 0;
-              for (int t = 0; t < k; ++t) acc += static_cast<double>(a[i * lda + t]) * b[j * ldb + t];
-              ASSERT_NEAR(c[i * ldc + j], acc, 1e-5 * k) << gemm.name;
-              ASSERT_NEAR(c2[i * ldc + j], acc, 1e-5 * k) << gemm.name;
-            }
-            for (size_t j = n; j < ldc; ++j) ASSERT_EQ(c[i * ldc + j], 42.0f) << "wrote past n";
-          }
-        }
       }
     }
   }
@@ -168,43 +138,6 @@ TEST(Fp32Kernels, LayerNormSoftmaxAndActivations) {
   std::vector<float> r = {-1.0f, 0.0f, 2.0f};
   ref.relu(r.size(), r.data());
   EXPECT_EQ(r, (std::vector<float>{0.0f, 0.0f, 2.0f}));
-}
-
-}  // namespace
-}  // namespace act::kernels
-
-namespace act::kernels {
-namespace {
-
-// Every FP32 GEMM variant this machine can run agrees with the baseline one.
-TEST(GemmF32Variants, AgreeWithTheBaseline) {
-  const GemmF32Kernels* ref = gemm_f32_table_ref();
-  ASSERT_NE(ref, nullptr);
-  int variants = 0;
-  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
-    if (isa == Isa::kRef) continue;
-    const GemmF32Kernels* v = &test::table_of(isa, &IsaTables::gemm_f32);
-    ++variants;
-    std::mt19937 rng(11);
-    for (int m : {1, 5, 64, 77}) {
-      for (int n : {1, 17, 128}) {
-        for (int k : {1, 9, 576}) {
-          const auto a = random_vector(static_cast<size_t>(m) * (k + 1), rng), b = random_vector(static_cast<size_t>(n) * k, rng);
-          std::vector<float> c_ref(static_cast<size_t>(m) * n), c(static_cast<size_t>(m) * n);
-          ref->nt(m, n, k, a.data(), k + 1, b.data(), k, c_ref.data(), n);
-          v->nt(m, n, k, a.data(), k + 1, b.data(), k, c.data(), n);
-          for (size_t i = 0; i < c.size(); ++i) ASSERT_NEAR(c[i], c_ref[i], 1e-5 * k) << v->name << " nt " << m << "x" << n << "x" << k;
-          ref->nn(m, n, k, a.data(), k + 1, b.data(), n, c_ref.data(), n);  // B read as [k x n]
-          v->nn(m, n, k, a.data(), k + 1, b.data(), n, c.data(), n);
-          for (size_t i = 0; i < c.size(); ++i) ASSERT_NEAR(c[i], c_ref[i], 1e-5 * k) << v->name << " nn";
-        }
-      }
-    }
-  }
-  // On a CPU with AVX2 the AVX2 build must have been compiled in and tested.
-  if (cpu_supports(Isa::kAvx2) && std::getenv("ACT_ISA") == nullptr) {
-    EXPECT_GE(variants, 1);
-  }
 }
 
 }  // namespace

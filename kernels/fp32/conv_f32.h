@@ -1,0 +1,32 @@
+// FP32 NHWC convolution on the int8 convolution's tiling: one tile of output pixels per call, its
+// patches gathered (im2col) into a small per-thread buffer, never a whole-image one; a 1x1 stride-1
+// conv reads its input in place. The product is the packed gemm_f32 with its fused epilogue.
+#pragma once
+
+#include <cstddef>
+
+#include "kernels/common/conv2d_shape.h"
+#include "kernels/fp32/gemm_f32.h"
+
+namespace act::kernels {
+
+struct ConvF32 {
+  Conv2dShape shape;
+  const GemmF32Kernels* kernels = nullptr;
+  /// OHWI weights [out_c x patch_size] packed by gemm_f32_pack for kernels->nr.
+  const float* packed_w = nullptr;
+};
+
+/// Output pixels per tile: a multiple of every gemm_f32 variant's MR (24) that keeps the patch
+/// buffer near 256 KB (L2-resident while the weights stream past it), at most 192 (small images
+/// still split into several tiles for the pool).
+int conv_f32_tile_pixels(const Conv2dShape& s);
+/// Floats of scratch conv_f32 needs for tiles of `tile_pixels` pixels (0 when it reads in place).
+size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels);
+
+/// Output pixels [pixel_begin, pixel_begin + count) of y = act(conv(x) + bias + residual), y and the
+/// residual [pixels x out_c]. `epilogue` points at pixel 0: bias one row (ld 0), residual ld out_c.
+void conv_f32(const ConvF32& conv, const float* input, float* y, const GemmF32Epilogue& epilogue, int pixel_begin,
+              int count, float* scratch);
+
+}  // namespace act::kernels

@@ -233,14 +233,15 @@ void bm_gemm_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Shap
   }
   std::vector<float> packed(kernels::gemm_f32_packed_floats(g->nr, s.n, s.k)), c(static_cast<size_t>(s.m) * s.n);
   kernels::gemm_f32_pack(g->nr, s.n, s.k, w.data(), static_cast<size_t>(s.k), packed.data());
-  const Tiling t = tiling(s.m, s.n, g->mr, g->nr, threads);
+  const graph::GemmTiling t = graph::gemm_tiling(s.m, s.n, g->mr, g->nr, threads);
   ThreadPool& tp = pool(threads);
   run_timed(state, key, threads, static_cast<double>(s.macs()), peak_gmacs, [&] {
     tp.parallel_for(t.count(), [&](size_t task, int) {
-      const int m0 = static_cast<int>(task / t.tiles_n) * t.tile_m, n0 = static_cast<int>(task % t.tiles_n) * t.tile_n;
+      int m0, m1, n0, n1;
+      t.rect(task, m0, m1, n0, n1);
       kernels::GemmF32PackedArgs args;
-      args.m = std::min(s.m - m0, t.tile_m);
-      args.n = std::min(s.n - n0, t.tile_n);
+      args.m = m1 - m0;
+      args.n = n1 - n0;
       args.k = s.k;
       args.a = a.data() + static_cast<size_t>(m0) * s.k;
       args.lda = static_cast<size_t>(s.k);

@@ -2,7 +2,8 @@
 // the kernel's MR, when there are enough of them for at least 5 tiles per thread (XNNPACK's rule):
 // each task's A strip stays in L1 while the packed weights stream past it once, and the many small
 // tasks even out a worker that starts late. Else columns in multiples of NR (and rows in two when
-// there are many). The ops and act_kernel_bench split the same way.
+// there are many). The int8 linears and act_kernel_bench's GEMM rows split this way; the float
+// linears keep 128x128 tiles, whose float weights (4x the bytes) would stream from memory per task.
 #pragma once
 
 #include <algorithm>

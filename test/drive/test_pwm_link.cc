@@ -313,8 +313,10 @@ TEST(PwmWatchdog, NeutralWhenActDriveStopsBeatingAndDrivingAgainWhenItResumes) {
   ASSERT_TRUE(neutral);
   // 250 ms after the last heartbeat, which came at most one 10 ms beat before the stop.
   report_fault_timing("SIGSTOP of act_drive (pwm, watchdog)", ms(neutral->when - stopped), "neutral duty cycles");
+  // Not early (a slow tick is no hang); not much later than the threshold: the margin is a loaded
+  // machine's scheduling of three processes, and the time itself is reported above.
   EXPECT_GE(neutral->when - stopped, milliseconds(200));
-  EXPECT_LE(neutral->when - stopped, kFaultDeadline + milliseconds(50));
+  EXPECT_LE(neutral->when - stopped, kFaultDeadline + milliseconds(250));
   ::kill(pid, SIGCONT);
   EXPECT_TRUE(tree.wait_until_not(kSafe, milliseconds(1000)));
   ::kill(-pid, SIGKILL);
@@ -340,7 +342,7 @@ TEST(ActDrivePwm, DrivesThePinsAndEndsNeutralOnSigtermSigstopAndSigkill) {
       ::dup2(log, 1);
       ::dup2(log, 2);
       ::execl(ACT_DRIVE_BIN, ACT_DRIVE_BIN, "-m", blob.c_str(), "--camera", video.c_str(), "--pwm", "pwmchip0:0,1",
-              "--pwm-sysfs-root", tree.root().c_str(), "--threads", "1", static_cast<char*>(nullptr));
+              "--pwm-sysfs-root", tree.root().c_str(), "--raw-endpoints", "--threads", "1", static_cast<char*>(nullptr));
       ::_exit(127);
     }
     return pid;
@@ -380,8 +382,13 @@ TEST(ActDrivePwm, DrivesThePinsAndEndsNeutralOnSigtermSigstopAndSigkill) {
   EXPECT_NE(log.find("act_pwm_watchdog: no heartbeat from act_drive for"), std::string::npos) << log;
   EXPECT_NE(log.find("act_pwm_watchdog: act_drive's heartbeat is back"), std::string::npos) << log;
 
+  const auto uncalibrated = run_command(std::string(ACT_DRIVE_BIN) + " -m " + q(blob) + " --camera " + q(video) +
+                                        " --pwm pwmchip0:0,1 --pwm-sysfs-root " + q(tree.root()));
+  EXPECT_EQ(uncalibrated.exit_code, 1);
+  EXPECT_NE(uncalibrated.output.find("--pwm pwmchip0:0,1 without --calibration: refusing"), std::string::npos) << uncalibrated.output;
+  EXPECT_NE(uncalibrated.output.find("--raw-endpoints"), std::string::npos) << uncalibrated.output;
   const auto missing = run_command(std::string(ACT_DRIVE_BIN) + " -m " + q(blob) + " --camera " + q(video) +
-                                   " --pwm pwmchip3:0,1 --pwm-sysfs-root " + q(tree.root()));
+                                   " --pwm pwmchip3:0,1 --raw-endpoints --pwm-sysfs-root " + q(tree.root()));
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.output.find("no PWM chip " + tree.root() + "/pwmchip3"), std::string::npos) << missing.output;
   EXPECT_NE(missing.output.find("dtoverlay=pwm-2chan"), std::string::npos) << missing.output;

@@ -2,7 +2,7 @@
 # Installs what the aarch64 cross build and its qemu test run need (scripts/run_arm64_tests.sh):
 # Debian's cross compiler and qemu-user, and through multiarch the arm64 packages that act_tests
 # links and runs with: the Debian arm64 runtime (loader, libc, libstdc++, as on a Raspberry Pi OS /
-# Debian bookworm board), zlib, GoogleTest and cpuinfo's library. Header-only dependencies (Eigen,
+# Debian bookworm board), zlib, GoogleTest and cpuinfo's library. Header-only dependencies (xsimd,
 # nlohmann-json) and the cpuinfo header are architecture-independent: the host's (install_deps.sh).
 # --packaging (scripts/build_packages.sh): only the cross compiler and the arm64 libraries the
 # packages link, no qemu-user or GoogleTest.

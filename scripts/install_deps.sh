@@ -9,7 +9,7 @@ mode="${1:-}"
 
 packages=(  # the library, the apps and their Debian packages (dpkg-shlibdeps, file)
   build-essential cmake ninja-build pkg-config
-  libeigen3-dev libxsimd-dev nlohmann-json3-dev libcli11-dev libcpuinfo-dev zlib1g-dev
+  libxsimd-dev nlohmann-json3-dev libcli11-dev libcpuinfo-dev zlib1g-dev
   libopencv-dev
   libcpp-httplib-dev libserialport-dev libevdev-dev  # act_drive: live view server, port listing, gamepads
   libonnx-dev libprotobuf-dev  # act_convert --export-onnx: ONNX's protobuf classes, checker, shape inference

@@ -36,7 +36,7 @@ set(CMAKE_LIBRARY_ARCHITECTURE ${ACT_CROSS_TRIPLET})
 
 # Libraries: Debian multiarch keeps arm64 packages in /usr/lib/<triplet> (zlib and gtest, with
 # their CMake and pkg-config files), the cross toolchain keeps its own libc and libstdc++ in
-# /usr/<triplet>. Header-only dependencies (Eigen, nlohmann-json) are architecture-independent and
+# /usr/<triplet>. Header-only dependencies (xsimd, nlohmann-json) are architecture-independent and
 # come from the host's /usr/include and /usr/share. CMAKE_LIBRARY_ARCHITECTURE makes find_library
 # and find_package search /usr/lib/<triplet>, never the host's /usr/lib/x86_64-linux-gnu; the find
 # root adds /usr/<triplet>. BOTH: the root first, then the normal (multiarch) paths.

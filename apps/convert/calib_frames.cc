@@ -87,8 +87,8 @@ class Loader {
     const double frame_aspect = static_cast<double>(image.cols) / image.rows;
     const double model_aspect = static_cast<double>(cam.width) / cam.height;
     if (std::abs(frame_aspect - model_aspect) > 0.01 * model_aspect) {
-      note("warning: calibration frames of " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
-           " are stretched to the model's " + std::to_string(cam.width) + "x" + std::to_string(cam.height) + " (" +
+      note("warning: calibration frames of " + std::to_string(image.rows) + "x" + std::to_string(image.cols) +
+           " are stretched to the model's " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width, " +
            cam.key + "): another aspect ratio than training's; use frames from the robot's camera at its training setting");
     }
     throw_if_failed(frame_to_model_rgb(image, cam.height, cam.width, rgb));

@@ -117,13 +117,13 @@ TEST_F(CalibrationMessages, FewerFramesThanAskedSaysHowManyAndWhy) {
 }
 
 TEST_F(CalibrationMessages, FramesOfAnotherAspectRatioAreAWarning) {
-  // 640x360 (16:9) frames for the model's 128x96 (4:3) camera.
+  // 360x640 (16:9) frames for the model's 96x128 (4:3) camera (height x width).
   fs::create_directories(dir_ + "/wide");
   cv::imwrite(dir_ + "/wide/f0.png", cv::Mat(360, 640, CV_8UC3, cv::Scalar(40, 90, 160)));
   cv::imwrite(dir_ + "/wide/f1.png", cv::Mat(360, 640, CV_8UC3, cv::Scalar(200, 30, 60)));
   const CommandResult r = run_command(convert(dir_ + "/wide"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  const std::string warning = "warning: calibration frames of 640x360 are stretched to the model's 128x96";
+  const std::string warning = "warning: calibration frames of 360x640 are stretched to the model's 96x128 (height x width";
   EXPECT_NE(r.output.find("act_convert: " + warning), std::string::npos) << r.output;  // as the frames are read
   EXPECT_NE(r.output.find("\n" + warning), std::string::npos) << r.output;             // and in the report
   // Frames of the model's own shape get no warning.

@@ -327,6 +327,8 @@ void define_module(py::module_& m) {
       .def_readonly("n_action_steps", &ModelInfo::n_action_steps)
       .def_readonly("action_low", &ModelInfo::action_low)
       .def_readonly("action_high", &ModelInfo::action_high)
+      .def_readonly("state_low", &ModelInfo::state_low)
+      .def_readonly("state_high", &ModelInfo::state_high)
       .def_readonly("temporal_ensembling", &ModelInfo::temporal_ensembling)
       .def_readonly("temporal_ensemble_coeff", &ModelInfo::temporal_ensemble_coeff)
       .def_readonly("precision", &ModelInfo::precision)

@@ -21,6 +21,8 @@ def test_model_info_describes_the_fixture(fixture, fp32_blob):
     assert info.precision == "fp32"
     assert info.isa and info.kernels
     assert len(info.action_low) == len(info.action_high) == 2
+    assert len(info.state_low) == len(info.state_high) == 2
+    assert all(lo < hi for lo, hi in zip(info.state_low, info.state_high))
 
 
 def test_infer_matches_lerobot_on_every_sample(fixture, fp32_blob):

@@ -176,28 +176,76 @@ void check_state_model(const ModelInfo& model, const std::string& where) {
   }
 }
 
+// The column of each name `prefix`0 .. `prefix`(count - 1), or an error naming the first missing one.
+std::vector<size_t> indexed_columns(const CsvTable& table, const std::string& prefix, int count, const std::string& what) {
+  std::vector<size_t> columns(static_cast<size_t>(count), table.header.size());
+  for (size_t c = 0; c < table.header.size(); ++c) {
+    const std::string& h = table.header[c];
+    if (h.rfind(prefix, 0) != 0) continue;
+    const std::optional<size_t> i = parse_index(h.substr(prefix.size()));
+    if (i && *i < columns.size()) columns[*i] = c;
+  }
+  for (size_t i = 0; i < columns.size(); ++i) {
+    if (columns[i] == table.header.size()) {
+      bad(table.path, "no '" + prefix + std::to_string(i) + "' column (" + what + " " + std::to_string(count) + " values)");
+    }
+  }
+  return columns;
+}
+
+std::optional<size_t> column_named(const CsvTable& table, const std::string& name) {
+  const auto it = std::find(table.header.begin(), table.header.end(), name);
+  return it == table.header.end() ? std::nullopt : std::optional<size_t>(it - table.header.begin());
+}
+
+// A recording whose ticks.csv holds every control tick (act_drive records the command it sent, who
+// sent it, the state and the camera frame at each tick): the demonstration is what was sent, by a
+// person or a policy, so a drive by hand is evaluated as well as an autonomous one. A frame is
+// evaluated at the first tick that saw it; its chunk runs over the following ticks until the car was
+// held safe (or the recording ends).
+Episode read_tick_recording(const fs::path& dir, const ModelInfo& model, const CsvTable& ticks, size_t cut_lines) {
+  Episode ep{dir.string(), "act_drive recording (every tick)", "", {}, {}, {}};
+  const std::vector<size_t> command = indexed_columns(ticks, "command.", model.action_dim, "the model's actions have");
+  const std::vector<size_t> state = indexed_columns(ticks, "state.", model.state_dim, "the model's state has");
+  const std::optional<size_t> driver = column_named(ticks, "driver"), frame = column_named(ticks, "frame");
+  if (!driver || !frame) bad(ticks.path, "no 'driver' and 'frame' columns beside the 'command.<i>' ones");
+  for (size_t c : command) ep.action_names.push_back(ticks.header[c]);
+  const auto held_safe = [&](const CsvTable::Row& row) { return row.cells[*driver] == "safe"; };
+  size_t safe_frames = 0;
+  for (size_t r = 0; r < ticks.rows.size(); ++r) {
+    const CsvTable::Row& row = ticks.rows[r];
+    const std::string& image = row.cells[*frame];
+    if (image.empty() || (r > 0 && ticks.rows[r - 1].cells[*frame] == image)) continue;  // no frame, or not a new one
+    if (held_safe(row)) {
+      ++safe_frames;
+      continue;
+    }
+    EpisodeFrame f;
+    f.source = image;
+    f.image_path = (dir / image).string();
+    for (size_t c : state) f.state.push_back(ticks.number(row, c));
+    for (size_t t = r; t < ticks.rows.size() && t < r + static_cast<size_t>(model.chunk_size) && !held_safe(ticks.rows[t]); ++t) {
+      for (size_t c : command) f.demonstration.push_back(ticks.number(ticks.rows[t], c));
+    }
+    ep.frames.push_back(std::move(f));
+  }
+  if (cut_lines > 0) ep.notes.push_back("skipped the last line of a file cut short (the recording was killed while writing)");
+  if (safe_frames > 0) ep.notes.push_back(std::to_string(safe_frames) + " frame(s) skipped: the car was held safe at their tick");
+  if (ep.frames.empty()) bad(ep.path, "no frame seen while a person or a policy drove");
+  return ep;
+}
+
 Episode read_recording(const fs::path& dir, const ModelInfo& model) {
   Episode ep{dir.string(), "act_drive recording", "", {}, {}, {}};
   check_state_model(model, ep.path);
-  // The executed actions by tick, from ticks.csv's action.<i> columns.
   size_t cut_lines = 0;
   const CsvTable ticks = read_csv((dir / "ticks.csv").string(), "ticks", true, &cut_lines);
-  std::optional<size_t> tick_column;
-  std::vector<size_t> action_column(static_cast<size_t>(model.action_dim), 0);
-  for (size_t c = 0; c < ticks.header.size(); ++c) {
-    const std::string& h = ticks.header[c];
-    if (h == "tick") tick_column = c;
-    if (h.rfind("action.", 0) == 0) {
-      const std::optional<size_t> i = parse_index(h.substr(7));
-      if (i && *i < action_column.size()) action_column[*i] = c;
-    }
-  }
+  if (column_named(ticks, "command.0")) return read_tick_recording(dir, model, ticks, cut_lines);
+  // An older recording: the frames the policy saw (log.jsonl), the actions it executed by tick (ticks.csv's action.<i>).
+  const std::optional<size_t> tick_column = column_named(ticks, "tick");
   if (!tick_column) bad(ticks.path, "no 'tick' column");
-  for (size_t a = 0; a < action_column.size(); ++a) {
-    if (action_column[a] == 0) bad(ticks.path, "no 'action." + std::to_string(a) + "' column (the model's actions have " +
-                                   std::to_string(model.action_dim) + " values)");
-    ep.action_names.push_back(ticks.header[action_column[a]]);
-  }
+  const std::vector<size_t> action_column = indexed_columns(ticks, "action.", model.action_dim, "the model's actions have");
+  for (size_t c : action_column) ep.action_names.push_back(ticks.header[c]);
   std::map<int64_t, std::vector<float>> executed;  // ticks whose action was the policy's (a safe action has none)
   for (const auto& row : ticks.rows) {
     const std::optional<size_t> tick = parse_index(row.cells[*tick_column]);

@@ -295,6 +295,41 @@ TEST(EvalEpisode, ActDriveRecordingByColumnNames) {
   EXPECT_NE(ep.notes[0].find("cut short"), std::string::npos) << ep.notes[0];
 }
 
+TEST(EvalEpisode, PerTickRecordingDemonstratesWhatWasSent) {
+  // act_drive's per-tick columns: the demonstration is the command sent (here by hand, where the
+  // policy's action columns are empty), each new camera frame is evaluated once at its first tick with
+  // that tick's state, and a tick held safe ends a chunk and is no demonstration.
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir() + "/rec";
+  fs::create_directories(dir + "/tick_frames");
+  std::string ticks = "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,sent,driver,frame,"
+                      "state.0,state.1,command.0,command.1\n";
+  for (int t = 0; t < 12; ++t) {
+    const int shown = t / 3;  // a new camera frame every third tick
+    char name[40];
+    std::snprintf(name, sizeof name, "tick_frames/%08d.png", shown);
+    if (t % 3 == 0) fs::copy_file(fixture_image(shown), dir + "/" + name);
+    const std::string state = exact(kStates[static_cast<size_t>(shown)][0]) + "," + exact(kStates[static_cast<size_t>(shown)][1]);
+    const bool safe = t == 5 || t == 6;
+    ticks += std::to_string(t) + ",0.1,0.0," + (safe ? "safe:e-stop" : "manual") + ",,,1500,1500,1," +
+             (safe ? "safe" : "manual") + "," + name + "," + state + "," + std::to_string(t) + "," + std::to_string(-t) + "\n";
+  }
+  write_text(dir + "/ticks.csv", ticks);
+  write_text(dir + "/log.jsonl", "");  // the policy never ran
+  const act::eval::Episode ep = act::eval::read_episode({dir, "", ""}, tiny_info());
+  EXPECT_EQ(ep.action_names, (std::vector<std::string>{"command.0", "command.1"}));
+  // Frames at ticks 0, 3 and 9; the one first seen at tick 6 was held safe.
+  ASSERT_EQ(ep.frames.size(), 3u);
+  EXPECT_EQ(ep.frames[0].source, "tick_frames/00000000.png");
+  EXPECT_EQ(ep.frames[0].demonstration, (std::vector<float>{0, 0, 1, -1, 2, -2, 3, -3, 4, -4}));  // until tick 5
+  EXPECT_EQ(ep.frames[1].demonstration, (std::vector<float>{3, -3, 4, -4}));
+  EXPECT_EQ(ep.frames[2].source, "tick_frames/00000003.png");
+  EXPECT_EQ(ep.frames[2].demonstration, (std::vector<float>{9, -9, 10, -10, 11, -11}));
+  EXPECT_EQ(ep.frames[2].state, kStates[3]);
+  ASSERT_EQ(ep.notes.size(), 1u);
+  EXPECT_NE(ep.notes[0].find("1 frame(s) skipped"), std::string::npos) << ep.notes[0];
+}
+
 TEST(EvalEpisode, VideoFramesByIndex) {
   const std::string dir = act::test::scratch_dir();
   const std::string video = dir + "/clip.avi";

@@ -18,6 +18,8 @@ constexpr int kQuantizeTileRows = 32;
 constexpr size_t kChannelBlock = 64;           // a multiple of every gemm_s8 NR
 
 size_t ceil_div(size_t a, size_t b) { return (a + b - 1) / b; }
+// `bytes` rounded up to whole 64-byte lines, the alignment packed weights need.
+size_t round_up_to_packed_align(size_t bytes) { return ceil_div(bytes, kernels::kGemmS8PackedAlign) * kernels::kGemmS8PackedAlign; }
 
 // Symmetric int8 parameters for values in [-absmax, absmax].
 kernels::QuantS8 symmetric_quant(float absmax) {
@@ -33,8 +35,7 @@ kernels::QuantS8 symmetric_quant(float absmax) {
 void AlignedBuffer::Free::operator()(void* p) const { std::free(p); }
 
 AlignedBuffer::AlignedBuffer(size_t bytes) {
-  const size_t rounded = (bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
-  void* p = std::aligned_alloc(kernels::kGemmS8PackedAlign, std::max(rounded, kernels::kGemmS8PackedAlign));
+  void* p = std::aligned_alloc(kernels::kGemmS8PackedAlign, round_up_to_packed_align(std::max<size_t>(bytes, 1)));
   if (p == nullptr) throw std::bad_alloc();
   buffer_.reset(p);
 }
@@ -291,7 +292,7 @@ struct RegionLayout {
   size_t end = 0;
   size_t add(size_t bytes) {
     const size_t at = end;
-    end = (at + bytes + kernels::kGemmS8PackedAlign - 1) / kernels::kGemmS8PackedAlign * kernels::kGemmS8PackedAlign;
+    end = round_up_to_packed_align(at + bytes);
     return at;
   }
 };

@@ -5,7 +5,9 @@
 # Debian bookworm board), zlib, GoogleTest and cpuinfo's library. Header-only dependencies (xsimd,
 # nlohmann-json) and the cpuinfo header are architecture-independent: the host's (install_deps.sh).
 # --packaging (scripts/build_packages.sh): only the cross compiler and the arm64 libraries the
-# packages link, no qemu-user or GoogleTest.
+# packages link, no qemu-user or GoogleTest. --projection: the cross compiler and LLVM 19's llvm-mca,
+# which bench/tools/count_loop_insns.py runs to project the NEON kernels on a Cortex-A76 (its
+# -mcpu=neoverse-n1 model: the A76's own name maps to the Cortex-A57 model in every LLVM of Debian).
 #
 # cpuinfo: libcpuinfo-dev:arm64 is NOT installed. Debian's libcpuinfo-dev is "Multi-Arch: same" but
 # ships /usr/lib/cmake/cpuinfo/cpuinfo-targets-none.cmake with its own architecture's paths inside,
@@ -22,7 +24,10 @@ set -euo pipefail
 host_packages=(g++-aarch64-linux-gnu)
 arm64_packages=(libc6 libstdc++6 zlib1g-dev libcpuinfo0
                 libserialport-dev libevdev-dev libcpp-httplib-dev)  # act_drive (--list-ports, --gamepad, --http)
-if [ "${1:-}" != "--packaging" ]; then  # the tests under emulation; --packaging: only the arm64 packages' build
+if [ "${1:-}" = "--projection" ]; then
+  host_packages+=(llvm-19)
+  arm64_packages=()
+elif [ "${1:-}" != "--packaging" ]; then  # the tests under emulation; --packaging: only the arm64 packages' build
   host_packages+=(qemu-user)
   arm64_packages+=(libgtest-dev libgmock-dev)
 fi

@@ -84,7 +84,9 @@ def main():
             continue
         print(f"{fn[:90]}\n  loop {body[0][0]:x}..{addr:x}: {len(body)} instructions, {macs} MAC: "
               + ", ".join(f"{k} {v}" for k, v in mix.most_common()))
-        if args.mca:
+        if args.mca and any(x[1] in ("bl", "blr", "ret", "call") for x in body):
+            print("  (a call inside: not projected)")
+        elif args.mca:
             cycles = mca_cycles(body, args.mca, args.triple, args.llvm_mca)
             mac_ops = sum(v * MACS_PER_INSN.get(k, 0) for k, v in mix.items())
             kind = next((k for k in mix if k.startswith(MACS)), None)

@@ -12,7 +12,7 @@
 //   - attention_f32/<isa>/<tokens>/threads:T: the float attention op, 8 heads of QK^T, softmax,
 //     PV on the packed gemm_f32, head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
-//     LayerNorm, softmax (bytes/s).
+//     LayerNorm, softmax, softmax into int8 (bytes/s).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
 // sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time),
 // at T = 1 also GMAC/s_cpu and pct_peak_cpu (by the thread's CPU time: what to read on a shared,
@@ -492,6 +492,20 @@ void bm_softmax(benchmark::State& state, const kernels::ElementwiseF32Kernels* e
   state.SetLabel(e->softmax_name);
 }
 
+// Attention's softmax straight into int8 codes (softmax_rows_s8) on the encoder's 8 heads of 302
+// scores per query, bytes/s of float input + int8 output.
+void bm_softmax_s8(benchmark::State& state, const kernels::ElementwiseF32Kernels* e, int rows, int cols) {
+  std::vector<float> x(static_cast<size_t>(rows) * cols), scale(static_cast<size_t>(rows));
+  for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<float>(i % 101) * 0.05f;
+  std::vector<int8_t> y(x.size());
+  for (auto _ : state) {
+    e->softmax_rows_s8(rows, cols, x.data(), cols, y.data(), cols, scale.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(x.size()) * 5);
+  state.SetLabel(e->softmax_s8_name);
+}
+
 std::string cpu_model() {
   std::ifstream in("/proc/cpuinfo");
   std::string line;
@@ -619,6 +633,7 @@ int main(int argc, char** argv) {
     const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);
     reg(benchmark::RegisterBenchmark((ew + "/layernorm/302x512").c_str(), bench::bm_layernorm, e, 302, 512));
     reg(benchmark::RegisterBenchmark((ew + "/softmax/2416x302").c_str(), bench::bm_softmax, e, 8 * 302, 302));
+    reg(benchmark::RegisterBenchmark((ew + "/softmax_s8/2416x302").c_str(), bench::bm_softmax_s8, e, 8 * 302, 302));
   }
   // The int8 attention: at each level with a gemm_s8 variant of its own (not the reference).
   for (kernels::Isa isa : isas) {

@@ -328,7 +328,6 @@ AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int 
   layout_.v_t_s8 = packing.add(hd * n_keys);
   layout_.q_s8 = block.add(rows * hd + kernels::kGemmS8ReadSlack);
   layout_.q_scale = block.add(rows * sizeof(float));
-  layout_.q_zero_point = block.add(rows * sizeof(int32_t));
   layout_.scores = block.add(rows * n_keys * sizeof(float));
   layout_.p_s8 = block.add(rows * n_keys + kernels::kGemmS8ReadSlack);
   layout_.p_scale = block.add(rows * sizeof(float));
@@ -387,25 +386,23 @@ void AttentionS8Op::run(const RunContext& ctx) const {
     uint8_t* scratch = aligned_scratch(ctx, thread);
     int8_t* q_s8 = reinterpret_cast<int8_t*>(scratch + layout_.q_s8);
     float* q_scale = reinterpret_cast<float*>(scratch + layout_.q_scale);
-    int32_t* q_zero_point = reinterpret_cast<int32_t*>(scratch + layout_.q_zero_point);
     float* scores = reinterpret_cast<float*>(scratch + layout_.scores);
     int8_t* p_s8 = reinterpret_cast<int8_t*>(scratch + layout_.p_s8);
     float* p_scale = reinterpret_cast<float*>(scratch + layout_.p_scale);
     const size_t column = head * head_dim;
-    const auto gemm = [&](int n, int k_len, const int8_t* a, size_t lda, const void* packed, const int32_t* a_zero_point,
-                          const float* a_scale, const float* w_scale, float* c, size_t ldc) {
-      const kernels::GemmS8Args args{.m = rows, .n = n, .k = k_len, .a = a, .lda = lda, .packed_w = packed,
-                                     .a_row_zero_point = a_zero_point};
+    // Neither A has zero points: the queries are symmetric, the probabilities' is in the packed values.
+    const auto gemm = [&](int n, int k_len, const int8_t* a, size_t lda, const void* packed, const float* a_scale,
+                          const float* w_scale, float* c, size_t ldc) {
+      const kernels::GemmS8Args args{.m = rows, .n = n, .k = k_len, .a = a, .lda = lda, .packed_w = packed};
       const kernels::GemmS8OutF32 o{.c = c, .ldc = ldc, .w_scale = w_scale, .a_row_scale = a_scale};
       kc.gemm_s8.f32out(args, o, 0, rows, 0, n);
     };
-    kernels::quantize_rows_dynamic_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
-                                          head_dim, q_scale, q_zero_point);
-    gemm(nk_, hd, q_s8, head_dim, head_at(head, layout_.packed_k), q_zero_point, q_scale,
+    kernels::quantize_rows_symmetric_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
+                                            head_dim, q_scale);
+    gemm(nk_, hd, q_s8, head_dim, head_at(head, layout_.packed_k), q_scale,
          static_cast<const float*>(head_at(head, layout_.k_scale)), scores, n_keys);
     kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);
-    // The probabilities' zero point is folded into the packed values: no per-row zero points.
-    gemm(hd, nk_, p_s8, n_keys, head_at(head, layout_.packed_v), nullptr, p_scale,
+    gemm(hd, nk_, p_s8, n_keys, head_at(head, layout_.packed_v), p_scale,
          static_cast<const float*>(head_at(head, layout_.v_scale)),
          out + static_cast<size_t>(r0) * static_cast<size_t>(dim_) + column, static_cast<size_t>(dim_));
   });

@@ -152,9 +152,10 @@ class LinearS8Op : public Op {
 /// softmax(q k^T / sqrt(d)) v per head with both matmuls on the int8 GEMM; AttentionOp is its float
 /// twin (same operands, same output layout). Two stages: a task per head quantizes its keys (per
 /// token) and values (per channel) symmetric, the GEMM's weight side, and packs them into the op's
-/// own buffer; then a task per (head, block of query rows) quantizes the queries per row
-/// (asymmetric), and the softmax writes its probabilities straight into int8 (softmax_rows_s8: all
-/// 256 codes cover [0, max p] of each row). The op's buffer makes a run of it single-threaded at the
+/// own buffer; then a task per (head, block of query rows) quantizes the queries per row, symmetric
+/// too (no zero-point correction in the GEMM; the action chunk moves no more than with asymmetric
+/// rows), and the softmax writes its probabilities straight into int8 (softmax_rows_s8: all 256
+/// codes cover [0, max p] of each row). The op's buffer makes a run of it single-threaded at the
 /// graph level, as the graph's own arena already does.
 class AttentionS8Op : public Op {
  public:
@@ -175,7 +176,7 @@ class AttentionS8Op : public Op {
   struct Layout {
     size_t packed_k, packed_v, k_scale, v_scale, head_bytes;
     size_t k_s8, v_t, v_t_s8;                                        // stage 1
-    size_t q_s8, q_scale, q_zero_point, scores, p_s8, p_scale;      // stage 2
+    size_t q_s8, q_scale, scores, p_s8, p_scale;                    // stage 2
     size_t scratch_bytes;
   };
   int nq_, nk_, dim_, heads_;

@@ -291,8 +291,8 @@ TEST_P(OpsPerIsa, AttentionMatchesNaiveSoftmaxAttention) {
 }
 
 // AttentionS8Op against the naive definition, on the shapes above and ragged ones (key counts that
-// are no multiple of any GEMM tile, several query blocks). Its error is quantization's: queries
-// and probabilities per row (8 bits), keys per token and values per channel (7 bits plus sign);
+// are no multiple of any GEMM tile, several query blocks). Its error is quantization's: the
+// probabilities per row (8 bits), queries per row, keys per token, values per channel (7 bits plus sign);
 // on these inputs the worst output error stays below 1.5 % of the largest |v| (the outputs are
 // convex combinations of v's rows), and the RMS error below 0.4 % of it.
 TEST_P(OpsPerIsa, AttentionS8MatchesNaiveSoftmaxAttentionWithinQuantizationError) {

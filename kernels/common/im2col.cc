@@ -20,6 +20,10 @@ inline void copy_run(int8_t* dst, const int8_t* src, size_t bytes) {
   std::memcpy(dst + bytes - 16, src + bytes - 16, 16);
 }
 
+// Rounding divisions for a positive divisor and any sign of numerator.
+inline int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+inline int ceil_div(int a, int b) { return -floor_div(-a, b); }
+
 }  // namespace
 
 void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, int count, float* patches) {
@@ -78,24 +82,40 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
         continue;
       }
       const int8_t* input_row = input + static_cast<size_t>(iy) * static_cast<size_t>(s.in_w) * run;
-      for (int j = 0; j < n; ++j) {
-        int8_t* d = dst + static_cast<size_t>(j) * ld;
-        const int ix0 = (ox_begin + j) * s.stride - s.pad;
-        // Without dilation a kernel row inside the image is kernel_w consecutive NHWC pixels: one copy
-        // (the 7x7 stem with 3 channels would otherwise copy 3 bytes at a time).
-        if (s.dilation == 1 && ix0 >= 0 && ix0 + s.kernel_w <= s.in_w) {
-          copy_run(d, input_row + static_cast<size_t>(ix0) * run, kernel_row_bytes);
-          continue;
-        }
-        for (int kx = 0; kx < s.kernel_w; ++kx, d += run) {
-          const int ix = ix0 + kx * s.dilation;
-          if (ix < 0 || ix >= s.in_w) {
-            std::memset(d, pad_value, run);
-          } else {
-            copy_run(d, input_row + static_cast<size_t>(ix) * run, run);
+      // Without dilation a kernel row inside the image is kernel_w consecutive NHWC pixels: one copy
+      // per output pixel (the 7x7 stem with 3 channels would otherwise copy 3 bytes at a time), in a
+      // loop of its own over the pixels whose whole kernel row is inside, so that the stem's 21-byte
+      // runs cost two moves and two pointer steps each; only the pixels at the image's left and right
+      // edges take the tap-by-tap path.
+      int inside_begin = n, inside_end = n;
+      if (s.dilation == 1) {
+        const int first = ceil_div(s.pad - ox_begin * s.stride, s.stride);  // ix0 >= 0
+        const int last = floor_div(s.in_w - s.kernel_w + s.pad - ox_begin * s.stride, s.stride);  // ix0 + kw <= in_w
+        inside_begin = std::clamp(first, 0, n);
+        inside_end = std::clamp(last + 1, inside_begin, n);
+      }
+      if (inside_end > inside_begin) {
+        const size_t src_step = static_cast<size_t>(s.stride) * run;
+        const int8_t* src = input_row + static_cast<size_t>((ox_begin + inside_begin) * s.stride - s.pad) * run;
+        int8_t* d = dst + static_cast<size_t>(inside_begin) * ld;
+        for (int j = inside_begin; j < inside_end; ++j, src += src_step, d += ld) copy_run(d, src, kernel_row_bytes);
+      }
+      const auto taps = [&](int j_begin, int j_end) {
+        for (int j = j_begin; j < j_end; ++j) {
+          int8_t* d = dst + static_cast<size_t>(j) * ld;
+          const int ix0 = (ox_begin + j) * s.stride - s.pad;
+          for (int kx = 0; kx < s.kernel_w; ++kx, d += run) {
+            const int ix = ix0 + kx * s.dilation;
+            if (ix < 0 || ix >= s.in_w) {
+              std::memset(d, pad_value, run);
+            } else {
+              copy_run(d, input_row + static_cast<size_t>(ix) * run, run);
+            }
           }
         }
-      }
+      };
+      taps(0, inside_begin);
+      taps(inside_end, n);
     }
     pixel += n;
     tile_row += static_cast<size_t>(n) * ld;

@@ -113,14 +113,15 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
     }
     for (int ky = 0; ky < s.kernel_h; ++ky) {
       const int iy = oy * s.stride - s.pad + ky * s.dilation;
-      const int8_t* input_row = input + static_cast<size_t>(iy) * input_row_bytes;
+      const bool row_inside = iy >= 0 && iy < s.in_h;
+      const int8_t* input_row = row_inside ? input + static_cast<size_t>(iy) * input_row_bytes : nullptr;
       const auto taps = [&](int j_begin, int j_end) {
         for (int j = j_begin; j < j_end; ++j) {
           int8_t* d = tile_row + static_cast<size_t>(j) * ld + static_cast<size_t>(ky) * kernel_row_bytes;
           const int ix0 = (ox_begin + j) * s.stride - s.pad;
           for (int kx = 0; kx < s.kernel_w; ++kx, d += run) {
             const int ix = ix0 + kx * s.dilation;
-            if (iy < 0 || iy >= s.in_h || ix < 0 || ix >= s.in_w) {
+            if (!row_inside || ix < 0 || ix >= s.in_w) {
               std::memset(d, pad_value, run);
             } else {
               copy_run(d, input_row + static_cast<size_t>(ix) * run, run);

@@ -112,8 +112,10 @@ struct EpiS8 {
   const GemmS8OutS8& o;
   __m512 scale[kVecs]{};
   __mmask16 mask[kVecs]{};
+  bool full_panel = false;
 
   void begin_panel(int n, int lo, int hi) {
+    full_panel = lo == 0 && hi == kNR;
     for (int j = 0; j < kVecs; ++j) {
       mask[j] = vec_mask(j, lo, hi);
       scale[j] = _mm512_maskz_loadu_ps(mask[j], o.scale + n + 16 * j);
@@ -124,8 +126,8 @@ struct EpiS8 {
     const __m512 qmin = _mm512_set1_ps(static_cast<float>(o.qmin));
     const __m512 qmax = _mm512_set1_ps(static_cast<float>(o.qmax));
     int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
+    __m512i q[kVecs];
     for (int j = 0; j < kVecs; ++j) {
-      if (mask[j] == 0) continue;
       __m512 v = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), scale[j]);
       if (o.residual != nullptr) {
         const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n + 16 * j;
@@ -136,9 +138,18 @@ struct EpiS8 {
       v = _mm512_add_ps(v, zo);
       v = _mm512_max_ps(v, qmin);  // v > qmin ? v : qmin, as requant_ref.h
       v = _mm512_min_ps(v, qmax);
-      // Round half to even (MXCSR default), then narrow; exact since v is within [qmin, qmax].
-      _mm_mask_storeu_epi8(cp + 16 * j, mask[j], _mm512_cvtsepi32_epi8(_mm512_cvtps_epi32(v)));
+      // Round half to even (MXCSR default); the ints are within [qmin, qmax], so narrowing is exact.
+      q[j] = _mm512_cvtps_epi32(v);
     }
+    if (full_panel) {
+      // 64 columns narrowed by two saturating packs (exact here) into one store; the packs
+      // interleave 128-bit lanes, dword 4l + j holding lane l of q[j], which the permute puts back.
+      const __m512i bytes = _mm512_packs_epi16(_mm512_packs_epi32(q[0], q[1]), _mm512_packs_epi32(q[2], q[3]));
+      const __m512i order = _mm512_setr_epi32(0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15);
+      _mm512_storeu_si512(cp, _mm512_permutexvar_epi32(order, bytes));
+      return;
+    }
+    for (int j = 0; j < kVecs; ++j) _mm_mask_storeu_epi8(cp + 16 * j, mask[j], _mm512_cvtsepi32_epi8(q[j]));
   }
 };
 

@@ -220,26 +220,42 @@ TEST(ConvS8, F32OutEqualsDequantizedDirectConvolution) {
   }
 }
 
+// im2col against its definition: the stem on an image too narrow for any kernel row to be inside
+// (every pixel tap by tap) and a wider one (the kernel-row loop for short runs), a 3x3 with 64
+// channels (192-byte kernel rows: the pixel-by-pixel loop), a dilated one (always tap by tap); the
+// pixels in ragged ranges that start mid-row, as tiles do.
 TEST(ConvS8, Im2colPadsWithTheZeroPointAndKeepsTheRowGap) {
-  const ConvCase c{"stem", 5, 4, 3, 1, 7, 2, 3, 1};
-  const Conv2dShape s = shape_of(c);
-  std::vector<int8_t> x(static_cast<size_t>(c.h) * c.w * c.cin);
-  for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<int8_t>(i);
-  const size_t ld = static_cast<size_t>(s.patch_size()) + 3;
-  const int pixels = s.out_h * s.out_w;
-  std::vector<int8_t> patches(pixels * ld, 99);
-  im2col_nhwc_s8(s, x.data(), -17, 0, pixels, patches.data(), ld);
-  for (int pix = 0; pix < pixels; ++pix) {
-    const int oy = pix / s.out_w, ox = pix % s.out_w;
-    for (int ky = 0; ky < 7; ++ky)
-      for (int kx = 0; kx < 7; ++kx)
-        for (int ch = 0; ch < 3; ++ch) {
-          const int iy = oy * 2 - 3 + ky, ix = ox * 2 - 3 + kx;
-          const bool inside = iy >= 0 && iy < c.h && ix >= 0 && ix < c.w;
-          const int8_t want = inside ? x[(static_cast<size_t>(iy) * c.w + ix) * 3 + ch] : int8_t{-17};
-          ASSERT_EQ(patches[pix * ld + (ky * 7 + kx) * 3 + ch], want) << pix << " " << ky << " " << kx;
-        }
-    for (size_t g = s.patch_size(); g < ld; ++g) ASSERT_EQ(patches[pix * ld + g], 99) << "wrote into the row gap";
+  const ConvCase cases[] = {
+      {"stem_narrow", 5, 4, 3, 1, 7, 2, 3, 1},
+      {"stem_wide", 9, 23, 3, 1, 7, 2, 3, 1},
+      {"3x3_c64", 4, 9, 64, 1, 3, 1, 1, 1},
+      {"3x3_dilated", 6, 7, 8, 1, 3, 1, 2, 2},
+  };
+  for (const ConvCase& c : cases) {
+    const Conv2dShape s = shape_of(c);
+    std::vector<int8_t> x(static_cast<size_t>(c.h) * c.w * c.cin);
+    for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<int8_t>(i * 7 + 1);
+    const size_t ld = static_cast<size_t>(s.patch_size()) + 3;
+    const int pixels = s.out_h * s.out_w;
+    for (int range : {pixels, 5}) {
+      std::vector<int8_t> patches(pixels * ld, 99);
+      for (int p0 = 0; p0 < pixels; p0 += range) {
+        im2col_nhwc_s8(s, x.data(), -17, p0, std::min(range, pixels - p0), patches.data() + p0 * ld, ld);
+      }
+      for (int pix = 0; pix < pixels; ++pix) {
+        const int oy = pix / s.out_w, ox = pix % s.out_w;
+        for (int ky = 0; ky < s.kernel_h; ++ky)
+          for (int kx = 0; kx < s.kernel_w; ++kx)
+            for (int ch = 0; ch < s.in_c; ++ch) {
+              const int iy = oy * s.stride - s.pad + ky * s.dilation, ix = ox * s.stride - s.pad + kx * s.dilation;
+              const bool inside = iy >= 0 && iy < c.h && ix >= 0 && ix < c.w;
+              const int8_t want = inside ? x[(static_cast<size_t>(iy) * c.w + ix) * s.in_c + ch] : int8_t{-17};
+              ASSERT_EQ(patches[pix * ld + (ky * s.kernel_w + kx) * s.in_c + ch], want)
+                  << c.name << " range " << range << " pixel " << pix << " tap " << ky << "," << kx << " channel " << ch;
+            }
+        for (size_t g = s.patch_size(); g < ld; ++g) ASSERT_EQ(patches[pix * ld + g], 99) << c.name << ": wrote into the row gap";
+      }
+    }
   }
 }
 

@@ -59,6 +59,13 @@ std::vector<float> Graph::read_f32(ValueId id) {
   return out;
 }
 
+void RowCodes::write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const {
+  const size_t row = static_cast<size_t>(r0);
+  kernels::quantize_rows_dynamic_f32_s8(ctx.kernels().quant, rows, cols, x + row * ldx, ldx,
+                                        ctx.data_s8(codes) + row * static_cast<size_t>(cols), static_cast<size_t>(cols),
+                                        ctx.data(scale) + row, ctx.data_s32(zero_point) + row);
+}
+
 double Graph::total_macs() const {
   double total = 0;
   for (const auto& op : ops_) total += op->macs();

@@ -79,6 +79,29 @@ struct MatrixRef {
   static MatrixRef of_constant(const float* p, size_t ld) { return {kNoValue, p, 0, ld}; }
 };
 
+/// The per-token int8 codes of a float matrix [rows, cols], exactly as quantize_rows_dynamic_f32_s8
+/// makes them from its rows, written by the op that produces the matrix while its rows are in cache
+/// (LayerNorm, an int8 linear), so that the int8 linears reading it skip a quantization pass.
+struct RowCodes {
+  ValueId codes = kNoValue;       ///< int8 [rows, cols]
+  ValueId scale = kNoValue;       ///< float [rows]
+  ValueId zero_point = kNoValue;  ///< int32 [rows]
+  int cols = 0;
+  bool present() const { return codes != kNoValue; }
+  std::vector<ValueId> values() const { return {codes, scale, zero_point}; }
+  /// Quantizes rows [r0, r0 + rows) of x (leading dimension ldx; x points at row 0) into them.
+  void write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const;
+};
+
+/// An op that can write RowCodes of its float output beside it (the graph builder asks for them
+/// when an int8 linear reads that output).
+class RowCodesWriter {
+ public:
+  virtual ~RowCodesWriter() = default;
+  /// From now on every run also writes `codes` (adds them to the op's outputs).
+  virtual void write_row_codes(const RowCodes& codes) = 0;
+};
+
 /// The part of the network an op belongs to, for per-stage timing.
 enum class Stage { kOther, kBackbone, kEncoder, kDecoder };
 inline constexpr int kStageCount = 4;

@@ -38,6 +38,9 @@ struct Value {
   int first_use = -1;  ///< op index that writes it (-1: a graph input)
   int last_use = -1;   ///< last op index that reads it
   bool pinned = false; ///< inputs and outputs: alive for the whole run
+  /// False when no op reads it and it is neither pinned nor kept (plan()): its producer may leave it
+  /// unwritten (an int8 linear whose consumers read only its row codes).
+  bool read = true;
 };
 
 /// What an op sees when it runs: the arena, the pool, per-thread scratch and the kernels to call (the
@@ -51,6 +54,7 @@ class RunContext {
   float* data(ValueId id) const { return arena_ + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) const { return reinterpret_cast<int8_t*>(data(id)); }
   int32_t* data_s32(ValueId id) const { return reinterpret_cast<int32_t*>(data(id)); }
+  bool read(ValueId id) const { return values_[static_cast<size_t>(id)].read; }
   ThreadPool& pool() const { return pool_; }
   const kernels::KernelConfig& kernels() const { return kernels_; }
   float* scratch(int thread) const { return scratch_ + static_cast<size_t>(thread) * scratch_per_thread_; }
@@ -89,7 +93,7 @@ struct RowCodes {
   int cols = 0;
   bool present() const { return codes != kNoValue; }
   std::vector<ValueId> values() const { return {codes, scale, zero_point}; }
-  /// Quantizes rows [r0, r0 + rows) of x (leading dimension ldx; x points at row 0) into them.
+  /// Quantizes `rows` rows of x (leading dimension ldx) into their rows r0, r0 + 1, ...
   void write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const;
 };
 

@@ -200,7 +200,7 @@ void LayerNormOp::run(const RunContext& ctx) const {
     for (int r = r0; r < r0 + rows; r += step) {
       const int n = std::min(step, r0 + rows - r);
       ctx.kernels().elementwise.layernorm_rows(n, cols_, x + r * ld, ld, gamma_, beta_, kLayerNormEps, y + r * ld, ld);
-      if (codes_.present()) codes_.write(ctx, y, ld, r, n);
+      if (codes_.present()) codes_.write(ctx, y + r * ld, ld, r, n);
     }
   });
 }

@@ -219,8 +219,8 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
                        const RowCodes& x_codes, InputCodes x_codes_from, const int8_t* weight, const float* w_scale,
                        MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output)
     : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), x_codes_(x_codes),
-      x_codes_from_(x_codes_from), weight_(weight), w_scale_(w_scale), epilogue_(epilogue),
-      packed_(kernels, out, in, weight, nullptr, 0) {
+      x_codes_from_(x_codes_from), weight_(weight), w_scale_(w_scale), epilogue_(epilogue), mr_(kernels.mr),
+      nr_(kernels.nr), packed_(kernels, out, in, weight, nullptr, 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
   check(!(bias_table && has_residual), ErrorCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
@@ -255,7 +255,7 @@ namespace {
 void write_codes_in_row_tiles(const RunContext& ctx, const RowCodes& codes, const float* x, size_t ldx, int rows) {
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows), kQuantizeTileRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kQuantizeTileRows;
-    codes.write(ctx, x, ldx, r0, std::min(kQuantizeTileRows, rows - r0));
+    codes.write(ctx, x + static_cast<size_t>(r0) * ldx, ldx, r0, std::min(kQuantizeTileRows, rows - r0));
   });
 }
 }  // namespace
@@ -290,19 +290,41 @@ void LinearS8Op::run(const RunContext& ctx) const {
     }
   }
   const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
-  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads());
+  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), y_codes_.present());
   // Tasks of whole rows quantize their rows while they are still in cache; else a pass of its own.
+  // When nothing reads the float output (its readers take the codes), those rows go to the task's
+  // scratch only, never to memory.
   const bool codes_per_task = y_codes_.present() && tiling.tiles_n == 1;
-  ctx.pool().parallel_for(tiling.count(), [&](size_t task, int) {
+  const bool f32_in_scratch = codes_per_task && !ctx.read(outputs[0]);
+  ctx.pool().parallel_for(tiling.count(), [&](size_t task, int thread) {
     int r0, r1, c0, c1;
     tiling.rect(task, r0, r1, c0, c1);
-    gemm.f32out(args, o, r0, r1, c0, c1);
+    // The task's rows as a GEMM of their own, starting at row r0.
+    const size_t row = static_cast<size_t>(r0);
+    kernels::GemmS8Args a = args;
+    a.m = r1 - r0;
+    a.a += row * a.lda;
+    a.a_row_zero_point += row;
+    kernels::GemmS8OutF32 to = o;
+    to.c = f32_in_scratch ? ctx.scratch(thread) : o.c + row * o.ldc;
+    to.a_row_scale += row;
+    if (to.residual != nullptr) to.residual += row * to.ldr;
+    gemm.f32out(a, to, 0, a.m, c0, c1);
     if (epilogue_ == Epilogue::kGelu) {
-      for (int r = r0; r < r1; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), o.c + static_cast<size_t>(r) * o.ldc + c0);
+      for (int r = 0; r < a.m; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), to.c + static_cast<size_t>(r) * to.ldc + c0);
     }
-    if (codes_per_task) y_codes_.write(ctx, o.c, o.ldc, r0, r1 - r0);
+    if (codes_per_task) y_codes_.write(ctx, to.c, to.ldc, r0, a.m);
   });
   if (y_codes_.present() && !codes_per_task) write_codes_in_row_tiles(ctx, y_codes_, o.c, o.ldc, rows_);
+}
+
+size_t LinearS8Op::scratch_per_thread() const {
+  if (!y_codes_.present()) return 0;
+  // The largest whole-row task of any thread count: one thread's strips or two threads' tiles
+  // (more threads get smaller ones).
+  int tile_rows = 0;
+  for (int threads : {1, 2}) tile_rows = std::max(tile_rows, gemm_tiling(rows_, out_, mr_, nr_, threads, true).tile_m);
+  return static_cast<size_t>(tile_rows) * static_cast<size_t>(out_);
 }
 
 // ---------------------------------------------------------------------------------- AttentionS8

@@ -137,6 +137,8 @@ class LinearS8Op : public Op, public RowCodesWriter {
   std::string kernel(const kernels::KernelConfig& k) const override;
   void run(const RunContext& ctx) const override;
   void write_row_codes(const RowCodes& codes) override;
+  /// With output codes: one task's float rows, when nothing reads them from memory.
+  size_t scratch_per_thread() const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
@@ -150,6 +152,7 @@ class LinearS8Op : public Op, public RowCodesWriter {
   const int8_t* weight_;
   const float* w_scale_;
   Epilogue epilogue_;
+  int mr_, nr_;  // the micro-tile of the gemm_s8 variant the weights are packed for (its tiling)
   PackedWeights packed_;
 };
 

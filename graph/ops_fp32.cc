@@ -189,19 +189,13 @@ void LayerNormOp::write_row_codes(const RowCodes& codes) {
 void LayerNormOp::run(const RunContext& ctx) const {
   const float* x = ctx.data(inputs[0]);
   float* y = ctx.data(outputs[0]);
-  constexpr int kRows = 32;
-  // With codes, a few rows at a time (8 KB of 512-wide rows), quantized while they are in L1.
-  constexpr int kCodeRows = 4;
+  constexpr int kRows = 32;  // with codes, quantized while the task's 64 KB of rows are in L2
   const size_t ld = static_cast<size_t>(cols_);
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kRows;
     const int rows = std::min(kRows, rows_ - r0);
-    const int step = codes_.present() ? kCodeRows : rows;
-    for (int r = r0; r < r0 + rows; r += step) {
-      const int n = std::min(step, r0 + rows - r);
-      ctx.kernels().elementwise.layernorm_rows(n, cols_, x + r * ld, ld, gamma_, beta_, kLayerNormEps, y + r * ld, ld);
-      if (codes_.present()) codes_.write(ctx, y + r * ld, ld, r, n);
-    }
+    ctx.kernels().elementwise.layernorm_rows(rows, cols_, x + r0 * ld, ld, gamma_, beta_, kLayerNormEps, y + r0 * ld, ld);
+    if (codes_.present()) codes_.write(ctx, y + r0 * ld, ld, r0, rows);
   });
 }
 

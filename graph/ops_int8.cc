@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 
 #include "graph/gemm_tiling.h"
@@ -220,7 +221,7 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
                        MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output)
     : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), x_codes_(x_codes),
       x_codes_from_(x_codes_from), weight_(weight), w_scale_(w_scale), epilogue_(epilogue), mr_(kernels.mr),
-      nr_(kernels.nr), packed_(kernels, out, in, weight, nullptr, 0) {
+      nr_(kernels.nr), table_cols_(out), packed_(kernels, out, in, weight, nullptr, 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
   check(!(bias_table && has_residual), ErrorCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
@@ -234,6 +235,21 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
   outputs = {output};
   if (quantized_here) {
     for (ValueId v : x_codes.values()) outputs.push_back(v);
+  }
+  // A constant per-row bias table whose last columns are the same in every row (the value third of
+  // the fused qkv, whose share of the positions is nil) reads them as a bias vector from row 0:
+  // fewer bytes streamed per run, the same sums (the table adds to float(acc) * scale + 0, never -0).
+  if (bias_table && bias_.constant != nullptr) {
+    const float* table = bias_.constant + bias_.col_offset;
+    const auto same_in_every_row = [&](int c) {
+      for (int r = 1; r < rows; ++r) {
+        if (std::memcmp(table + static_cast<size_t>(r) * bias_.ld + c, table + c, sizeof(float)) != 0) return false;
+      }
+      return true;
+    };
+    int first_shared = out;
+    while (first_shared > 0 && same_in_every_row(first_shared - 1)) --first_shared;
+    table_cols_ = std::min(out, static_cast<int>(ceil_div(static_cast<size_t>(first_shared), static_cast<size_t>(nr_))) * nr_);
   }
 }
 
@@ -279,9 +295,11 @@ void LinearS8Op::run(const RunContext& ctx) const {
   o.relu = epilogue_ == Epilogue::kRelu;
   const bool has_bias = bias_.value != kNoValue || bias_.constant != nullptr;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
+  kernels::GemmS8OutF32 shared_bias_columns = o;  // columns [table_cols_, out_) of a bias table
   if (has_bias && bias_.ld != 0) {  // a per-row table rides in the residual slot
     o.residual = bias_.resolve(ctx);
     o.ldr = bias_.ld;
+    shared_bias_columns.bias = o.residual;
   } else {
     if (has_bias) o.bias = bias_.resolve(ctx);
     if (has_residual) {
@@ -305,11 +323,14 @@ void LinearS8Op::run(const RunContext& ctx) const {
     a.m = r1 - r0;
     a.a += row * a.lda;
     a.a_row_zero_point += row;
-    kernels::GemmS8OutF32 to = o;
-    to.c = f32_in_scratch ? ctx.scratch(thread) : o.c + row * o.ldc;
+    kernels::GemmS8OutF32 to = o, shared = shared_bias_columns;
+    to.c = shared.c = f32_in_scratch ? ctx.scratch(thread) : o.c + row * o.ldc;
     to.a_row_scale += row;
+    shared.a_row_scale = to.a_row_scale;
     if (to.residual != nullptr) to.residual += row * to.ldr;
-    gemm.f32out(a, to, 0, a.m, c0, c1);
+    const int split = std::clamp(table_cols_, c0, c1);
+    if (c0 < split) gemm.f32out(a, to, 0, a.m, c0, split);
+    if (split < c1) gemm.f32out(a, shared, 0, a.m, split, c1);
     if (epilogue_ == Epilogue::kGelu) {
       for (int r = 0; r < a.m; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), to.c + static_cast<size_t>(r) * to.ldc + c0);
     }

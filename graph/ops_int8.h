@@ -153,6 +153,7 @@ class LinearS8Op : public Op, public RowCodesWriter {
   const float* w_scale_;
   Epilogue epilogue_;
   int mr_, nr_;  // the micro-tile of the gemm_s8 variant the weights are packed for (its tiling)
+  int table_cols_;  // output columns that read a per-row bias table; the rest (if any) share row 0's
   PackedWeights packed_;
 };
 

@@ -268,6 +268,44 @@ TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
   }
 }
 
+// A constant per-row bias table whose last columns are the same in every row (the fused qkv's value
+// third) is read there as a bias vector: the same bits as the table read whole (from a graph value,
+// which the op cannot inspect), with ReLU, on 1 and 2 threads.
+TEST_P(OpsPerIsa, LinearS8BiasTableWithSharedColumnsGivesTheSameBits) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(5);
+  const int in = 72, out = 200, per_row_cols = 130;
+  const QuantizedWeights w = quantize_weights(uniform(static_cast<size_t>(out) * in, rng, -0.3f, 0.3f), out, in);
+  ThreadPool one(1);
+  for (ThreadPool* pool : {&one, &pool_}) {
+    for (int rows : {1, 7, 131}) {
+      std::vector<float> table = uniform(static_cast<size_t>(rows) * out, rng, -1.0f, 1.0f);
+      for (int r = 1; r < rows; ++r) {
+        std::copy_n(table.begin() + per_row_cols, out - per_row_cols, table.begin() + static_cast<ptrdiff_t>(r) * out + per_row_cols);
+      }
+      const std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -2.0f, 2.0f);
+      Graph g;
+      const ValueId xv = g.add_input("x", {rows, in}), tv = g.add_input("table", {rows, out});
+      const ValueId y_constant = g.add_value("y_constant", {rows, out}), y_value = g.add_value("y_value", {rows, out});
+      const MatrixRef xr = MatrixRef::of(xv, in);
+      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, row_codes(g, "xc", rows, in),
+                                            LinearS8Op::InputCodes::kQuantizedHere, w.q.data(), w.scale.data(),
+                                            MatrixRef::of_constant(table.data(), out), MatrixRef{}, Epilogue::kRelu, y_constant));
+      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, row_codes(g, "xv", rows, in),
+                                            LinearS8Op::InputCodes::kQuantizedHere, w.q.data(), w.scale.data(),
+                                            MatrixRef::of(tv, out), MatrixRef{}, Epilogue::kRelu, y_value));
+      g.mark_output(y_constant);
+      g.mark_output(y_value);
+      g.plan(pool->threads(), false);
+      std::copy(x.begin(), x.end(), g.data(xv));
+      std::copy(table.begin(), table.end(), g.data(tv));
+      g.run(*pool, k);
+      ASSERT_EQ(0, std::memcmp(g.data(y_constant), g.data(y_value), table.size() * sizeof(float)))
+          << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows;
+    }
+  }
+}
+
 // softmax(Q K^T / sqrt(d)) V per head, in double.
 std::vector<double> attention_naive(const std::vector<float>& q, const std::vector<float>& k, const std::vector<float>& v,
                                     int nq, int nk, int dim, int heads) {

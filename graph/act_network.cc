@@ -172,13 +172,14 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
                            MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
   const ValueId y = graph_.add_value(out_name, {rows, out});
   if (const ActbTensor* q8 = int8_weight(weight_name, {out, in})) {
-    const ValueId qx = graph_.add_value(out_name + ".x_s8", {rows, in}, DataType::kS8);
-    const ValueId row_scale = graph_.add_value(out_name + ".x_scale", {rows});
-    const ValueId row_zero_point = graph_.add_value(out_name + ".x_zero_point", {rows}, DataType::kS32);
-    add_layer(std::make_unique<LinearS8Op>(kernels_.gemm_s8, rows, in, out, x, reinterpret_cast<const int8_t*>(q8->data),
-                                           q8->quant.scales.data(), bias, residual, epilogue, y, qx, row_scale,
-                                           row_zero_point),
-              out_name, y, weight_name, true);
+    RowCodes x_codes = producer_row_codes(x, rows, in);
+    const auto from = x_codes.present() ? LinearS8Op::InputCodes::kFromProducer : LinearS8Op::InputCodes::kQuantizedHere;
+    if (!x_codes.present()) x_codes = add_row_codes(out_name + ".x", rows, in);
+    auto op = std::make_unique<LinearS8Op>(kernels_.gemm_s8, rows, in, out, x, x_codes, from,
+                                           reinterpret_cast<const int8_t*>(q8->data), q8->quant.scales.data(), bias,
+                                           residual, epilogue, y);
+    row_codes_writers_[y] = op.get();
+    add_layer(std::move(op), out_name, y, weight_name, true);
     return y;
   }
   auto op = std::make_unique<LinearOp>(kernels_.gemm_f32, rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
@@ -190,8 +191,27 @@ ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, 
   const int D = config_.dim_model;
   const ValueId y = graph_.add_value(out_name, {rows, D});
   auto op = std::make_unique<LayerNormOp>(rows, D, weight(weight_prefix + ".weight", {D}), weight(weight_prefix + ".bias", {D}), x, y);
+  row_codes_writers_[y] = op.get();
   add(std::move(op), out_name);
   return y;
+}
+
+RowCodes ActNetwork::add_row_codes(const std::string& name, int rows, int cols) {
+  return {graph_.add_value(name + "_s8", {rows, cols}, DataType::kS8), graph_.add_value(name + "_scale", {rows}),
+          graph_.add_value(name + "_zero_point", {rows}, DataType::kS32), cols};
+}
+
+RowCodes ActNetwork::producer_row_codes(const MatrixRef& x, int rows, int cols) {
+  if (x.value == kNoValue || x.col_offset != 0 || x.ld != static_cast<size_t>(cols) ||
+      graph_.value(x.value).shape != std::vector<int64_t>{rows, cols}) {
+    return {};
+  }
+  if (auto it = row_codes_.find(x.value); it != row_codes_.end()) return it->second;
+  const auto writer = row_codes_writers_.find(x.value);
+  if (writer == row_codes_writers_.end()) return {};
+  const RowCodes codes = add_row_codes(graph_.value(x.value).name, rows, cols);
+  writer->second->write_row_codes(codes);
+  return row_codes_[x.value] = codes;
 }
 
 ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v) {

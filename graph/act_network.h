@@ -123,6 +123,11 @@ class ActNetwork {
   ValueId linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                  MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone);
   ValueId layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix);
+  /// Values for the row codes of a [rows, cols] matrix, named `name`_s8, _scale, _zero_point.
+  RowCodes add_row_codes(const std::string& name, int rows, int cols);
+  /// The row codes of x written by the op that produces it (asked of it on first use), when x is a
+  /// whole [rows, cols] value of such an op; else none.
+  RowCodes producer_row_codes(const MatrixRef& x, int rows, int cols);
   ValueId attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v);
 
   ModelConfig config_;
@@ -130,6 +135,8 @@ class ActNetwork {
   const kernels::KernelConfig& kernels_;
   QuantConfig quant_;  // empty for an FP32 network
   std::map<ValueId, Tensor> converted_;  // float <-> int8 conversions already in the graph
+  std::map<ValueId, RowCodesWriter*> row_codes_writers_;  // ops that can write their output's row codes
+  std::map<ValueId, RowCodes> row_codes_;                 // row codes already asked for, by value
   std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
   Graph graph_;
   std::vector<ValueId> camera_inputs_;

@@ -24,9 +24,18 @@ struct GemmTiling {
   }
 };
 
-inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads) {
+/// f32 output rows a one-thread task of `whole_rows` tiling holds: about half of a 1 MB L2.
+inline constexpr int kRowStripBytes = 512 * 1024;
+
+/// With `whole_rows` (the caller quantizes each task's rows right after it, while they are still in
+/// cache), one thread runs strips of whole rows too, of at most kRowStripBytes of output each.
+inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool whole_rows = false) {
   const auto tiles = [](int total, int tile) { return (total + tile - 1) / tile; };
-  if (threads <= 1) return {m, n, m, n, 1, 1};
+  if (threads <= 1) {
+    if (!whole_rows) return {m, n, m, n, 1, 1};
+    const int tm = std::min(m, std::max(mr, kRowStripBytes / (4 * n) / mr * mr));
+    return {m, n, tm, n, tiles(m, tm), 1};
+  }
   const int want = 5 * threads;
   if (m >= want * mr) {
     const int tm = (m / want + mr - 1) / mr * mr;

@@ -59,6 +59,13 @@ std::vector<float> Graph::read_f32(ValueId id) {
   return out;
 }
 
+void RowCodes::write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const {
+  const size_t row = static_cast<size_t>(r0);
+  kernels::quantize_rows_dynamic_f32_s8(ctx.kernels().quant, rows, cols, x, ldx,
+                                        ctx.data_s8(codes) + row * static_cast<size_t>(cols), static_cast<size_t>(cols),
+                                        ctx.data(scale) + row, ctx.data_s32(zero_point) + row);
+}
+
 double Graph::total_macs() const {
   double total = 0;
   for (const auto& op : ops_) total += op->macs();
@@ -67,10 +74,16 @@ double Graph::total_macs() const {
 
 void Graph::plan(int threads, bool keep_all_values) {
   // Lifetimes.
-  for (auto& v : values_) v.first_use = v.last_use = -1;
+  for (auto& v : values_) {
+    v.first_use = v.last_use = -1;
+    v.read = v.pinned || keep_all_values;
+  }
   for (size_t i = 0; i < ops_.size(); ++i) {
     const int idx = static_cast<int>(i);
-    for (ValueId in : ops_[i]->inputs) values_[static_cast<size_t>(in)].last_use = idx;
+    for (ValueId in : ops_[i]->inputs) {
+      values_[static_cast<size_t>(in)].last_use = idx;
+      values_[static_cast<size_t>(in)].read = true;
+    }
     for (ValueId out : ops_[i]->outputs) {
       Value& v = values_[static_cast<size_t>(out)];
       if (v.first_use < 0) v.first_use = idx;

@@ -38,6 +38,9 @@ struct Value {
   int first_use = -1;  ///< op index that writes it (-1: a graph input)
   int last_use = -1;   ///< last op index that reads it
   bool pinned = false; ///< inputs and outputs: alive for the whole run
+  /// False when no op reads it and it is neither pinned nor kept (plan()): its producer may leave it
+  /// unwritten (an int8 linear whose consumers read only its row codes).
+  bool read = true;
 };
 
 /// What an op sees when it runs: the arena, the pool, per-thread scratch and the kernels to call (the
@@ -51,6 +54,7 @@ class RunContext {
   float* data(ValueId id) const { return arena_ + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) const { return reinterpret_cast<int8_t*>(data(id)); }
   int32_t* data_s32(ValueId id) const { return reinterpret_cast<int32_t*>(data(id)); }
+  bool read(ValueId id) const { return values_[static_cast<size_t>(id)].read; }
   ThreadPool& pool() const { return pool_; }
   const kernels::KernelConfig& kernels() const { return kernels_; }
   float* scratch(int thread) const { return scratch_ + static_cast<size_t>(thread) * scratch_per_thread_; }
@@ -77,6 +81,29 @@ struct MatrixRef {
   }
   static MatrixRef of(ValueId v, size_t ld, size_t col_offset = 0) { return {v, nullptr, col_offset, ld}; }
   static MatrixRef of_constant(const float* p, size_t ld) { return {kNoValue, p, 0, ld}; }
+};
+
+/// The per-token int8 codes of a float matrix [rows, cols], exactly as quantize_rows_dynamic_f32_s8
+/// makes them from its rows, written by the op that produces the matrix while its rows are in cache
+/// (LayerNorm, an int8 linear), so that the int8 linears reading it skip a quantization pass.
+struct RowCodes {
+  ValueId codes = kNoValue;       ///< int8 [rows, cols]
+  ValueId scale = kNoValue;       ///< float [rows]
+  ValueId zero_point = kNoValue;  ///< int32 [rows]
+  int cols = 0;
+  bool present() const { return codes != kNoValue; }
+  std::vector<ValueId> values() const { return {codes, scale, zero_point}; }
+  /// Quantizes `rows` rows of x (leading dimension ldx) into their rows r0, r0 + 1, ...
+  void write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const;
+};
+
+/// An op that can write RowCodes of its float output beside it (the graph builder asks for them
+/// when an int8 linear reads that output).
+class RowCodesWriter {
+ public:
+  virtual ~RowCodesWriter() = default;
+  /// From now on every run also writes `codes` (adds them to the op's outputs).
+  virtual void write_row_codes(const RowCodes& codes) = 0;
 };
 
 /// The part of the network an op belongs to, for per-stage timing.

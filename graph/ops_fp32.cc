@@ -176,15 +176,26 @@ LayerNormOp::LayerNormOp(int rows, int cols, const float* gamma, const float* be
   outputs = {output};
 }
 
+std::string LayerNormOp::kernel(const kernels::KernelConfig& k) const {
+  return codes_.present() ? std::string(k.elementwise.layernorm_name) + " + " + k.quant.quantize_name : k.elementwise.layernorm_name;
+}
+
+void LayerNormOp::write_row_codes(const RowCodes& codes) {
+  check(!codes_.present() && codes.cols == cols_, ErrorCode::kInternal, "LayerNormOp: row codes asked for twice or of another width");
+  codes_ = codes;
+  for (ValueId v : codes.values()) outputs.push_back(v);
+}
+
 void LayerNormOp::run(const RunContext& ctx) const {
   const float* x = ctx.data(inputs[0]);
   float* y = ctx.data(outputs[0]);
-  constexpr int kRows = 32;
+  constexpr int kRows = 32;  // with codes, quantized while the task's 64 KB of rows are in L2
   const size_t ld = static_cast<size_t>(cols_);
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kRows;
     const int rows = std::min(kRows, rows_ - r0);
     ctx.kernels().elementwise.layernorm_rows(rows, cols_, x + r0 * ld, ld, gamma_, beta_, kLayerNormEps, y + r0 * ld, ld);
+    if (codes_.present()) codes_.write(ctx, y + r0 * ld, ld, r0, rows);
   });
 }
 

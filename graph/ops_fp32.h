@@ -118,12 +118,14 @@ class GluOp : public Op {
   int rows_, cols_in_;
 };
 
-class LayerNormOp : public Op {
+class LayerNormOp : public Op, public RowCodesWriter {
  public:
   LayerNormOp(int rows, int cols, const float* gamma, const float* beta, ValueId input, ValueId output);
   const char* type() const override { return "layernorm_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.elementwise.layernorm_name; }
+  std::string kernel(const kernels::KernelConfig& k) const override;
   void run(const RunContext& ctx) const override;
+  /// The rows' int8 codes too, each few rows quantized right after they are normalized.
+  void write_row_codes(const RowCodes& codes) override;
   const float* gamma() const { return gamma_; }
   const float* beta() const { return beta_; }
 
@@ -131,6 +133,7 @@ class LayerNormOp : public Op {
   int rows_, cols_;
   const float* gamma_;
   const float* beta_;
+  RowCodes codes_;
 };
 
 /// The operands of multi-head attention, the same for the float and the int8 op (and what an

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 
 #include "graph/gemm_tiling.h"
@@ -215,52 +216,90 @@ void ConvS8Op::run(const RunContext& ctx) const {
 
 // ------------------------------------------------------------------------------------ LinearS8
 
-LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const int8_t* weight,
-                       const float* w_scale, MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output,
-                       ValueId quantized_x, ValueId row_scale, ValueId row_zero_point)
-    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), weight_(weight), w_scale_(w_scale),
-      epilogue_(epilogue), packed_(kernels, out, in, weight, nullptr, 0) {
+LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x,
+                       const RowCodes& x_codes, InputCodes x_codes_from, const int8_t* weight, const float* w_scale,
+                       MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output)
+    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), x_codes_(x_codes),
+      x_codes_from_(x_codes_from), weight_(weight), w_scale_(w_scale), epilogue_(epilogue), mr_(kernels.mr),
+      nr_(kernels.nr), table_cols_(out), packed_(kernels, out, in, weight, nullptr, 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
   check(!(bias_table && has_residual), ErrorCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
-  for (const MatrixRef* r : {&x_, &bias_, &residual_}) {
+  check(x_codes.cols == in, ErrorCode::kInternal, "LinearS8Op: input codes of another width");
+  const bool quantized_here = x_codes_from == InputCodes::kQuantizedHere;
+  if (quantized_here && x_.value != kNoValue) inputs.push_back(x_.value);
+  if (!quantized_here) inputs = x_codes.values();
+  for (const MatrixRef* r : {&bias_, &residual_}) {
     if (r->value != kNoValue) inputs.push_back(r->value);
   }
-  outputs = {output, quantized_x, row_scale, row_zero_point};
+  outputs = {output};
+  if (quantized_here) {
+    for (ValueId v : x_codes.values()) outputs.push_back(v);
+  }
+  // A constant per-row bias table whose last columns are the same in every row (the value third of
+  // the fused qkv, whose share of the positions is nil) reads them as a bias vector from row 0:
+  // fewer bytes streamed per run, the same sums (the table adds to float(acc) * scale + 0, never -0).
+  if (bias_table && bias_.constant != nullptr) {
+    const float* table = bias_.constant + bias_.col_offset;
+    const auto same_in_every_row = [&](int c) {
+      for (int r = 1; r < rows; ++r) {
+        if (std::memcmp(table + static_cast<size_t>(r) * bias_.ld + c, table + c, sizeof(float)) != 0) return false;
+      }
+      return true;
+    };
+    int first_shared = out;
+    while (first_shared > 0 && same_in_every_row(first_shared - 1)) --first_shared;
+    table_cols_ = std::min(out, static_cast<int>(ceil_div(static_cast<size_t>(first_shared), static_cast<size_t>(nr_))) * nr_);
+  }
 }
 
-void LinearS8Op::run(const RunContext& ctx) const {
-  const float* x = x_.resolve(ctx);
-  int8_t* qx = ctx.data_s8(outputs[1]);
-  float* row_scale = ctx.data(outputs[2]);
-  int32_t* row_zero_point = ctx.data_s32(outputs[3]);
-  const size_t in = static_cast<size_t>(in_);
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kQuantizeTileRows), [&](size_t task, int) {
+std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
+  std::string variant = k.gemm_s8.f32out_name;
+  if (x_codes_from_ == InputCodes::kQuantizedHere) variant = std::string(k.quant.quantize_name) + " + " + variant;
+  if (y_codes_.present()) variant += std::string(" + ") + k.quant.quantize_name;
+  return variant;
+}
+
+void LinearS8Op::write_row_codes(const RowCodes& codes) {
+  check(!y_codes_.present() && codes.cols == out_, ErrorCode::kInternal, "LinearS8Op: row codes asked for twice or of another width");
+  y_codes_ = codes;
+  for (ValueId v : codes.values()) outputs.push_back(v);
+}
+
+namespace {
+// `codes` of rows [0, rows) of x, in tasks of kQuantizeTileRows rows.
+void write_codes_in_row_tiles(const RunContext& ctx, const RowCodes& codes, const float* x, size_t ldx, int rows) {
+  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows), kQuantizeTileRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kQuantizeTileRows;
-    const int rows = std::min(kQuantizeTileRows, rows_ - r0);
-    kernels::quantize_rows_dynamic_f32_s8(ctx.kernels().quant, rows, in_, x + static_cast<size_t>(r0) * x_.ld, x_.ld, qx + r0 * in, in,
-                                          row_scale + r0, row_zero_point + r0);
+    codes.write(ctx, x + static_cast<size_t>(r0) * ldx, ldx, r0, std::min(kQuantizeTileRows, rows - r0));
   });
+}
+}  // namespace
+
+void LinearS8Op::run(const RunContext& ctx) const {
+  if (x_codes_from_ == InputCodes::kQuantizedHere) write_codes_in_row_tiles(ctx, x_codes_, x_.resolve(ctx), x_.ld, rows_);
 
   kernels::GemmS8Args args;
   args.m = rows_;
   args.n = out_;
   args.k = in_;
-  args.a = qx;
-  args.lda = in;
+  args.a = ctx.data_s8(x_codes_.codes);
+  args.lda = static_cast<size_t>(in_);
   args.packed_w = packed_.data();
-  args.a_row_zero_point = row_zero_point;
+  args.a_row_zero_point = ctx.data_s32(x_codes_.zero_point);
   kernels::GemmS8OutF32 o;
   o.c = ctx.data(outputs[0]);
   o.ldc = static_cast<size_t>(out_);
   o.w_scale = w_scale_;
-  o.a_row_scale = row_scale;
+  o.a_row_scale = ctx.data(x_codes_.scale);
   o.relu = epilogue_ == Epilogue::kRelu;
   const bool has_bias = bias_.value != kNoValue || bias_.constant != nullptr;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
+  kernels::GemmS8OutF32 shared_bias_columns = o;  // columns [table_cols_, out_) of a bias table
   if (has_bias && bias_.ld != 0) {  // a per-row table rides in the residual slot
     o.residual = bias_.resolve(ctx);
     o.ldr = bias_.ld;
+    shared_bias_columns.bias = o.residual;
   } else {
     if (has_bias) o.bias = bias_.resolve(ctx);
     if (has_residual) {
@@ -269,15 +308,44 @@ void LinearS8Op::run(const RunContext& ctx) const {
     }
   }
   const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
-  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads());
-  ctx.pool().parallel_for(tiling.count(), [&](size_t task, int) {
+  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), y_codes_.present());
+  // Tasks of whole rows quantize their rows while they are still in cache; else a pass of its own.
+  // When nothing reads the float output (its readers take the codes), those rows go to the task's
+  // scratch only, never to memory.
+  const bool codes_per_task = y_codes_.present() && tiling.tiles_n == 1;
+  const bool f32_in_scratch = codes_per_task && !ctx.read(outputs[0]);
+  ctx.pool().parallel_for(tiling.count(), [&](size_t task, int thread) {
     int r0, r1, c0, c1;
     tiling.rect(task, r0, r1, c0, c1);
-    gemm.f32out(args, o, r0, r1, c0, c1);
+    // The task's rows as a GEMM of their own, starting at row r0.
+    const size_t row = static_cast<size_t>(r0);
+    kernels::GemmS8Args a = args;
+    a.m = r1 - r0;
+    a.a += row * a.lda;
+    a.a_row_zero_point += row;
+    kernels::GemmS8OutF32 to = o, shared = shared_bias_columns;
+    to.c = shared.c = f32_in_scratch ? ctx.scratch(thread) : o.c + row * o.ldc;
+    to.a_row_scale += row;
+    shared.a_row_scale = to.a_row_scale;
+    if (to.residual != nullptr) to.residual += row * to.ldr;
+    const int split = std::clamp(table_cols_, c0, c1);
+    if (c0 < split) gemm.f32out(a, to, 0, a.m, c0, split);
+    if (split < c1) gemm.f32out(a, shared, 0, a.m, split, c1);
     if (epilogue_ == Epilogue::kGelu) {
-      for (int r = r0; r < r1; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), o.c + static_cast<size_t>(r) * o.ldc + c0);
+      for (int r = 0; r < a.m; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), to.c + static_cast<size_t>(r) * to.ldc + c0);
     }
+    if (codes_per_task) y_codes_.write(ctx, to.c, to.ldc, r0, a.m);
   });
+  if (y_codes_.present() && !codes_per_task) write_codes_in_row_tiles(ctx, y_codes_, o.c, o.ldc, rows_);
+}
+
+size_t LinearS8Op::scratch_per_thread() const {
+  if (!y_codes_.present()) return 0;
+  // The largest whole-row task of any thread count: one thread's strips or two threads' tiles
+  // (more threads get smaller ones).
+  int tile_rows = 0;
+  for (int threads : {1, 2}) tile_rows = std::max(tile_rows, gemm_tiling(rows_, out_, mr_, nr_, threads, true).tile_m);
+  return static_cast<size_t>(tile_rows) * static_cast<size_t>(out_);
 }
 
 // ---------------------------------------------------------------------------------- AttentionS8

@@ -122,19 +122,23 @@ class ConvS8Op : public Op {
 };
 
 /// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x quantized per row at run time
-/// (dynamic per-token quantization) into int8 values the op owns. The bias is a vector (ld 0) or a
+/// (dynamic per-token quantization) into the int8 codes `x_codes`: by this op, or (kFromProducer)
+/// by the op that wrote x, which then need not be read at all. The bias is a vector (ld 0) or a
 /// per-row table (then there must be no residual: the table takes the residual's place in the
-/// kernel's epilogue).
-class LinearS8Op : public Op {
+/// kernel's epilogue). Asked to (write_row_codes), it also writes its output's codes, each task
+/// quantizing the rows it has just computed when the tiling gives tasks whole rows.
+class LinearS8Op : public Op, public RowCodesWriter {
  public:
-  LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const int8_t* weight,
-             const float* w_scale, MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output,
-             ValueId quantized_x, ValueId row_scale, ValueId row_zero_point);
+  enum class InputCodes { kQuantizedHere, kFromProducer };
+  LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const RowCodes& x_codes,
+             InputCodes x_codes_from, const int8_t* weight, const float* w_scale, MatrixRef bias, MatrixRef residual,
+             Epilogue epilogue, ValueId output);
   const char* type() const override { return "linear_s8_dyn"; }
-  std::string kernel(const kernels::KernelConfig& k) const override {
-    return std::string(k.quant.quantize_name) + " + " + k.gemm_s8.f32out_name;
-  }
+  std::string kernel(const kernels::KernelConfig& k) const override;
   void run(const RunContext& ctx) const override;
+  void write_row_codes(const RowCodes& codes) override;
+  /// With output codes: one task's float rows, when nothing reads them from memory.
+  size_t scratch_per_thread() const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
@@ -143,9 +147,13 @@ class LinearS8Op : public Op {
  private:
   int rows_, in_, out_;
   MatrixRef x_, bias_, residual_;
+  RowCodes x_codes_, y_codes_;
+  InputCodes x_codes_from_;
   const int8_t* weight_;
   const float* w_scale_;
   Epilogue epilogue_;
+  int mr_, nr_;  // the micro-tile of the gemm_s8 variant the weights are packed for (its tiling)
+  int table_cols_;  // output columns that read a per-row bias table; the rest (if any) share row 0's
   PackedWeights packed_;
 };
 

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <random>
 #include <string>
@@ -167,6 +168,11 @@ TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
   }
 }
 
+RowCodes row_codes(Graph& g, const std::string& name, int rows, int cols) {
+  return {g.add_value(name + "_s8", {rows, cols}, DataType::kS8), g.add_value(name + "_scale", {rows}),
+          g.add_value(name + "_zero_point", {rows}, DataType::kS32), cols};
+}
+
 // LinearS8Op (activations quantized per row at run time) against LinearOp with the float weights:
 // bias, a residual, ReLU; rows around the tile sizes.
 TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
@@ -187,13 +193,12 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
       const ValueId rv = g.add_input("residual", {rows, out});
       const ValueId y_float = g.add_value("y_float", {rows, out});
       const ValueId y_q = g.add_value("y_q", {rows, out});
-      const ValueId x_s8 = g.add_value("x_s8", {rows, in}, DataType::kS8);
-      const ValueId row_scale = g.add_value("row_scale", {rows});
-      const ValueId row_zp = g.add_value("row_zero_point", {rows}, DataType::kS32);
+      const RowCodes x_codes = row_codes(g, "x", rows, in);
+      const ValueId row_scale = x_codes.scale;
       const MatrixRef xr = MatrixRef::of(xv, in), br = MatrixRef::of_constant(bias.data(), 0), rr = MatrixRef::of(rv, out);
       g.add_op(std::make_unique<LinearOp>(k.gemm_f32, rows, in, out, xr, w.data(), br, rr, epilogue, y_float));
-      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, qw.q.data(), qw.scale.data(), br, rr, epilogue,
-                                            y_q, x_s8, row_scale, row_zp));
+      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, x_codes, LinearS8Op::InputCodes::kQuantizedHere,
+                                            qw.q.data(), qw.scale.data(), br, rr, epilogue, y_q));
       g.mark_output(y_float);
       g.mark_output(y_q);
       g.plan(pool_.threads(), true);
@@ -211,6 +216,92 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
               << kernels::isa_name(GetParam()) << " rows " << rows << " row " << r << " column " << o;
         }
       }
+    }
+  }
+}
+
+// The transformer's chain LayerNorm -> linear -> FFN hidden (ReLU or GELU) -> linear + residual, with
+// each int8 linear's input codes written by the op producing it (fused), against the same chain with
+// every linear quantizing its own input: the same bits, for ragged row counts on 1 and 2 threads
+// (whole-row tasks quantizing their rows, and column tiles followed by a pass of their own).
+TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(21);
+  const int dim = 64, hidden = 200;
+  const std::vector<float> gamma = uniform(dim, rng, 0.5f, 1.5f), beta = uniform(dim, rng, -0.5f, 0.5f);
+  const QuantizedWeights w1 = quantize_weights(uniform(static_cast<size_t>(hidden) * dim, rng, -0.3f, 0.3f), hidden, dim);
+  const QuantizedWeights w2 = quantize_weights(uniform(static_cast<size_t>(dim) * hidden, rng, -0.3f, 0.3f), dim, hidden);
+  const std::vector<float> b1 = uniform(hidden, rng, -1.0f, 1.0f), b2 = uniform(dim, rng, -1.0f, 1.0f);
+  ThreadPool one(1);
+  for (ThreadPool* pool : {&one, &pool_}) {
+    for (int rows : {1, 5, 13, 67, 131}) {
+      for (Epilogue act : {Epilogue::kRelu, Epilogue::kGelu}) {
+        std::vector<float> x = uniform(static_cast<size_t>(rows) * dim, rng, -3.0f, 3.0f);
+        std::vector<float> outputs[2];
+        for (const bool fused : {false, true}) {
+          Graph g;
+          const ValueId xv = g.add_input("x", {rows, dim});
+          const ValueId normed = g.add_value("normed", {rows, dim});
+          const ValueId h = g.add_value("h", {rows, hidden});
+          const ValueId y = g.add_value("y", {rows, dim});
+          auto& norm = g.add_op(std::make_unique<LayerNormOp>(rows, dim, gamma.data(), beta.data(), xv, normed));
+          const auto source = fused ? LinearS8Op::InputCodes::kFromProducer : LinearS8Op::InputCodes::kQuantizedHere;
+          const RowCodes normed_codes = row_codes(g, "normed", rows, dim), h_codes = row_codes(g, "h", rows, hidden);
+          if (fused) norm.write_row_codes(normed_codes);
+          auto& linear1 = g.add_op(std::make_unique<LinearS8Op>(
+              k.gemm_s8, rows, dim, hidden, MatrixRef::of(normed, dim), normed_codes, source, w1.q.data(), w1.scale.data(),
+              MatrixRef::of_constant(b1.data(), 0), MatrixRef{}, act, h));
+          if (fused) linear1.write_row_codes(h_codes);
+          g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, hidden, dim, MatrixRef::of(h, hidden), h_codes, source,
+                                                w2.q.data(), w2.scale.data(), MatrixRef::of_constant(b2.data(), 0),
+                                                MatrixRef::of(normed, dim), Epilogue::kNone, y));
+          g.mark_output(y);
+          g.plan(pool->threads(), false);
+          std::copy(x.begin(), x.end(), g.data(xv));
+          g.run(*pool, k);
+          outputs[fused].assign(g.data(y), g.data(y) + static_cast<size_t>(rows) * dim);
+        }
+        ASSERT_EQ(0, std::memcmp(outputs[0].data(), outputs[1].data(), outputs[0].size() * sizeof(float)))
+            << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows;
+      }
+    }
+  }
+}
+
+// A constant per-row bias table whose last columns are the same in every row (the fused qkv's value
+// third) is read there as a bias vector: the same bits as the table read whole (from a graph value,
+// which the op cannot inspect), with ReLU, on 1 and 2 threads.
+TEST_P(OpsPerIsa, LinearS8BiasTableWithSharedColumnsGivesTheSameBits) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(5);
+  const int in = 72, out = 200, per_row_cols = 130;
+  const QuantizedWeights w = quantize_weights(uniform(static_cast<size_t>(out) * in, rng, -0.3f, 0.3f), out, in);
+  ThreadPool one(1);
+  for (ThreadPool* pool : {&one, &pool_}) {
+    for (int rows : {1, 7, 131}) {
+      std::vector<float> table = uniform(static_cast<size_t>(rows) * out, rng, -1.0f, 1.0f);
+      for (int r = 1; r < rows; ++r) {
+        std::copy_n(table.begin() + per_row_cols, out - per_row_cols, table.begin() + static_cast<ptrdiff_t>(r) * out + per_row_cols);
+      }
+      const std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -2.0f, 2.0f);
+      Graph g;
+      const ValueId xv = g.add_input("x", {rows, in}), tv = g.add_input("table", {rows, out});
+      const ValueId y_constant = g.add_value("y_constant", {rows, out}), y_value = g.add_value("y_value", {rows, out});
+      const MatrixRef xr = MatrixRef::of(xv, in);
+      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, row_codes(g, "xc", rows, in),
+                                            LinearS8Op::InputCodes::kQuantizedHere, w.q.data(), w.scale.data(),
+                                            MatrixRef::of_constant(table.data(), out), MatrixRef{}, Epilogue::kRelu, y_constant));
+      g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, row_codes(g, "xv", rows, in),
+                                            LinearS8Op::InputCodes::kQuantizedHere, w.q.data(), w.scale.data(),
+                                            MatrixRef::of(tv, out), MatrixRef{}, Epilogue::kRelu, y_value));
+      g.mark_output(y_constant);
+      g.mark_output(y_value);
+      g.plan(pool->threads(), false);
+      std::copy(x.begin(), x.end(), g.data(xv));
+      std::copy(table.begin(), table.end(), g.data(tv));
+      g.run(*pool, k);
+      ASSERT_EQ(0, std::memcmp(g.data(y_constant), g.data(y_value), table.size() * sizeof(float)))
+          << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows;
     }
   }
 }

@@ -7,6 +7,8 @@
 
 #if defined(__aarch64__)
 
+#include <arm_neon.h>
+
 #include <xsimd/xsimd.hpp>
 
 namespace act::kernels {
@@ -15,6 +17,14 @@ namespace act::kernels {
 
 namespace {
 using Arch = xsimd::neon64;
+
+// The low byte of each int32 lane (already in [-128, 127]): two narrowing moves, one 4-byte store.
+template <>
+void store_low_bytes<Arch>(int8_t* p, const xsimd::batch<int32_t, Arch>& v) {
+  const int16x4_t halves = vmovn_s32(v);
+  const int8x8_t bytes = vmovn_s16(vcombine_s16(halves, halves));
+  vst1_lane_s32(reinterpret_cast<int32_t*>(p), vreinterpret_s32_s8(bytes), 0);
+}
 }  // namespace
 
 const ElementwiseF32Kernels* elementwise_f32_table_neon() {

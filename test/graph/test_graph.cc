@@ -6,6 +6,7 @@
 #include <set>
 #include <thread>
 
+#include "graph/gemm_tiling.h"
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
 #include "graph/thread_pool.h"
@@ -78,6 +79,40 @@ TEST(ThreadPool, RecordsEachThreadsSpanOfASection) {
 }
 
 // A chain a -> b -> c -> d of LayerNorms: the planner may reuse a's memory for c, never for b.
+// Every output element in exactly one task; row bands start on multiples of MR and are at most
+// tile_m rows; with enough rows, at least 5 bands per thread's worth of rows.
+TEST(GemmTiling, CoversEachOutputOnceInBandsOfWholeGroups) {
+  for (int mr : {1, 4, 6}) {
+    for (int m : {1, 5, 6, 7, 59, 100, 302, 1200}) {
+      for (int n : {16, 64, 512, 1536, 3200}) {
+        for (int threads : {1, 2, 3, 4}) {
+          for (bool whole_rows : {false, true}) {
+            const GemmTiling t = gemm_tiling(m, n, mr, 16, threads, whole_rows);
+            std::vector<int> hits(static_cast<size_t>(m) * static_cast<size_t>(n), 0);
+            for (size_t task = 0; task < t.count(); ++task) {
+              int m0, m1, n0, n1;
+              t.rect(task, m0, m1, n0, n1);
+              ASSERT_EQ(m0 % mr, 0);
+              ASSERT_TRUE(0 <= m0 && m0 < m1 && m1 <= m && 0 <= n0 && n0 < n1 && n1 <= n);
+              ASSERT_LE(m1 - m0, t.tile_m);
+              for (int r = m0; r < m1; ++r) {
+                for (int c = n0; c < n1; ++c) hits[static_cast<size_t>(r) * static_cast<size_t>(n) + static_cast<size_t>(c)]++;
+              }
+            }
+            for (int h : hits) {
+              ASSERT_EQ(h, 1) << "m " << m << " n " << n << " mr " << mr << " threads " << threads;
+            }
+            if (threads > 1 && m >= 5 * threads * mr) {
+              EXPECT_GE(t.tiles_m * t.tile_m, m);
+              EXPECT_LE(t.tile_m, (m / (5 * threads) + mr - 1) / mr * mr);
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 TEST(GraphPlanner, ReusesDeadBuffersAndKeepsLiveOnesApart) {
   Graph g;
   const int rows = 4, cols = 64;

@@ -56,6 +56,8 @@ struct GemmF32Kernels {
 size_t gemm_f32_packed_floats(int nr, int n, int k);
 /// Packs B [n x k] (row stride ldb): panel j holds columns [j nr, j nr + nr) as k rows of nr floats.
 void gemm_f32_pack(int nr, int n, int k, const float* b, size_t ldb, float* packed);
+/// B [n x k] (row stride k) back from its panels, exactly: what a packed layer's weights were.
+void gemm_f32_unpack(int nr, int n, int k, const float* packed, float* b);
 /// The same panels from B^T stored [k x n] (row stride ldb), e.g. attention's values for P V.
 void gemm_f32_pack_transposed(int nr, int n, int k, const float* bt, size_t ldb, float* packed);
 

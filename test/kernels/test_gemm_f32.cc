@@ -179,6 +179,18 @@ TEST(GemmF32Packed, PackingFromTheTransposeGivesTheSamePanels) {
   EXPECT_EQ(from_b, from_bt);
 }
 
+TEST(GemmF32Packed, UnpackingGivesBackTheMatrix) {
+  const int n = 37, k = 5;
+  std::vector<float> b(static_cast<size_t>(n) * k);
+  for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<float>(i) * 0.25f - 3.0f;
+  for (int nr : {12, 16, 32}) {
+    std::vector<float> packed(gemm_f32_packed_floats(nr, n, k), -1.0f), back(b.size(), -2.0f);
+    gemm_f32_pack(nr, n, k, b.data(), static_cast<size_t>(k), packed.data());
+    gemm_f32_unpack(nr, n, k, packed.data(), back.data());
+    EXPECT_EQ(back, b) << "nr " << nr;
+  }
+}
+
 TEST(GemmF32Packed, PackingPadsPanelsWithZeros) {
   const int n = 5, k = 3, nr = 4;
   std::vector<float> b(static_cast<size_t>(n) * k);

@@ -210,9 +210,9 @@ AttentionOp::AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, in
 }
 
 namespace {
-// Queries per task: each task packs its head's keys and values, so one tile per head at ACT's 302
-// (or 242) tokens; 8 heads still keep 2-4 threads busy.
-constexpr int kAttentionTileRows = 320;
+// Queries per pass: a multiple of every gemm_f32 MR (1, 6, 8) whose scores ([rows x nk], 29 KB at
+// ACT's 302 tokens) stay in L1 from QK^T through the softmax to P V.
+constexpr int kAttentionTileRows = 24;
 }
 
 size_t AttentionOp::scratch_per_thread() const {
@@ -231,27 +231,29 @@ void AttentionOp::run(const RunContext& ctx) const {
   float* out = ctx.data(outputs[0]);
   const int hd = dim_ / heads_;
   const float scale = 1.0f / std::sqrt(static_cast<float>(hd));
-  const size_t row_tiles = ceil_div(static_cast<size_t>(nq_), kAttentionTileRows);
-  ctx.pool().parallel_for(row_tiles * static_cast<size_t>(heads_), [&](size_t task, int thread) {
-    const int h = static_cast<int>(task % static_cast<size_t>(heads_));
-    const int r0 = static_cast<int>(task / static_cast<size_t>(heads_)) * kAttentionTileRows;
-    const int rows = std::min(kAttentionTileRows, nq_ - r0);
-    float* scores = ctx.scratch(thread);                                       // [rows, nk]
-    float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * nk_;  // [rows, hd]
+  // One task per head: its keys and values packed once, then one pass per tile of queries.
+  ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t task, int thread) {
+    const int h = static_cast<int>(task);
+    float* scores = ctx.scratch(thread);                                       // [tile rows, nk]
+    float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * nk_;  // [tile rows, hd]
     float* packed_k = q_scaled + static_cast<size_t>(kAttentionTileRows) * hd;
     float* packed_v = packed_k + kernels::gemm_f32_packed_floats(nr_, nk_, hd);
-    // PyTorch scales q before q k^T; do the same so rounding matches.
-    for (int r = 0; r < rows; ++r) {
-      const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
-      for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
-    }
     kernels::gemm_f32_pack(nr_, nk_, hd, k + static_cast<size_t>(h) * hd, k_.ld, packed_k);
     kernels::gemm_f32_pack_transposed(nr_, hd, nk_, v + static_cast<size_t>(h) * hd, v_.ld, packed_v);
-    gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
-                 .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
-    ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
-    gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
-                 .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_), .epilogue = {}});
+    for (int r0 = 0; r0 < nq_; r0 += kAttentionTileRows) {
+      const int rows = std::min(kAttentionTileRows, nq_ - r0);
+      // PyTorch scales q before q k^T; do the same so rounding matches.
+      for (int r = 0; r < rows; ++r) {
+        const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
+        for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
+      }
+      gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
+                   .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
+      ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
+      gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
+                   .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_),
+                   .epilogue = {}});
+    }
   });
 }
 

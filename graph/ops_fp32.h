@@ -146,7 +146,8 @@ struct AttentionParams {
 };
 
 /// Multi-head scaled dot-product attention, no mask: out[:, head] = softmax(q_h k_h^T / sqrt(d)) v_h.
-/// Both products on the packed gemm_f32 of `gemm` (each task packs its head's keys and values).
+/// One task per head packs its keys and values once, then runs QK^T, softmax and P V on the packed
+/// gemm_f32 of `gemm` one tile of queries at a time, the tile's scores never leaving L1.
 class AttentionOp : public Op {
  public:
   AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,

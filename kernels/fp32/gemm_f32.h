@@ -37,6 +37,11 @@ struct GemmF32PackedArgs {
   int m = 0, n = 0, k = 0;
   const float* a = nullptr;
   size_t lda = 0;
+  /// Instead of a and lda, A's rows in segments of segment_k floats (a convolution's kernel rows,
+  /// read in place): row i's segment s at a_segments[i * (k / segment_k) + s]. segment_k >= 8 and
+  /// divides k.
+  const float* const* a_segments = nullptr;
+  int segment_k = 0;
   const float* packed_b = nullptr;
   int col0 = 0;
   float* c = nullptr;

@@ -1,5 +1,6 @@
 // The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
-// stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM)
+// stride / padding / dilation the ResNet backbones use: conv_f32 (tiles of kernel rows read in place
+// or gathered by im2col, + the packed GEMM)
 // with every variant this CPU runs, the max-pool, and the element-wise reference
 // (test_elementwise_f32.cc holds the SIMD element-wise variants to it; test_gemm_f32.cc the GEMM).
 #include <gtest/gtest.h>
@@ -60,7 +61,7 @@ TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
       {1, 1, 3, 2, 3, 1, 1, 1},     // a single pixel: everything but the centre tap is padding
       {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
       {6, 5, 7, 9, 1, 1, 0, 1},     // 1x1/1: reads the input in place
-      {9, 8, 4, 70, 3, 1, 1, 1},    // over 64 output channels: im2col
+      {9, 8, 2, 70, 3, 1, 1, 1},    // kernel rows of 6 floats: im2col
   };
   for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);

@@ -115,8 +115,8 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
     const Tensor xf = as_f32(x);
     const ValueId res = residual ? as_f32(*residual).id : kNoValue;
     const ValueId y = graph_.add_value(name, y_shape);
-    add_layer(std::make_unique<Conv2dOp>(kernels_.gemm_f32, s, weight(bn::conv_weight(c.name), w_shape), bias, relu, xf.id, res, y),
-              name, y, bn::conv_weight(c.name), false);
+    add_layer(std::make_unique<Conv2dOp>(packed_weight(bn::conv_weight(c.name), w_shape), s, bias, relu, xf.id, res, y), name, y,
+              bn::conv_weight(c.name), false);
     calibration_point(CalibrationRole::kConvOutput, y);
     return Tensor{y, false, {}, kNoValue};
   }
@@ -164,6 +164,17 @@ void ActNetwork::add_layer(std::unique_ptr<Op> op, const std::string& name, Valu
   add(std::move(op), name);
 }
 
+std::shared_ptr<const PackedF32Weights> ActNetwork::packed_weight(const std::string& name, const std::vector<int64_t>& shape) {
+  std::shared_ptr<const PackedF32Weights>& packed = packed_weights_[name];
+  if (packed == nullptr) {
+    const int n = static_cast<int>(shape[0]);
+    const int k = static_cast<int>(shape_elements(shape) / static_cast<uint64_t>(n));
+    packed = std::make_shared<const PackedF32Weights>(kernels_.gemm_f32, n, k, weight(name, shape));
+    tensors_.release(name);  // the panels are the only copy from here on
+  }
+  return packed;
+}
+
 void ActNetwork::calibration_point(CalibrationRole role, ValueId value) {
   if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value});
 }
@@ -182,7 +193,7 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
     add_layer(std::move(op), out_name, y, weight_name, true);
     return y;
   }
-  auto op = std::make_unique<LinearOp>(kernels_.gemm_f32, rows, in, out, x, weight(weight_name, {out, in}), bias, residual, epilogue, y);
+  auto op = std::make_unique<LinearOp>(packed_weight(weight_name, {out, in}), rows, in, out, x, bias, residual, epilogue, y);
   add_layer(std::move(op), out_name, y, weight_name, false);
   return y;
 }

@@ -97,6 +97,9 @@ class ActNetwork {
   const float* weight(const std::string& name, const std::vector<int64_t>& shape);
   /// The tensor, checked against the shape, when it is int8 (per-channel scales along axis 0); else null.
   const ActbTensor* int8_weight(const std::string& name, const std::vector<int64_t>& shape);
+  /// The float tensor `name` (of `shape`, [n, ...]) packed as an [n x rest] GEMM operand, once per
+  /// network; its pages in the blob are released then.
+  std::shared_ptr<const PackedF32Weights> packed_weight(const std::string& name, const std::vector<int64_t>& shape);
   /// A per-token bias table: from the blob, or rebuilt from its bias vector (blob_names.h).
   const float* bias_table(const std::string& table, int rows, int width, const std::string& weight_name, int pos_cols);
   Tensor as_f32(const Tensor& t);
@@ -138,6 +141,7 @@ class ActNetwork {
   std::map<ValueId, RowCodesWriter*> row_codes_writers_;  // ops that can write their output's row codes
   std::map<ValueId, RowCodes> row_codes_;                 // row codes already asked for, by value
   std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
+  std::map<std::string, std::shared_ptr<const PackedF32Weights>> packed_weights_;  // by blob tensor name
   Graph graph_;
   std::vector<ValueId> camera_inputs_;
   ValueId state_input_ = kNoValue;

@@ -33,8 +33,14 @@ kernels::GemmF32Activation activation_of(Epilogue e) {
 // ------------------------------------------------------------------------------------- Conv2d
 
 PackedF32Weights::PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n, int k, const float* w)
-    : nr_(kernels.nr), panels_(kernels::gemm_f32_packed_floats(kernels.nr, n, k)) {
+    : nr_(kernels.nr), n_(n), k_(k), panels_(kernels::gemm_f32_packed_floats(kernels.nr, n, k)) {
   kernels::gemm_f32_pack(nr_, n, k, w, static_cast<size_t>(k), panels_.data());
+}
+
+std::vector<float> PackedF32Weights::unpacked() const {
+  std::vector<float> w(static_cast<size_t>(n_) * static_cast<size_t>(k_));
+  kernels::gemm_f32_unpack(nr_, n_, k_, panels_.data(), w.data());
+  return w;
 }
 
 const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernels) const {
@@ -43,10 +49,12 @@ const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernel
   return panels_.data();
 }
 
-Conv2dOp::Conv2dOp(const kernels::GemmF32Kernels& gemm, const kernels::Conv2dShape& shape, const float* weight,
-                   const float* bias, bool relu, ValueId input, ValueId residual, ValueId output)
-    : s_(shape), weight_(weight), bias_(bias), relu_(relu), residual_(residual),
-      tile_pixels_(kernels::conv_f32_tile_pixels(shape)), packed_(gemm, shape.out_c, shape.patch_size(), weight) {
+Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels::Conv2dShape& shape, const float* bias,
+                   bool relu, ValueId input, ValueId residual, ValueId output)
+    : s_(shape), bias_(bias), relu_(relu), residual_(residual), tile_pixels_(kernels::conv_f32_tile_pixels(shape)),
+      packed_(std::move(weight)) {
+  check(packed_->rows() == shape.out_c && packed_->cols() == shape.patch_size(), ErrorCode::kInternal,
+        "conv2d_f32: packed weights do not match the convolution's shape");
   inputs = {input};
   if (residual != kNoValue) inputs.push_back(residual);
   outputs = {output};
@@ -59,7 +67,7 @@ double Conv2dOp::macs() const {
 }
 
 void Conv2dOp::run(const RunContext& ctx) const {
-  const kernels::ConvF32 conv{s_, &ctx.kernels().gemm_f32, packed_.for_kernels(ctx.kernels().gemm_f32)};
+  const kernels::ConvF32 conv{s_, &ctx.kernels().gemm_f32, packed_->for_kernels(ctx.kernels().gemm_f32)};
   const float* x = ctx.data(inputs[0]);
   float* y = ctx.data(outputs[0]);
   kernels::GemmF32Epilogue epilogue;
@@ -104,10 +112,12 @@ void MaxPoolOp::run(const RunContext& ctx) const {
 
 // ------------------------------------------------------------------------------------- Linear
 
-LinearOp::LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int out, MatrixRef x, const float* weight,
-                   MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output)
-    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), weight_(weight), epilogue_(epilogue),
-      packed_(gemm, out, in, weight) {
+LinearOp::LinearOp(std::shared_ptr<const PackedF32Weights> weight, int rows, int in, int out, MatrixRef x, MatrixRef bias,
+                   MatrixRef residual, Epilogue epilogue, ValueId output)
+    : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), epilogue_(epilogue),
+      packed_(std::move(weight)) {
+  check(packed_->rows() == out && packed_->cols() == in, ErrorCode::kInternal,
+        "linear_f32: packed weights do not match the layer's shape");
   for (const MatrixRef* r : {&x_, &bias_, &residual_}) {
     if (r->value != kNoValue) inputs.push_back(r->value);
   }
@@ -116,7 +126,7 @@ LinearOp::LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int ou
 
 void LinearOp::run(const RunContext& ctx) const {
   const kernels::GemmF32Kernels& gemm = ctx.kernels().gemm_f32;
-  const float* packed = packed_.for_kernels(gemm);
+  const float* packed = packed_->for_kernels(gemm);
   const float* x = x_.resolve(ctx);
   const bool has_bias = bias_.value != kNoValue || bias_.constant != nullptr;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
@@ -211,9 +221,9 @@ AttentionOp::AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, in
 }
 
 namespace {
-// Queries per task: each task packs its head's keys and values, so one tile per head at ACT's 302
-// (or 242) tokens; 8 heads still keep 2-4 threads busy.
-constexpr int kAttentionTileRows = 320;
+// Queries per pass: a multiple of every gemm_f32 MR (1, 6, 8) whose scores ([rows x nk], 29 KB at
+// ACT's 302 tokens) stay in L1 from QK^T through the softmax to P V.
+constexpr int kAttentionTileRows = 24;
 }
 
 size_t AttentionOp::scratch_per_thread() const {
@@ -232,27 +242,29 @@ void AttentionOp::run(const RunContext& ctx) const {
   float* out = ctx.data(outputs[0]);
   const int hd = dim_ / heads_;
   const float scale = 1.0f / std::sqrt(static_cast<float>(hd));
-  const size_t row_tiles = ceil_div(static_cast<size_t>(nq_), kAttentionTileRows);
-  ctx.pool().parallel_for(row_tiles * static_cast<size_t>(heads_), [&](size_t task, int thread) {
-    const int h = static_cast<int>(task % static_cast<size_t>(heads_));
-    const int r0 = static_cast<int>(task / static_cast<size_t>(heads_)) * kAttentionTileRows;
-    const int rows = std::min(kAttentionTileRows, nq_ - r0);
-    float* scores = ctx.scratch(thread);                                       // [rows, nk]
-    float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * nk_;  // [rows, hd]
+  // One task per head: its keys and values packed once, then one pass per tile of queries.
+  ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t task, int thread) {
+    const int h = static_cast<int>(task);
+    float* scores = ctx.scratch(thread);                                       // [tile rows, nk]
+    float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * nk_;  // [tile rows, hd]
     float* packed_k = q_scaled + static_cast<size_t>(kAttentionTileRows) * hd;
     float* packed_v = packed_k + kernels::gemm_f32_packed_floats(nr_, nk_, hd);
-    // PyTorch scales q before q k^T; do the same so rounding matches.
-    for (int r = 0; r < rows; ++r) {
-      const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
-      for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
-    }
     kernels::gemm_f32_pack(nr_, nk_, hd, k + static_cast<size_t>(h) * hd, k_.ld, packed_k);
     kernels::gemm_f32_pack_transposed(nr_, hd, nk_, v + static_cast<size_t>(h) * hd, v_.ld, packed_v);
-    gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
-                 .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
-    ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
-    gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
-                 .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_), .epilogue = {}});
+    for (int r0 = 0; r0 < nq_; r0 += kAttentionTileRows) {
+      const int rows = std::min(kAttentionTileRows, nq_ - r0);
+      // PyTorch scales q before q k^T; do the same so rounding matches.
+      for (int r = 0; r < rows; ++r) {
+        const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
+        for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
+      }
+      gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
+                   .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
+      ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
+      gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
+                   .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_),
+                   .epilogue = {}});
+    }
   });
 }
 

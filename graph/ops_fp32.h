@@ -2,6 +2,7 @@
 // the float kernels in kernels/fp32 for each tile.
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "graph/graph.h"
@@ -26,44 +27,48 @@ struct LinearParams {
 };
 
 /// Float weights [n x k] packed once, at graph build time, into the panels of one gemm_f32
-/// variant (its nr); owned by the op that uses them.
+/// variant (its nr); shared by the ops that use them (every camera's backbone), and the network's
+/// only copy: ActNetwork releases the blob's once they are packed.
 class PackedF32Weights {
  public:
   PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n, int k, const float* w);
   /// The panels, for the variant about to run them; an error when its panels are not these.
   const float* for_kernels(const kernels::GemmF32Kernels& kernels) const;
+  /// The weights as given, [n x k], unpacked from the panels (for exporters).
+  std::vector<float> unpacked() const;
+  int rows() const { return n_; }
+  int cols() const { return k_; }
 
  private:
-  int nr_;
+  int nr_, n_, k_;
   std::vector<float> panels_;
 };
 
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).
-/// Weights [out_c, kh, kw, in_c], packed at build time for `gemm`. Tiles of output pixels
+/// Weights [out_c, kh, kw, in_c], packed at build time. Tiles of output pixels
 /// (kernels/fp32/conv_f32.h: im2col of one tile into per-thread scratch, or the input in place).
 class Conv2dOp : public Op {
  public:
-  Conv2dOp(const kernels::GemmF32Kernels& gemm, const kernels::Conv2dShape& shape, const float* weight, const float* bias,
-           bool relu, ValueId input, ValueId residual, ValueId output);
+  Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels::Conv2dShape& shape, const float* bias, bool relu,
+           ValueId input, ValueId residual, ValueId output);
   const char* type() const override { return "conv2d_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
   const kernels::Conv2dShape& shape() const { return s_; }
-  const float* weight() const { return weight_; }  ///< [out_c, kh, kw, in_c]
+  std::vector<float> weight() const { return packed_->unpacked(); }  ///< [out_c, kh, kw, in_c]
   const float* bias() const { return bias_; }
   bool relu() const { return relu_; }
   ValueId residual() const { return residual_; }
 
  private:
   kernels::Conv2dShape s_;
-  const float* weight_;
   const float* bias_;
   bool relu_;
   ValueId residual_;
   int tile_pixels_;
-  PackedF32Weights packed_;
+  std::shared_ptr<const PackedF32Weights> packed_;
 };
 
 /// 2-D max-pool over NHWC, float32 or int8 (max commutes with the monotonic quantization: an int8
@@ -85,25 +90,24 @@ class MaxPoolOp : public Op {
   bool s8_;
 };
 
-/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in], packed at build time for `gemm`;
+/// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in], packed at build time;
 /// bias is a vector (ld 0) or a per-row table; the residual may be a broadcast row.
 class LinearOp : public Op {
  public:
-  LinearOp(const kernels::GemmF32Kernels& gemm, int rows, int in, int out, MatrixRef x, const float* weight, MatrixRef bias,
+  LinearOp(std::shared_ptr<const PackedF32Weights> weight, int rows, int in, int out, MatrixRef x, MatrixRef bias,
            MatrixRef residual, Epilogue epilogue, ValueId output);
   const char* type() const override { return "linear_f32"; }
   std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
   void run(const RunContext& ctx) const override;
   double macs() const override { return static_cast<double>(rows_) * in_ * out_; }
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
-  const float* weight() const { return weight_; }  ///< [out, in]
+  std::vector<float> weight() const { return packed_->unpacked(); }  ///< [out, in]
 
  private:
   int rows_, in_, out_;
   MatrixRef x_, bias_, residual_;
-  const float* weight_;
   Epilogue epilogue_;
-  PackedF32Weights packed_;
+  std::shared_ptr<const PackedF32Weights> packed_;
 };
 
 /// GLU over the last axis: y = a * sigmoid(b), a the first half of each row, b the second.
@@ -145,7 +149,8 @@ struct AttentionParams {
 };
 
 /// Multi-head scaled dot-product attention, no mask: out[:, head] = softmax(q_h k_h^T / sqrt(d)) v_h.
-/// Both products on the packed gemm_f32 of `gemm` (each task packs its head's keys and values).
+/// One task per head packs its keys and values once, then runs QK^T, softmax and P V on the packed
+/// gemm_f32 of `gemm` one tile of queries at a time, the tile's scores never leaving L1.
 class AttentionOp : public Op {
  public:
   AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,

@@ -1,6 +1,9 @@
 // FP32 NHWC convolution on the int8 convolution's tiling: one tile of output pixels per call, its
 // patches gathered (im2col) into a small per-thread buffer, never a whole-image one; a 1x1 stride-1
-// conv reads its input in place. The product is the packed gemm_f32 with its fused epilogue.
+// conv reads its input in place, and so does every other undilated one, kernel row by kernel row
+// (the GEMM's a_segments; rows across the image's edge copied with their padding): the stem's and
+// layer1's patch copies cost a quarter of the product. Either way the same bits. The product is the
+// packed gemm_f32 with its fused epilogue.
 #pragma once
 
 #include <cstddef>

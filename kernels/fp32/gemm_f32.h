@@ -37,6 +37,11 @@ struct GemmF32PackedArgs {
   int m = 0, n = 0, k = 0;
   const float* a = nullptr;
   size_t lda = 0;
+  /// Instead of a and lda, A's rows in segments of segment_k floats (a convolution's kernel rows,
+  /// read in place): row i's segment s at a_segments[i * (k / segment_k) + s]. segment_k >= 8 and
+  /// divides k.
+  const float* const* a_segments = nullptr;
+  int segment_k = 0;
   const float* packed_b = nullptr;
   int col0 = 0;
   float* c = nullptr;
@@ -56,6 +61,8 @@ struct GemmF32Kernels {
 size_t gemm_f32_packed_floats(int nr, int n, int k);
 /// Packs B [n x k] (row stride ldb): panel j holds columns [j nr, j nr + nr) as k rows of nr floats.
 void gemm_f32_pack(int nr, int n, int k, const float* b, size_t ldb, float* packed);
+/// B [n x k] (row stride k) back from its panels, exactly: what a packed layer's weights were.
+void gemm_f32_unpack(int nr, int n, int k, const float* packed, float* b);
 /// The same panels from B^T stored [k x n] (row stride ldb), e.g. attention's values for P V.
 void gemm_f32_pack_transposed(int nr, int n, int k, const float* bt, size_t ldb, float* packed);
 

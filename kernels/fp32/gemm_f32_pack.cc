@@ -24,6 +24,15 @@ void gemm_f32_pack(int nr, int n, int k, const float* b, size_t ldb, float* pack
   }
 }
 
+void gemm_f32_unpack(int nr, int n, int k, const float* packed, float* b) {
+  const size_t panel = static_cast<size_t>(nr) * static_cast<size_t>(k);
+  for (int c = 0; c < n; ++c) {
+    const float* column = packed + static_cast<size_t>(c / nr) * panel + static_cast<size_t>(c % nr);
+    float* row = b + static_cast<size_t>(c) * static_cast<size_t>(k);
+    for (int p = 0; p < k; ++p) row[p] = column[static_cast<size_t>(p) * nr];
+  }
+}
+
 void gemm_f32_pack_transposed(int nr, int n, int k, const float* bt, size_t ldb, float* packed) {
   for (int c0 = 0; c0 < n; c0 += nr) {
     const int cols = std::min(nr, n - c0);

@@ -10,6 +10,12 @@ namespace {
 
 constexpr int kRefNr = 8;
 
+float a_at(const GemmF32PackedArgs& g, int i, int p) {
+  if (g.a_segments == nullptr) return g.a[static_cast<size_t>(i) * g.lda + static_cast<size_t>(p)];
+  const int segments = g.k / g.segment_k;
+  return g.a_segments[static_cast<size_t>(i) * static_cast<size_t>(segments) + static_cast<size_t>(p / g.segment_k)][p % g.segment_k];
+}
+
 void gemm_packed_ref(const GemmF32PackedArgs& g) {
   const GemmF32Epilogue& e = g.epilogue;
   for (int i = 0; i < g.m; ++i) {
@@ -19,7 +25,7 @@ void gemm_packed_ref(const GemmF32PackedArgs& g) {
       const float* panel = g.packed_b + static_cast<size_t>(col / kRefNr) * static_cast<size_t>(g.k) * kRefNr +
                            static_cast<size_t>(col % kRefNr);
       float sum = 0.0f;
-      for (int p = 0; p < g.k; ++p) sum += g.a[static_cast<size_t>(i) * g.lda + static_cast<size_t>(p)] * panel[static_cast<size_t>(p) * kRefNr];
+      for (int p = 0; p < g.k; ++p) sum += a_at(g, i, p) * panel[static_cast<size_t>(p) * kRefNr];
       if (e.bias) sum += e.bias[static_cast<size_t>(i) * e.bias_ld + static_cast<size_t>(j)];
       if (e.residual) sum += e.residual[static_cast<size_t>(i) * e.residual_ld + static_cast<size_t>(j)];
       if (e.activation == GemmF32Activation::kRelu) sum = sum < 0.0f ? 0.0f : sum;

@@ -126,7 +126,8 @@ TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
       const ValueId in_s8 = g.add_value("x_s8", {s.in_h, s.in_w, s.in_c}, DataType::kS8);
       const ValueId y_float = g.add_value("y_float", {pixels, s.out_c});
       g.add_op(std::make_unique<QuantizeOp>(x.size(), in_q, in, in_s8));
-      g.add_op(std::make_unique<Conv2dOp>(k.gemm_f32, s, w.data(), bias.data(), s8_out, in, kNoValue, y_float));
+      g.add_op(std::make_unique<Conv2dOp>(std::make_shared<PackedF32Weights>(k.gemm_f32, s.out_c, s.patch_size(), w.data()), s,
+                                                 bias.data(), s8_out, in, kNoValue, y_float));
       ConvS8Spec spec;
       spec.shape = s;
       spec.weight = qw.q.data();
@@ -196,7 +197,8 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
       const RowCodes x_codes = row_codes(g, "x", rows, in);
       const ValueId row_scale = x_codes.scale;
       const MatrixRef xr = MatrixRef::of(xv, in), br = MatrixRef::of_constant(bias.data(), 0), rr = MatrixRef::of(rv, out);
-      g.add_op(std::make_unique<LinearOp>(k.gemm_f32, rows, in, out, xr, w.data(), br, rr, epilogue, y_float));
+      g.add_op(std::make_unique<LinearOp>(std::make_shared<PackedF32Weights>(k.gemm_f32, out, in, w.data()), rows, in, out, xr, br, rr,
+                                          epilogue, y_float));
       g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, x_codes, LinearS8Op::InputCodes::kQuantizedHere,
                                             qw.q.data(), qw.scale.data(), br, rr, epilogue, y_q));
       g.mark_output(y_float);

@@ -1,5 +1,6 @@
 // The FP32 kernels against naive definitions, on random shapes including ragged tiles, every
-// stride / padding / dilation the ResNet backbones use: conv_f32 (tiled im2col + the packed GEMM)
+// stride / padding / dilation the ResNet backbones use: conv_f32 (tiles of kernel rows read in place
+// or gathered by im2col, + the packed GEMM)
 // with every variant this CPU runs, the max-pool, and the element-wise reference
 // (test_elementwise_f32.cc holds the SIMD element-wise variants to it; test_gemm_f32.cc the GEMM).
 #include <gtest/gtest.h>
@@ -8,6 +9,7 @@
 #include <cstdlib>
 #include <random>
 
+#include "kernels/common/im2col.h"
 #include "kernels/fp32/conv_f32.h"
 #include "kernels/fp32/elementwise_f32.h"
 #include "kernels/fp32/fp32_kernels.h"
@@ -59,6 +61,7 @@ TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
       {1, 1, 3, 2, 3, 1, 1, 1},     // a single pixel: everything but the centre tap is padding
       {20, 3, 16, 33, 3, 2, 1, 1},  // out_c not a multiple of anything
       {6, 5, 7, 9, 1, 1, 0, 1},     // 1x1/1: reads the input in place
+      {9, 8, 2, 70, 3, 1, 1, 1},    // kernel rows of 6 floats: im2col
   };
   for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
@@ -77,9 +80,15 @@ TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
       for (int p0 = 0; p0 < pixels; p0 += 5) {
         conv_f32(conv, x.data(), y.data(), GemmF32Epilogue{}, p0, std::min(5, pixels - p0), scratch.data());
       }
+      // Kernel rows read in place or patches gathered, the same products: the GEMM of the whole im2col.
+      std::vector<float> patches(static_cast<size_t>(pixels) * s.patch_size()), y_im2col(y.size());
+      im2col_nhwc_f32(s, x.data(), 0, pixels, patches.data());
+      gemm.packed({.m = pixels, .n = c.cout, .k = s.patch_size(), .a = patches.data(), .lda = static_cast<size_t>(s.patch_size()),
+                   .packed_b = packed.data(), .c = y_im2col.data(), .ldc = static_cast<size_t>(c.cout), .epilogue = {}});
       for (size_t i = 0; i < y.size(); ++i) {
         ASSERT_NEAR(y[i], expected[i], 1e-5 * (1 + std::fabs(expected[i])) * s.patch_size())
             << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
+        ASSERT_EQ(y[i], y_im2col[i]) << gemm.name << " case " << c.h << "x" << c.w << " k" << c.kernel << "/" << c.stride << " at " << i;
       }
     }
   }

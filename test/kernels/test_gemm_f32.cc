@@ -30,13 +30,14 @@ struct Case {
   int bias;              // 0 none, 1 vector, 2 per-row table
   int residual;          // 0 none, 1 full, 2 broadcast row
   GemmF32Activation activation;
+  int segment_k = 0;     // > 0: A given as segments (a_segments), each stored apart from its row
 };
 
 std::string describe(const Case& c) {
   return "layer " + std::to_string(c.rows) + "x" + std::to_string(c.cols) + "x" + std::to_string(c.k) + " call rows " +
          std::to_string(c.m0) + "+" + std::to_string(c.m) + " panel " + std::to_string(c.col_panel) + " n " +
          std::to_string(c.n) + " bias " + std::to_string(c.bias) + " residual " + std::to_string(c.residual) + " act " +
-         std::to_string(static_cast<int>(c.activation));
+         std::to_string(static_cast<int>(c.activation)) + " segments of " + std::to_string(c.segment_k);
 }
 
 // Runs one case on `g` and checks every output against the double product; returns the paths recorded.
@@ -58,6 +59,21 @@ uint32_t check_case(const GemmF32Kernels& g, const Case& c, std::mt19937& rng) {
   args.k = c.k;
   args.a = a.data() + static_cast<size_t>(c.m0) * lda;
   args.lda = lda;
+  // Segmented A: each segment copied to its own place, last row's first, the row pointers from m0.
+  const size_t segments = c.segment_k > 0 ? static_cast<size_t>(c.k / c.segment_k) : 0;
+  std::vector<float> segment_store(static_cast<size_t>(c.rows) * static_cast<size_t>(c.k));
+  std::vector<const float*> segment_rows(static_cast<size_t>(c.rows) * segments);
+  for (size_t i = 0; i < segment_rows.size(); ++i) {
+    const size_t r = i / segments, s = i % segments, seg = static_cast<size_t>(c.segment_k);
+    float* dst = segment_store.data() + (segment_rows.size() - 1 - i) * seg;
+    std::copy_n(a.data() + r * lda + s * seg, seg, dst);
+    segment_rows[i] = dst;
+  }
+  if (c.segment_k > 0) {
+    args.a = nullptr;
+    args.a_segments = segment_rows.data() + static_cast<size_t>(c.m0) * segments;
+    args.segment_k = c.segment_k;
+  }
   args.packed_b = packed.data();
   args.col0 = col0;
   args.c = out.data() + static_cast<size_t>(c.m0) * ldc + static_cast<size_t>(col0);
@@ -140,6 +156,11 @@ TEST(GemmF32Packed, EveryVariantMatchesTheDoubleProduct) {
         {3 * mr + 2, 4 * nr + 3, 70, mr + 1, mr + 1, 1, 2 * nr, 2, 1, GemmF32Activation::kRelu},
         {3 * mr + 2, 4 * nr + 3, 70, 1, 2 * mr, 2, 2 * nr + 3, 1, 2, GemmF32Activation::kNone},
         {5, 3 * nr, 33, 2, 3, 1, nr - 1, 0, 1, GemmF32Activation::kGelu},
+        // A in segments (a convolution's kernel rows): one k block of 7 (the stem's 7 x 21), blocks of one
+        // segment longer than 256 (3 x 300), and blocks of 10 segments with a shorter last one.
+        {2 * mr + 1, nr + 3, 147, 0, 2 * mr + 1, 0, nr + 3, 1, 1, GemmF32Activation::kRelu, 21},
+        {mr + 2, 2 * nr, 3 * 300, 1, mr, 0, 2 * nr, 2, 0, GemmF32Activation::kNone, 300},
+        {3 * mr, 2 * nr + 1, 600, 0, 3 * mr, 0, 2 * nr + 1, 0, 2, GemmF32Activation::kGelu, 24},
     };
     uint32_t paths = 0;
     for (const Case& c : cases) paths |= check_case(g, c, rng);
@@ -177,6 +198,18 @@ TEST(GemmF32Packed, PackingFromTheTransposeGivesTheSamePanels) {
   gemm_f32_pack(nr, n, k, b.data(), static_cast<size_t>(k), from_b.data());
   gemm_f32_pack_transposed(nr, n, k, bt.data(), static_cast<size_t>(n + 2), from_bt.data());
   EXPECT_EQ(from_b, from_bt);
+}
+
+TEST(GemmF32Packed, UnpackingGivesBackTheMatrix) {
+  const int n = 37, k = 5;
+  std::vector<float> b(static_cast<size_t>(n) * k);
+  for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<float>(i) * 0.25f - 3.0f;
+  for (int nr : {12, 16, 32}) {
+    std::vector<float> packed(gemm_f32_packed_floats(nr, n, k), -1.0f), back(b.size(), -2.0f);
+    gemm_f32_pack(nr, n, k, b.data(), static_cast<size_t>(k), packed.data());
+    gemm_f32_unpack(nr, n, k, packed.data(), back.data());
+    EXPECT_EQ(back, b) << "nr " << nr;
+  }
 }
 
 TEST(GemmF32Packed, PackingPadsPanelsWithZeros) {

@@ -424,7 +424,7 @@ TEST(ActbSemantics, ConfigAndTensorsMustAgree) {
 TEST(ActbSemantics, TensorsNobodyReadAreNamed) {
   const std::string path = test::scratch_dir() + "/reads.actb";
   small_writer().write(path);
-  const ActbFile f = ActbFile::open(path);
+  ActbFile f = ActbFile::open(path);
   BlobTensors tensors(f);
   for (const ActbTensor& t : f.tensors()) {
     if (t.name != "q") tensors.find(t.name);
@@ -434,6 +434,17 @@ TEST(ActbSemantics, TensorsNobodyReadAreNamed) {
   EXPECT_NO_THROW(tensors.check_all_read());
   EXPECT_TRUE(throws_error([&] { tensors.f32("q", f.get("q").shape); }, ErrorCode::kDataLoss, {path, "\"q\"", "I8"}));
   EXPECT_TRUE(throws_error([&] { tensors.get("q", {99}); }, ErrorCode::kDataLoss, {path, "\"q\"", "[99]"}));
+}
+
+TEST(ActbSemantics, ReleasedTensorsAreNotReadAgain) {
+  const std::string path = test::scratch_dir() + "/retire.actb";
+  small_writer().write(path);
+  ActbFile f = ActbFile::open(path);
+  BlobTensors tensors(f);
+  tensors.release("a");
+  EXPECT_TRUE(throws_error([&] { tensors.f32("a", {2, 3}); }, ErrorCode::kInternal, {path, "\"a\"", "released"}));
+  EXPECT_TRUE(throws_error([&] { tensors.release("q"); }, ErrorCode::kInternal, {path, "\"q\"", "no float tensor"}));
+  EXPECT_EQ(tensors.f32("b", {3})[2], 9.0f);  // the others stay readable
 }
 
 // ---------------------------------------------------------------------------------------------- writer

@@ -32,6 +32,30 @@ TEST(FileMapping, MapsWholeFile) {
   EXPECT_EQ(reinterpret_cast<uintptr_t>(m.data()) % static_cast<uintptr_t>(sysconf(_SC_PAGESIZE)), 0u);
 }
 
+// Releasing [1.5 pages, 4.25 pages) gives back pages 2 and 3 only: the partly covered pages keep
+// their bytes. A mapped file reads them again from the file, a private copy as zeros.
+TEST(FileMapping, ReleasedPagesAreReadAgainFromTheFileOrAsZeros) {
+  const auto page = static_cast<size_t>(sysconf(_SC_PAGESIZE));
+  const std::string path = test::scratch_dir() + "/pages.bin";
+  std::vector<uint8_t> bytes(5 * page);
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<uint8_t>(i % 251 + 1);
+  test::write_file(path, bytes);
+  const size_t begin = page + page / 2, end = 4 * page + page / 4;
+
+  FileMapping shared = FileMapping::open(path);
+  shared.release_pages(shared.data() + begin, end - begin);
+  EXPECT_EQ(std::memcmp(shared.data(), bytes.data(), bytes.size()), 0);
+
+  FileMapping copy = FileMapping::open(path, FileMapping::Mode::kPrivateCopy);
+  copy.release_pages(copy.data() + begin, end - begin);
+  for (size_t i = 0; i < bytes.size(); ++i) {
+    const bool released = i >= 2 * page && i < 4 * page;
+    ASSERT_EQ(copy.data()[i], released ? 0 : bytes[i]) << "byte " << i;
+  }
+  EXPECT_TRUE(throws_error([&] { copy.release_pages(copy.data() + page, 5 * page); }, ErrorCode::kInternal,
+                           {path, "outside the mapping"}));
+}
+
 TEST(FileMapping, EmptyFileMapsToNull) {
   const std::string path = test::scratch_dir() + "/empty.bin";
   test::write_file(path, {});

@@ -105,6 +105,8 @@ class ActbFile {
   const ActbTensor& get(const std::string& name) const;
   const std::vector<ActbTensor>& tensors() const { return tensors_; }
   size_t file_size() const { return mapping_.size(); }
+  /// Gives `tensor`'s memory back (FileMapping::release_pages): read it no more afterwards.
+  void release_pages(const ActbTensor& tensor) { mapping_.release_pages(tensor.data, tensor.nbytes); }
 
  private:
   FileMapping mapping_;

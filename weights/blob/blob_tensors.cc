@@ -70,9 +70,21 @@ const ActbTensor* BlobTensors::find(const std::string& name) {
   return t;
 }
 
+void BlobTensors::release(const std::string& name) {
+  const ActbTensor* t = find(name);
+  if (t == nullptr || t->dtype != DType::kF32) {
+    fail(ErrorCode::kInternal, "'" + blob_.path() + "': no float tensor \"" + name + "\" to release");
+  }
+  released_[static_cast<size_t>(t - blob_.tensors().data())] = true;
+  blob_.release_pages(*t);
+}
+
 const ActbTensor& BlobTensors::get(const std::string& name, const std::vector<int64_t>& shape) {
   const ActbTensor* t = find(name);
   if (t == nullptr) fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': missing tensor \"" + name + "\"");
+  if (released_[static_cast<size_t>(t - blob_.tensors().data())]) {
+    fail(ErrorCode::kInternal, "'" + blob_.path() + "': tensor \"" + name + "\" read after its pages were released");
+  }
   if (t->shape != shape) {
     fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has shape " + shape_string(t->shape) +
          ", the model config implies " + shape_string(shape));

@@ -24,7 +24,8 @@ ModelConfig blob_model_config(const ActbFile& blob);
 /// model does not normalise) is found by check_all_read.
 class BlobTensors {
  public:
-  explicit BlobTensors(const ActbFile& blob) : blob_(blob), read_(blob.tensors().size(), false) {}
+  explicit BlobTensors(ActbFile& blob)
+      : blob_(blob), read_(blob.tensors().size(), false), released_(blob.tensors().size(), false) {}
 
   const ActbFile& blob() const { return blob_; }
   /// The tensor called `name`, or null; recorded as read.
@@ -36,12 +37,17 @@ class BlobTensors {
   /// Records every tensor whose name starts with `prefix` as read: a part of the network that runs
   /// elsewhere (the split engine's backbone) leaves its weights in the blob, unused.
   void skip(const std::string& prefix);
+  /// Gives the float tensor `name`'s memory back (ActbFile::release_pages), for a reader that keeps
+  /// it in another form (a layer's packed weights); get and f32 of it throw kInternal after (find
+  /// still tells its dtype and shape).
+  void release(const std::string& name);
   /// Throws kDataLoss listing the tensors never asked for.
   void check_all_read() const;
 
  private:
-  const ActbFile& blob_;
-  std::vector<bool> read_;  // by index in blob_.tensors()
+  ActbFile& blob_;
+  std::vector<bool> read_;     // by index in blob_.tensors()
+  std::vector<bool> released_;  // by index in blob_.tensors()
 };
 
 }  // namespace act

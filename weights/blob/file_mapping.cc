@@ -119,6 +119,17 @@ FileMapping FileMapping::open(const std::string& path, Mode mode) {
   return m;
 }
 
+void FileMapping::release_pages(const uint8_t* begin, size_t bytes) {
+  if (bytes == 0) return;
+  check(begin >= data_ && bytes <= size_ - static_cast<size_t>(begin - data_), ErrorCode::kInternal,
+        "releasing pages outside the mapping of '" + path_ + "'");
+  const auto page = static_cast<uintptr_t>(::sysconf(_SC_PAGESIZE));
+  const uintptr_t first = (reinterpret_cast<uintptr_t>(begin) + page - 1) / page * page;
+  const uintptr_t last = (reinterpret_cast<uintptr_t>(begin) + bytes) / page * page;
+  // Advice only: pages that stay (a refusal, or a kernel without it) cost memory, never correctness.
+  if (first < last) ::madvise(reinterpret_cast<void*>(first), last - first, MADV_DONTNEED);
+}
+
 FileMapping::~FileMapping() {
   if (data_ != nullptr) ::munmap(const_cast<uint8_t*>(data_), size_);
 }

@@ -25,6 +25,11 @@ class FileMapping {
   FileMapping(const FileMapping&) = delete;
   FileMapping& operator=(const FileMapping&) = delete;
 
+  /// Gives the whole pages inside [begin, begin + bytes) of the mapping back to the system: a mapped
+  /// file's pages are read from the file again if touched, a private copy's then read as zeros.
+  /// For data the caller keeps in another form (a layer's packed weights).
+  void release_pages(const uint8_t* begin, size_t bytes);
+
   const uint8_t* data() const { return data_; }
   size_t size() const { return size_; }
   const std::string& path() const { return path_; }

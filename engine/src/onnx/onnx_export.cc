@@ -269,7 +269,10 @@ class OnnxBuilder {
     if (const auto* conv = dynamic_cast<const graph::Conv2dOp*>(&op)) return conv_f32(*conv);
     if (const auto* conv = dynamic_cast<const graph::ConvS8Op*>(&op)) return conv_s8(*conv);
     if (const auto* pool = dynamic_cast<const graph::MaxPoolOp*>(&op)) return maxpool(*pool);
-    if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) return linear(op, lin->params(), lin->weight(), nullptr, nullptr);
+    if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) {
+      const std::vector<float> w = lin->weight();
+      return linear(op, lin->params(), w.data(), nullptr, nullptr);
+    }
     if (const auto* lin = dynamic_cast<const graph::LinearS8Op*>(&op)) {
       return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale());
     }
@@ -332,8 +335,9 @@ class OnnxBuilder {
   void conv_f32(const graph::Conv2dOp& op) {
     const kernels::Conv2dShape& s = op.shape();
     const std::vector<size_t> from = ohwi_to_oihw(s);
+    const std::vector<float> ohwi = op.weight();
     std::vector<float> w(from.size());
-    for (size_t i = 0; i < from.size(); ++i) w[i] = op.weight()[from[i]];
+    for (size_t i = 0; i < from.size(); ++i) w[i] = ohwi[from[i]];
     const std::string weight = constant_f32("weight", {s.out_c, s.in_c, s.kernel_h, s.kernel_w}, std::move(w));
     const std::string residual = op.residual() == graph::kNoValue ? "" : float_nchw(op.residual());
     const std::string y = conv_node(s, float_nchw(op.inputs[0]), weight, op.bias(), residual, op.relu(), "conv");
@@ -536,7 +540,7 @@ StatusOr<OnnxExportSummary> export_onnx(const std::string& blob_path, const std:
                                         const OnnxExportOptions& options) {
   OnnxExportSummary summary;
   Status s = guarded([&] {
-    const ActbFile blob = ActbFile::open(blob_path, /*verify_checksum=*/true, FileMapping::Mode::kMap);
+    ActbFile blob = ActbFile::open(blob_path, /*verify_checksum=*/true, FileMapping::Mode::kMap);
     BlobTensors tensors(blob);
     const ModelConfig config = blob_model_config(blob);
     // The reference kernels: the network is only read (its rebuilt bias tables are computed with them).

@@ -87,7 +87,11 @@ def main():
         if args.mca and any(x[1] in ("bl", "blr", "ret", "call") for x in body):
             print("  (a call inside: not projected)")
         elif args.mca:
-            cycles = mca_cycles(body, args.mca, args.triple, args.llvm_mca)
+            try:
+                cycles = mca_cycles(body, args.mca, args.triple, args.llvm_mca)
+            except subprocess.CalledProcessError:
+                print("  (llvm-mca could not read this loop: not projected)")
+                continue
             mac_ops = sum(v * MACS_PER_INSN.get(k, 0) for k, v in mix.items())
             kind = next((k for k in mix if k.startswith(MACS)), None)
             peak = args.peak_macs or PEAK_MACS_PER_CYCLE.get(kind, 0.0)

@@ -207,7 +207,8 @@ ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, 
   return y;
 }
 
-RowCodes ActNetwork::add_row_codes(const std::string& name, int rows, int cols) {
+// `name` by value: it may be a graph value's name, and adding values may move it.
+RowCodes ActNetwork::add_row_codes(std::string name, int rows, int cols) {
   return {graph_.add_value(name + "_s8", {rows, cols}, DataType::kS8), graph_.add_value(name + "_scale", {rows}),
           graph_.add_value(name + "_zero_point", {rows}, DataType::kS32), cols};
 }

@@ -127,7 +127,7 @@ class ActNetwork {
                  MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone);
   ValueId layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix);
   /// Values for the row codes of a [rows, cols] matrix, named `name`_s8, _scale, _zero_point.
-  RowCodes add_row_codes(const std::string& name, int rows, int cols);
+  RowCodes add_row_codes(std::string name, int rows, int cols);
   /// The row codes of x written by the op that produces it (asked of it on first use), when x is a
   /// whole [rows, cols] value of such an op; else none.
   RowCodes producer_row_codes(const MatrixRef& x, int rows, int cols);

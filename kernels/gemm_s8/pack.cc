@@ -42,9 +42,13 @@ size_t panel_bytes(const LayoutDesc& d, int k) {
 
 // One column's k-groups: column `slot` of group g sits at group_base[g * nr * kr]. KR is a constant
 // so that each whole group is a fixed-length copy the compiler turns into word moves (attention
-// packs its keys and values at every run); returns the column's sum of weights.
-template <int KR>
-int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* group_base) {
+// packs its keys and values at every run); returns the column's sum of weights. The column's k-th
+// weight is wcol[k * K_STEP]: K_STEP 1 for W [n x k]; 0 stands for `ldw` (W^T [k x n] read
+// down a column, attention's values in their token-major layout).
+template <int KR, bool TRANSPOSED>
+int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wcol, size_t ldw, int8_t* group_base) {
+  const size_t k_step = TRANSPOSED ? ldw : 1;
+  const auto at = [&](int kk) { return wcol[static_cast<size_t>(kk) * k_step]; };
   const auto flip = static_cast<int8_t>(d.w_plus128 ? 0x80 : 0);
   const size_t group_stride = static_cast<size_t>(d.nr) * KR;
   int64_t sum = 0;
@@ -53,7 +57,7 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* grou
   for (; k0 + KR <= k; k0 += KR, group += group_stride) {
     int32_t group_sum = 0;
     for (int r = 0; r < KR; ++r) {
-      const int8_t wv = wrow[k0 + r];
+      const int8_t wv = at(k0 + r);
       ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
       group_sum += wv;
       group[r] = static_cast<int8_t>(wv ^ flip);  // VNNI: W + 128 as u8
@@ -63,7 +67,7 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* grou
   // The ragged last group; its padding (k >= K, like columns past N) stays 0 in every layout, so
   // over-read A bytes meet 0.
   for (int r = 0; k0 + r < k; ++r) {
-    const int8_t wv = wrow[k0 + r];
+    const int8_t wv = at(k0 + r);
     ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
     sum += wv;
     group[r] = static_cast<int8_t>(wv ^ flip);
@@ -71,10 +75,11 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* grou
   return sum;
 }
 
-template <int KR>
+template <int KR, bool TRANSPOSED = false>
 void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw, const int32_t* bias,
                   int32_t a_zero_point, void* packed) {
-  ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK && ldw >= static_cast<size_t>(k), "bad weight shape");
+  ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK && ldw >= static_cast<size_t>(TRANSPOSED ? n : k),
+             "bad weight shape");
   ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
   ACT_DCHECK(d.kr == KR, "layout and packer disagree on the k-group");
   const int kp = static_cast<int>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
@@ -103,7 +108,8 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
       const int col = p * d.nr + c;
       if (col >= n) break;  // columns past N stay zero
       const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
-      const int64_t sum = pack_column<KR>(d, k, w + static_cast<size_t>(col) * ldw, data + static_cast<size_t>(slot) * KR);
+      const int8_t* wcol = w + static_cast<size_t>(col) * (TRANSPOSED ? 1 : ldw);
+      const int64_t sum = pack_column<KR, TRANSPOSED>(d, k, wcol, ldw, data + static_cast<size_t>(slot) * KR);
       // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
       const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sum;
       const auto ksum32 = static_cast<int32_t>(sum);
@@ -140,6 +146,26 @@ void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed) {
   pack_generic<4>(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_1x1_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                        void* packed) {
+  pack_generic<1, true>(desc_of(GemmS8Layout::kRef1x1), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_8x8_goi_pair4(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                              void* packed) {
+  pack_generic<8, true>(desc_of(GemmS8Layout::kAvx2_8x8), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed) {
+  pack_generic<4, true>(desc_of(GemmS8Layout::kVnni64x4), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                         void* packed) {
+  pack_generic<4, true>(desc_of(GemmS8Layout::kNeon16x4), n, k, wt, ldw, bias, a_zero_point, packed);
 }
 
 }  // namespace act::kernels

@@ -103,12 +103,70 @@ void minmax_f32_avx2(size_t n, const float* x, float* lo, float* hi) {
   *hi = _mm_cvtss_f32(x4);
 }
 
+void quantize_rows_symmetric_f32_s8_avx2(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                         float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_avx2(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_avx2(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+// 8 columns at a time: their minmax down the rows, 8 scales, then the same rows quantized with a
+// vector of 8 inverse scales. A ragged last block loads through vmaskmovps (masked-off lanes read
+// as 0 and never fault; the minmax keeps its accumulator there) and stores through a stack copy.
+void quantize_columns_symmetric_f32_s8_avx2(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                            float* col_scale) {
+  const __m256 zero = _mm256_setzero_ps(), lo = _mm256_set1_ps(-128.0f), hi = _mm256_set1_ps(127.0f);
+  for (int c0 = 0; c0 < cols; c0 += 8) {
+    const int width = cols - c0 < 8 ? cols - c0 : 8;
+    const __m256i lanes = _mm256_cmpgt_epi32(_mm256_set1_epi32(width), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    const __m256 keep = _mm256_castsi256_ps(lanes);
+    __m256 mn = _mm256_set1_ps(__builtin_inff()), mx = _mm256_set1_ps(-__builtin_inff());
+    for (int r = 0; r < rows; ++r) {
+      const __m256 a = _mm256_maskload_ps(x + static_cast<size_t>(r) * ldx + c0, lanes);
+      mn = _mm256_blendv_ps(mn, _mm256_min_ps(a, mn), keep);  // minps(a, acc) skips a NaN, as minmax does
+      mx = _mm256_blendv_ps(mx, _mm256_max_ps(a, mx), keep);
+    }
+    float lo_c[8], hi_c[8], inv_c[8] = {};
+    _mm256_storeu_ps(lo_c, mn);
+    _mm256_storeu_ps(hi_c, mx);
+    for (int j = 0; j < width; ++j) col_scale[c0 + j] = symmetric_scale_s8(lo_c[j], hi_c[j], &inv_c[j]);
+    const __m256 inv = _mm256_loadu_ps(inv_c);
+    for (int r = 0; r < rows; ++r) {
+      __m256 v = _mm256_mul_ps(_mm256_maskload_ps(x + static_cast<size_t>(r) * ldx + c0, lanes), inv);
+      v = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(v, zero), lo), hi);  // the rule, as quantize8
+      const __m256i q = _mm256_cvtps_epi32(v);
+      const __m128i w = _mm_packs_epi32(_mm256_castsi256_si128(q), _mm256_extracti128_si256(q, 1));
+      const __m128i b = _mm_packs_epi16(w, w);
+      int8_t* yr = y + static_cast<size_t>(r) * ldy + c0;
+      if (width == 8) {
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(yr), b);
+      } else {
+        int8_t t[16];
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(t), b);
+        std::memcpy(yr, t, static_cast<size_t>(width));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 const QuantS8Kernels* quant_s8_table_avx2() {
-  static constexpr QuantS8Kernels kTable = {Isa::kAvx2,         "quantize_f32_s8_avx2", "dequantize_s8_f32_avx2",
-                                            "minmax_f32_avx2",  quantize_f32_s8_avx2,   dequantize_s8_f32_avx2,
-                                            minmax_f32_avx2};
+  static constexpr QuantS8Kernels kTable = {Isa::kAvx2,
+                                            "quantize_f32_s8_avx2",
+                                            "dequantize_s8_f32_avx2",
+                                            "minmax_f32_avx2",
+                                            "quantize_rows_symmetric_f32_s8_avx2",
+                                            "quantize_columns_symmetric_f32_s8_avx2",
+                                            quantize_f32_s8_avx2,
+                                            dequantize_s8_f32_avx2,
+                                            minmax_f32_avx2,
+                                            quantize_rows_symmetric_f32_s8_avx2,
+                                            quantize_columns_symmetric_f32_s8_avx2};
   return &kTable;
 }
 

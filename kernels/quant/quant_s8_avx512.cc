@@ -77,13 +77,57 @@ void minmax_f32_avx512(size_t n, const float* x, float* lo, float* hi) {
   *hi = _mm512_reduce_max_ps(_mm512_max_ps(mx0, mx1));
 }
 
+void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                           float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_avx512(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_avx512(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+// 16 columns at a time: their minmax down the rows (one cache line per row), 16 scales, then the
+// same lines quantized with a vector of 16 inverse scales.
+void quantize_columns_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                              float* col_scale) {
+  const __m512 zero = _mm512_setzero_ps(), lo = _mm512_set1_ps(-128.0f), hi = _mm512_set1_ps(127.0f);
+  for (int c0 = 0; c0 < cols; c0 += 16) {
+    const int width = cols - c0 < 16 ? cols - c0 : 16;
+    const __mmask16 m = tail_mask(static_cast<size_t>(width));
+    __m512 mn = _mm512_set1_ps(__builtin_inff()), mx = _mm512_set1_ps(-__builtin_inff());
+    for (int r = 0; r < rows; ++r) {
+      const __m512 a = _mm512_maskz_loadu_ps(m, x + static_cast<size_t>(r) * ldx + c0);
+      mn = _mm512_mask_min_ps(mn, m, a, mn);  // minps(a, acc) skips a NaN, as minmax does
+      mx = _mm512_mask_max_ps(mx, m, a, mx);
+    }
+    float lo_c[16], hi_c[16], inv_c[16] = {};
+    _mm512_storeu_ps(lo_c, mn);
+    _mm512_storeu_ps(hi_c, mx);
+    for (int j = 0; j < width; ++j) col_scale[c0 + j] = symmetric_scale_s8(lo_c[j], hi_c[j], &inv_c[j]);
+    const __m512 inv = _mm512_loadu_ps(inv_c);
+    for (int r = 0; r < rows; ++r) {
+      const __m512 a = _mm512_maskz_loadu_ps(m, x + static_cast<size_t>(r) * ldx + c0);
+      _mm_mask_storeu_epi8(y + static_cast<size_t>(r) * ldy + c0, m, quantize16(a, inv, zero, lo, hi));
+    }
+  }
+}
+
 }  // namespace
 
 const QuantS8Kernels* quant_s8_table_avx512() {
-  static constexpr QuantS8Kernels kTable = {
-      Isa::kAvx512,           "quantize_f32_s8_avx512", "dequantize_s8_f32_avx512",
-      "minmax_f32_avx512",    quantize_f32_s8_avx512,   dequantize_s8_f32_avx512,
-      minmax_f32_avx512};
+  static constexpr QuantS8Kernels kTable = {Isa::kAvx512,
+                                            "quantize_f32_s8_avx512",
+                                            "dequantize_s8_f32_avx512",
+                                            "minmax_f32_avx512",
+                                            "quantize_rows_symmetric_f32_s8_avx512",
+                                            "quantize_columns_symmetric_f32_s8_avx512",
+                                            quantize_f32_s8_avx512,
+                                            dequantize_s8_f32_avx512,
+                                            minmax_f32_avx512,
+                                            quantize_rows_symmetric_f32_s8_avx512,
+                                            quantize_columns_symmetric_f32_s8_avx512};
   return &kTable;
 }
 

@@ -90,12 +90,73 @@ void minmax_f32_neon(size_t n, const float* x, float* lo, float* hi) {
   *hi = vmaxnmvq_f32(vmaxnmq_f32(mx0, mx1));
 }
 
+void quantize_rows_symmetric_f32_s8_neon(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                         float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_neon(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_neon(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+// 4 columns at a time: their minmax down the rows, 4 scales, then the same rows quantized with a
+// vector of 4 inverse scales. A ragged last block goes through a NaN-padded stack copy.
+void quantize_columns_symmetric_f32_s8_neon(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                            float* col_scale) {
+  const float32x4_t zero = vdupq_n_f32(0.0f), lo = vdupq_n_f32(-128.0f), hi = vdupq_n_f32(127.0f);
+  for (int c0 = 0; c0 < cols; c0 += 4) {
+    const int width = cols - c0 < 4 ? cols - c0 : 4;
+    const auto load = [&](int r) {
+      const float* xr = x + static_cast<size_t>(r) * ldx + c0;
+      if (width == 4) return vld1q_f32(xr);
+      float t[4];
+      for (float& v : t) v = __builtin_nanf("");
+      std::memcpy(t, xr, static_cast<size_t>(width) * sizeof(float));
+      return vld1q_f32(t);
+    };
+    float32x4_t mn = vdupq_n_f32(__builtin_inff()), mx = vdupq_n_f32(-__builtin_inff());
+    for (int r = 0; r < rows; ++r) {
+      const float32x4_t a = load(r);
+      mn = vminnmq_f32(mn, a);  // fminnm skips a NaN, as minmax does
+      mx = vmaxnmq_f32(mx, a);
+    }
+    float lo_c[4], hi_c[4], inv_c[4] = {};
+    vst1q_f32(lo_c, mn);
+    vst1q_f32(hi_c, mx);
+    for (int j = 0; j < width; ++j) col_scale[c0 + j] = symmetric_scale_s8(lo_c[j], hi_c[j], &inv_c[j]);
+    const float32x4_t inv = vld1q_f32(inv_c);
+    for (int r = 0; r < rows; ++r) {
+      float32x4_t v = vaddq_f32(vmulq_f32(load(r), inv), zero);  // the rule, as quantize4
+      v = vminnmq_f32(vmaxnmq_f32(v, lo), hi);
+      const int16x4_t h = vqmovn_s32(vcvtnq_s32_f32(v));
+      int8_t t[8];
+      vst1_s8(t, vqmovn_s16(vcombine_s16(h, h)));
+      int8_t* yr = y + static_cast<size_t>(r) * ldy + c0;
+      if (width == 4) {
+        std::memcpy(yr, t, 4);  // one 4-byte store
+      } else {
+        std::memcpy(yr, t, static_cast<size_t>(width));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 const QuantS8Kernels* quant_s8_table_neon() {
-  static constexpr QuantS8Kernels kTable = {Isa::kNeon,         "quantize_f32_s8_neon", "dequantize_s8_f32_neon",
-                                            "minmax_f32_neon",  quantize_f32_s8_neon,   dequantize_s8_f32_neon,
-                                            minmax_f32_neon};
+  static constexpr QuantS8Kernels kTable = {Isa::kNeon,
+                                            "quantize_f32_s8_neon",
+                                            "dequantize_s8_f32_neon",
+                                            "minmax_f32_neon",
+                                            "quantize_rows_symmetric_f32_s8_neon",
+                                            "quantize_columns_symmetric_f32_s8_neon",
+                                            quantize_f32_s8_neon,
+                                            dequantize_s8_f32_neon,
+                                            minmax_f32_neon,
+                                            quantize_rows_symmetric_f32_s8_neon,
+                                            quantize_columns_symmetric_f32_s8_neon};
   return &kTable;
 }
 

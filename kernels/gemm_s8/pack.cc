@@ -33,6 +33,8 @@ const LayoutDesc& desc_of(GemmS8Layout layout) {
   return kLayouts[0];
 }
 
+constexpr int kMaxNr = 64;
+
 size_t round_up(size_t x, size_t to) { return (x + to - 1) / to * to; }
 
 size_t panel_bytes(const LayoutDesc& d, int k) {
@@ -42,13 +44,9 @@ size_t panel_bytes(const LayoutDesc& d, int k) {
 
 // One column's k-groups: column `slot` of group g sits at group_base[g * nr * kr]. KR is a constant
 // so that each whole group is a fixed-length copy the compiler turns into word moves (attention
-// packs its keys and values at every run); returns the column's sum of weights. The column's k-th
-// weight is wcol[k * K_STEP]: K_STEP 1 for W [n x k]; 0 stands for `ldw` (W^T [k x n] read
-// down a column, attention's values in their token-major layout).
-template <int KR, bool TRANSPOSED>
-int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wcol, size_t ldw, int8_t* group_base) {
-  const size_t k_step = TRANSPOSED ? ldw : 1;
-  const auto at = [&](int kk) { return wcol[static_cast<size_t>(kk) * k_step]; };
+// packs its keys and values at every run); returns the column's sum of weights.
+template <int KR>
+int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* group_base) {
   const auto flip = static_cast<int8_t>(d.w_plus128 ? 0x80 : 0);
   const size_t group_stride = static_cast<size_t>(d.nr) * KR;
   int64_t sum = 0;
@@ -57,7 +55,7 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wcol, size_t ldw, 
   for (; k0 + KR <= k; k0 += KR, group += group_stride) {
     int32_t group_sum = 0;
     for (int r = 0; r < KR; ++r) {
-      const int8_t wv = at(k0 + r);
+      const int8_t wv = wrow[k0 + r];
       ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
       group_sum += wv;
       group[r] = static_cast<int8_t>(wv ^ flip);  // VNNI: W + 128 as u8
@@ -67,12 +65,50 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wcol, size_t ldw, 
   // The ragged last group; its padding (k >= K, like columns past N) stays 0 in every layout, so
   // over-read A bytes meet 0.
   for (int r = 0; k0 + r < k; ++r) {
-    const int8_t wv = at(k0 + r);
+    const int8_t wv = wrow[k0 + r];
     ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
     sum += wv;
     group[r] = static_cast<int8_t>(wv ^ flip);
   }
   return sum;
+}
+
+// The same for W^T [k x n] (row stride ldw): the `cols` columns of one panel, k-group by k-group,
+// the group's KR rows of W^T read in order (contiguous, where a column of W^T would be a strided
+// walk) and interleaved into the group; column sums accumulate in `sums`. Interleave and sums are
+// separate loops over columns with no slot shuffle (PAIR4 false), which GCC vectorizes.
+template <int KR, bool PAIR4>
+void pack_panel_transposed(const LayoutDesc& d, int k, int cols, const int8_t* wt, size_t ldw, int8_t* data,
+                           int32_t* sums) {
+  const auto flip = static_cast<int8_t>(d.w_plus128 ? 0x80 : 0);
+  const size_t group_stride = static_cast<size_t>(d.nr) * KR;
+  const auto slot = [](int c) { return PAIR4 ? 2 * (c % 4) + c / 4 : c; };
+  int k0 = 0;
+  for (; k0 + KR <= k; k0 += KR) {
+    int8_t* group = data + static_cast<size_t>(k0 / KR) * group_stride;
+    const int8_t* src = wt + static_cast<size_t>(k0) * ldw;
+    for (int c = 0; c < cols; ++c) {
+      for (int r = 0; r < KR; ++r) {
+        const int8_t wv = src[static_cast<size_t>(r) * ldw + static_cast<size_t>(c)];
+        ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
+        group[slot(c) * KR + r] = static_cast<int8_t>(wv ^ flip);
+      }
+    }
+    for (int r = 0; r < KR; ++r) {
+      const int8_t* row = src + static_cast<size_t>(r) * ldw;
+      for (int c = 0; c < cols; ++c) sums[c] += row[c];
+    }
+  }
+  // The ragged last group; its padding stays 0.
+  int8_t* group = data + static_cast<size_t>(k0 / KR) * group_stride;
+  for (int r = 0; k0 + r < k; ++r) {
+    const int8_t* row = wt + static_cast<size_t>(k0 + r) * ldw;
+    for (int c = 0; c < cols; ++c) {
+      ACT_DCHECK(row[c] != -128, "gemm_s8 weights must lie in [-127, 127]");
+      sums[c] += row[c];
+      group[slot(c) * KR + r] = static_cast<int8_t>(row[c] ^ flip);
+    }
+  }
 }
 
 template <int KR, bool TRANSPOSED = false>
@@ -82,6 +118,7 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
              "bad weight shape");
   ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
   ACT_DCHECK(d.kr == KR, "layout and packer disagree on the k-group");
+  ACT_DCHECK(d.nr <= kMaxNr, "panel wider than the column sums kept per panel");
   const int kp = static_cast<int>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
   const size_t pbytes = panel_bytes(d, k);
   const int panels = (n + d.nr - 1) / d.nr;
@@ -104,18 +141,30 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
   for (int p = 0; p < panels; ++p) {
     uint8_t* panel = base + sizeof(GemmS8PackedHeader) + static_cast<size_t>(p) * pbytes;
     auto* data = reinterpret_cast<int8_t*>(panel + 8 * static_cast<size_t>(d.nr));
-    for (int c = 0; c < d.nr; ++c) {
+    const int cols = std::min(d.nr, n - p * d.nr);  // columns past N stay zero
+    // Column sums fit int32: |sum| <= 127 * kGemmS8MaxK.
+    int32_t sums[kMaxNr] = {};
+    if constexpr (TRANSPOSED) {
+      const int8_t* wt = w + static_cast<size_t>(p) * static_cast<size_t>(d.nr);
+      if (d.pair4) {
+        pack_panel_transposed<KR, true>(d, k, cols, wt, ldw, data, sums);
+      } else {
+        pack_panel_transposed<KR, false>(d, k, cols, wt, ldw, data, sums);
+      }
+    } else {
+      for (int c = 0; c < cols; ++c) {
+        const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
+        const int8_t* wrow = w + static_cast<size_t>(p * d.nr + c) * ldw;
+        sums[c] = static_cast<int32_t>(pack_column<KR>(d, k, wrow, data + static_cast<size_t>(slot) * KR));
+      }
+    }
+    for (int c = 0; c < cols; ++c) {
       const int col = p * d.nr + c;
-      if (col >= n) break;  // columns past N stay zero
-      const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
-      const int8_t* wcol = w + static_cast<size_t>(col) * (TRANSPOSED ? 1 : ldw);
-      const int64_t sum = pack_column<KR, TRANSPOSED>(d, k, wcol, ldw, data + static_cast<size_t>(slot) * KR);
       // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
-      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sum;
-      const auto ksum32 = static_cast<int32_t>(sum);
+      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sums[c];
       const auto kbias32 = static_cast<int32_t>(kbias);
       std::memcpy(panel + 4 * static_cast<size_t>(c), &kbias32, 4);
-      std::memcpy(panel + 4 * static_cast<size_t>(d.nr + c), &ksum32, 4);
+      std::memcpy(panel + 4 * static_cast<size_t>(d.nr + c), &sums[c], 4);
     }
   }
 }

@@ -358,7 +358,7 @@ void rows_symmetric_naive(int rows, int cols, const float* x, size_t ldx, int8_t
 
 TEST_P(QuantS8Variant, RowsSymmetricMatchesPerRowPath) {
   std::mt19937 rng(35);
-  for (int cols : {1, 3, 15, 16, 17, 33, 64, 302, 515}) {
+  for (int cols : {1, 3, 15, 16, 17, 33, 48, 63, 64, 65, 302, 515}) {
     const int rows = 11;
     const size_t ldx = static_cast<size_t>(cols) + 5, ldy = static_cast<size_t>(cols) + 2;
     const std::vector<float> x = symmetric_test_matrix(rows, cols, ldx, rng);

@@ -76,7 +76,7 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* grou
 // The same for W^T [k x n] (row stride ldw): the `cols` columns of one panel, k-group by k-group,
 // the group's KR rows of W^T read in order (contiguous, where a column of W^T would be a strided
 // walk) and interleaved into the group; column sums accumulate in `sums`. Interleave and sums are
-// separate loops over columns with no slot shuffle (PAIR4 false), which GCC vectorizes.
+// separate plain loops over columns, which GCC vectorizes.
 template <int KR, bool PAIR4>
 void pack_panel_transposed(const LayoutDesc& d, int k, int cols, const int8_t* wt, size_t ldw, int8_t* data,
                            int32_t* sums) {
@@ -87,12 +87,19 @@ void pack_panel_transposed(const LayoutDesc& d, int k, int cols, const int8_t* w
   for (; k0 + KR <= k; k0 += KR) {
     int8_t* group = data + static_cast<size_t>(k0 / KR) * group_stride;
     const int8_t* src = wt + static_cast<size_t>(k0) * ldw;
+    // PAIR4: interleaved in column order first (the loop GCC vectorizes), then each column's KR
+    // bytes moved to its slot as one word.
+    int8_t staged[kMaxNr * KR];
+    int8_t* interleaved = PAIR4 ? staged : group;
     for (int c = 0; c < cols; ++c) {
       for (int r = 0; r < KR; ++r) {
         const int8_t wv = src[static_cast<size_t>(r) * ldw + static_cast<size_t>(c)];
         ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
-        group[slot(c) * KR + r] = static_cast<int8_t>(wv ^ flip);
+        interleaved[c * KR + r] = static_cast<int8_t>(wv ^ flip);
       }
+    }
+    if constexpr (PAIR4) {
+      for (int c = 0; c < cols; ++c) std::memcpy(group + slot(c) * KR, staged + c * KR, KR);
     }
     for (int r = 0; r < KR; ++r) {
       const int8_t* row = src + static_cast<size_t>(r) * ldw;

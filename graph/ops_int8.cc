@@ -388,12 +388,11 @@ AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int 
   layout_.v_scale = head.add(hd * sizeof(float));
   layout_.head_bytes = head.end;
   keys_values_ = AlignedBuffer(static_cast<size_t>(heads) * layout_.head_bytes);
-  // A thread's scratch: the packing stage's float and int8 copies, then one query block's buffers;
+  // A thread's scratch: the packing stage's int8 keys and values, then one query block's buffers;
   // int8 matrices the GEMM reads as A get the kernels' over-read slack.
   RegionLayout packing, block;
   layout_.k_s8 = packing.add(n_keys * hd);
-  layout_.v_t = packing.add(hd * n_keys * sizeof(float));
-  layout_.v_t_s8 = packing.add(hd * n_keys);
+  layout_.v_s8 = packing.add(n_keys * hd);
   layout_.q_s8 = block.add(rows * hd + kernels::kGemmS8ReadSlack);
   layout_.q_scale = block.add(rows * sizeof(float));
   layout_.scores = block.add(rows * n_keys * sizeof(float));
@@ -420,28 +419,21 @@ void AttentionS8Op::run(const RunContext& ctx) const {
   ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t head, int thread) {
     uint8_t* scratch = aligned_scratch(ctx, thread);
     int8_t* k_s8 = reinterpret_cast<int8_t*>(scratch + layout_.k_s8);
-    float* v_t = reinterpret_cast<float*>(scratch + layout_.v_t);
-    int8_t* v_t_s8 = reinterpret_cast<int8_t*>(scratch + layout_.v_t_s8);
+    int8_t* v_s8 = reinterpret_cast<int8_t*>(scratch + layout_.v_s8);
     float* k_scale = static_cast<float*>(head_at(head, layout_.k_scale));
     float* v_scale = static_cast<float*>(head_at(head, layout_.v_scale));
     const size_t column = head * head_dim;
 
     // Keys: one int8 row per token, the 1 / sqrt(d) of the scores folded into their scales.
-    kernels::quantize_rows_symmetric_f32_s8(kc.quant, nk_, hd, k + column, k_.ld, k_s8, head_dim, k_scale);
+    kc.quant.quantize_rows_symmetric(nk_, hd, k + column, k_.ld, k_s8, head_dim, k_scale);
     for (size_t j = 0; j < n_keys; ++j) k_scale[j] *= inv_sqrt_hd;
     kc.gemm_s8.pack(nk_, hd, k_s8, head_dim, nullptr, 0, head_at(head, layout_.packed_k));
-    // Values, transposed: one int8 row per channel (the output columns of p v). In blocks of keys,
-    // so that each channel's row is written a cache line at a time rather than a float per line.
-    constexpr size_t kKeyBlock = 16;
-    for (size_t j0 = 0; j0 < n_keys; j0 += kKeyBlock) {
-      const size_t j1 = std::min(n_keys, j0 + kKeyBlock);
-      for (size_t c = 0; c < head_dim; ++c) {
-        for (size_t j = j0; j < j1; ++j) v_t[c * n_keys + j] = v[j * v_.ld + column + c];
-      }
-    }
-    kernels::quantize_rows_symmetric_f32_s8(kc.quant, hd, nk_, v_t, n_keys, v_t_s8, n_keys, v_scale);
-    // The probabilities' zero point is the same for every row: fold it into the packed values.
-    kc.gemm_s8.pack(hd, nk_, v_t_s8, n_keys, nullptr, kernels::kSoftmaxS8ZeroPoint, head_at(head, layout_.packed_v));
+    // Values: one scale per channel (the output columns of p v), quantized where they lie, one row
+    // per token, and packed from that transposed view. The probabilities' zero point is the same for
+    // every row: fold it into the packed values.
+    kc.quant.quantize_columns_symmetric(nk_, hd, v + column, v_.ld, v_s8, head_dim, v_scale);
+    kc.gemm_s8.pack_transposed(hd, nk_, v_s8, head_dim, nullptr, kernels::kSoftmaxS8ZeroPoint,
+                               head_at(head, layout_.packed_v));
   });
 
   // Stage 2, a task per (head, block of query rows): scores = q k^T / sqrt(d), softmax, then p v;
@@ -465,8 +457,8 @@ void AttentionS8Op::run(const RunContext& ctx) const {
       const kernels::GemmS8OutF32 o{.c = c, .ldc = ldc, .w_scale = w_scale, .a_row_scale = a_scale};
       kc.gemm_s8.f32out(args, o, 0, rows, 0, n);
     };
-    kernels::quantize_rows_symmetric_f32_s8(kc.quant, rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8,
-                                            head_dim, q_scale);
+    kc.quant.quantize_rows_symmetric(rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8, head_dim,
+                                     q_scale);
     gemm(nk_, hd, q_s8, head_dim, head_at(head, layout_.packed_k), q_scale,
          static_cast<const float*>(head_at(head, layout_.k_scale)), scores, n_keys);
     kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);

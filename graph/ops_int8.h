@@ -171,7 +171,8 @@ class AttentionS8Op : public Op {
                 MatrixRef v, ValueId output);
   const char* type() const override { return "attention_s8"; }
   std::string kernel(const kernels::KernelConfig& k) const override {
-    return std::string(k.quant.quantize_name) + " + " + k.gemm_s8.f32out_name + " + " + k.elementwise.softmax_s8_name;
+    return std::string(k.quant.rows_symmetric_name) + " + " + k.gemm_s8.f32out_name + " + " +
+           k.elementwise.softmax_s8_name;
   }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
@@ -183,7 +184,7 @@ class AttentionS8Op : public Op {
   /// keys_values_ (head_bytes apart), and of each task's buffers in its thread's scratch.
   struct Layout {
     size_t packed_k, packed_v, k_scale, v_scale, head_bytes;
-    size_t k_s8, v_t, v_t_s8;                                        // stage 1
+    size_t k_s8, v_s8;                                               // stage 1
     size_t q_s8, q_scale, scores, p_s8, p_scale;                    // stage 2
     size_t scratch_bytes;
   };

@@ -133,6 +133,7 @@ struct GemmS8Kernels {
   const char* s32out_name;
   GemmS8PackedSizeFn packed_size;
   GemmS8PackFn pack;
+  GemmS8PackFn pack_transposed;  ///< the same bytes as `pack`, from W^T [k x n] (w row stride ldw >= n)
   GemmS8S8OutFn s8out;
   GemmS8F32OutFn f32out;
   GemmS8S32OutFn s32out;

@@ -245,6 +245,7 @@ const GemmS8Kernels* gemm_s8_table_avx2() {
       "gemm_s8s8_s32out_2x8c8_avx2",
       [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kAvx2_8x8, n, k); },
       pack_w_s8_8x8_goi_pair4,
+      pack_wt_s8_8x8_goi_pair4,
       gemm_s8s8_s8out_2x8c8_avx2,
       gemm_s8s8_f32out_2x8c8_avx2,
       gemm_s8s8_s32out_2x8c8_avx2,

@@ -274,6 +274,7 @@ const GemmS8Kernels* gemm_s8_table_avx512vnni() {
       "gemm_s8s8_s32out_6x64c4_avx512vnni",
       [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kVnni64x4, n, k); },
       pack_w_s8_64x4_goi_x80,
+      pack_wt_s8_64x4_goi_x80,
       gemm_s8s8_s8out_6x64c4_avx512vnni,
       gemm_s8s8_f32out_6x64c4_avx512vnni,
       gemm_s8s8_s32out_6x64c4_avx512vnni,

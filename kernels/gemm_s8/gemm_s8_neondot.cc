@@ -279,6 +279,7 @@ const GemmS8Kernels* gemm_s8_table_neondot() {
       "gemm_s8s8_s32out_4x16c4_neondot",
       [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kNeon16x4, n, k); },
       pack_w_s8_16x4_goi,
+      pack_wt_s8_16x4_goi,
       gemm_s8s8_s8out_4x16c4_neondot,
       gemm_s8s8_f32out_4x16c4_neondot,
       gemm_s8s8_s32out_4x16c4_neondot,

@@ -108,6 +108,7 @@ const GemmS8Kernels* gemm_s8_table_ref() {
       "gemm_s8s8_s32out_1x1c1_ref",
       [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kRef1x1, n, k); },
       pack_w_s8_1x1_goi,
+      pack_wt_s8_1x1_goi,
       gemm_s8s8_s8out_1x1c1_ref,
       gemm_s8s8_f32out_1x1c1_ref,
       gemm_s8s8_s32out_1x1c1_ref,

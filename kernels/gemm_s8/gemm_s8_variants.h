@@ -42,6 +42,17 @@ void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int
 /// nr=16, kr=4.
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed);
+/// The same four packers reading W^T: `wt` is [k x n] (row stride ldw >= n), W[j][i] = wt[i * ldw + j];
+/// each writes the bytes its pack_w_ twin writes for W. Attention packs its values this way, straight
+/// from their token-major int8 copy.
+void pack_wt_s8_1x1_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                        void* packed);
+void pack_wt_s8_8x8_goi_pair4(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                              void* packed);
+void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed);
+void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                         void* packed);
 
 // ---- ref (gemm_s8_ref.cc): the normative scalar definition ----------------------------------
 

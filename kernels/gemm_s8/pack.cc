@@ -33,6 +33,8 @@ const LayoutDesc& desc_of(GemmS8Layout layout) {
   return kLayouts[0];
 }
 
+constexpr int kMaxNr = 64;
+
 size_t round_up(size_t x, size_t to) { return (x + to - 1) / to * to; }
 
 size_t panel_bytes(const LayoutDesc& d, int k) {
@@ -71,12 +73,59 @@ int64_t pack_column(const LayoutDesc& d, int k, const int8_t* wrow, int8_t* grou
   return sum;
 }
 
-template <int KR>
+// The same for W^T [k x n] (row stride ldw): the `cols` columns of one panel, k-group by k-group,
+// the group's KR rows of W^T read in order (contiguous, where a column of W^T would be a strided
+// walk) and interleaved into the group; column sums accumulate in `sums`. Interleave and sums are
+// separate plain loops over columns, which GCC vectorizes.
+template <int KR, bool PAIR4>
+void pack_panel_transposed(const LayoutDesc& d, int k, int cols, const int8_t* wt, size_t ldw, int8_t* data,
+                           int32_t* sums) {
+  const auto flip = static_cast<int8_t>(d.w_plus128 ? 0x80 : 0);
+  const size_t group_stride = static_cast<size_t>(d.nr) * KR;
+  const auto slot = [](int c) { return PAIR4 ? 2 * (c % 4) + c / 4 : c; };
+  int k0 = 0;
+  for (; k0 + KR <= k; k0 += KR) {
+    int8_t* group = data + static_cast<size_t>(k0 / KR) * group_stride;
+    const int8_t* src = wt + static_cast<size_t>(k0) * ldw;
+    // PAIR4: interleaved in column order first (the loop GCC vectorizes), then each column's KR
+    // bytes moved to its slot as one word.
+    int8_t staged[kMaxNr * KR];
+    int8_t* interleaved = PAIR4 ? staged : group;
+    for (int c = 0; c < cols; ++c) {
+      for (int r = 0; r < KR; ++r) {
+        const int8_t wv = src[static_cast<size_t>(r) * ldw + static_cast<size_t>(c)];
+        ACT_DCHECK(wv != -128, "gemm_s8 weights must lie in [-127, 127]");
+        interleaved[c * KR + r] = static_cast<int8_t>(wv ^ flip);
+      }
+    }
+    if constexpr (PAIR4) {
+      for (int c = 0; c < cols; ++c) std::memcpy(group + slot(c) * KR, staged + c * KR, KR);
+    }
+    for (int r = 0; r < KR; ++r) {
+      const int8_t* row = src + static_cast<size_t>(r) * ldw;
+      for (int c = 0; c < cols; ++c) sums[c] += row[c];
+    }
+  }
+  // The ragged last group; its padding stays 0.
+  int8_t* group = data + static_cast<size_t>(k0 / KR) * group_stride;
+  for (int r = 0; k0 + r < k; ++r) {
+    const int8_t* row = wt + static_cast<size_t>(k0 + r) * ldw;
+    for (int c = 0; c < cols; ++c) {
+      ACT_DCHECK(row[c] != -128, "gemm_s8 weights must lie in [-127, 127]");
+      sums[c] += row[c];
+      group[slot(c) * KR + r] = static_cast<int8_t>(row[c] ^ flip);
+    }
+  }
+}
+
+template <int KR, bool TRANSPOSED = false>
 void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw, const int32_t* bias,
                   int32_t a_zero_point, void* packed) {
-  ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK && ldw >= static_cast<size_t>(k), "bad weight shape");
+  ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK && ldw >= static_cast<size_t>(TRANSPOSED ? n : k),
+             "bad weight shape");
   ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
   ACT_DCHECK(d.kr == KR, "layout and packer disagree on the k-group");
+  ACT_DCHECK(d.nr <= kMaxNr, "panel wider than the column sums kept per panel");
   const int kp = static_cast<int>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
   const size_t pbytes = panel_bytes(d, k);
   const int panels = (n + d.nr - 1) / d.nr;
@@ -99,17 +148,30 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
   for (int p = 0; p < panels; ++p) {
     uint8_t* panel = base + sizeof(GemmS8PackedHeader) + static_cast<size_t>(p) * pbytes;
     auto* data = reinterpret_cast<int8_t*>(panel + 8 * static_cast<size_t>(d.nr));
-    for (int c = 0; c < d.nr; ++c) {
+    const int cols = std::min(d.nr, n - p * d.nr);  // columns past N stay zero
+    // Column sums fit int32: |sum| <= 127 * kGemmS8MaxK.
+    int32_t sums[kMaxNr] = {};
+    if constexpr (TRANSPOSED) {
+      const int8_t* wt = w + static_cast<size_t>(p) * static_cast<size_t>(d.nr);
+      if (d.pair4) {
+        pack_panel_transposed<KR, true>(d, k, cols, wt, ldw, data, sums);
+      } else {
+        pack_panel_transposed<KR, false>(d, k, cols, wt, ldw, data, sums);
+      }
+    } else {
+      for (int c = 0; c < cols; ++c) {
+        const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
+        const int8_t* wrow = w + static_cast<size_t>(p * d.nr + c) * ldw;
+        sums[c] = static_cast<int32_t>(pack_column<KR>(d, k, wrow, data + static_cast<size_t>(slot) * KR));
+      }
+    }
+    for (int c = 0; c < cols; ++c) {
       const int col = p * d.nr + c;
-      if (col >= n) break;  // columns past N stay zero
-      const int slot = d.pair4 ? 2 * (c % 4) + c / 4 : c;
-      const int64_t sum = pack_column<KR>(d, k, w + static_cast<size_t>(col) * ldw, data + static_cast<size_t>(slot) * KR);
       // kbias wraps modulo 2^32 like the kernels' int32 arithmetic (C++20 conversion is modular).
-      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sum;
-      const auto ksum32 = static_cast<int32_t>(sum);
+      const int64_t kbias = (bias != nullptr ? bias[col] : 0) - int64_t{a_zero_point} * sums[c];
       const auto kbias32 = static_cast<int32_t>(kbias);
       std::memcpy(panel + 4 * static_cast<size_t>(c), &kbias32, 4);
-      std::memcpy(panel + 4 * static_cast<size_t>(d.nr + c), &ksum32, 4);
+      std::memcpy(panel + 4 * static_cast<size_t>(d.nr + c), &sums[c], 4);
     }
   }
 }
@@ -140,6 +202,26 @@ void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed) {
   pack_generic<4>(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_1x1_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                        void* packed) {
+  pack_generic<1, true>(desc_of(GemmS8Layout::kRef1x1), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_8x8_goi_pair4(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                              void* packed) {
+  pack_generic<8, true>(desc_of(GemmS8Layout::kAvx2_8x8), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed) {
+  pack_generic<4, true>(desc_of(GemmS8Layout::kVnni64x4), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                         void* packed) {
+  pack_generic<4, true>(desc_of(GemmS8Layout::kNeon16x4), n, k, wt, ldw, bias, a_zero_point, packed);
 }
 
 }  // namespace act::kernels

@@ -35,13 +35,31 @@ struct QuantS8Kernels {
   const char* quantize_name;    ///< quantize_f32_s8_<isa>
   const char* dequantize_name;  ///< dequantize_s8_f32_<isa>
   const char* minmax_name;      ///< minmax_f32_<isa>
+  const char* rows_symmetric_name;     ///< quantize_rows_symmetric_f32_s8_<isa>
+  const char* columns_symmetric_name;  ///< quantize_columns_symmetric_f32_s8_<isa>
   /// y[i] = quantize(x[i]) by the rule above.
   void (*quantize)(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y);
   /// y[i] = scale * (float(q[i]) - float(zero_point)).
   void (*dequantize)(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y);
   /// Smallest and largest value of x[0..n) (n >= 1; NaNs are ignored, all-NaN gives +inf/-inf).
   void (*minmax)(size_t n, const float* x, float* lo, float* hi);
+  /// Symmetric per-row quantization, the gemm_s8 weight side (values in [-127, 127], zero point 0),
+  /// for operands made at run time (attention's queries and keys): for each of `rows` rows of
+  /// `cols` values (row stride ldx), row_scale[r] = symmetric_scale_s8(minmax of the row) and the
+  /// row quantized with it into y (row stride ldy). One call for all rows.
+  void (*quantize_rows_symmetric)(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                  float* row_scale);
+  /// The same per column: col_scale[c] from the minmax of column c over the rows, y[r][c] quantized
+  /// with it (y keeps x's orientation). Attention's values, one scale per channel, read straight
+  /// from the strided projection output.
+  void (*quantize_columns_symmetric)(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                     float* col_scale);
 };
+
+/// The symmetric scale of values whose minmax is [lo, hi]: max |x| / 127, at least FLT_MIN (so its
+/// inverse is finite); *inv_scale receives the multiplier to quantize with, 0 when max |x| is 0 or
+/// the range is not finite (such rows quantize as zeros). The one rule every variant calls.
+float symmetric_scale_s8(float lo, float hi, float* inv_scale);
 
 /// Dynamic per-row quantization with the variant `k`: for each of `rows` rows of `cols` values, the
 /// parameters choose_quant_s8(row min, row max) and the row quantized with them. row_scale[r] and
@@ -49,11 +67,5 @@ struct QuantS8Kernels {
 /// points take).
 void quantize_rows_dynamic_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
                                   size_t ldy, float* row_scale, int32_t* row_zero_point);
-
-/// Symmetric per-row quantization, the gemm_s8 weight side (values in [-127, 127], zero point 0),
-/// for operands made at run time (attention's keys and values): row_scale[r] = max |row| / 127
-/// (at least FLT_MIN, so its inverse is finite; non-finite rows quantize as zeros).
-void quantize_rows_symmetric_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
-                                    size_t ldy, float* row_scale);
 
 }  // namespace act::kernels

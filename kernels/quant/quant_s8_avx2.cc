@@ -25,13 +25,24 @@ __m256i quantize8(const float* x, __m256 inv, __m256 z, __m256 lo, __m256 hi) {
   return _mm256_cvtps_epi32(v);
 }
 
-void quantize32(const float* x, __m256 inv, __m256 z, __m256 lo, __m256 hi, int8_t* y) {
-  const __m256i q0 = quantize8(x, inv, z, lo, hi), q1 = quantize8(x + 8, inv, z, lo, hi);
-  const __m256i q2 = quantize8(x + 16, inv, z, lo, hi), q3 = quantize8(x + 24, inv, z, lo, hi);
+// 32 codes from four vectors of 8 to bytes in order.
+void store32(__m256i q0, __m256i q1, __m256i q2, __m256i q3, int8_t* y) {
   // packs works within 128-bit lanes: bytes come out as dwords [0 2 4 6 1 3 5 7]; permute back.
   const __m256i b = _mm256_packs_epi16(_mm256_packs_epi32(q0, q1), _mm256_packs_epi32(q2, q3));
   const __m256i order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(y), _mm256_permutevar8x32_epi32(b, order));
+}
+
+void quantize32(const float* x, __m256 inv, __m256 z, __m256 lo, __m256 hi, int8_t* y) {
+  store32(quantize8(x, inv, z, lo, hi), quantize8(x + 8, inv, z, lo, hi), quantize8(x + 16, inv, z, lo, hi),
+          quantize8(x + 24, inv, z, lo, hi), y);
+}
+
+// The same with an inverse scale per lane (inv[0..32), per column).
+void quantize32_per_lane(const float* x, const float* inv, __m256 z, __m256 lo, __m256 hi, int8_t* y) {
+  store32(quantize8(x, _mm256_loadu_ps(inv), z, lo, hi), quantize8(x + 8, _mm256_loadu_ps(inv + 8), z, lo, hi),
+          quantize8(x + 16, _mm256_loadu_ps(inv + 16), z, lo, hi), quantize8(x + 24, _mm256_loadu_ps(inv + 24), z, lo, hi),
+          y);
 }
 
 void quantize_f32_s8_avx2(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
@@ -103,12 +114,93 @@ void minmax_f32_avx2(size_t n, const float* x, float* lo, float* hi) {
   *hi = _mm_cvtss_f32(x4);
 }
 
+void quantize_rows_symmetric_f32_s8_avx2(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                         float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_avx2(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_avx2(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+// 32 columns at a time (four vectors): their minmax down the rows, 32 scales, then the same rows
+// quantized with four vectors of inverse scales; each row is visited twice per block (attention's
+// rows lie pages apart: a visit is a TLB lookup). A ragged block loads through vmaskmovps
+// (masked-off lanes read as 0 and never fault; the minmax keeps its accumulator there) and stores
+// through a stack copy.
+void quantize_columns_symmetric_f32_s8_avx2(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                            float* col_scale) {
+  constexpr int kVectors = 4, kBlock = 8 * kVectors;
+  const __m256 zero = _mm256_setzero_ps(), lo = _mm256_set1_ps(-128.0f), hi = _mm256_set1_ps(127.0f);
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  for (int c0 = 0; c0 < cols; c0 += kBlock) {
+    const int width = cols - c0 < kBlock ? cols - c0 : kBlock;
+    __m256i m[kVectors];
+    __m256 mn[kVectors], mx[kVectors];
+    for (int j = 0; j < kVectors; ++j) {
+      m[j] = _mm256_cmpgt_epi32(_mm256_set1_epi32(width - 8 * j), lane);
+      mn[j] = _mm256_set1_ps(__builtin_inff());
+      mx[j] = _mm256_set1_ps(-__builtin_inff());
+    }
+    // minps(a, acc) skips a NaN, as minmax does. Whole blocks take plain loads and no blends.
+    if (width == kBlock) {
+      for (int r = 0; r < rows; ++r) {
+        const float* xr = x + static_cast<size_t>(r) * ldx + c0;
+        for (int j = 0; j < kVectors; ++j) {
+          const __m256 a = _mm256_loadu_ps(xr + 8 * j);
+          mn[j] = _mm256_min_ps(a, mn[j]);
+          mx[j] = _mm256_max_ps(a, mx[j]);
+        }
+      }
+    } else {
+      for (int r = 0; r < rows; ++r) {
+        const float* xr = x + static_cast<size_t>(r) * ldx + c0;
+        for (int j = 0; j < kVectors; ++j) {
+          const __m256 a = _mm256_maskload_ps(xr + 8 * j, m[j]);
+          const __m256 keep = _mm256_castsi256_ps(m[j]);
+          mn[j] = _mm256_blendv_ps(mn[j], _mm256_min_ps(a, mn[j]), keep);
+          mx[j] = _mm256_blendv_ps(mx[j], _mm256_max_ps(a, mx[j]), keep);
+        }
+      }
+    }
+    float lo_c[kBlock], hi_c[kBlock], inv_c[kBlock] = {};
+    for (int j = 0; j < kVectors; ++j) {
+      _mm256_storeu_ps(lo_c + 8 * j, mn[j]);
+      _mm256_storeu_ps(hi_c + 8 * j, mx[j]);
+    }
+    for (int c = 0; c < width; ++c) col_scale[c0 + c] = symmetric_scale_s8(lo_c[c], hi_c[c], &inv_c[c]);
+    for (int r = 0; r < rows; ++r) {
+      const float* xr = x + static_cast<size_t>(r) * ldx + c0;
+      int8_t* yr = y + static_cast<size_t>(r) * ldy + c0;
+      if (width == kBlock) {
+        quantize32_per_lane(xr, inv_c, zero, lo, hi, yr);
+      } else {
+        float xt[kBlock] = {};
+        int8_t yt[kBlock];
+        std::memcpy(xt, xr, static_cast<size_t>(width) * sizeof(float));
+        quantize32_per_lane(xt, inv_c, zero, lo, hi, yt);
+        std::memcpy(yr, yt, static_cast<size_t>(width));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 const QuantS8Kernels* quant_s8_table_avx2() {
-  static constexpr QuantS8Kernels kTable = {Isa::kAvx2,         "quantize_f32_s8_avx2", "dequantize_s8_f32_avx2",
-                                            "minmax_f32_avx2",  quantize_f32_s8_avx2,   dequantize_s8_f32_avx2,
-                                            minmax_f32_avx2};
+  static constexpr QuantS8Kernels kTable = {Isa::kAvx2,
+                                            "quantize_f32_s8_avx2",
+                                            "dequantize_s8_f32_avx2",
+                                            "minmax_f32_avx2",
+                                            "quantize_rows_symmetric_f32_s8_avx2",
+                                            "quantize_columns_symmetric_f32_s8_avx2",
+                                            quantize_f32_s8_avx2,
+                                            dequantize_s8_f32_avx2,
+                                            minmax_f32_avx2,
+                                            quantize_rows_symmetric_f32_s8_avx2,
+                                            quantize_columns_symmetric_f32_s8_avx2};
   return &kTable;
 }
 

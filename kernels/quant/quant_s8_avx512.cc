@@ -77,13 +77,75 @@ void minmax_f32_avx512(size_t n, const float* x, float* lo, float* hi) {
   *hi = _mm512_reduce_max_ps(_mm512_max_ps(mx0, mx1));
 }
 
+void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                           float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_avx512(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_avx512(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+// 64 columns at a time (four vectors, a whole attention head): their minmax down the rows, 64
+// scales, then the same rows quantized with four vectors of inverse scales. Each row is visited
+// twice per block, not twice per vector: rows lie a page or more apart (the qkv output), and every
+// visit costs a TLB lookup.
+void quantize_columns_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                              float* col_scale) {
+  constexpr int kVectors = 4, kBlock = 16 * kVectors;
+  const __m512 zero = _mm512_setzero_ps(), lo = _mm512_set1_ps(-128.0f), hi = _mm512_set1_ps(127.0f);
+  for (int c0 = 0; c0 < cols; c0 += kBlock) {
+    const int width = cols - c0 < kBlock ? cols - c0 : kBlock;
+    __mmask16 m[kVectors];
+    __m512 mn[kVectors], mx[kVectors];
+    for (int j = 0; j < kVectors; ++j) {
+      m[j] = tail_mask(width > 16 * j ? static_cast<size_t>(width - 16 * j) : 0);
+      mn[j] = _mm512_set1_ps(__builtin_inff());
+      mx[j] = _mm512_set1_ps(-__builtin_inff());
+    }
+    for (int r = 0; r < rows; ++r) {
+      const float* xr = x + static_cast<size_t>(r) * ldx + c0;
+      for (int j = 0; j < kVectors; ++j) {
+        const __m512 a = _mm512_maskz_loadu_ps(m[j], xr + 16 * j);
+        mn[j] = _mm512_mask_min_ps(mn[j], m[j], a, mn[j]);  // minps(a, acc) skips a NaN, as minmax does
+        mx[j] = _mm512_mask_max_ps(mx[j], m[j], a, mx[j]);
+      }
+    }
+    float lo_c[kBlock], hi_c[kBlock], inv_c[kBlock] = {};
+    for (int j = 0; j < kVectors; ++j) {
+      _mm512_storeu_ps(lo_c + 16 * j, mn[j]);
+      _mm512_storeu_ps(hi_c + 16 * j, mx[j]);
+    }
+    for (int c = 0; c < width; ++c) col_scale[c0 + c] = symmetric_scale_s8(lo_c[c], hi_c[c], &inv_c[c]);
+    __m512 inv[kVectors];
+    for (int j = 0; j < kVectors; ++j) inv[j] = _mm512_loadu_ps(inv_c + 16 * j);
+    for (int r = 0; r < rows; ++r) {
+      const float* xr = x + static_cast<size_t>(r) * ldx + c0;
+      int8_t* yr = y + static_cast<size_t>(r) * ldy + c0;
+      for (int j = 0; j < kVectors; ++j) {
+        const __m512 a = _mm512_maskz_loadu_ps(m[j], xr + 16 * j);
+        _mm_mask_storeu_epi8(yr + 16 * j, m[j], quantize16(a, inv[j], zero, lo, hi));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 const QuantS8Kernels* quant_s8_table_avx512() {
-  static constexpr QuantS8Kernels kTable = {
-      Isa::kAvx512,           "quantize_f32_s8_avx512", "dequantize_s8_f32_avx512",
-      "minmax_f32_avx512",    quantize_f32_s8_avx512,   dequantize_s8_f32_avx512,
-      minmax_f32_avx512};
+  static constexpr QuantS8Kernels kTable = {Isa::kAvx512,
+                                            "quantize_f32_s8_avx512",
+                                            "dequantize_s8_f32_avx512",
+                                            "minmax_f32_avx512",
+                                            "quantize_rows_symmetric_f32_s8_avx512",
+                                            "quantize_columns_symmetric_f32_s8_avx512",
+                                            quantize_f32_s8_avx512,
+                                            dequantize_s8_f32_avx512,
+                                            minmax_f32_avx512,
+                                            quantize_rows_symmetric_f32_s8_avx512,
+                                            quantize_columns_symmetric_f32_s8_avx512};
   return &kTable;
 }
 

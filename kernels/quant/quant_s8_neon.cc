@@ -90,12 +90,90 @@ void minmax_f32_neon(size_t n, const float* x, float* lo, float* hi) {
   *hi = vmaxnmvq_f32(vmaxnmq_f32(mx0, mx1));
 }
 
+void quantize_rows_symmetric_f32_s8_neon(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                         float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_neon(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_neon(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+// 16 columns at a time (four vectors): their minmax down the rows, 16 scales, then the same rows
+// quantized with four vectors of inverse scales; each row is visited twice per block (attention's
+// rows lie pages apart: a visit is a TLB lookup). A ragged block's vectors go through a NaN-padded
+// stack copy.
+void quantize_columns_symmetric_f32_s8_neon(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                            float* col_scale) {
+  constexpr int kVectors = 4, kBlock = 4 * kVectors;
+  const float32x4_t zero = vdupq_n_f32(0.0f), lo = vdupq_n_f32(-128.0f), hi = vdupq_n_f32(127.0f);
+  for (int c0 = 0; c0 < cols; c0 += kBlock) {
+    const int width = cols - c0 < kBlock ? cols - c0 : kBlock;
+    const auto load = [&](int r, int j) {
+      const float* xv = x + static_cast<size_t>(r) * ldx + c0 + 4 * j;
+      const int left = width - 4 * j;
+      if (left >= 4) return vld1q_f32(xv);
+      float t[4];
+      for (float& v : t) v = __builtin_nanf("");
+      if (left > 0) std::memcpy(t, xv, static_cast<size_t>(left) * sizeof(float));
+      return vld1q_f32(t);
+    };
+    float32x4_t mn[kVectors], mx[kVectors];
+    for (int j = 0; j < kVectors; ++j) {
+      mn[j] = vdupq_n_f32(__builtin_inff());
+      mx[j] = vdupq_n_f32(-__builtin_inff());
+    }
+    for (int r = 0; r < rows; ++r) {
+      for (int j = 0; j < kVectors; ++j) {
+        const float32x4_t a = load(r, j);
+        mn[j] = vminnmq_f32(mn[j], a);  // fminnm skips a NaN, as minmax does
+        mx[j] = vmaxnmq_f32(mx[j], a);
+      }
+    }
+    float lo_c[kBlock], hi_c[kBlock], inv_c[kBlock] = {};
+    for (int j = 0; j < kVectors; ++j) {
+      vst1q_f32(lo_c + 4 * j, mn[j]);
+      vst1q_f32(hi_c + 4 * j, mx[j]);
+    }
+    for (int c = 0; c < width; ++c) col_scale[c0 + c] = symmetric_scale_s8(lo_c[c], hi_c[c], &inv_c[c]);
+    float32x4_t inv[kVectors];
+    for (int j = 0; j < kVectors; ++j) inv[j] = vld1q_f32(inv_c + 4 * j);
+    for (int r = 0; r < rows; ++r) {
+      int16x4_t h[kVectors];
+      for (int j = 0; j < kVectors; ++j) {
+        float32x4_t v = vaddq_f32(vmulq_f32(load(r, j), inv[j]), zero);  // the rule, as quantize4
+        v = vminnmq_f32(vmaxnmq_f32(v, lo), hi);
+        h[j] = vqmovn_s32(vcvtnq_s32_f32(v));
+      }
+      const int8x16_t b = vcombine_s8(vqmovn_s16(vcombine_s16(h[0], h[1])), vqmovn_s16(vcombine_s16(h[2], h[3])));
+      int8_t* yr = y + static_cast<size_t>(r) * ldy + c0;
+      if (width == kBlock) {
+        vst1q_s8(yr, b);
+      } else {
+        int8_t t[kBlock];
+        vst1q_s8(t, b);
+        std::memcpy(yr, t, static_cast<size_t>(width));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 const QuantS8Kernels* quant_s8_table_neon() {
-  static constexpr QuantS8Kernels kTable = {Isa::kNeon,         "quantize_f32_s8_neon", "dequantize_s8_f32_neon",
-                                            "minmax_f32_neon",  quantize_f32_s8_neon,   dequantize_s8_f32_neon,
-                                            minmax_f32_neon};
+  static constexpr QuantS8Kernels kTable = {Isa::kNeon,
+                                            "quantize_f32_s8_neon",
+                                            "dequantize_s8_f32_neon",
+                                            "minmax_f32_neon",
+                                            "quantize_rows_symmetric_f32_s8_neon",
+                                            "quantize_columns_symmetric_f32_s8_neon",
+                                            quantize_f32_s8_neon,
+                                            dequantize_s8_f32_neon,
+                                            minmax_f32_neon,
+                                            quantize_rows_symmetric_f32_s8_neon,
+                                            quantize_columns_symmetric_f32_s8_neon};
   return &kTable;
 }
 

@@ -47,10 +47,56 @@ void minmax_f32_ref(size_t n, const float* x, float* lo, float* hi) {
   *hi = b;
 }
 
+float symmetric_scale_s8(float lo, float hi, float* inv_scale) {
+  const float absmax = std::isfinite(lo) && std::isfinite(hi) ? std::max(-lo, hi) : 0.0f;
+  const float scale = std::max(absmax / 127.0f, std::numeric_limits<float>::min());
+  // 1 / scale may round so that max |x| lands a hair past 127: the clamp keeps it at 127, and
+  // -max |x| cannot reach -128.
+  *inv_scale = absmax > 0.0f ? 1.0f / scale : 0.0f;
+  return scale;
+}
+
+void quantize_rows_symmetric_f32_s8_ref(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                        float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    minmax_f32_ref(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    quantize_f32_s8_ref(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+void quantize_columns_symmetric_f32_s8_ref(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                           float* col_scale) {
+  for (int c = 0; c < cols; ++c) {
+    float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+    for (int r = 0; r < rows; ++r) {
+      const float v = x[static_cast<size_t>(r) * ldx + static_cast<size_t>(c)];
+      lo = v < lo ? v : lo;  // NaNs skipped, as in minmax_f32_ref
+      hi = v > hi ? v : hi;
+    }
+    float inv;
+    col_scale[c] = symmetric_scale_s8(lo, hi, &inv);
+    for (int r = 0; r < rows; ++r) {
+      const size_t at = static_cast<size_t>(r) * ldx + static_cast<size_t>(c);
+      quantize_f32_s8_ref(1, x + at, inv, 0, y + static_cast<size_t>(r) * ldy + static_cast<size_t>(c));
+    }
+  }
+}
+
 const QuantS8Kernels* quant_s8_table_ref() {
-  static constexpr QuantS8Kernels kTable = {Isa::kRef,          "quantize_f32_s8_ref", "dequantize_s8_f32_ref",
-                                            "minmax_f32_ref",   quantize_f32_s8_ref,   dequantize_s8_f32_ref,
-                                            minmax_f32_ref};
+  static constexpr QuantS8Kernels kTable = {Isa::kRef,
+                                            "quantize_f32_s8_ref",
+                                            "dequantize_s8_f32_ref",
+                                            "minmax_f32_ref",
+                                            "quantize_rows_symmetric_f32_s8_ref",
+                                            "quantize_columns_symmetric_f32_s8_ref",
+                                            quantize_f32_s8_ref,
+                                            dequantize_s8_f32_ref,
+                                            minmax_f32_ref,
+                                            quantize_rows_symmetric_f32_s8_ref,
+                                            quantize_columns_symmetric_f32_s8_ref};
   return &kTable;
 }
 
@@ -65,21 +111,6 @@ void quantize_rows_dynamic_f32_s8(const QuantS8Kernels& k, int rows, int cols, c
     row_scale[r] = q.scale;
     row_zero_point[r] = q.zero_point;
     k.quantize(static_cast<size_t>(cols), xr, 1.0f / q.scale, q.zero_point, y + static_cast<size_t>(r) * ldy);
-  }
-}
-
-void quantize_rows_symmetric_f32_s8(const QuantS8Kernels& k, int rows, int cols, const float* x, size_t ldx, int8_t* y,
-                                    size_t ldy, float* row_scale) {
-  for (int r = 0; r < rows; ++r) {
-    const float* xr = x + static_cast<size_t>(r) * ldx;
-    float lo, hi;
-    k.minmax(static_cast<size_t>(cols), xr, &lo, &hi);
-    const float absmax = std::isfinite(lo) && std::isfinite(hi) ? std::max(-lo, hi) : 0.0f;
-    const float scale = std::max(absmax / 127.0f, std::numeric_limits<float>::min());
-    row_scale[r] = scale;
-    // 1 / scale may round so that max |row| lands a hair past 127: the clamp keeps it at 127, and
-    // -max |row| cannot reach -128.
-    k.quantize(static_cast<size_t>(cols), xr, absmax > 0.0f ? 1.0f / scale : 0.0f, 0, y + static_cast<size_t>(r) * ldy);
   }
 }
 

@@ -15,6 +15,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -260,6 +261,69 @@ TEST_P(GemmS8Variant, EmptyRectangleWritesNothing) {
   v.s32out(g, GemmS8OutS32{c.data(), static_cast<size_t>(n)}, 0, 0, 0, n);
   v.s32out(g, GemmS8OutS32{c.data(), static_cast<size_t>(n)}, 0, 1, 3, 3);
   for (int32_t x : c) EXPECT_EQ(x, 77);
+}
+
+// The transposed packers write, byte for byte, what their twins write for the explicit transpose:
+// every layout (the packers are portable, so all four run here), ragged n and k around each
+// panel width and k-group, a row stride wider than n, both bias forms and a zero point.
+TEST(GemmS8Pack, TransposedPackerMatchesPackOfTranspose) {
+  struct Pair {
+    GemmS8Layout layout;
+    GemmS8PackFn pack, pack_transposed;
+  };
+  const Pair pairs[] = {{GemmS8Layout::kRef1x1, pack_w_s8_1x1_goi, pack_wt_s8_1x1_goi},
+                        {GemmS8Layout::kAvx2_8x8, pack_w_s8_8x8_goi_pair4, pack_wt_s8_8x8_goi_pair4},
+                        {GemmS8Layout::kVnni64x4, pack_w_s8_64x4_goi_x80, pack_wt_s8_64x4_goi_x80},
+                        {GemmS8Layout::kNeon16x4, pack_w_s8_16x4_goi, pack_wt_s8_16x4_goi}};
+  uint32_t seed = 1000;
+  for (const Pair& p : pairs) {
+    for (int n : {1, 7, 16, 17, 64, 65}) {
+      for (int k : {1, 3, 4, 9, 64, 302}) {
+        std::mt19937 rng(seed++);
+        std::uniform_int_distribution<int> byte(-127, 127);
+        const size_t ldt = static_cast<size_t>(n) + 3;  // wt [k x n], padded rows
+        std::vector<int8_t> wt(static_cast<size_t>(k) * ldt), w(static_cast<size_t>(n) * k);
+        for (auto& b : wt) b = static_cast<int8_t>(byte(rng));
+        for (int j = 0; j < n; ++j) {
+          for (int i = 0; i < k; ++i) w[static_cast<size_t>(j) * k + i] = wt[static_cast<size_t>(i) * ldt + j];
+        }
+        std::vector<int32_t> bias(static_cast<size_t>(n));
+        for (auto& b : bias) b = byte(rng) * 1000;
+        const size_t bytes = gemm_s8_packed_size(p.layout, n, k);
+        for (const int32_t* b : {static_cast<const int32_t*>(nullptr), static_cast<const int32_t*>(bias.data())}) {
+          std::unique_ptr<uint8_t, decltype(&std::free)> want(
+              static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+          std::unique_ptr<uint8_t, decltype(&std::free)> got(
+              static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+          std::memset(got.get(), 0x5a, bytes);  // every byte must be written
+          p.pack(n, k, w.data(), static_cast<size_t>(k), b, -13, want.get());
+          p.pack_transposed(n, k, wt.data(), ldt, b, -13, got.get());
+          ASSERT_EQ(std::memcmp(got.get(), want.get(), bytes), 0)
+              << "layout " << static_cast<int>(p.layout) << " n=" << n << " k=" << k << (b ? " with bias" : "");
+        }
+      }
+    }
+  }
+}
+
+// Each variant's table pairs its packer with the transposed twin of the same layout.
+TEST_P(GemmS8Variant, TablePairsTransposedPacker) {
+  const GemmS8Kernels& v = variant();
+  const int n = v.nr + 1, k = 2 * v.kr + 1;
+  std::vector<int8_t> w(static_cast<size_t>(n) * k);
+  for (size_t i = 0; i < w.size(); ++i) w[i] = static_cast<int8_t>(static_cast<int>(i % 255) - 127);
+  std::vector<int8_t> wt(w.size());
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < k; ++i) wt[static_cast<size_t>(i) * n + j] = w[static_cast<size_t>(j) * k + i];
+  }
+  const size_t bytes = v.packed_size(n, k);
+  std::unique_ptr<uint8_t, decltype(&std::free)> want(
+      static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+  std::unique_ptr<uint8_t, decltype(&std::free)> got(
+      static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+  v.pack(n, k, w.data(), static_cast<size_t>(k), nullptr, 5, want.get());
+  v.pack_transposed(n, k, wt.data(), static_cast<size_t>(n), nullptr, 5, got.get());
+  EXPECT_EQ(std::memcmp(got.get(), want.get(), bytes), 0) << v.pack_name;
 }
 
 std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }

@@ -319,6 +319,87 @@ TEST_P(QuantS8Variant, RowsDynamicIsBitExact) {
   }
 }
 
+// Rows with every kind of content: random, constant, all-negative, huge, tiny, all zero, a NaN, an
+// infinity, all NaN, in that order as far as `rows` goes (rows of `cols` values, row stride ldx).
+std::vector<float> symmetric_test_matrix(int rows, int cols, size_t ldx, std::mt19937& rng) {
+  std::vector<float> x = random_floats(static_cast<size_t>(rows) * ldx, rng, -6.0f, 4.0f);
+  for (int r = 0; r < std::min(rows, 8); ++r) {
+    float* xr = x.data() + static_cast<size_t>(r) * ldx;
+    for (int c = 0; c < cols; ++c) {
+      switch (r) {
+        case 0: xr[c] = 2.5f; break;
+        case 1: xr[c] = -std::fabs(xr[c]); break;
+        case 2: xr[c] *= 1e37f; break;
+        case 3: xr[c] *= 1e-40f; break;
+        case 4: xr[c] = 0.0f; break;
+        case 5: xr[c] = c == cols / 2 ? kNaN : xr[c]; break;
+        case 6: xr[c] = c == cols - 1 ? -kInf : xr[c]; break;
+        default: xr[c] = kNaN;
+      }
+    }
+  }
+  return x;
+}
+
+// Symmetric quantization as the attention op did it row by row before the multi-row kernels, from
+// the reference's minmax and quantize: max |row| / 127 (at least FLT_MIN), inverse 0 for a zero
+// or non-finite range.
+void rows_symmetric_naive(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy, float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi;
+    reference().minmax(static_cast<size_t>(cols), xr, &lo, &hi);
+    const float absmax = std::isfinite(lo) && std::isfinite(hi) ? std::max(-lo, hi) : 0.0f;
+    row_scale[r] = std::max(absmax / 127.0f, FLT_MIN);
+    reference().quantize(static_cast<size_t>(cols), xr, absmax > 0.0f ? 1.0f / row_scale[r] : 0.0f, 0,
+                         y + static_cast<size_t>(r) * ldy);
+  }
+}
+
+TEST_P(QuantS8Variant, RowsSymmetricMatchesPerRowPath) {
+  std::mt19937 rng(35);
+  for (int cols : {1, 3, 15, 16, 17, 33, 48, 63, 64, 65, 302, 515}) {
+    const int rows = 11;
+    const size_t ldx = static_cast<size_t>(cols) + 5, ldy = static_cast<size_t>(cols) + 2;
+    const std::vector<float> x = symmetric_test_matrix(rows, cols, ldx, rng);
+    std::vector<int8_t> yw(rows * ldy, 99), y(rows * ldy, 99);
+    std::vector<float> sw(rows), s(rows, -1.0f);
+    rows_symmetric_naive(rows, cols, x.data(), ldx, yw.data(), ldy, sw.data());
+    v().quantize_rows_symmetric(rows, cols, x.data(), ldx, y.data(), ldy, s.data());
+    ASSERT_EQ(y, yw) << v().rows_symmetric_name << " cols=" << cols;  // padding bytes untouched too
+    ASSERT_EQ(0, std::memcmp(s.data(), sw.data(), s.size() * sizeof(float))) << v().rows_symmetric_name;
+  }
+}
+
+// Per column is per row of the transpose: the same codes (transposed back) and scales, which is
+// what the attention op's values got from the float transposed copy this replaced.
+TEST_P(QuantS8Variant, ColumnsSymmetricMatchesRowsOfTranspose) {
+  std::mt19937 rng(36);
+  for (int cols : {1, 3, 4, 7, 8, 15, 16, 17, 33, 64, 70}) {
+    for (int rows : {1, 5, 302}) {
+      const size_t ldt = static_cast<size_t>(rows) + 1;  // x^T [cols x rows]
+      const std::vector<float> xt = symmetric_test_matrix(cols, rows, ldt, rng);
+      const size_t ldx = static_cast<size_t>(cols) + 3, ldy = static_cast<size_t>(cols) + 1;
+      std::vector<float> x(static_cast<size_t>(rows) * ldx, 7.0f);
+      for (int r = 0; r < rows; ++r) {
+        for (int c = 0; c < cols; ++c) x[r * ldx + c] = xt[c * ldt + r];
+      }
+      std::vector<int8_t> yt(static_cast<size_t>(cols) * rows), y(rows * ldy, 99);
+      std::vector<float> sw(cols), s(cols, -1.0f);
+      rows_symmetric_naive(cols, rows, xt.data(), ldt, yt.data(), static_cast<size_t>(rows), sw.data());
+      v().quantize_columns_symmetric(rows, cols, x.data(), ldx, y.data(), ldy, s.data());
+      for (int r = 0; r < rows; ++r) {
+        for (int c = 0; c < cols; ++c) {
+          ASSERT_EQ(y[r * ldy + c], yt[static_cast<size_t>(c) * rows + r])
+              << v().columns_symmetric_name << " rows=" << rows << " cols=" << cols << " at " << r << "," << c;
+        }
+        for (size_t c = static_cast<size_t>(cols); c < ldy; ++c) ASSERT_EQ(y[r * ldy + c], 99) << "wrote past the row";
+      }
+      ASSERT_EQ(0, std::memcmp(s.data(), sw.data(), s.size() * sizeof(float))) << v().columns_symmetric_name;
+    }
+  }
+}
+
 std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
 
 INSTANTIATE_TEST_SUITE_P(Available, QuantS8Variant,

@@ -278,14 +278,24 @@ ConcatRowsOp::ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output) : 
 }
 
 void ConcatRowsOp::run(const RunContext& ctx) const {
+  constexpr int kRows = 32;
   float* y = ctx.data(outputs[0]);
-  for (const auto& p : parts_) {
-    const float* src = p.source.resolve(ctx);
-    for (int r = 0; r < p.rows; ++r) {
-      std::memcpy(y, src + static_cast<size_t>(r) * p.source.ld, static_cast<size_t>(cols_) * sizeof(float));
-      y += cols_;
+  int total_rows = 0;
+  for (const auto& p : parts_) total_rows += p.rows;
+  // Bands of output rows over the pool; each band copies its rows from whichever parts they lie in.
+  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(total_rows), static_cast<size_t>(kRows)), [&](size_t task, int) {
+    const int begin = static_cast<int>(task) * kRows, end = std::min(total_rows, begin + kRows);
+    int part_start = 0;
+    for (const auto& p : parts_) {
+      const int from = std::max(begin, part_start), to = std::min(end, part_start + p.rows);
+      const float* src = from < to ? p.source.resolve(ctx) : nullptr;
+      for (int r = from; r < to; ++r) {
+        std::memcpy(y + static_cast<size_t>(r) * cols_, src + static_cast<size_t>(r - part_start) * p.source.ld,
+                    static_cast<size_t>(cols_) * sizeof(float));
+      }
+      part_start += p.rows;
     }
-  }
+  });
 }
 
 }  // namespace act::graph

@@ -191,16 +191,21 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
     for (size_t c = 0; c < 3; ++c) {
       for (int v = 0; v < 256; ++v) lut[c][v] = norm.apply(static_cast<float>(v) / 255.0f, c);
     }
-    // Each pixel's channel value through its channel's table, into the network's input (float or int8).
+    // Each pixel's channel value through its channel's table, into the network's input (float or int8),
+    // in bands of rows over the pool: the first parallel section of a run, it also wakes the workers
+    // while this thread maps its share.
     const auto map_pixels = [&](auto* dst, const auto& table) {
+      constexpr size_t kBandRows = 8;
       const auto* src = static_cast<const uint8_t*>(image.data);
-      for (size_t y = 0; y < h; ++y) {
-        const uint8_t* row = src + y * stride;
-        auto* out = dst + y * w * 3;
-        for (size_t x = 0; x < w; ++x) {
-          for (size_t c = 0; c < 3; ++c) out[3 * x + c] = table[c][row[3 * x + c]];
+      pool_.parallel_for((h + kBandRows - 1) / kBandRows, [&](size_t band, int) {
+        for (size_t y = band * kBandRows; y < std::min(h, (band + 1) * kBandRows); ++y) {
+          const uint8_t* row = src + y * stride;
+          auto* out = dst + y * w * 3;
+          for (size_t x = 0; x < w; ++x) {
+            for (size_t c = 0; c < 3; ++c) out[3 * x + c] = table[c][row[3 * x + c]];
+          }
         }
-      }
+      });
     };
     if (dst_s8 != nullptr) {
       int8_t lut_s8[3][256];

@@ -198,11 +198,15 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
       constexpr size_t kBandRows = 8;
       const auto* src = static_cast<const uint8_t*>(image.data);
       pool_.parallel_for((h + kBandRows - 1) / kBandRows, [&](size_t band, int) {
-        for (size_t y = band * kBandRows; y < std::min(h, (band + 1) * kBandRows); ++y) {
-          const uint8_t* row = src + y * stride;
-          auto* out = dst + y * w * 3;
-          for (size_t x = 0; x < w; ++x) {
-            for (size_t c = 0; c < 3; ++c) out[3 * x + c] = table[c][row[3 * x + c]];
+        // Locals, not the captures: an int8 store may alias anything in memory, which would reload
+        // every captured value after each store.
+        const auto* tables = &table[0];
+        const size_t width = w, row_stride = stride, end = std::min(h, (band + 1) * kBandRows);
+        for (size_t y = band * kBandRows; y < end; ++y) {
+          const uint8_t* row = src + y * row_stride;
+          auto* out = dst + y * width * 3;
+          for (size_t x = 0; x < width; ++x) {
+            for (size_t c = 0; c < 3; ++c) out[3 * x + c] = tables[c][row[3 * x + c]];
           }
         }
       });

@@ -61,6 +61,21 @@ struct QuantS8Kernels {
 /// the range is not finite (such rows quantize as zeros). The one rule every variant calls.
 float symmetric_scale_s8(float lo, float hi, float* inv_scale);
 
+/// The row loop of every variant's quantize_rows_symmetric, with that variant's own minmax and
+/// quantize as template arguments (each row: minmax, symmetric_scale_s8, quantize with zero point 0).
+template <void (*Minmax)(size_t, const float*, float*, float*),
+          void (*Quantize)(size_t, const float*, float, int32_t, int8_t*)>
+void quantize_rows_symmetric_with(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
+                                  float* row_scale) {
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    float lo, hi, inv;
+    Minmax(static_cast<size_t>(cols), xr, &lo, &hi);
+    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
+    Quantize(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
+  }
+}
+
 /// Dynamic per-row quantization with the variant `k`: for each of `rows` rows of `cols` values, the
 /// parameters choose_quant_s8(row min, row max) and the row quantized with them. row_scale[r] and
 /// row_zero_point[r] receive the parameters (what the gemm_s8 f32-out epilogue and per-row zero

@@ -116,13 +116,7 @@ void minmax_f32_avx2(size_t n, const float* x, float* lo, float* hi) {
 
 void quantize_rows_symmetric_f32_s8_avx2(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
                                          float* row_scale) {
-  for (int r = 0; r < rows; ++r) {
-    const float* xr = x + static_cast<size_t>(r) * ldx;
-    float lo, hi, inv;
-    minmax_f32_avx2(static_cast<size_t>(cols), xr, &lo, &hi);
-    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
-    quantize_f32_s8_avx2(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
-  }
+  quantize_rows_symmetric_with<minmax_f32_avx2, quantize_f32_s8_avx2>(rows, cols, x, ldx, y, ldy, row_scale);
 }
 
 // 32 columns at a time (four vectors): their minmax down the rows, 32 scales, then the same rows

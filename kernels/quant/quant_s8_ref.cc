@@ -58,13 +58,7 @@ float symmetric_scale_s8(float lo, float hi, float* inv_scale) {
 
 void quantize_rows_symmetric_f32_s8_ref(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
                                         float* row_scale) {
-  for (int r = 0; r < rows; ++r) {
-    const float* xr = x + static_cast<size_t>(r) * ldx;
-    float lo, hi, inv;
-    minmax_f32_ref(static_cast<size_t>(cols), xr, &lo, &hi);
-    row_scale[r] = symmetric_scale_s8(lo, hi, &inv);
-    quantize_f32_s8_ref(static_cast<size_t>(cols), xr, inv, 0, y + static_cast<size_t>(r) * ldy);
-  }
+  quantize_rows_symmetric_with<minmax_f32_ref, quantize_f32_s8_ref>(rows, cols, x, ldx, y, ldy, row_scale);
 }
 
 void quantize_columns_symmetric_f32_s8_ref(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,

@@ -22,7 +22,7 @@ class ProgressLine {
   /// True when stderr is a terminal (the apps' progress goes there).
   static bool stderr_is_terminal();
 
-  /// `done` of `total` `unit`s of `task` (e.g. "calibrating (mse), pass 1/2", 3, 64, "frames"). A new
+  /// `done` of `total` `unit`s of `task` (e.g. "calibrating (mse)", 3, 64, "frames"). A new
   /// task restarts the clock for its rate; report done 0 at its start so the first rate is right.
   void update(const std::string& task, size_t done, size_t total, const char* unit);
   /// A line of its own (ends an open progress line first).

@@ -154,7 +154,7 @@ enum class AttentionPrecision { kAuto, kInt8, kFp32 };
 inline constexpr double kInt8AttentionErrorBudget = 0.25;
 
 /// How far a conversion is, for a progress display: `done` of `total` `unit`s of `task` (e.g. 3 of 64
-/// "frames" of "calibrating (mse), pass 1/2"; done 0 when a task starts), or, with total 0, a one-off
+/// "frames" of "calibrating (mse)"; done 0 when a task starts), or, with total 0, a one-off
 /// message in `task` (e.g. "all layers int8: held-out MSE 0.0021 (target 0.001)").
 struct ConversionProgress {
   std::string task;

@@ -175,25 +175,16 @@ class Converter {
     graph::Graph& g = network.graph();
     const std::vector<graph::CalibrationPoint>& points = network.calibration_points();
     std::vector<RangeObserver> observers(points.size());
-    const bool histograms = opt_.method != CalibrationMethod::kMinMax;
-    const int passes = histograms ? 2 : 1;
     std::vector<float> normalized(chunk_values());
-    for (int pass = 1; pass <= passes; ++pass) {
-      const std::string task = "calibrating (" + std::string(calibration_method_name(opt_.method)) + "), pass " +
-                               std::to_string(pass) + "/" + std::to_string(passes);
-      progress(task, 0, calib_.size(), "frames");
-      for (size_t f = 0; f < calib_.size(); ++f) {
-        fp32_->run(obs(calib_[f]), normalized);
-        for (size_t k = 0; k < points.size(); ++k) {
-          const std::span<const float> values(g.data(points[k].value), g.value(points[k].value).elements);
-          if (pass == 1) {
-            observers[k].observe_range(values);
-          } else {
-            observers[k].observe_histogram(values);
-          }
-        }
-        progress(task, f + 1, calib_.size(), "frames");
+    // One pass: each observer keeps its range and its histogram together.
+    const std::string task = "calibrating (" + std::string(calibration_method_name(opt_.method)) + ")";
+    progress(task, 0, calib_.size(), "frames");
+    for (size_t f = 0; f < calib_.size(); ++f) {
+      fp32_->run(obs(calib_[f]), normalized);
+      for (size_t k = 0; k < points.size(); ++k) {
+        observers[k].observe(std::span<const float>(g.data(points[k].value), g.value(points[k].value).elements));
       }
+      progress(task, f + 1, calib_.size(), "frames");
     }
     std::map<std::string, ActivationQuant> out;
     for (size_t k = 0; k < points.size(); ++k) {

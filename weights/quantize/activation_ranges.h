@@ -40,7 +40,7 @@ class RangeObserver {
   };
   Histogram histogram() const;
 
-  /// The parameters of the three methods. minmax covers [min, max] and needs pass 1 only;
+  /// The parameters of the three methods. minmax covers [min, max] (the histogram unused);
   /// percentile clips the tails at `percentile` (e.g. 99.99) and mse minimizes the expected squared
   /// quantization error (rounding and clipping) over the histogram. Without a histogram (or for a
   /// constant value) the last two fall back to minmax.

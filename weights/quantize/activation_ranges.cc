@@ -29,8 +29,7 @@ void RangeObserver::observe(std::span<const float> values) {
     }
     if (!std::isfinite(lo)) return;
   }
-  const bool had_range = seen_ && hi_ > lo_;
-  const bool constant_so_far = seen_ && !had_range;  // then every value so far was lo_
+  const bool constant_so_far = seen_ && !(hi_ > lo_);  // then every value so far was lo_
   const float constant = lo_;
   lo_ = seen_ ? std::min(lo_, lo) : lo;
   hi_ = seen_ ? std::max(hi_, hi) : hi;
@@ -61,7 +60,6 @@ void RangeObserver::cover(float lo, float hi) {
   if (width_ == 0.0) {  // the first range: the grid starts at it, kMaxGridBins bins to its top
     origin_ = lo;
     width_ = (static_cast<double>(hi) - static_cast<double>(lo)) / (kMaxGridBins - 1);
-    first_ = 0;
   }
   const auto grid_index = [&](float v) { return static_cast<int64_t>(std::floor((static_cast<double>(v) - origin_) / width_)); };
   // Grid indices of the first and last bins to hold: the bins there now and [lo, hi]. Pairs of bins

@@ -58,16 +58,20 @@ __mmask16 vec_mask(int j, int lo, int hi) {
 template <int R>
 void row_corrections(const int8_t* a, size_t lda, int k, int32_t (&corr)[R]) {
   const __m512i ones = _mm512_set1_epi8(1);
-  for (int r = 0; r < R; ++r) {
-    const int8_t* src = a + static_cast<size_t>(r) * lda;
-    __m512i sum = _mm512_setzero_si512();
-    for (int i = 0; i < k; i += 64) {
-      const int left = k - i;
-      const __mmask64 m = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
-      sum = _mm512_dpbusd_epi32(sum, ones, _mm512_maskz_loadu_epi8(m, src + i));
+  // The rows side by side: R independent chains of vpdpbusd, not one chain after another.
+  __m512i sum[R];
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) sum[r] = _mm512_setzero_si512();
+  for (int i = 0; i < k; i += 64) {
+    const int left = k - i;
+    const __mmask64 m = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
+#pragma GCC unroll 6
+    for (int r = 0; r < R; ++r) {
+      sum[r] = _mm512_dpbusd_epi32(sum[r], ones, _mm512_maskz_loadu_epi8(m, a + static_cast<size_t>(r) * lda + i));
     }
-    corr[r] = static_cast<int32_t>(128u * static_cast<uint32_t>(_mm512_reduce_add_epi32(sum)));
   }
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) corr[r] = static_cast<int32_t>(128u * static_cast<uint32_t>(_mm512_reduce_add_epi32(sum[r])));
 }
 
 // out[r][j] = kbias - corr[r] + sum over k-groups of (W + 128) x A. The accumulators are a local

@@ -1,9 +1,9 @@
 // How a GEMM's output [m x n] is split into thread-pool tasks. Whole rows of output, in multiples of
-// the kernel's MR, when there are enough of them for at least 5 tiles per thread (XNNPACK's rule):
-// each task's A strip stays in L1 while the packed weights stream past it once, and the many small
-// tasks even out a worker that starts late. Else columns in multiples of NR (and rows in two when
-// there are many). The int8 linears and act_kernel_bench's GEMM rows split this way; the float
-// linears keep 128x128 tiles, whose float weights (4x the bytes) would stream from memory per task.
+// the kernel's MR, when there are enough of them for 5 tasks per thread (XNNPACK's rule): each
+// task's A strip stays in L1 while the packed weights stream past it once, and the many small tasks
+// even out a worker that starts late. Else columns in multiples of NR (and rows in two when there
+// are many). The int8 linears and act_kernel_bench's GEMM rows split this way; the convolutions
+// split their output pixels, and the float linears their columns, with the same EvenSplit.
 #pragma once
 
 #include <algorithm>
@@ -11,16 +11,43 @@
 
 namespace act::graph {
 
+/// `total` items cut into `parts` ranges of whole `quantum`s (the last range may end short of one)
+/// whose sizes differ by at most one quantum, the larger ones first: the tasks of a thread pool
+/// even out to within one quantum per thread. (Fixed-size tiles left a remainder: layer3's 1200
+/// pixels in 11 tiles of 108 and one of 12 gave one of two threads a whole tile more.)
+struct EvenSplit {
+  int total = 0, quantum = 1, parts = 1;
+  /// Range i: [begin, end).
+  void range(int i, int& begin, int& end) const {
+    const int units = (total + quantum - 1) / quantum;
+    const int base = units / parts, extra = units % parts;
+    begin = quantum * (i * base + std::min(i, extra));
+    end = std::min(total, begin + quantum * (base + (i < extra ? 1 : 0)));
+  }
+  /// The size of the largest range.
+  int max_size() const {
+    const int units = (total + quantum - 1) / quantum;
+    return std::min(total, quantum * ((units + parts - 1) / parts));
+  }
+};
+
+/// The split of `total` into ranges of at most `max_size` items (a multiple of `quantum`): as few
+/// as that allows, rounded up to a multiple of `threads` while every range keeps a quantum.
+inline EvenSplit split_evenly(int total, int quantum, int max_size, int threads) {
+  const int units = (total + quantum - 1) / quantum;
+  const int max_units = std::max(1, max_size / quantum);
+  int parts = (units + max_units - 1) / max_units;
+  if (threads > 1) parts = std::min(units, (parts + threads - 1) / threads * threads);
+  return {total, quantum, std::max(1, parts)};
+}
+
 struct GemmTiling {
-  int m = 0, n = 0;
-  int tile_m = 0, tile_n = 0, tiles_m = 1, tiles_n = 1;
-  size_t count() const { return static_cast<size_t>(tiles_m) * static_cast<size_t>(tiles_n); }
+  EvenSplit rows, cols;
+  size_t count() const { return static_cast<size_t>(rows.parts) * static_cast<size_t>(cols.parts); }
   /// Task `task`'s output rectangle [m0, m1) x [n0, n1).
   void rect(size_t task, int& m0, int& m1, int& n0, int& n1) const {
-    m0 = static_cast<int>(task / static_cast<size_t>(tiles_n)) * tile_m;
-    n0 = static_cast<int>(task % static_cast<size_t>(tiles_n)) * tile_n;
-    m1 = std::min(m, m0 + tile_m);
-    n1 = std::min(n, n0 + tile_n);
+    rows.range(static_cast<int>(task / static_cast<size_t>(cols.parts)), m0, m1);
+    cols.range(static_cast<int>(task % static_cast<size_t>(cols.parts)), n0, n1);
   }
 };
 
@@ -30,20 +57,15 @@ inline constexpr int kRowStripBytes = 512 * 1024;
 /// With `whole_rows` (the caller quantizes each task's rows right after it, while they are still in
 /// cache), one thread runs strips of whole rows too, of at most kRowStripBytes of output each.
 inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool whole_rows = false) {
-  const auto tiles = [](int total, int tile) { return (total + tile - 1) / tile; };
+  const EvenSplit all_cols{n, nr, 1};
   if (threads <= 1) {
-    if (!whole_rows) return {m, n, m, n, 1, 1};
-    const int tm = std::min(m, std::max(mr, kRowStripBytes / (4 * n) / mr * mr));
-    return {m, n, tm, n, tiles(m, tm), 1};
+    if (!whole_rows) return {{m, mr, 1}, all_cols};
+    return {split_evenly(m, mr, std::max(mr, kRowStripBytes / (4 * n) / mr * mr), 1), all_cols};
   }
   const int want = 5 * threads;
-  if (m >= want * mr) {
-    const int tm = (m / want + mr - 1) / mr * mr;
-    return {m, n, tm, n, tiles(m, tm), 1};
-  }
-  const int tn = std::max(nr, (n / want + nr - 1) / nr * nr);
-  const int tm = m >= 2 * mr * 8 ? (m / 2 + mr - 1) / mr * mr : m;
-  return {m, n, tm, tn, tiles(m, tm), tiles(n, tn)};
+  const int col_units = (n + nr - 1) / nr;
+  if (m >= want * mr) return {{m, mr, want}, all_cols};
+  return {{m, mr, m >= 2 * mr * 8 ? 2 : 1}, {n, nr, std::max(1, std::min(col_units, want))}};
 }
 
 }  // namespace act::graph

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "graph/gemm_tiling.h"
 #include "kernels/pool_s8/maxpool_s8.h"
 #include "weights/blob/error.h"
 
@@ -81,10 +82,11 @@ void Conv2dOp::run(const RunContext& ctx) const {
     epilogue.residual_ld = static_cast<size_t>(s_.out_c);
   }
   epilogue.activation = relu_ ? kernels::GemmF32Activation::kRelu : kernels::GemmF32Activation::kNone;
-  const int pixels = s_.out_h * s_.out_w;
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(pixels), static_cast<size_t>(tile_pixels_)), [&](size_t task, int thread) {
-    const int p0 = static_cast<int>(task) * tile_pixels_;
-    kernels::conv_f32(conv, x, y, epilogue, p0, std::min(tile_pixels_, pixels - p0), ctx.scratch(thread));
+  const EvenSplit tiles = split_evenly(s_.out_h * s_.out_w, kernels::kConvF32TileQuantum, tile_pixels_, ctx.pool().threads());
+  ctx.pool().parallel_for(static_cast<size_t>(tiles.parts), [&](size_t task, int thread) {
+    int p0, p1;
+    tiles.range(static_cast<int>(task), p0, p1);
+    kernels::conv_f32(conv, x, y, epilogue, p0, p1 - p0, ctx.scratch(thread));
   });
 }
 
@@ -137,16 +139,18 @@ void LinearOp::run(const RunContext& ctx) const {
   const float* bias = has_bias ? bias_.resolve(ctx) : nullptr;
   const float* residual = has_residual ? residual_.resolve(ctx) : nullptr;
   float* y = ctx.data(outputs[0]);
-  const int tile_cols = (kLinearTileCols + gemm.nr - 1) / gemm.nr * gemm.nr;  // whole panels
-  const size_t col_tiles = ceil_div(static_cast<size_t>(out_), static_cast<size_t>(tile_cols));
+  // Whole panels per task, as many tasks of each size as the threads can share evenly.
+  const int tile_cols = (kLinearTileCols + gemm.nr - 1) / gemm.nr * gemm.nr;
+  const EvenSplit col_tiles = split_evenly(out_, gemm.nr, tile_cols, ctx.pool().threads());
   const size_t row_tiles = ceil_div(static_cast<size_t>(rows_), kLinearTileRows);
   const size_t ldy = static_cast<size_t>(out_);
-  ctx.pool().parallel_for(col_tiles * row_tiles, [&](size_t task, int) {
-    const int c0 = static_cast<int>(task % col_tiles) * tile_cols;
-    const int r0 = static_cast<int>(task / col_tiles) * kLinearTileRows;
+  ctx.pool().parallel_for(static_cast<size_t>(col_tiles.parts) * row_tiles, [&](size_t task, int) {
+    int c0, c1;
+    col_tiles.range(static_cast<int>(task % static_cast<size_t>(col_tiles.parts)), c0, c1);
+    const int r0 = static_cast<int>(task / static_cast<size_t>(col_tiles.parts)) * kLinearTileRows;
     kernels::GemmF32PackedArgs args;
     args.m = std::min(kLinearTileRows, rows_ - r0);
-    args.n = std::min(tile_cols, out_ - c0);
+    args.n = c1 - c0;
     args.k = in_;
     args.a = x + static_cast<size_t>(r0) * x_.ld;
     args.lda = x_.ld;

@@ -158,11 +158,12 @@ void ConvS8Op::run(const RunContext& ctx) const {
   }
   const kernels::ConvS8 conv{spec_.shape, &ctx.kernels().gemm_s8, packed_.data(), static_cast<int8_t>(in_q.zero_point)};
   const int8_t* x = ctx.data_s8(inputs[0]);
-  const int pixels = spec_.shape.out_h * spec_.shape.out_w;
   const size_t n = static_cast<size_t>(spec_.shape.out_c);
+  const EvenSplit pixel_split = split_evenly(spec_.shape.out_h * spec_.shape.out_w, kernels::kConvS8TileQuantum,
+                                             tile_pixels_, ctx.pool().threads());
   // Few pixel tiles (the deep layers): split the output channels too, in blocks of 64, so every
   // thread gets work without each one streaming all the weights.
-  const size_t pixel_tiles = ceil_div(static_cast<size_t>(pixels), static_cast<size_t>(tile_pixels_));
+  const size_t pixel_tiles = static_cast<size_t>(pixel_split.parts);
   const size_t wanted = 4 * static_cast<size_t>(ctx.pool().threads());
   const size_t channel_blocks =
       pixel_tiles >= wanted ? 1 : std::min(ceil_div(wanted, pixel_tiles), ceil_div(n, kChannelBlock));
@@ -173,10 +174,11 @@ void ConvS8Op::run(const RunContext& ctx) const {
     kernels::ConvChannels channels;
   };
   const auto tile = [&](size_t task) {
-    const int p0 = static_cast<int>(task / channel_blocks) * tile_pixels_;
+    int p0, p1;
+    pixel_split.range(static_cast<int>(task / channel_blocks), p0, p1);
     const size_t c0 = (task % channel_blocks) * channels_per_block;
     const int c1 = static_cast<int>(std::min(n, c0 + channels_per_block));
-    return Tile{p0, std::min(tile_pixels_, pixels - p0), {static_cast<int>(std::min(c0, n)), c1}};
+    return Tile{p0, p1 - p0, {static_cast<int>(std::min(c0, n)), c1}};
   };
   if (spec_.s8_out) {
     kernels::GemmS8OutS8 out;
@@ -312,7 +314,7 @@ void LinearS8Op::run(const RunContext& ctx) const {
   // Tasks of whole rows quantize their rows while they are still in cache; else a pass of its own.
   // When nothing reads the float output (its readers take the codes), those rows go to the task's
   // scratch only, never to memory.
-  const bool codes_per_task = y_codes_.present() && tiling.tiles_n == 1;
+  const bool codes_per_task = y_codes_.present() && tiling.cols.parts == 1;
   const bool f32_in_scratch = codes_per_task && !ctx.read(outputs[0]);
   ctx.pool().parallel_for(tiling.count(), [&](size_t task, int thread) {
     int r0, r1, c0, c1;
@@ -344,7 +346,7 @@ size_t LinearS8Op::scratch_per_thread() const {
   // The largest whole-row task of any thread count: one thread's strips or two threads' tiles
   // (more threads get smaller ones).
   int tile_rows = 0;
-  for (int threads : {1, 2}) tile_rows = std::max(tile_rows, gemm_tiling(rows_, out_, mr_, nr_, threads, true).tile_m);
+  for (int threads : {1, 2}) tile_rows = std::max(tile_rows, gemm_tiling(rows_, out_, mr_, nr_, threads, true).rows.max_size());
   return static_cast<size_t>(tile_rows) * static_cast<size_t>(out_);
 }
 

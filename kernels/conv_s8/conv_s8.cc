@@ -8,7 +8,7 @@ namespace act::kernels {
 
 namespace {
 
-constexpr int kTileQuantum = 12;  // lcm of the gemm_s8 MRs (1, 2, 4, 6)
+constexpr int kTileQuantum = kConvS8TileQuantum;
 constexpr size_t kTargetScratchBytes = 256 * 1024;
 
 // The A operand of a tile: patches in scratch, or the input itself. Returns rows' pointer and lda.

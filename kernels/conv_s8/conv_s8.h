@@ -22,7 +22,9 @@ struct ConvS8 {
   bool direct() const { return shape.reads_input_in_place(); }
 };
 
-/// Output pixels per tile for this conv: a multiple of every variant's MR (12) that keeps the
+/// The lcm of every gemm_s8 variant's MR (1, 2, 4, 6): tiles of output pixels start on multiples of it.
+inline constexpr int kConvS8TileQuantum = 12;
+/// Output pixels per tile for this conv at most: a multiple of kConvS8TileQuantum that keeps the
 /// patch buffer near 256 KB (L2-resident while the weights stream past it).
 int conv_s8_tile_pixels(const Conv2dShape& s);
 /// Bytes of scratch conv_s8_* needs for tiles of `tile_pixels` pixels (0 when direct), including

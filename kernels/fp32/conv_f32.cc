@@ -7,7 +7,7 @@
 namespace act::kernels {
 
 namespace {
-constexpr int kTileQuantum = 24;  // lcm of the gemm_f32 MRs (1, 6, 8)
+constexpr int kTileQuantum = kConvF32TileQuantum;
 constexpr size_t kTargetScratchBytes = 256 * 1024;
 
 // Kernel rows read in place (the GEMM's a_segments) instead of im2col: at 64 output channels (the

@@ -20,7 +20,9 @@ struct ConvF32 {
   const float* packed_w = nullptr;
 };
 
-/// Output pixels per tile: a multiple of every gemm_f32 variant's MR (24) that keeps the patch
+/// The lcm of every gemm_f32 variant's MR (1, 6, 8): tiles of output pixels start on multiples of it.
+inline constexpr int kConvF32TileQuantum = 24;
+/// Output pixels per tile at most: a multiple of kConvF32TileQuantum that keeps the patch
 /// buffer near 256 KB (L2-resident while the weights stream past it), at most 192 (small images
 /// still split into several tiles for the pool).
 int conv_f32_tile_pixels(const Conv2dShape& s);

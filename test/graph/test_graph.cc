@@ -94,7 +94,7 @@ TEST(GemmTiling, CoversEachOutputOnceInBandsOfWholeGroups) {
               t.rect(task, m0, m1, n0, n1);
               ASSERT_EQ(m0 % mr, 0);
               ASSERT_TRUE(0 <= m0 && m0 < m1 && m1 <= m && 0 <= n0 && n0 < n1 && n1 <= n);
-              ASSERT_LE(m1 - m0, t.tile_m);
+              ASSERT_LE(m1 - m0, t.rows.max_size());
               for (int r = m0; r < m1; ++r) {
                 for (int c = n0; c < n1; ++c) hits[static_cast<size_t>(r) * static_cast<size_t>(n) + static_cast<size_t>(c)]++;
               }
@@ -103,9 +103,52 @@ TEST(GemmTiling, CoversEachOutputOnceInBandsOfWholeGroups) {
               ASSERT_EQ(h, 1) << "m " << m << " n " << n << " mr " << mr << " threads " << threads;
             }
             if (threads > 1 && m >= 5 * threads * mr) {
-              EXPECT_GE(t.tiles_m * t.tile_m, m);
-              EXPECT_LE(t.tile_m, (m / (5 * threads) + mr - 1) / mr * mr);
+              EXPECT_EQ(t.rows.parts, 5 * threads);
+              EXPECT_EQ(t.cols.parts, 1);
             }
+          }
+        }
+      }
+    }
+  }
+}
+
+// Ranges that tile [0, total) in order, start on whole quanta, hold at most max_size items, differ
+// by at most a quantum (only the last may be shorter still, by the part of a quantum past total),
+// and come in a multiple of the thread count unless every quantum is a range already.
+TEST(EvenSplit, TilesTheRangeInNearEqualPartsSharedByTheThreads) {
+  for (int quantum : {1, 6, 12, 24}) {
+    for (int total : {1, 7, 12, 300, 302, 1200, 4800, 19200, 76800}) {
+      for (int max_size : {quantum, 4 * quantum, 108, 192}) {
+        for (int threads : {1, 2, 3, 4}) {
+          const EvenSplit split = split_evenly(total, quantum, max_size, threads);
+          const int units = (total + quantum - 1) / quantum;
+          SCOPED_TRACE(testing::Message() << "total " << total << " quantum " << quantum << " max " << max_size
+                                          << " threads " << threads << " parts " << split.parts);
+          ASSERT_GE(split.parts, 1);
+          ASSERT_LE(split.parts, units);
+          if (split.parts < units) {  // else every quantum is a range of its own already
+            EXPECT_EQ(split.parts % threads, 0);
+          }
+          int expected_begin = 0, smallest = total, largest = 0;
+          for (int i = 0; i < split.parts; ++i) {
+            int begin, end;
+            split.range(i, begin, end);
+            ASSERT_EQ(begin, expected_begin);
+            ASSERT_EQ(begin % quantum, 0);
+            ASSERT_LT(begin, end);
+            ASSERT_LE(end - begin, split.max_size());
+            ASSERT_LE(end - begin, std::max(quantum, max_size / quantum * quantum));
+            if (i + 1 < split.parts) {
+              ASSERT_EQ((end - begin) % quantum, 0);
+              smallest = std::min(smallest, end - begin);
+            }
+            largest = std::max(largest, end - begin);
+            expected_begin = end;
+          }
+          EXPECT_EQ(expected_begin, total);
+          if (split.parts > 1) {
+            EXPECT_LE(largest - smallest, quantum);
           }
         }
       }

@@ -16,6 +16,7 @@ enum KernelPath : uint32_t {
   kPathRowTail = 1u << 1,      ///< a micro-tile with fewer than MR rows (e.g. the 1x16c4 kernel)
   kPathPartialCols = 1u << 2,  ///< a micro-tile storing fewer than NR columns
   kPathRowZeroPoint = 1u << 3, ///< per-row activation zero points
+  kPathSegmentedA = 1u << 4,   ///< A rows read in segments (GemmS8Args::a_segments)
 };
 
 /// A record of (Isa, KernelPath) pairs that ran. Thread-safe: kernels running on several threads

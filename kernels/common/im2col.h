@@ -1,8 +1,10 @@
 // Tiled im2col for the convolutions, float and int8: the patches of a tile of output pixels,
 // gathered into a small per-thread buffer that the GEMM reads as A (never a whole-image buffer).
-// Patch order is (ky, kx, c), the OHWI weight order.
+// Patch order is (ky, kx, c), the OHWI weight order. Or, without copying, pointers at each pixel's
+// kernel rows where they lie in the input (the GEMMs' segmented A).
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 
@@ -18,5 +20,56 @@ void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, 
 /// `pad_value` — the input's zero point, the int8 code of 0.0, so padding contributes exactly nothing.
 void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value, int pixel_begin, int count,
                     int8_t* patches, size_t ld);
+
+/// Elements of one kernel row (a segment of the patch): kernel_w * in_c, contiguous in NHWC when
+/// the dilation is 1.
+inline size_t kernel_row_elements(const Conv2dShape& s) {
+  return static_cast<size_t>(s.kernel_w) * static_cast<size_t>(s.in_c);
+}
+
+/// Scratch elements point_at_kernel_rows needs for `pixels` pixels: the padding row and at most one
+/// padded copy per kernel row.
+inline size_t kernel_row_copies_elements(const Conv2dShape& s, int pixels) {
+  return kernel_row_elements(s) * (1 + static_cast<size_t>(pixels) * static_cast<size_t>(s.kernel_h));
+}
+
+/// Points rows[i * kernel_h + ky] at kernel row ky of output pixel pixel_begin + i (dilation 1):
+/// in the input where the row lies inside it, else at a row of `pad` (above or below the image) or
+/// at a copy with its padding (across the left or right edge), both in `scratch`
+/// (kernel_row_copies_elements). The order of the patch: (ky, kx, c).
+template <class T>
+void point_at_kernel_rows(const Conv2dShape& s, const T* input, T pad, int pixel_begin, int count, T* scratch,
+                          const T** rows) {
+  const size_t seg = kernel_row_elements(s), c = static_cast<size_t>(s.in_c);
+  const T* pad_row = scratch;
+  std::fill(scratch, scratch + seg, pad);
+  T* copies = scratch + seg;
+  for (int i = 0; i < count; ++i) {
+    const int oy = (pixel_begin + i) / s.out_w, ox = (pixel_begin + i) % s.out_w;
+    const int ix0 = ox * s.stride - s.pad;
+    const bool inside_x = ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
+    for (int ky = 0; ky < s.kernel_h; ++ky) {
+      const int iy = oy * s.stride - s.pad + ky;
+      const T* row = input + static_cast<size_t>(iy) * static_cast<size_t>(s.in_w) * c;
+      if (iy < 0 || iy >= s.in_h) {
+        *rows++ = pad_row;
+      } else if (inside_x) {
+        *rows++ = row + static_cast<size_t>(ix0) * c;
+      } else {
+        for (int kx = 0; kx < s.kernel_w; ++kx) {
+          const int ix = ix0 + kx;
+          T* dst = copies + static_cast<size_t>(kx) * c;
+          if (ix < 0 || ix >= s.in_w) {
+            std::fill(dst, dst + c, pad);
+          } else {
+            std::copy(row + static_cast<size_t>(ix) * c, row + static_cast<size_t>(ix + 1) * c, dst);
+          }
+        }
+        *rows++ = copies;
+        copies += seg;
+      }
+    }
+  }
+}
 
 }  // namespace act::kernels

@@ -1,7 +1,8 @@
-// INT8 NHWC convolution as tiled im2col + gemm_s8: each call computes a tile of output pixels,
-// gathering only that tile's patches into caller-provided scratch (1x1 stride-1 convolutions read
-// the input in place). The gemm_s8 epilogue does the rest: bias, per-channel requantization (or
-// dequantization), residual, ReLU.
+// INT8 NHWC convolution as gemm_s8 over tiles of output pixels: each call computes one tile, its A
+// the input itself (1x1 stride 1), pointers at its kernel rows in the input (kGemmS8SegmentAlign-
+// multiple rows), or its patches gathered into caller-provided scratch (the rest: the stem). The
+// gemm_s8 epilogue does the rest: bias, per-channel requantization (or dequantization), residual,
+// ReLU.
 #pragma once
 
 #include <cstddef>

@@ -18,48 +18,9 @@ bool reads_kernel_rows_in_place(const Conv2dShape& s) {
   return !s.reads_input_in_place() && s.dilation == 1 && s.kernel_w * s.in_c >= 8;
 }
 
-size_t segment_floats(const Conv2dShape& s) { return static_cast<size_t>(s.kernel_w) * static_cast<size_t>(s.in_c); }
-
-// Points at each pixel's kernel rows: in the input where the row lies inside it, else at the zero
-// row (above or below the image) or at a copy with its padding (across the left or right edge).
-void point_at_kernel_rows(const Conv2dShape& s, const float* input, int pixel_begin, int count, float* scratch,
-                          const float** rows) {
-  const size_t seg = segment_floats(s), c = static_cast<size_t>(s.in_c);
-  const float* zeros = scratch;
-  std::fill(scratch, scratch + seg, 0.0f);
-  float* copies = scratch + seg;
-  for (int i = 0; i < count; ++i) {
-    const int oy = (pixel_begin + i) / s.out_w, ox = (pixel_begin + i) % s.out_w;
-    const int ix0 = ox * s.stride - s.pad;
-    const bool inside_x = ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
-    for (int ky = 0; ky < s.kernel_h; ++ky) {
-      const int iy = oy * s.stride - s.pad + ky;
-      const float* row = input + static_cast<size_t>(iy) * static_cast<size_t>(s.in_w) * c;
-      if (iy < 0 || iy >= s.in_h) {
-        *rows++ = zeros;
-      } else if (inside_x) {
-        *rows++ = row + static_cast<size_t>(ix0) * c;
-      } else {
-        for (int kx = 0; kx < s.kernel_w; ++kx) {
-          const int ix = ix0 + kx;
-          float* dst = copies + static_cast<size_t>(kx) * c;
-          if (ix < 0 || ix >= s.in_w) {
-            std::fill(dst, dst + c, 0.0f);
-          } else {
-            std::copy(row + static_cast<size_t>(ix) * c, row + static_cast<size_t>(ix + 1) * c, dst);
-          }
-        }
-        *rows++ = copies;
-        copies += seg;
-      }
-    }
-  }
-}
-
 // Scratch of the in-place path: the zero row, at most one copy per kernel row, then the pointers.
 size_t row_pointers_offset(const Conv2dShape& s, int tile_pixels) {
-  const size_t floats = segment_floats(s) * (1 + static_cast<size_t>(tile_pixels) * static_cast<size_t>(s.kernel_h));
-  return (floats + 15) / 16 * 16;  // 64-byte aligned
+  return (kernel_row_copies_elements(s, tile_pixels) + 15) / 16 * 16;  // 64-byte aligned
 }
 }  // namespace
 
@@ -88,9 +49,9 @@ void conv_f32(const ConvF32& conv, const float* input, float* y, const GemmF32Ep
   if (reads_kernel_rows_in_place(s)) {
     // The pointers after the row copies, in the same (suitably aligned) scratch.
     auto** rows = reinterpret_cast<const float**>(scratch + row_pointers_offset(s, count));
-    point_at_kernel_rows(s, input, pixel_begin, count, scratch, rows);
+    point_at_kernel_rows(s, input, 0.0f, pixel_begin, count, scratch, rows);
     args.a_segments = rows;
-    args.segment_k = static_cast<int>(segment_floats(s));
+    args.segment_k = static_cast<int>(kernel_row_elements(s));
   } else if (s.reads_input_in_place()) {
     args.a = input + static_cast<size_t>(pixel_begin) * s.in_c;
   } else {

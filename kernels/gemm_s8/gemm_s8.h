@@ -29,6 +29,8 @@ namespace act::kernels {
 /// Bytes that a kernel may read past the end of each A row it reads (A[m][K-1]); the caller must
 /// keep them addressable (XNNPACK's XNN_EXTRA_BYTES). Their values never change the result.
 inline constexpr size_t kGemmS8ReadSlack = 16;
+/// segment_k of a segmented A is a multiple of this (every variant's k-group divides it).
+inline constexpr int kGemmS8SegmentAlign = 8;
 /// Largest K the kernels accept: keeps every int32 sum exact (255 * 127 * K < 2^31).
 inline constexpr int kGemmS8MaxK = 1 << 16;
 /// Alignment of packed buffers and of every panel inside them.
@@ -70,6 +72,11 @@ struct GemmS8Args {
   int m = 0, n = 0, k = 0;           ///< C is [m x n]; 1 <= k <= kGemmS8MaxK
   const int8_t* a = nullptr;         ///< A [m x k]
   size_t lda = 0;                    ///< elements between A rows, >= k
+  /// Instead of a and lda, A's rows in segments of segment_k bytes (a convolution's kernel rows,
+  /// read where they lie in the input): row i's segment s at a_segments[i * (k / segment_k) + s].
+  /// segment_k is a multiple of kGemmS8SegmentAlign and divides k; no byte past a segment is read.
+  const int8_t* const* a_segments = nullptr;
+  int segment_k = 0;
   const void* packed_w = nullptr;    ///< W packed for [n x k] by this variant's packer
   /// Optional [m]: per-row activation zero points, used instead of the packed a_zero_point.
   const int32_t* a_row_zero_point = nullptr;

@@ -41,10 +41,13 @@ constexpr GemmS8Layout kLayout = GemmS8Layout::kAvx2_8x8;
 // Weight panels processed per sweep over the rows: keep them in L2 while every row block reuses them.
 constexpr size_t kPanelBlockBytes = size_t{512} << 10;
 
-// out[r] = the 8 int32 accumulators of row r (natural column order), kbias included. The
-// accumulators are a local array (copied out once) so that GCC keeps them in registers.
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
+
+// out[r] = the 8 int32 accumulators of row r (natural column order), kbias included, A walked
+// segment by segment. The accumulators are a local array (copied out once) so that GCC keeps them
+// in registers.
 template <int R>
-inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kgroups, __m256i (&out)[R]) {
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgroups, __m256i (&out)[R]) {
   const auto* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
   __m256i acc[R][4];
 #pragma GCC unroll 2
@@ -52,24 +55,30 @@ inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kg
 #pragma GCC unroll 4
     for (int j = 0; j < 4; ++j) acc[r][j] = _mm256_setzero_si256();
   }
-  for (int g = 0; g < kgroups; ++g) {
-    __m256i av[R];
-#pragma GCC unroll 2
-    for (int r = 0; r < R; ++r) {
-      int64_t bytes;
-      std::memcpy(&bytes, a + static_cast<size_t>(r) * lda + static_cast<size_t>(g) * kKR, 8);
-      av[r] = _mm256_cvtepi8_epi16(_mm_set1_epi64x(bytes));
-    }
-    const int8_t* wg = w + static_cast<size_t>(g) * (kNR * kKR);
-#pragma GCC unroll 4
-    for (int j = 0; j < 4; ++j) {
-      const __m256i wv = _mm256_cvtepi8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(wg + j * 16)));
+  const int segments = segment_count(g), segment_groups = kgroups / segments;
+  for (int s = 0; s < segments; ++s) {
+    const int8_t* rows[R];
+    segment_rows<R>(g, m, s, rows);
+    const int8_t* ws = w + static_cast<size_t>(s) * static_cast<size_t>(segment_groups) * (kNR * kKR);
+    for (int gi = 0; gi < segment_groups; ++gi) {
+      __m256i av[R];
 #pragma GCC unroll 2
       for (int r = 0; r < R; ++r) {
-        acc[r][j] = _mm256_add_epi32(acc[r][j], _mm256_madd_epi16(av[r], wv));
-        // Pins the sum to its register here; without it GCC issues all vpmaddwd first, runs out of
-        // registers for the products and adds moves (and spills) to the loop.
-        __asm__("" : "+x"(acc[r][j]));
+        int64_t bytes;
+        std::memcpy(&bytes, rows[r] + static_cast<size_t>(gi) * kKR, 8);
+        av[r] = _mm256_cvtepi8_epi16(_mm_set1_epi64x(bytes));
+      }
+      const int8_t* wg = ws + static_cast<size_t>(gi) * (kNR * kKR);
+#pragma GCC unroll 4
+      for (int j = 0; j < 4; ++j) {
+        const __m256i wv = _mm256_cvtepi8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(wg + j * 16)));
+#pragma GCC unroll 2
+        for (int r = 0; r < R; ++r) {
+          acc[r][j] = _mm256_add_epi32(acc[r][j], _mm256_madd_epi16(av[r], wv));
+          // Pins the sum to its register here; without it GCC issues all vpmaddwd first, runs out of
+          // registers for the products and adds moves (and spills) to the loop.
+          __asm__("" : "+x"(acc[r][j]));
+        }
       }
     }
   }
@@ -186,7 +195,7 @@ template <int R, class Epi>
 void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
           Epi& epi) {
   __m256i acc[R];
-  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp / kKR, acc);
+  accumulate<R>(g, m, panel, h.kp / kKR, acc);
   if (g.a_row_zero_point != nullptr) {
     // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
     const __m256i ksum = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 4 * kNR));
@@ -198,8 +207,6 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel
   epi.begin_panel(n, lo, hi);
   for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
-
-#include "kernels/gemm_s8/gemm_s8_driver.inc"
 
 template <class Epi>
 void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,

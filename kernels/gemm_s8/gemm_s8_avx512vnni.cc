@@ -45,6 +45,8 @@ constexpr GemmS8Layout kLayout = GemmS8Layout::kVnni64x4;
 constexpr int kVecs = kNR / 16;
 constexpr size_t kPanelBlockBytes = size_t{1} << 20;  // weight panels kept in L2 per sweep
 
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
+
 // The lanes of vector j (columns [16j, 16j + 16) of the panel) that fall inside [lo, hi).
 __mmask16 vec_mask(int j, int lo, int hi) {
   const int a = lo - 16 * j < 0 ? 0 : lo - 16 * j;
@@ -54,31 +56,34 @@ __mmask16 vec_mask(int j, int lo, int hi) {
 }
 
 // 128 * sum_k A[r][k] for the R rows of a tile (exactly K bytes each: masked loads read nothing
-// past the row, and padding weights are 0 so A's slack bytes never count).
+// past a row or segment, and padding weights are 0 so A's slack bytes never count). The rows side
+// by side: R independent chains of vpdpbusd, not one chain after another.
 template <int R>
-void row_corrections(const int8_t* a, size_t lda, int k, int32_t (&corr)[R]) {
+void row_corrections(const GemmS8Args& g, int m, int32_t (&corr)[R]) {
   const __m512i ones = _mm512_set1_epi8(1);
-  // The rows side by side: R independent chains of vpdpbusd, not one chain after another.
   __m512i sum[R];
 #pragma GCC unroll 6
   for (int r = 0; r < R; ++r) sum[r] = _mm512_setzero_si512();
-  for (int i = 0; i < k; i += 64) {
-    const int left = k - i;
-    const __mmask64 m = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
+  const int segments = segment_count(g), bytes = g.k / segments;
+  for (int s = 0; s < segments; ++s) {
+    const int8_t* rows[R];
+    segment_rows<R>(g, m, s, rows);
+    for (int i = 0; i < bytes; i += 64) {
+      const int left = bytes - i;
+      const __mmask64 mask = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
 #pragma GCC unroll 6
-    for (int r = 0; r < R; ++r) {
-      sum[r] = _mm512_dpbusd_epi32(sum[r], ones, _mm512_maskz_loadu_epi8(m, a + static_cast<size_t>(r) * lda + i));
+      for (int r = 0; r < R; ++r) sum[r] = _mm512_dpbusd_epi32(sum[r], ones, _mm512_maskz_loadu_epi8(mask, rows[r] + i));
     }
   }
 #pragma GCC unroll 6
   for (int r = 0; r < R; ++r) corr[r] = static_cast<int32_t>(128u * static_cast<uint32_t>(_mm512_reduce_add_epi32(sum[r])));
 }
 
-// out[r][j] = kbias - corr[r] + sum over k-groups of (W + 128) x A. The accumulators are a local
-// array (copied out once) so that GCC keeps them in registers; an out-parameter array would be
-// stored every iteration.
+// out[r][j] = kbias - corr[r] + sum over k-groups of (W + 128) x A, segment by segment. The
+// accumulators are a local array (copied out once) so that GCC keeps them in registers; an
+// out-parameter array would be stored every iteration.
 template <int R>
-inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kgroups, const int32_t (&corr)[R],
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgroups, const int32_t (&corr)[R],
                        __m512i (&out)[R][kVecs]) {
   const uint8_t* w = panel + 8 * kNR;
   __m512i acc[R][kVecs];
@@ -88,21 +93,27 @@ inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kg
 #pragma GCC unroll 6
     for (int r = 0; r < R; ++r) acc[r][j] = _mm512_sub_epi32(kbias, _mm512_set1_epi32(corr[r]));
   }
-  for (int g = 0; g < kgroups; ++g) {
-    const uint8_t* wg = w + static_cast<size_t>(g) * (kNR * kKR);
-    const __m512i w0 = _mm512_loadu_si512(wg);
-    const __m512i w1 = _mm512_loadu_si512(wg + 64);
-    const __m512i w2 = _mm512_loadu_si512(wg + 128);
-    const __m512i w3 = _mm512_loadu_si512(wg + 192);
+  const int segments = segment_count(g), segment_groups = kgroups / segments;
+  for (int s = 0; s < segments; ++s) {
+    const int8_t* rows[R];
+    segment_rows<R>(g, m, s, rows);
+    const uint8_t* ws = w + static_cast<size_t>(s) * static_cast<size_t>(segment_groups) * (kNR * kKR);
+    for (int gi = 0; gi < segment_groups; ++gi) {
+      const uint8_t* wg = ws + static_cast<size_t>(gi) * (kNR * kKR);
+      const __m512i w0 = _mm512_loadu_si512(wg);
+      const __m512i w1 = _mm512_loadu_si512(wg + 64);
+      const __m512i w2 = _mm512_loadu_si512(wg + 128);
+      const __m512i w3 = _mm512_loadu_si512(wg + 192);
 #pragma GCC unroll 6
-    for (int r = 0; r < R; ++r) {
-      int32_t quad;
-      std::memcpy(&quad, a + static_cast<size_t>(r) * lda + static_cast<size_t>(g) * kKR, 4);
-      const __m512i av = _mm512_set1_epi32(quad);
-      acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], w0, av);
-      acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], w1, av);
-      acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], w2, av);
-      acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], w3, av);
+      for (int r = 0; r < R; ++r) {
+        int32_t quad;
+        std::memcpy(&quad, rows[r] + static_cast<size_t>(gi) * kKR, 4);
+        const __m512i av = _mm512_set1_epi32(quad);
+        acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], w0, av);
+        acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], w1, av);
+        acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], w2, av);
+        acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], w3, av);
+      }
     }
   }
 #pragma GCC unroll 6
@@ -204,7 +215,7 @@ template <int R, class Epi>
 void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr)[R], const uint8_t* panel, int m,
           int n, int lo, int hi, Epi& epi) {
   __m512i acc[R][kVecs];
-  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp / kKR, corr, acc);
+  accumulate<R>(g, m, panel, h.kp / kKR, corr, acc);
   if (g.a_row_zero_point != nullptr) {
     // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
     for (int j = 0; j < kVecs; ++j) {
@@ -219,14 +230,12 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
 }
 
-#include "kernels/gemm_s8/gemm_s8_driver.inc"
-
 // The rows [m, m + R) against panels [pb, pe): the row sums once, then every panel.
 template <int R, class Epi>
 void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int pb, int pe, int n0,
               int n1, Epi& epi, uint32_t& paths) {
   int32_t corr[R];
-  row_corrections<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, g.k, corr);
+  row_corrections<R>(g, m, corr);
   for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
     tile<R>(g, h, corr, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi);
   });

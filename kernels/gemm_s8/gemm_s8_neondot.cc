@@ -34,6 +34,8 @@ constexpr Isa kIsa = Isa::kNeonDot;
 constexpr GemmS8Layout kLayout = GemmS8Layout::kNeon16x4;
 constexpr size_t kPanelBlockBytes = size_t{256} << 10;  // half the A76's 512 KB L2
 
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
+
 // One k-group (16 columns x 4 bytes) against lane L of each row's 16-byte A chunk.
 template <int R, int L>
 inline void step_q(const int8_t* wg, const int8x16_t (&av)[R], int32x4_t (&acc)[R][4]) {
@@ -58,43 +60,50 @@ inline void step_d(const int8_t* wg, const int8x8_t (&av)[R], int32x4_t (&acc)[R
   }
 }
 
-// out[r][j] = kbias + sum over k. The accumulators are a local array (copied out once) so that
-// GCC keeps them in registers; an out-parameter array would be stored every iteration.
+// out[r][j] = kbias + sum over k, A walked segment by segment (kp / segments bytes each). The
+// accumulators are a local array (copied out once) so that GCC keeps them in registers; an
+// out-parameter array would be stored every iteration.
 template <int R>
-inline void accumulate(const int8_t* a, size_t lda, const uint8_t* panel, int kp, int32x4_t (&out)[R][4]) {
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp, int32x4_t (&out)[R][4]) {
   int32x4_t acc[R][4];
-  const int8_t* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
   const auto* kbias = static_cast<const int32_t*>(static_cast<const void*>(panel));
   for (int j = 0; j < 4; ++j) {
     const int32x4_t b = vld1q_s32(kbias + 4 * j);
     for (int r = 0; r < R; ++r) acc[r][j] = b;
   }
-  int k = 0;
-  for (; k + 16 <= kp; k += 16) {
-    int8x16_t av[R];
-    for (int r = 0; r < R; ++r) av[r] = vld1q_s8(a + static_cast<size_t>(r) * lda + k);
-    const int8_t* wk = w + static_cast<size_t>(k) * kNR;  // k-group k/4 starts at (k/4) * 64
-    step_q<R, 0>(wk, av, acc);
-    step_q<R, 1>(wk + 64, av, acc);
-    step_q<R, 2>(wk + 128, av, acc);
-    step_q<R, 3>(wk + 192, av, acc);
-  }
-  if (k + 8 <= kp) {
-    int8x8_t av[R];
-    for (int r = 0; r < R; ++r) av[r] = vld1_s8(a + static_cast<size_t>(r) * lda + k);
-    const int8_t* wk = w + static_cast<size_t>(k) * kNR;
-    step_d<R, 0>(wk, av, acc);
-    step_d<R, 1>(wk + 64, av, acc);
-    k += 8;
-  }
-  if (k < kp) {  // one k-group left
-    int8x8_t av[R];
-    for (int r = 0; r < R; ++r) {
-      int32_t quad;
-      std::memcpy(&quad, a + static_cast<size_t>(r) * lda + k, 4);
-      av[r] = vreinterpret_s8_s32(vdup_n_s32(quad));
+  const int segments = segment_count(g), segment_bytes = kp / segments;
+  for (int s = 0; s < segments; ++s) {
+    const int8_t* rows[R];
+    segment_rows<R>(g, m, s, rows);
+    // k-group k/4 of the segment starts at (k/4) * 64 bytes of its weights.
+    const int8_t* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR) + static_cast<size_t>(s) * segment_bytes * kNR;
+    int k = 0;
+    for (; k + 16 <= segment_bytes; k += 16) {
+      int8x16_t av[R];
+      for (int r = 0; r < R; ++r) av[r] = vld1q_s8(rows[r] + k);
+      const int8_t* wk = w + static_cast<size_t>(k) * kNR;
+      step_q<R, 0>(wk, av, acc);
+      step_q<R, 1>(wk + 64, av, acc);
+      step_q<R, 2>(wk + 128, av, acc);
+      step_q<R, 3>(wk + 192, av, acc);
     }
-    step_d<R, 0>(w + static_cast<size_t>(k) * kNR, av, acc);
+    if (k + 8 <= segment_bytes) {
+      int8x8_t av[R];
+      for (int r = 0; r < R; ++r) av[r] = vld1_s8(rows[r] + k);
+      const int8_t* wk = w + static_cast<size_t>(k) * kNR;
+      step_d<R, 0>(wk, av, acc);
+      step_d<R, 1>(wk + 64, av, acc);
+      k += 8;
+    }
+    if (k < segment_bytes) {  // one k-group left
+      int8x8_t av[R];
+      for (int r = 0; r < R; ++r) {
+        int32_t quad;
+        std::memcpy(&quad, rows[r] + k, 4);
+        av[r] = vreinterpret_s8_s32(vdup_n_s32(quad));
+      }
+      step_d<R, 0>(w + static_cast<size_t>(k) * kNR, av, acc);
+    }
   }
   for (int r = 0; r < R; ++r) {
     for (int j = 0; j < 4; ++j) out[r][j] = acc[r][j];
@@ -220,7 +229,7 @@ template <int R, class Epi>
 void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
           Epi& epi) {
   int32x4_t acc[R][4];
-  accumulate<R>(g.a + static_cast<size_t>(m) * g.lda, g.lda, panel, h.kp, acc);
+  accumulate<R>(g, m, panel, h.kp, acc);
   if (g.a_row_zero_point != nullptr) {
     // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
     const auto* ksum = static_cast<const int32_t*>(static_cast<const void*>(panel + 4 * kNR));
@@ -232,8 +241,6 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel
   epi.begin_panel(n, lo, hi);
   for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
-
-#include "kernels/gemm_s8/gemm_s8_driver.inc"
 
 template <class Epi>
 void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,

@@ -20,10 +20,20 @@ void check_args(const GemmS8Args& g, size_t ldc, int m0, int m1, int n0, int n1)
   ACT_DCHECK(h.magic == kGemmS8PackedMagic && h.layout == GemmS8Layout::kRef1x1,
              "packed_w was not written by pack_w_s8_1x1_goi");
   ACT_DCHECK(h.n == g.n && h.k == g.k, "packed_w has another shape");
-  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK && g.lda >= static_cast<size_t>(g.k), "bad k or lda");
+  ACT_DCHECK(g.k >= 1 && g.k <= kGemmS8MaxK, "bad k");
+  ACT_DCHECK(g.a_segments != nullptr ? g.segment_k > 0 && g.segment_k % kGemmS8SegmentAlign == 0 && g.k % g.segment_k == 0
+                                     : g.lda >= static_cast<size_t>(g.k),
+             "bad lda or segment_k");
   ACT_DCHECK(ldc >= static_cast<size_t>(g.n), "ldc < n");
   ACT_DCHECK(0 <= m0 && m0 <= m1 && m1 <= g.m && 0 <= n0 && n0 <= n1 && n1 <= g.n, "rectangle outside C");
   (void)h, (void)ldc, (void)m0, (void)m1, (void)n0, (void)n1;
+}
+
+// A[m][k], from its rows or its segments.
+int8_t a_at(const GemmS8Args& g, int m, int k) {
+  if (g.a_segments == nullptr) return g.a[static_cast<size_t>(m) * g.lda + static_cast<size_t>(k)];
+  const size_t segments_per_row = static_cast<size_t>(g.k / g.segment_k);
+  return g.a_segments[static_cast<size_t>(m) * segments_per_row + static_cast<size_t>(k / g.segment_k)][k % g.segment_k];
 }
 
 // acc[m][n] = sum_k (A[m][k] - z_a) W[n][k] + bias[n], modulo 2^32, from the packed column:
@@ -36,16 +46,16 @@ int32_t accumulate(const GemmS8Args& g, int m, int n) {
   std::memcpy(&kbias, panel, 4);
   std::memcpy(&ksum, panel + 4, 4);
   const auto* w = reinterpret_cast<const int8_t*>(panel + 8);
-  const int8_t* a = g.a + static_cast<size_t>(m) * g.lda;
   int64_t acc = kbias;
-  for (int k = 0; k < g.k; ++k) acc += int32_t{a[k]} * int32_t{w[k]};
+  for (int k = 0; k < g.k; ++k) acc += int32_t{a_at(g, m, k)} * int32_t{w[k]};
   if (g.a_row_zero_point != nullptr) acc -= (int64_t{g.a_row_zero_point[m]} - h.a_zero_point) * ksum;
   return static_cast<int32_t>(acc);  // modular, like the SIMD int32 lanes
 }
 
 void record(const GemmS8Args& g) {
   if (g.covered != nullptr) {
-    g.covered->record(Isa::kRef, kPathFullTile | (g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u));
+    g.covered->record(Isa::kRef, kPathFullTile | (g.a_row_zero_point != nullptr ? kPathRowZeroPoint : 0u) |
+                                     (g.a_segments != nullptr ? kPathSegmentedA : 0u));
   }
 }
 

@@ -112,10 +112,12 @@ std::vector<std::pair<int, int>> tile_sizes(const GemmS8Kernels& v, int tm, int 
 
 void GemmS8Tester::test(const GemmS8Kernels& v) const {
   SCOPED_TRACE(::testing::Message() << isa_name(v.isa) << " m=" << m_ << " n=" << n_ << " k=" << k_
+                                    << " segment_k=" << segment_k_
                                     << " lda+=" << lda_pad_ << " ldc+=" << ldc_pad_ << " za=" << za_
                                     << " per_row=" << per_row_ << " out=" << static_cast<int>(out_)
                                     << " zo=" << zo_ << " q=[" << qmin_ << "," << qmax_ << "] res=" << residual_
                                     << " relu=" << relu_ << " seed=" << seed_);
+  ASSERT_TRUE(segment_k_ == 0 || (segment_k_ % kGemmS8SegmentAlign == 0 && k_ % segment_k_ == 0)) << "bad test";
   const GemmS8Kernels* ref = gemm_s8_table_ref();
   std::mt19937 rng(seed_);
   auto uniform = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
@@ -136,6 +138,29 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
       int8_t& x = a[static_cast<size_t>(i) * lda + kk];
       if (a_fill_ == GemmFill::kMax) x = 127;
       if (a_fill_ == GemmFill::kMin) x = -128;
+    }
+  }
+  // Segments: a pool of separately allocated kernel-row-like pieces, each row's segments picked from
+  // it (rows share them), and the dense A above rewritten to the bytes the segments hold.
+  std::vector<std::unique_ptr<int8_t[]>> segment_pool;
+  std::vector<const int8_t*> a_segments;
+  if (segment_k_ > 0) {
+    const int per_row = k_ / segment_k_;
+    const int pool_size = std::max(1, m_ * per_row / 2 + 1);
+    for (int p = 0; p < pool_size; ++p) {
+      segment_pool.emplace_back(new int8_t[static_cast<size_t>(segment_k_)]);
+      for (int t = 0; t < segment_k_; ++t) {
+        segment_pool.back()[t] = static_cast<int8_t>(a_fill_ == GemmFill::kMax   ? 127
+                                                     : a_fill_ == GemmFill::kMin ? -128
+                                                                                 : uniform(-128, 127));
+      }
+    }
+    for (int i = 0; i < m_; ++i) {
+      for (int s = 0; s < per_row; ++s) {
+        const int8_t* seg = segment_pool[static_cast<size_t>(uniform(0, pool_size - 1))].get();
+        a_segments.push_back(seg);
+        std::memcpy(&a[static_cast<size_t>(i) * lda + static_cast<size_t>(s) * segment_k_], seg, static_cast<size_t>(segment_k_));
+      }
     }
   }
   std::vector<int8_t> w(static_cast<size_t>(n_) * k_);
@@ -188,8 +213,13 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
     g.m = m_;
     g.n = n_;
     g.k = k_;
-    g.a = a.data();
-    g.lda = lda;
+    if (segment_k_ > 0) {
+      g.a_segments = a_segments.data();
+      g.segment_k = segment_k_;
+    } else {
+      g.a = a.data();
+      g.lda = lda;
+    }
     g.packed_w = p.get();
     g.a_row_zero_point = per_row_ ? row_zp.data() : nullptr;
     g.covered = covered;
@@ -238,6 +268,7 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
     if (per_row_) {
       EXPECT_NE(paths & kPathRowZeroPoint, 0u) << "per-row zero points were not applied";
     }
+    EXPECT_EQ((paths & kPathSegmentedA) != 0, segment_k_ > 0) << "A was not read the way it was given";
     if (m_ % v.mr != 0) {
       EXPECT_NE(paths & kPathRowTail, 0u) << "row tail kernel did not run";
     }

@@ -47,6 +47,10 @@ class GemmS8Tester {
   /// Sub-rectangle size for the tiling check (0: a default set of unaligned sizes).
   GemmS8Tester& tile(int tm, int tn) { tile_m_ = tm; tile_n_ = tn; return *this; }
   GemmS8Tester& seed(uint32_t v) { seed_ = v; return *this; }
+  /// A read in segments of this many bytes (GemmS8Args::a_segments; a multiple of kGemmS8SegmentAlign
+  /// that divides k): each its own allocation of exactly that size (ASan catches a read past one),
+  /// shared between rows the way a convolution's kernel rows are. 0: a plain A.
+  GemmS8Tester& segments(int segment_k) { segment_k_ = segment_k; return *this; }
   /// Where C and the residual are the same buffer (s8 out only).
   GemmS8Tester& residual_in_place(bool v) { in_place_ = v; return *this; }
 
@@ -64,6 +68,7 @@ class GemmS8Tester {
   float scale_lo_ = 1e-4f, scale_hi_ = 1e-2f;
   GemmFill a_fill_ = GemmFill::kRandom, w_fill_ = GemmFill::kRandom;
   int tile_m_ = 0, tile_n_ = 0;
+  int segment_k_ = 0;
   uint32_t seed_ = 1;
 };
 

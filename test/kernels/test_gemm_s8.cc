@@ -84,6 +84,34 @@ TEST_P(GemmS8Variant, LargeShapes) {
   GemmS8Tester().m(2 * mr() + 3).n(4 * nr()).k(2304 + 7).out(GemmOut::kS32).a_zero_point(11).seed(9).test(variant());
 }
 
+// A in segments (a convolution's kernel rows read in place): segments of one and several k-steps,
+// one to four per row, row tails, every epilogue, per-row zero points.
+TEST_P(GemmS8Variant, SegmentedA) {
+  uint32_t seed = 900;
+  for (int segment_k : {8, 16, 24, 64, 192}) {
+    for (int segments : {1, 2, 3, 4}) {
+      for (int m : {1, mr() + 1, 2 * mr() + 3}) {
+        for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
+          const int za = static_cast<int>(seed % 9) - 4;
+          GemmS8Tester()
+              .m(m)
+              .n(nr() + 5)
+              .k(segment_k * segments)
+              .segments(segment_k)
+              .out(out)
+              .a_zero_point(za)
+              .per_row(out == GemmOut::kF32 && segments % 2 == 0)
+              .residual(out != GemmOut::kS32 && m > 1)
+              .seed(seed++)
+              .test(variant());
+        }
+      }
+    }
+  }
+  GemmS8Tester().m(37).n(3 * nr() + 1).k(576).segments(192).out(GemmOut::kS8).a_fill(GemmFill::kMin)
+      .w_fill(GemmFill::kMax).seed(seed++).test(variant());
+}
+
 TEST_P(GemmS8Variant, StridedAAndC) {
   uint32_t seed = 200;
   for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {

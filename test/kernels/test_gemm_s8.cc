@@ -323,7 +323,8 @@ TEST(GemmS8Pack, TransposedPackerMatchesPackOfTranspose) {
               static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
           std::unique_ptr<uint8_t, decltype(&std::free)> got(
               static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
-          std::memset(got.get(), 0x5a, bytes);  // every byte must be written
+          std::memset(got.get(), 0x5a, bytes);  // every byte must be written: unwritten ones differ
+          std::memset(want.get(), 0xa5, bytes);
           p.pack(n, k, w.data(), static_cast<size_t>(k), b, -13, want.get());
           p.pack_transposed(n, k, wt.data(), ldt, b, -13, got.get());
           ASSERT_EQ(std::memcmp(got.get(), want.get(), bytes), 0)

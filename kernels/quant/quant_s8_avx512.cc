@@ -77,9 +77,35 @@ void minmax_f32_avx512(size_t n, const float* x, float* lo, float* hi) {
   *hi = _mm512_reduce_max_ps(_mm512_max_ps(mx0, mx1));
 }
 
+// Rows of up to 64 values (attention's heads) in registers: each row loaded once, its max |x| (maxps
+// returns the accumulator for a NaN, which minmax skips too; masked-off lanes are 0), the one rule's
+// scale from [-max, max] (the same as from the row's minmax: max(-lo, hi) is max |x|, and a
+// non-finite or empty range gives what it gives there), and the row quantized from the registers.
+// A call per row for minmax and for quantize cost a 64-value row about 110 cycles.
 void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
                                            float* row_scale) {
-  quantize_rows_symmetric_with<minmax_f32_avx512, quantize_f32_s8_avx512>(rows, cols, x, ldx, y, ldy, row_scale);
+  constexpr int kVectors = 4;
+  if (cols > 16 * kVectors) {
+    quantize_rows_symmetric_with<minmax_f32_avx512, quantize_f32_s8_avx512>(rows, cols, x, ldx, y, ldy, row_scale);
+    return;
+  }
+  const __m512 zero = _mm512_setzero_ps(), lo = _mm512_set1_ps(-128.0f), hi = _mm512_set1_ps(127.0f);
+  __mmask16 m[kVectors];
+  for (int j = 0; j < kVectors; ++j) m[j] = tail_mask(cols > 16 * j ? static_cast<size_t>(cols - 16 * j) : 0);
+  for (int r = 0; r < rows; ++r) {
+    const float* xr = x + static_cast<size_t>(r) * ldx;
+    __m512 v[kVectors], amax = zero;
+    for (int j = 0; j < kVectors; ++j) {
+      v[j] = _mm512_maskz_loadu_ps(m[j], xr + 16 * j);
+      amax = _mm512_max_ps(_mm512_abs_ps(v[j]), amax);
+    }
+    const float row_max = _mm512_reduce_max_ps(amax);
+    float inv;
+    row_scale[r] = symmetric_scale_s8(-row_max, row_max, &inv);
+    const __m512 inv_v = _mm512_set1_ps(inv);
+    int8_t* yr = y + static_cast<size_t>(r) * ldy;
+    for (int j = 0; j < kVectors; ++j) _mm_mask_storeu_epi8(yr + 16 * j, m[j], quantize16(v[j], inv_v, zero, lo, hi));
+  }
 }
 
 // 64 columns at a time (four vectors, a whole attention head): their minmax down the rows, 64

@@ -33,6 +33,21 @@ inline size_t kernel_row_copies_elements(const Conv2dShape& s, int pixels) {
   return kernel_row_elements(s) * (1 + static_cast<size_t>(pixels) * static_cast<size_t>(s.kernel_h));
 }
 
+/// Where the pointer array starts in a scratch of T that holds the copies first (64-byte aligned
+/// after them), in elements of T.
+template <class T>
+size_t kernel_row_pointers_offset(const Conv2dShape& s, int pixels) {
+  return (kernel_row_copies_elements(s, pixels) * sizeof(T) + 63) / 64 * 64 / sizeof(T);
+}
+
+/// Elements of T the in-place path needs for `pixels` pixels: the copies, then a pointer per
+/// kernel row.
+template <class T>
+size_t kernel_row_scratch_elements(const Conv2dShape& s, int pixels) {
+  const size_t pointers = static_cast<size_t>(pixels) * static_cast<size_t>(s.kernel_h);
+  return kernel_row_pointers_offset<T>(s, pixels) + (pointers * sizeof(const T*) + sizeof(T) - 1) / sizeof(T);
+}
+
 /// Points rows[i * kernel_h + ky] at kernel row ky of output pixel pixel_begin + i (dilation 1):
 /// in the input where the row lies inside it, else at a row of `pad` (above or below the image) or
 /// at a copy with its padding (across the left or right edge), both in `scratch`

@@ -20,11 +20,6 @@ bool reads_kernel_rows_in_place(const Conv2dShape& s) {
          kernel_row_elements(s) % static_cast<size_t>(kGemmS8SegmentAlign) == 0;
 }
 
-// Scratch of the in-place path: the padding row and the edge copies, then the pointers (aligned).
-size_t row_pointers_offset(const Conv2dShape& s, int tile_pixels) {
-  return (kernel_row_copies_elements(s, tile_pixels) + 63) / 64 * 64;
-}
-
 // The A operand of a tile: kernel rows in place, patches in scratch, or the input itself.
 GemmS8Args tile_args(const ConvS8& conv, const int8_t* input, int pixel_begin, int count, int8_t* scratch) {
   const Conv2dShape& s = conv.shape;
@@ -37,7 +32,7 @@ GemmS8Args tile_args(const ConvS8& conv, const int8_t* input, int pixel_begin, i
     args.a = input + static_cast<size_t>(pixel_begin) * s.in_c;
     args.lda = static_cast<size_t>(s.in_c);
   } else if (reads_kernel_rows_in_place(s)) {
-    auto** rows = reinterpret_cast<const int8_t**>(scratch + row_pointers_offset(s, count));
+    auto** rows = reinterpret_cast<const int8_t**>(scratch + kernel_row_pointers_offset<int8_t>(s, count));
     point_at_kernel_rows(s, input, conv.input_zero_point, pixel_begin, count, scratch, rows);
     args.a_segments = rows;
     args.segment_k = static_cast<int>(kernel_row_elements(s));
@@ -60,10 +55,7 @@ int conv_s8_tile_pixels(const Conv2dShape& s) {
 size_t conv_s8_scratch_bytes(const Conv2dShape& s, int tile_pixels) {
   const ConvS8 probe{s, nullptr, nullptr, 0};
   if (probe.direct()) return 0;
-  if (reads_kernel_rows_in_place(s)) {
-    const size_t pointers = static_cast<size_t>(tile_pixels) * static_cast<size_t>(s.kernel_h);
-    return row_pointers_offset(s, tile_pixels) + pointers * sizeof(const int8_t*);
-  }
+  if (reads_kernel_rows_in_place(s)) return kernel_row_scratch_elements<int8_t>(s, tile_pixels);
   return static_cast<size_t>(tile_pixels) * static_cast<size_t>(s.patch_size()) + kGemmS8ReadSlack;
 }
 

@@ -18,10 +18,6 @@ bool reads_kernel_rows_in_place(const Conv2dShape& s) {
   return !s.reads_input_in_place() && s.dilation == 1 && s.kernel_w * s.in_c >= 8;
 }
 
-// Scratch of the in-place path: the zero row, at most one copy per kernel row, then the pointers.
-size_t row_pointers_offset(const Conv2dShape& s, int tile_pixels) {
-  return (kernel_row_copies_elements(s, tile_pixels) + 15) / 16 * 16;  // 64-byte aligned
-}
 }  // namespace
 
 int conv_f32_tile_pixels(const Conv2dShape& s) {
@@ -31,10 +27,7 @@ int conv_f32_tile_pixels(const Conv2dShape& s) {
 }
 
 size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels) {
-  if (reads_kernel_rows_in_place(s)) {
-    const size_t pointers = static_cast<size_t>(tile_pixels) * static_cast<size_t>(s.kernel_h);
-    return row_pointers_offset(s, tile_pixels) + (pointers * sizeof(const float*) + sizeof(float) - 1) / sizeof(float);
-  }
+  if (reads_kernel_rows_in_place(s)) return kernel_row_scratch_elements<float>(s, tile_pixels);
   return s.reads_input_in_place() ? 0 : static_cast<size_t>(tile_pixels) * static_cast<size_t>(s.patch_size());
 }
 
@@ -48,7 +41,7 @@ void conv_f32(const ConvF32& conv, const float* input, float* y, const GemmF32Ep
   args.lda = static_cast<size_t>(args.k);
   if (reads_kernel_rows_in_place(s)) {
     // The pointers after the row copies, in the same (suitably aligned) scratch.
-    auto** rows = reinterpret_cast<const float**>(scratch + row_pointers_offset(s, count));
+    auto** rows = reinterpret_cast<const float**>(scratch + kernel_row_pointers_offset<float>(s, count));
     point_at_kernel_rows(s, input, 0.0f, pixel_begin, count, scratch, rows);
     args.a_segments = rows;
     args.segment_k = static_cast<int>(kernel_row_elements(s));

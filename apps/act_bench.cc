@@ -25,6 +25,7 @@
 #include "apps/op_profile_report.h"
 #include "apps/progress.h"
 #include "apps/status_error.h"
+#include "graph/aligned_buffer.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
@@ -366,6 +367,7 @@ class Benchmark {
     peak_ = measure_peak(engine_->model_info());
     pct_peak_ = peak_.gmacs_per_core > 0 ? 100.0 * gmacs_per_s_ / (peak_.gmacs_per_core * engine_->threads()) : 0.0;
     rss_ = act::peak_rss_bytes();
+    huge_page_bytes_ = act::graph::AlignedBuffer::huge_page_bytes();
     if (opt_.op_profiling) {
       const std::vector<act::OpProfile> profile = engine_->op_profile();
       op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core * engine_->threads(), timed_.op_ms);
@@ -405,7 +407,8 @@ class Benchmark {
     } else {
       std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(peak_.isa));
     }
-    std::printf("peak RSS     %.1f MB\n", static_cast<double>(rss_) / 1e6);
+    std::printf("peak RSS     %.1f MB; %.1f MB of the engine's weights and values in huge pages\n",
+                static_cast<double>(rss_) / 1e6, static_cast<double>(huge_page_bytes_) / 1e6);
     if (op_table_) op_table_->print(stdout, 10);
     if (comparison_) {
       const Comparison& c = *comparison_;
@@ -453,6 +456,7 @@ class Benchmark {
                  {"gmac_per_s_per_core", peak_.gmacs_per_core},
                  {"percent_of_peak", pct_peak_}};
     j["peak_rss_bytes"] = rss_;
+    j["huge_page_bytes"] = huge_page_bytes_;
     if (op_table_) j["op_profile"] = op_table_->to_json();
     json_file_->write(j.dump(2) + "\n");
     json_file_->commit();
@@ -504,6 +508,7 @@ class Benchmark {
   Peak peak_;
   double pct_peak_ = 0;
   size_t rss_ = 0;
+  size_t huge_page_bytes_ = 0;
 };
 
 }  // namespace

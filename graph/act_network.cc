@@ -23,10 +23,13 @@ const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::ve
 
 const float* ActNetwork::bias_table(const std::string& table, int rows, int width, const std::string& weight_name,
                                     int pos_cols) {
+  const size_t elements = static_cast<size_t>(rows) * static_cast<size_t>(width);
+  float* out = reinterpret_cast<float*>(owned_tables_.emplace_back(elements * sizeof(float)).data());
   if (tensors_.find(table) != nullptr) {
     // FP32 blobs keep the bias vector beside the table, for inspection.
     if (tensors_.find(bn::bias_vector(table)) != nullptr) weight(bn::bias_vector(table), {width});
-    return weight(table, {rows, width});
+    const float* stored = weight(table, {rows, width});
+    return std::copy(stored, stored + elements, out) - elements;  // read at every inference: into huge pages
   }
   // Rebuild: table[r][c] = bias[c] + (c < pos_cols ? W[c] . pos[r] : 0), with the weights the
   // layer runs with (dequantized when int8).
@@ -41,16 +44,15 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
     const float* f = weight(weight_name, {width, D});
     std::copy(f, f + w.size(), w.begin());
   }
-  std::vector<float>& out = owned_tables_.emplace_back(static_cast<size_t>(rows) * width);
   std::vector<float> packed(kernels::gemm_f32_packed_floats(kernels_.gemm_f32.nr, pos_cols, D));
   kernels::gemm_f32_pack(kernels_.gemm_f32.nr, pos_cols, D, w.data(), static_cast<size_t>(D), packed.data());
   kernels_.gemm_f32.packed({.m = rows, .n = pos_cols, .k = D, .a = pos, .lda = static_cast<size_t>(D),
-                             .packed_b = packed.data(), .c = out.data(), .ldc = static_cast<size_t>(width), .epilogue = {}});
+                             .packed_b = packed.data(), .c = out, .ldc = static_cast<size_t>(width), .epilogue = {}});
   for (int r = 0; r < rows; ++r) {
-    float* row = out.data() + static_cast<size_t>(r) * width;
+    float* row = out + static_cast<size_t>(r) * width;
     for (int c = 0; c < width; ++c) row[c] = c < pos_cols ? row[c] + bias[c] : bias[c];
   }
-  return out.data();
+  return out;
 }
 
 ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {

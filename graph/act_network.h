@@ -140,7 +140,7 @@ class ActNetwork {
   std::map<ValueId, Tensor> converted_;  // float <-> int8 conversions already in the graph
   std::map<ValueId, RowCodesWriter*> row_codes_writers_;  // ops that can write their output's row codes
   std::map<ValueId, RowCodes> row_codes_;                 // row codes already asked for, by value
-  std::list<std::vector<float>> owned_tables_;  // rebuilt bias tables (stable addresses)
+  std::vector<AlignedBuffer> owned_tables_;  // the bias tables the ops read
   std::map<std::string, std::shared_ptr<const PackedF32Weights>> packed_weights_;  // by blob tensor name
   Graph graph_;
   std::vector<ValueId> camera_inputs_;

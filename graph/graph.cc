@@ -125,7 +125,8 @@ void Graph::plan(int threads, bool keep_all_values) {
   scratch_per_thread_ = 0;
   for (const auto& op : ops_) scratch_per_thread_ = std::max(scratch_per_thread_, align_up(op->scratch_per_thread()));
   scratch_offset_ = total;
-  arena_.assign(total + scratch_per_thread_ * static_cast<size_t>(std::max(threads, 1)), 0.0f);
+  arena_floats_ = total + scratch_per_thread_ * static_cast<size_t>(std::max(threads, 1));
+  arena_ = AlignedBuffer(arena_floats_ * sizeof(float));
   planned_ = true;
 }
 
@@ -141,9 +142,9 @@ const char* stage_name(Stage stage) {
 
 void Graph::run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfile* profile) {
   check(planned_, ErrorCode::kInternal, "Graph::run before plan");
-  check(arena_.size() >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
+  check(arena_floats_ >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
         "graph planned for fewer threads than the pool has");
-  RunContext ctx(arena_.data(), values_, pool, kernels, arena_.data() + scratch_offset_, scratch_per_thread_);
+  RunContext ctx(arena(), values_, pool, kernels, arena() + scratch_offset_, scratch_per_thread_);
   if (profile == nullptr) {
     for (const auto& op : ops_) op->run(ctx);
     return;

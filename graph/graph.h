@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "graph/aligned_buffer.h"
 #include "graph/thread_pool.h"
 #include "kernels/config/kernel_config.h"
 #include "kernels/quant/quant_s8.h"
@@ -160,7 +161,7 @@ class Graph {
   /// `profile`, records when each op ran (and on which threads).
   void run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfile* profile = nullptr);
 
-  float* data(ValueId id) { return arena_.data() + values_[static_cast<size_t>(id)].offset; }
+  float* data(ValueId id) { return arena() + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) { return reinterpret_cast<int8_t*>(data(id)); }
   Value& value(ValueId id) { return values_[static_cast<size_t>(id)]; }
   /// The value as floats: a copy of an f32 value, or an int8 value dequantized with its static
@@ -172,16 +173,19 @@ class Graph {
   /// The value of that name, or kNoValue.
   ValueId find(const std::string& name) const;
   const std::vector<std::unique_ptr<Op>>& ops() const { return ops_; }
-  size_t arena_bytes() const { return arena_.size() * sizeof(float); }
+  size_t arena_bytes() const { return arena_floats_ * sizeof(float); }
   double total_macs() const;
 
  private:
   std::vector<Value> values_;
   std::vector<std::unique_ptr<Op>> ops_;
-  std::vector<float> arena_;  // values, then per-thread scratch
+  AlignedBuffer arena_;  // floats: values, then per-thread scratch
+  size_t arena_floats_ = 0;
   size_t scratch_offset_ = 0;
   size_t scratch_per_thread_ = 0;
   bool planned_ = false;
+
+  float* arena() { return reinterpret_cast<float*>(arena_.data()); }
 };
 
 }  // namespace act::graph

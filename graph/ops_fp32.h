@@ -5,6 +5,7 @@
 #include <memory>
 #include <vector>
 
+#include "graph/aligned_buffer.h"
 #include "graph/graph.h"
 #include "kernels/common/conv2d_shape.h"
 #include "kernels/fp32/conv_f32.h"
@@ -41,7 +42,8 @@ class PackedF32Weights {
 
  private:
   int nr_, n_, k_;
-  std::vector<float> panels_;
+  AlignedBuffer panels_;  // floats
+  float* panels() const { return reinterpret_cast<float*>(panels_.data()); }
 };
 
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).

@@ -12,6 +12,8 @@
 
 namespace act::graph {
 
+static_assert(kAlignedBufferAlign % kernels::kGemmS8PackedAlign == 0, "packed weights live in AlignedBuffers");
+
 namespace {
 
 constexpr size_t kElementwiseChunk = 1 << 16;  // elements per quantize/dequantize task
@@ -31,15 +33,7 @@ kernels::QuantS8 symmetric_quant(float absmax) {
 
 }  // namespace
 
-// ------------------------------------------------------------------ AlignedBuffer, PackedWeights
-
-void AlignedBuffer::Free::operator()(void* p) const { std::free(p); }
-
-AlignedBuffer::AlignedBuffer(size_t bytes) {
-  void* p = std::aligned_alloc(kernels::kGemmS8PackedAlign, round_up_to_packed_align(std::max<size_t>(bytes, 1)));
-  if (p == nullptr) throw std::bad_alloc();
-  buffer_.reset(p);
-}
+// --------------------------------------------------------------------------------- PackedWeights
 
 PackedWeights::PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
                              int32_t a_zero_point) {

@@ -15,6 +15,7 @@
 #include <memory>
 #include <vector>
 
+#include "graph/aligned_buffer.h"
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
 #include "kernels/conv_s8/conv_s8.h"
@@ -22,20 +23,6 @@
 #include "kernels/quant/quant_s8.h"
 
 namespace act::graph {
-
-/// A 64-byte aligned byte buffer owned by an op (packed weights, attention's packed keys and values).
-class AlignedBuffer {
- public:
-  AlignedBuffer() = default;
-  explicit AlignedBuffer(size_t bytes);
-  uint8_t* data() const { return static_cast<uint8_t*>(buffer_.get()); }
-
- private:
-  struct Free {
-    void operator()(void* p) const;
-  };
-  std::unique_ptr<void, Free> buffer_;
-};
 
 /// Weights packed for one gemm_s8 variant, 64-byte aligned, owned by the op that uses them.
 class PackedWeights {

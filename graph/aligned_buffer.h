@@ -1,0 +1,51 @@
+// AlignedBuffer: the memory of packed weights (and of attention's packed keys and values), 64-byte
+// aligned and zero-filled, in transparent huge pages where the OS gives them.
+//
+// Why: the default model's 35 MB of int8 weights do not fit the last-level cache and stream from
+// DRAM at every inference; in 4 KB pages that is a TLB miss per page walked. Buffers are carved one
+// after another from shared regions of 32 MB (or more for a larger buffer), mapped 2 MB-aligned with
+// madvise(MADV_HUGEPAGE), so one engine's weights lie contiguous in a few huge pages. A region is
+// unmapped when the last buffer carved from it goes (each buffer holds a reference to it); the region
+// still open for carving is reused from its start once every buffer in it is gone. Where the OS has
+// no huge pages the regions are ordinary pages, and where mmap fails the buffer is std::aligned_alloc
+// memory: the same layout either way.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <utility>
+
+namespace act::graph {
+
+/// Bytes of alignment every AlignedBuffer has (the packed-weight alignment of the GEMM kernels).
+inline constexpr size_t kAlignedBufferAlign = 64;
+
+class AlignedBuffer {
+ public:
+  AlignedBuffer() = default;
+  /// `bytes` of zeroed memory (at least one 64-byte line). Throws std::bad_alloc when out of memory.
+  explicit AlignedBuffer(size_t bytes);
+  AlignedBuffer(AlignedBuffer&& other) noexcept
+      : region_(std::move(other.region_)), data_(std::exchange(other.data_, nullptr)) {}
+  AlignedBuffer& operator=(AlignedBuffer&& other) noexcept {
+    region_ = std::move(other.region_);
+    data_ = std::exchange(other.data_, nullptr);
+    return *this;
+  }
+  AlignedBuffer(const AlignedBuffer&) = delete;
+  AlignedBuffer& operator=(const AlignedBuffer&) = delete;
+  uint8_t* data() const { return data_; }
+
+  /// Bytes of this process's AlignedBuffer regions the kernel backs with huge pages right now (Linux
+  /// /proc/self/smaps; 0 elsewhere), for benchmarks and tests to show the hint took.
+  static size_t huge_page_bytes();
+
+  struct Region;
+
+ private:
+  std::shared_ptr<Region> region_;  // keeps the memory alive
+  uint8_t* data_ = nullptr;
+};
+
+}  // namespace act::graph

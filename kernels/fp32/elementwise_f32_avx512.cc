@@ -22,6 +22,25 @@ BatchF<Arch> multiply_add<Arch>(const BatchF<Arch>& a, const BatchF<Arch>& b, co
   return _mm512_fmadd_ps(a, b, c);
 }
 
+// GCC's reductions fold the halves onto each other in registers: lane_tree's order, so its bits.
+template <>
+float lane_tree_max<Arch>(const BatchF<Arch>& v) {
+  return _mm512_reduce_max_ps(v);
+}
+template <>
+float lane_tree_sum<Arch>(const BatchF<Arch>& v) {
+  return _mm512_reduce_add_ps(v);
+}
+
+// 2^t as vscalefps(2^f, n): n by vrndscaleps, the exponent added by the instruction (two integer
+// operations and the rounding-bias pair fewer than the generic form).
+template <>
+BatchF<Arch> exp2_nonpositive<Arch>(const BatchF<Arch>& t_in) {
+  const __m512 t = _mm512_max_ps(t_in, _mm512_set1_ps(-125.0f));
+  const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  return _mm512_scalef_ps(exp2_fraction<Arch>(BatchF<Arch>(_mm512_sub_ps(t, n))), n);
+}
+
 // vpmovdb into a register, then one 16-byte store (the store form of vpmovdb is several times slower).
 template <>
 void store_low_bytes<Arch>(int8_t* p, const xsimd::batch<int32_t, Arch>& v) {

@@ -130,7 +130,7 @@ TEST_P(ElementwiseF32Variant, SoftmaxS8WithinToleranceAndHalfACodeOfTheSoftmax) 
     ref().softmax_rows_s8(rows, cols, x.data(), ld, y_ref.data(), ld, scale_ref);
     v().softmax_rows_s8(rows, cols, x.data(), ld, y.data(), ld, scale);
     for (int r = 0; r < rows; ++r) {
-      EXPECT_NEAR(scale[r], scale_ref[r], 2e-6 * scale_ref[r]) << v().softmax_s8_name << " cols=" << cols;
+      EXPECT_NEAR(scale[r], scale_ref[r], 4e-6 * scale_ref[r]) << v().softmax_s8_name << " cols=" << cols;
       std::vector<float> p(x.begin() + static_cast<std::ptrdiff_t>(r * ld), x.begin() + static_cast<std::ptrdiff_t>(r * ld + cols));
       ref().softmax_rows(1, cols, p.data(), ld);
       float p_max = 0.0f;

@@ -19,6 +19,14 @@ namespace {
 constexpr size_t kHugePage = size_t{2} << 20;         // x86-64 and 4 KB-page arm64; others just align more
 constexpr size_t kRegionBytes = size_t{32} << 20;     // the default model's weights in two regions
 
+// Under AddressSanitizer every buffer is an allocation of its own, so that its redzones catch a
+// kernel reading past its packed weights (carved side by side, they would read the next buffer).
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kCarveFromRegions = false;
+#else
+constexpr bool kCarveFromRegions = true;
+#endif
+
 size_t round_up(size_t bytes, size_t to) { return (bytes + to - 1) / to * to; }
 
 }  // namespace
@@ -86,8 +94,8 @@ AlignedBuffer::AlignedBuffer(size_t bytes) {
   if (!r.open || r.open->size - r.open->used < bytes) {
     const size_t size = std::max(kRegionBytes, round_up(bytes, kHugePage));
     auto region = std::make_shared<Region>();
-    region->base = map_huge_aligned(size);
-    if (region->base == nullptr) {  // no mapping: a plain allocation of this buffer alone
+    region->base = kCarveFromRegions ? map_huge_aligned(size) : nullptr;
+    if (region->base == nullptr) {  // a plain allocation of this buffer alone
       region->mapped = false;
       region->base = static_cast<uint8_t*>(std::aligned_alloc(kAlignedBufferAlign, bytes));
       if (region->base == nullptr) throw std::bad_alloc();
@@ -105,6 +113,8 @@ AlignedBuffer::AlignedBuffer(size_t bytes) {
   std::memset(data_, 0, bytes);  // fresh pages are zero already; a reused region's are not
   region_ = r.open;
 }
+
+bool AlignedBuffer::carves_from_regions() { return kCarveFromRegions; }
 
 size_t AlignedBuffer::huge_page_bytes() {
   std::set<uintptr_t> mapped;

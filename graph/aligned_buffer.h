@@ -7,8 +7,9 @@
 // madvise(MADV_HUGEPAGE), so one engine's weights lie contiguous in a few huge pages. A region is
 // unmapped when the last buffer carved from it goes (each buffer holds a reference to it); the region
 // still open for carving is reused from its start once every buffer in it is gone. Where the OS has
-// no huge pages the regions are ordinary pages, and where mmap fails the buffer is std::aligned_alloc
-// memory: the same layout either way.
+// no huge pages the regions are ordinary pages, and where mmap fails (or under AddressSanitizer,
+// whose redzones need each buffer apart) the buffer is std::aligned_alloc memory: the same contents
+// either way.
 #pragma once
 
 #include <cstddef>
@@ -40,6 +41,8 @@ class AlignedBuffer {
   /// Bytes of this process's AlignedBuffer regions the kernel backs with huge pages right now (Linux
   /// /proc/self/smaps; 0 elsewhere), for benchmarks and tests to show the hint took.
   static size_t huge_page_bytes();
+  /// False under AddressSanitizer: every buffer is then an allocation of its own.
+  static bool carves_from_regions();
 
   struct Region;
 

@@ -45,7 +45,9 @@ TEST(AlignedBuffer, ReusedMemoryComesBackZeroed) {
   AlignedBuffer again(bytes);
   EXPECT_TRUE(all_zero(again.data(), bytes));
   // The region the first came from had no other buffer: the second is carved from its start again.
-  EXPECT_EQ(again.data(), first);
+  if (AlignedBuffer::carves_from_regions()) {
+    EXPECT_EQ(again.data(), first);
+  }
 }
 
 TEST(AlignedBuffer, MovingKeepsTheMemoryAndEmptiesTheSource) {
@@ -78,6 +80,7 @@ TEST(AlignedBuffer, ThreadsAllocatingAndFreeingAtOnce) {
 
 // The madvise hint takes where the kernel offers transparent huge pages to those who ask.
 TEST(AlignedBuffer, LargeBuffersLieInHugePages) {
+  if (!AlignedBuffer::carves_from_regions()) GTEST_SKIP() << "AddressSanitizer build: a plain allocation per buffer";
   std::ifstream mode_file("/sys/kernel/mm/transparent_hugepage/enabled");
   std::string mode;
   std::getline(mode_file, mode);

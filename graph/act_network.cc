@@ -29,7 +29,8 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
     // FP32 blobs keep the bias vector beside the table, for inspection.
     if (tensors_.find(bn::bias_vector(table)) != nullptr) weight(bn::bias_vector(table), {width});
     const float* stored = weight(table, {rows, width});
-    return std::copy(stored, stored + elements, out) - elements;  // read at every inference: into huge pages
+    std::copy(stored, stored + elements, out);  // read at every inference: into huge pages, off the file mapping
+    return out;
   }
   // Rebuild: table[r][c] = bias[c] + (c < pos_cols ? W[c] . pos[r] : 0), with the weights the
   // layer runs with (dequantized when int8).

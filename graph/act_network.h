@@ -7,7 +7,6 @@
 // quantized. Quantize/dequantize ops are inserted where a value crosses between the two.
 #pragma once
 
-#include <list>
 #include <map>
 #include <string>
 #include <vector>

@@ -8,7 +8,6 @@
 #include <fstream>
 #include <mutex>
 #include <new>
-#include <set>
 #include <string>
 #include <utility>
 
@@ -123,13 +122,17 @@ size_t AlignedBuffer::huge_page_bytes() {
     std::lock_guard<std::mutex> lock(r.mutex);
     mapped = r.mapped;
   }
+  return anon_huge_page_bytes(mapped);
+}
+
+size_t anon_huge_page_bytes(const std::set<uintptr_t>& mapping_starts) {
   std::ifstream smaps("/proc/self/smaps");
   size_t total = 0;
   bool ours = false;
   for (std::string line; std::getline(smaps, line);) {
     const size_t dash = line.find('-');
     if (dash != std::string::npos && dash > 0 && line.find_first_not_of("0123456789abcdef") == dash) {
-      ours = mapped.count(std::stoull(line.substr(0, dash), nullptr, 16)) > 0;  // a mapping's header line
+      ours = mapping_starts.count(std::stoull(line.substr(0, dash), nullptr, 16)) > 0;  // a mapping's header line
     } else if (ours && line.rfind("AnonHugePages:", 0) == 0) {
       total += std::stoull(line.substr(14)) * 1024;  // "AnonHugePages:   2048 kB"
     }

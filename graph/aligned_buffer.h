@@ -1,5 +1,6 @@
-// AlignedBuffer: the memory of packed weights (and of attention's packed keys and values), 64-byte
-// aligned and zero-filled, in transparent huge pages where the OS gives them.
+// AlignedBuffer: the memory of an engine's packed weights, the bias tables its linears read, its
+// graph's arena and attention's packed keys and values: 64-byte aligned and zero-filled, in
+// transparent huge pages where the OS gives them.
 //
 // Why: the default model's 35 MB of int8 weights do not fit the last-level cache and stream from
 // DRAM at every inference; in 4 KB pages that is a TLB miss per page walked. Buffers are carved one
@@ -15,6 +16,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <set>
 #include <utility>
 
 namespace act::graph {
@@ -38,8 +40,8 @@ class AlignedBuffer {
   AlignedBuffer& operator=(const AlignedBuffer&) = delete;
   uint8_t* data() const { return data_; }
 
-  /// Bytes of this process's AlignedBuffer regions the kernel backs with huge pages right now (Linux
-  /// /proc/self/smaps; 0 elsewhere), for benchmarks and tests to show the hint took.
+  /// Bytes of this process's AlignedBuffer regions the kernel backs with huge pages right now, for
+  /// benchmarks and tests to show the hint took.
   static size_t huge_page_bytes();
   /// False under AddressSanitizer: every buffer is then an allocation of its own.
   static bool carves_from_regions();
@@ -50,5 +52,9 @@ class AlignedBuffer {
   std::shared_ptr<Region> region_;  // keeps the memory alive
   uint8_t* data_ = nullptr;
 };
+
+/// Bytes the kernel backs with huge pages in this process's mappings that start at these addresses
+/// (AnonHugePages in Linux's /proc/self/smaps; 0 where it has none).
+size_t anon_huge_page_bytes(const std::set<uintptr_t>& mapping_starts);
 
 }  // namespace act::graph

@@ -36,7 +36,7 @@ float lane_tree_sum<Arch>(const BatchF<Arch>& v) {
 // operations and the rounding-bias pair fewer than the generic form).
 template <>
 BatchF<Arch> exp2_nonpositive<Arch>(const BatchF<Arch>& t_in) {
-  const __m512 t = _mm512_max_ps(t_in, _mm512_set1_ps(-125.0f));
+  const __m512 t = _mm512_max_ps(t_in, _mm512_set1_ps(kExp2Lowest));
   const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
   return _mm512_scalef_ps(exp2_fraction<Arch>(BatchF<Arch>(_mm512_sub_ps(t, n))), n);
 }

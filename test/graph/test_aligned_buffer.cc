@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cstring>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -83,25 +82,6 @@ TEST(AlignedBuffer, ThreadsAllocatingAndFreeingAtOnce) {
   for (auto& th : threads) th.join();
 }
 
-// AnonHugePages of the mapping that starts at `start` (/proc/self/smaps), in bytes.
-size_t huge_bytes_of_mapping(const void* start) {
-  std::ifstream smaps("/proc/self/smaps");
-  const std::string header = [&] {
-    std::ostringstream s;
-    s << std::hex << reinterpret_cast<uintptr_t>(start) << "-";
-    return s.str();
-  }();
-  bool ours = false;
-  for (std::string line; std::getline(smaps, line);) {
-    if (line.find('-') != std::string::npos && line.find_first_not_of("0123456789abcdef") == line.find('-')) {
-      ours = line.rfind(header, 0) == 0;
-    } else if (ours && line.rfind("AnonHugePages:", 0) == 0) {
-      return std::stoull(line.substr(14)) * 1024;
-    }
-  }
-  return 0;
-}
-
 // The madvise hint takes wherever it takes for a mapping of the test's own: the control, a 2 MB-
 // aligned region advised the same way. Where the control gets none (no THP for those who ask,
 // qemu-user, which swallows madvise), there is nothing to compare with.
@@ -113,7 +93,7 @@ TEST(AlignedBuffer, LargeBuffersLieInHugePagesWhereTheSystemGivesThem) {
   auto* control = reinterpret_cast<uint8_t*>((reinterpret_cast<uintptr_t>(raw) + kHuge - 1) / kHuge * kHuge);
   ::madvise(control, kBytes, MADV_HUGEPAGE);
   std::memset(control, 1, kBytes);
-  const size_t control_huge = huge_bytes_of_mapping(control);
+  const size_t control_huge = anon_huge_page_bytes({reinterpret_cast<uintptr_t>(control)});
   ::munmap(raw, kBytes + kHuge);
   if (control_huge == 0) GTEST_SKIP() << "a region advised MADV_HUGEPAGE here gets no huge pages (no THP, or emulated)";
 

@@ -72,6 +72,11 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   EXPECT_NEAR(j["throughput_per_s"].get<double>(), 1.0 / mean_s, 1e-9 / mean_s);
   EXPECT_NEAR(j["achieved_gmac_per_s"].get<double>(), expected_gmac / mean_s, 1e-6 * expected_gmac / mean_s);
   EXPECT_GT(j["peak_rss_bytes"].get<double>(), 0.0);
+  // The engine's memory in huge pages: whole 2 MB pages, part of the resident set.
+  const auto huge = j["huge_page_bytes"].get<uint64_t>();
+  EXPECT_EQ(huge % (uint64_t{2} << 20), 0u) << huge;
+  EXPECT_LE(static_cast<double>(huge), j["peak_rss_bytes"].get<double>());
+  EXPECT_NE(r.output.find("in huge pages"), std::string::npos) << r.output;
   // % of peak is the achieved rate over the probe's per-core peak times the threads.
   if (j["peak"]["gmac_per_s_per_core"].get<double>() > 0) {
     const double want = 100.0 * j["achieved_gmac_per_s"].get<double>() / (j["peak"]["gmac_per_s_per_core"].get<double>() * 1);

@@ -336,9 +336,13 @@ TEST(PwmWatchdog, NeutralWhenActDriveStopsBeatingAndDrivingAgainWhenItResumes) {
   EXPECT_LE(neutral->when - stopped, kFaultDeadline + milliseconds(250));
   ::kill(pid, SIGCONT);
   EXPECT_TRUE(tree.wait_until_not(kSafe, milliseconds(1000)));
+  const auto killed = Clock::now();
   ::kill(-pid, SIGKILL);
   ::waitpid(pid, nullptr, 0);
   EXPECT_TRUE(process_ended(driving.watchdog, milliseconds(1000)));
+  // The tree's watcher scans every 200 us: wait until it has seen the watchdog's last writes, which
+  // may come just before it exits, then the car must stay safe.
+  EXPECT_TRUE(tree.wait_for(kSafe, killed, milliseconds(1000)));
   EXPECT_TRUE(tree.current().is(kSafe));
 }
 

@@ -22,19 +22,26 @@ timings=()
 stage_start=$SECONDS
 stage_done() { timings+=("$1 $((SECONDS - stage_start))s"); stage_start=$SECONDS; }
 
-# ctest over a build tree; when tests fail, their whole output is printed again at the very end, so
-# the tail of a long CI log says what failed and why.
+# ctest over a build tree; when tests fail, their output is printed again at the very end, so the
+# tail of a long CI log says what failed and why: first each failed test's last lines (where a test
+# says why it failed), then up to 80 lines of each one's log.
 run_ctest() {
   local dir="$1"
   shift
   if ctest --test-dir "$dir" --output-on-failure -j "$jobs" "$@"; then return 0; fi
+  local failed failed_names=()
+  while IFS=: read -r _ failed; do failed_names+=("$failed"); done < "$dir/Testing/Temporary/LastTestsFailed.log"
+  test_log() {
+    awk -v name="$1" '{ p = index($0, " Testing: ") } p && substr($0, p + 10) == name {on = 1}
+                      on {print} on && /end time:/ {on = 0}' "$dir/Testing/Temporary/LastTest.log"
+  }
+  echo "== why the failed tests in $dir failed: the last lines each printed =="
+  for failed in "${failed_names[@]}"; do
+    echo "-- $failed:"
+    test_log "$failed" | grep -v -e '^<end of output>' -e '^-----' -e '^Test time' -e '^Test Failed' -e 'end time:' | tail -n 12
+  done
   echo "== output of the failed tests in $dir =="
-  local failed
-  while IFS=: read -r _ failed; do
-    awk -v name="$failed" '{ p = index($0, " Testing: ") } p && substr($0, p + 10) == name {on = 1}
-                             on {print} on && /end time:/ {on = 0}' \
-      "$dir/Testing/Temporary/LastTest.log" | tail -n 80
-  done < "$dir/Testing/Temporary/LastTestsFailed.log"
+  for failed in "${failed_names[@]}"; do test_log "$failed" | tail -n 80; done
   echo "stage times: ${timings[*]} (failed in $dir after $SECONDS s)"
   exit 1
 }

@@ -14,6 +14,8 @@ if [ $# -ne 5 ]; then
 fi
 build="$1" source="$2" work="$3" blob="$4" checkpoint="$5"
 fail() { echo "run_package_test: $*" >&2; exit 1; }
+# Any other command that fails names itself (set -e alone exits without a word when the command is quiet).
+trap 'status=$?; echo "run_package_test: line $LINENO: \"$BASH_COMMAND\" failed with exit code $status" >&2' ERR
 
 rm -rf "$work"
 mkdir -p "$work/debs" "$work/root"

@@ -84,16 +84,25 @@ class FakePwmTree {
   }
   /// Waits up to `limit` until the current duty cycles are not `command` (driving again).
   bool wait_until_not(PwmCommand command, std::chrono::milliseconds limit) const {
-    const auto deadline = Clock::now() + limit;
-    while (Clock::now() < deadline) {
-      const Sample s = current();
-      if (s.steering_ns > 0 && !s.is(command)) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    }
-    return false;
+    return wait_until_current([&](const Sample& s) { return s.steering_ns > 0 && !s.is(command); }, limit);
+  }
+  /// Waits up to `limit` until the current duty cycles are `command` (the watcher scans every 200 us,
+  /// but under load it can be late by more than any fixed sleep).
+  bool wait_until_is(PwmCommand command, std::chrono::milliseconds limit) const {
+    return wait_until_current([&](const Sample& s) { return s.is(command); }, limit);
   }
 
  private:
+  template <class Pred>
+  bool wait_until_current(Pred pred, std::chrono::milliseconds limit) const {
+    const auto deadline = Clock::now() + limit;
+    while (Clock::now() < deadline) {
+      if (pred(current())) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return pred(current());
+  }
+
   // Reads what was appended to each duty-cycle file since the last scan.
   void scan() {
     bool changed = false;

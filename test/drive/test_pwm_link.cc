@@ -209,8 +209,7 @@ struct PwmRig {
     during();
     stop.store(true);
     control.join();
-    std::this_thread::sleep_for(milliseconds(20));  // the watcher's next scan
-    EXPECT_TRUE(tree.current().is(kSafe)) << "not neutral at the end";
+    EXPECT_TRUE(tree.wait_until_is(kSafe, milliseconds(1000))) << "not neutral at the end";
     return summary;
   }
 };

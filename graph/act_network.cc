@@ -24,7 +24,7 @@ const ActbTensor* ActNetwork::int8_weight(const std::string& name, const std::ve
 const float* ActNetwork::bias_table(const std::string& table, int rows, int width, const std::string& weight_name,
                                     int pos_cols) {
   const size_t elements = static_cast<size_t>(rows) * static_cast<size_t>(width);
-  float* out = reinterpret_cast<float*>(owned_tables_.emplace_back(elements * sizeof(float)).data());
+  float* out = owned_tables_.emplace_back(elements * sizeof(float)).floats();
   if (tensors_.find(table) != nullptr) {
     // FP32 blobs keep the bias vector beside the table, for inspection.
     if (tensors_.find(bn::bias_vector(table)) != nullptr) weight(bn::bias_vector(table), {width});

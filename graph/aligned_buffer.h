@@ -39,6 +39,8 @@ class AlignedBuffer {
   AlignedBuffer(const AlignedBuffer&) = delete;
   AlignedBuffer& operator=(const AlignedBuffer&) = delete;
   uint8_t* data() const { return data_; }
+  /// The same memory as floats (the arena, float weight panels, bias tables).
+  float* floats() const { return reinterpret_cast<float*>(data_); }
 
   /// Bytes of this process's AlignedBuffer regions the kernel backs with huge pages right now, for
   /// benchmarks and tests to show the hint took.

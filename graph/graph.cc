@@ -144,7 +144,7 @@ void Graph::run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfi
   check(planned_, ErrorCode::kInternal, "Graph::run before plan");
   check(arena_floats_ >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
         "graph planned for fewer threads than the pool has");
-  RunContext ctx(arena(), values_, pool, kernels, arena() + scratch_offset_, scratch_per_thread_);
+  RunContext ctx(arena_.floats(), values_, pool, kernels, arena_.floats() + scratch_offset_, scratch_per_thread_);
   if (profile == nullptr) {
     for (const auto& op : ops_) op->run(ctx);
     return;

@@ -161,7 +161,7 @@ class Graph {
   /// `profile`, records when each op ran (and on which threads).
   void run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfile* profile = nullptr);
 
-  float* data(ValueId id) { return arena() + values_[static_cast<size_t>(id)].offset; }
+  float* data(ValueId id) { return arena_.floats() + values_[static_cast<size_t>(id)].offset; }
   int8_t* data_s8(ValueId id) { return reinterpret_cast<int8_t*>(data(id)); }
   Value& value(ValueId id) { return values_[static_cast<size_t>(id)]; }
   /// The value as floats: a copy of an f32 value, or an int8 value dequantized with its static
@@ -184,8 +184,6 @@ class Graph {
   size_t scratch_offset_ = 0;
   size_t scratch_per_thread_ = 0;
   bool planned_ = false;
-
-  float* arena() { return reinterpret_cast<float*>(arena_.data()); }
 };
 
 }  // namespace act::graph

@@ -39,19 +39,19 @@ kernels::GemmF32Activation activation_of(Epilogue e) {
 
 PackedF32Weights::PackedF32Weights(const kernels::GemmF32Kernels& kernels, int n, int k, const float* w)
     : nr_(kernels.nr), n_(n), k_(k), panels_(kernels::gemm_f32_packed_floats(kernels.nr, n, k) * sizeof(float)) {
-  kernels::gemm_f32_pack(nr_, n, k, w, static_cast<size_t>(k), panels());
+  kernels::gemm_f32_pack(nr_, n, k, w, static_cast<size_t>(k), panels_.floats());
 }
 
 std::vector<float> PackedF32Weights::unpacked() const {
   std::vector<float> w(static_cast<size_t>(n_) * static_cast<size_t>(k_));
-  kernels::gemm_f32_unpack(nr_, n_, k_, panels(), w.data());
+  kernels::gemm_f32_unpack(nr_, n_, k_, panels_.floats(), w.data());
   return w;
 }
 
 const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernels) const {
   check(kernels.nr == nr_, ErrorCode::kInternal,
         std::string("float weights packed in panels of ") + std::to_string(nr_) + " columns, run by " + kernels.name);
-  return panels();
+  return panels_.floats();
 }
 
 Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels::Conv2dShape& shape, const float* bias,

@@ -43,7 +43,6 @@ class PackedF32Weights {
  private:
   int nr_, n_, k_;
   AlignedBuffer panels_;  // floats
-  float* panels() const { return reinterpret_cast<float*>(panels_.data()); }
 };
 
 /// NHWC convolution with BatchNorm already folded: y = act(conv(x) + bias [+ residual]).

@@ -262,11 +262,21 @@ struct DrivingProcess {
   Clock::time_point last_beat_time() const { return Clock::time_point(Clock::duration(last_beat->load())); }
 };
 
-DrivingProcess start_driving_process(const FakePwmTree& tree) {
+// The heartbeat's shared page: mapped once per test process (never unmapped) and reused, since one
+// driving process at a time is alive.
+std::atomic<Clock::rep>* shared_last_beat() {
   static_assert(std::atomic<Clock::rep>::is_always_lock_free, "shared between processes");
-  void* shared = ::mmap(nullptr, sizeof(std::atomic<Clock::rep>), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
-  EXPECT_NE(shared, MAP_FAILED);
-  auto* last_beat = new (shared) std::atomic<Clock::rep>(0);  // one mapping per test process run: never unmapped
+  static std::atomic<Clock::rep>* const beat = [] {
+    void* shared = ::mmap(nullptr, sizeof(std::atomic<Clock::rep>), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+    EXPECT_NE(shared, MAP_FAILED);
+    return new (shared) std::atomic<Clock::rep>(0);
+  }();
+  return beat;
+}
+
+DrivingProcess start_driving_process(const FakePwmTree& tree) {
+  std::atomic<Clock::rep>* last_beat = shared_last_beat();
+  last_beat->store(0);
   int report[2];
   EXPECT_EQ(::pipe(report), 0);
   const pid_t pid = ::fork();

@@ -99,13 +99,18 @@ if [ ! -f "$unpacked/usr/lib/aarch64-linux-gnu/libactengine.so.0" ]; then
   exit 1
 fi
 depends="$(dpkg-deb -f "$(ls "$build"/actengine-tools_*_arm64.deb)" Depends)"
+unstripped=' \.(symtab|debug_info) '
 for app in act_bench act_eval act_convert act_drive act_pwm_watchdog; do
   program="$unpacked/usr/bin/$app"
-  if ! readelf -h "$program" 2>/dev/null | grep -q "Machine: *AArch64"; then
+  # Outputs read whole before they are matched (under pipefail, `readelf | grep -q` fails when grep
+  # stops early and readelf dies of SIGPIPE).
+  header="$(readelf -h "$program" 2>/dev/null || true)"
+  if [[ ! "$header" =~ Machine:\ *AArch64 ]]; then
     echo "run_arm64_tests: the arm64 package has no aarch64 $app" >&2
     exit 1
   fi
-  if readelf -S "$program" | grep -qE ' \.(symtab|debug_info) '; then
+  sections="$(readelf -S "$program")"
+  if [[ "$sections" =~ $unstripped ]]; then
     echo "run_arm64_tests: $app in the arm64 package is not stripped" >&2
     exit 1
   fi

@@ -40,9 +40,15 @@ multiarch="$(dpkg-architecture -qDEB_HOST_MULTIARCH)"
 libdir="$work/root/usr/lib/$multiarch"
 [ -f "$libdir/libactengine.so.0" ] || fail "libactengine.so.0 is not in /usr/lib/$multiarch"
 export LD_LIBRARY_PATH="$libdir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+# Outputs are read whole before they are matched: under pipefail `ldd X | grep -q Y` fails when grep
+# stops at its match and ldd, still writing, dies of SIGPIPE (the pkg-config check below failed that
+# way one full ctest run in two here, and the checks in this loop could pass without looking).
+unstripped=' \.(symtab|debug_info) '
 for binary in "$work"/root/usr/bin/* "$libdir"/lib*.so.*.*; do
-  if readelf -S "$binary" | grep -qE ' \.(symtab|debug_info) '; then fail "$binary is not stripped"; fi
-  if ldd "$binary" | grep -q 'not found'; then ldd "$binary"; fail "$binary needs a library that is not found"; fi
+  sections="$(readelf -S "$binary")"
+  libraries="$(ldd "$binary")"
+  if [[ "$sections" =~ $unstripped ]]; then fail "$binary is not stripped"; fi
+  if [[ "$libraries" == *"not found"* ]]; then echo "$libraries"; fail "$binary needs a library that is not found"; fi
 done
 for tool in act_convert act_eval act_bench act_drive; do
   "$work/root/usr/bin/$tool" --help >"$work/$tool.help" || fail "$tool --help failed"
@@ -55,7 +61,7 @@ cmake -S "$source/test/consumer" -B "$work/consumer" -DCMAKE_PREFIX_PATH="$work/
 cmake --build "$work/consumer" --target consumer consumer_convert >>"$work/consumer.log" ||
   { cat "$work/consumer.log"; fail "building test/consumer failed"; }
 # ...its shared libraries must be the package's, not the build tree's.
-ldd "$work/consumer/consumer" | grep -q "$libdir/libactengine.so.0" || fail "consumer does not use the package's libactengine"
+[[ "$(ldd "$work/consumer/consumer")" == *"$libdir/libactengine.so.0"* ]] || fail "consumer does not use the package's libactengine"
 "$work/consumer/consumer" "$blob"
 mkdir -p "$work/convert"
 "$work/consumer/consumer_convert" "$checkpoint" "$work/convert"
@@ -65,6 +71,6 @@ export PKG_CONFIG_PATH="$libdir/pkgconfig"
 [ "$(pkg-config --modversion actengine)" = "$version" ] || fail "pkg-config does not find actengine $version"
 # shellcheck disable=SC2046  # the flags are words
 c++ -std=c++20 -O1 "$source/test/consumer/main.cc" -o "$work/consumer_pkgconfig" $(pkg-config --cflags --libs actengine)
-ldd "$work/consumer_pkgconfig" | grep -q "$libdir/libactengine.so.0" || fail "the pkg-config consumer does not use the package's libactengine"
+[[ "$(ldd "$work/consumer_pkgconfig")" == *"$libdir/libactengine.so.0"* ]] || fail "the pkg-config consumer does not use the package's libactengine"
 "$work/consumer_pkgconfig" "$blob"
 echo "run_package_test: the packages install, run and build consumers (CMake and pkg-config)"

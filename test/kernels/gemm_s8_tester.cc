@@ -278,6 +278,11 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
     if (n_ % v.nr != 0) {
       EXPECT_NE(paths & kPathPartialCols, 0u) << "partial columns did not run";
     }
+    // The VNNI kernel prefetches weights that span several panels (or one too large for L1) and
+    // only those: both loops, with and without the prefetches, must have run where expected.
+    if (v.isa == Isa::kAvx512Vnni && (k_ <= 256 || k_ > 512)) {  // panels of at most 16.5 KB, or over 32 KB
+      EXPECT_EQ((paths & kPathStreamedWeights) != 0, n_ > v.nr || k_ > 512) << "weight prefetching ran where it should not, or did not";
+    }
 
     for (const auto& [tm, tn] : tile_sizes(v, tile_m_, tile_n_)) {
       SCOPED_TRACE(::testing::Message() << "sub-rectangles " << tm << "x" << tn);

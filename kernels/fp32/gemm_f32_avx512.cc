@@ -1,5 +1,5 @@
 // FP32 GEMM with this file's avx512 flags (cmake/ActLayer.cmake): the packed micro-kernels of
-// gemm_f32_packed.inc on a 8x32 register tile.
+// gemm_f32_packed.inc on a 8x32 register tile, B prefetched 1 KB ahead (8 k steps).
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__x86_64__)
@@ -26,7 +26,7 @@ xsimd::batch<float, xsimd::avx512f> multiply_add<xsimd::avx512f>(const xsimd::ba
   return _mm512_fmadd_ps(a, b, c);
 }
 
-using Packed = PackedGemm<xsimd::avx512f, 8, 2>;
+using Packed = PackedGemm<xsimd::avx512f, 8, 2, 1024>;
 void gemm_packed_avx512(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
 }  // namespace
 

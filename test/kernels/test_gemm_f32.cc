@@ -156,10 +156,13 @@ TEST(GemmF32Packed, EveryVariantMatchesTheDoubleProduct) {
         {3 * mr + 2, 4 * nr + 3, 70, mr + 1, mr + 1, 1, 2 * nr, 2, 1, GemmF32Activation::kRelu},
         {3 * mr + 2, 4 * nr + 3, 70, 1, 2 * mr, 2, 2 * nr + 3, 1, 2, GemmF32Activation::kNone},
         {5, 3 * nr, 33, 2, 3, 1, nr - 1, 0, 1, GemmF32Activation::kGelu},
-        // A in segments (a convolution's kernel rows): one k block of 7 (the stem's 7 x 21), blocks of one
-        // segment longer than 256 (3 x 300), and blocks of 10 segments with a shorter last one.
+        // A in segments (a convolution's kernel rows): one k block of 7 (the stem's 7 x 21); segments
+        // longer than 256 cut into k blocks of their largest divisor up to 256 (300 in halves, 768 in
+        // thirds as layer3's, a prime 263 value by value); blocks of 10 segments with a shorter last one.
         {2 * mr + 1, nr + 3, 147, 0, 2 * mr + 1, 0, nr + 3, 1, 1, GemmF32Activation::kRelu, 21},
         {mr + 2, 2 * nr, 3 * 300, 1, mr, 0, 2 * nr, 2, 0, GemmF32Activation::kNone, 300},
+        {mr + 1, nr + 1, 2 * 768, 0, mr + 1, 0, nr + 1, 1, 1, GemmF32Activation::kRelu, 768},
+        {mr - 1 > 0 ? mr - 1 : 1, nr, 2 * 263, 0, mr - 1 > 0 ? mr - 1 : 1, 0, nr, 0, 2, GemmF32Activation::kGelu, 263},
         {3 * mr, 2 * nr + 1, 600, 0, 3 * mr, 0, 2 * nr + 1, 0, 2, GemmF32Activation::kGelu, 24},
     };
     uint32_t paths = 0;

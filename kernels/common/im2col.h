@@ -56,33 +56,47 @@ template <class T>
 void point_at_kernel_rows(const Conv2dShape& s, const T* input, T pad, int pixel_begin, int count, T* scratch,
                           const T** rows) {
   const size_t seg = kernel_row_elements(s), c = static_cast<size_t>(s.in_c);
+  const size_t row_stride = static_cast<size_t>(s.in_w) * c;
   const T* pad_row = scratch;
   std::fill(scratch, scratch + seg, pad);
   T* copies = scratch + seg;
-  for (int i = 0; i < count; ++i) {
-    const int oy = (pixel_begin + i) / s.out_w, ox = (pixel_begin + i) % s.out_w;
-    const int ix0 = ox * s.stride - s.pad;
+  // The pixel's coordinates step along the tile (a division per pixel cost as much as the rest).
+  int oy = pixel_begin / s.out_w, ox = pixel_begin % s.out_w;
+  for (int i = 0; i < count; ++i, rows += s.kernel_h) {
+    const int ix0 = ox * s.stride - s.pad, iy0 = oy * s.stride - s.pad;
     const bool inside_x = ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
-    for (int ky = 0; ky < s.kernel_h; ++ky) {
-      const int iy = oy * s.stride - s.pad + ky;
-      const T* row = input + static_cast<size_t>(iy) * static_cast<size_t>(s.in_w) * c;
-      if (iy < 0 || iy >= s.in_h) {
-        *rows++ = pad_row;
-      } else if (inside_x) {
-        *rows++ = row + static_cast<size_t>(ix0) * c;
-      } else {
-        for (int kx = 0; kx < s.kernel_w; ++kx) {
-          const int ix = ix0 + kx;
-          T* dst = copies + static_cast<size_t>(kx) * c;
-          if (ix < 0 || ix >= s.in_w) {
-            std::fill(dst, dst + c, pad);
-          } else {
-            std::copy(row + static_cast<size_t>(ix) * c, row + static_cast<size_t>(ix + 1) * c, dst);
-          }
+    if (inside_x && iy0 >= 0 && iy0 + s.kernel_h <= s.in_h) {
+      // The whole window inside the image (nearly every pixel): kernel rows a row stride apart.
+      const T* row = input + static_cast<size_t>(iy0) * row_stride + static_cast<size_t>(ix0) * c;
+      for (int ky = 0; ky < s.kernel_h; ++ky, row += row_stride) rows[ky] = row;
+    } else {
+      for (int ky = 0; ky < s.kernel_h; ++ky) {
+        const int iy = iy0 + ky;
+        if (iy < 0 || iy >= s.in_h) {
+          rows[ky] = pad_row;
+          continue;
         }
-        *rows++ = copies;
-        copies += seg;
+        const T* row = input + static_cast<size_t>(iy) * row_stride;
+        if (inside_x) {
+          rows[ky] = row + static_cast<size_t>(ix0) * c;
+        } else {
+          for (int kx = 0; kx < s.kernel_w; ++kx) {
+            const int ix = ix0 + kx;
+            T* dst = copies + static_cast<size_t>(kx) * c;
+            if (ix < 0 || ix >= s.in_w) {
+              std::fill(dst, dst + c, pad);
+            } else {
+              std::copy(row + static_cast<size_t>(ix) * c, row + static_cast<size_t>(ix + 1) * c, dst);
+            }
+          }
+          rows[ky] = copies;
+          copies += seg;
+        }
       }
+    }
+    if (++ox == s.out_w) {
+      ox = 0;
+      ++oy;
     }
   }
 }

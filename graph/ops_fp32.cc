@@ -92,11 +92,10 @@ void Conv2dOp::run(const RunContext& ctx) const {
 
 // ------------------------------------------------------------------------------------ MaxPool
 
-MaxPoolOp::MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, bool s8, ValueId input,
-                     ValueId output)
+MaxPoolOp::MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output)
     : in_h_(in_h), in_w_(in_w), channels_(channels), kernel_(kernel), stride_(stride), pad_(pad),
       out_h_(kernels::Conv2dShape::out_dim(in_h, kernel, stride, pad, 1)),
-      out_w_(kernels::Conv2dShape::out_dim(in_w, kernel, stride, pad, 1)), s8_(s8) {
+      out_w_(kernels::Conv2dShape::out_dim(in_w, kernel, stride, pad, 1)) {
   inputs = {input};
   outputs = {output};
 }
@@ -106,13 +105,8 @@ void MaxPoolOp::run(const RunContext& ctx) const {
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(out_h_), kRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kRows;
     const int r1 = std::min(out_h_, r0 + kRows);
-    if (s8_) {
-      kernels::maxpool_nhwc_s8(ctx.kernels().maxpool_s8, in_h_, in_w_, channels_, kernel_, stride_, pad_, out_w_, ctx.data_s8(inputs[0]),
-                               ctx.data_s8(outputs[0]), r0, r1);
-    } else {
-      kernels::maxpool_nhwc_f32(in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_, ctx.data(inputs[0]),
-                                ctx.data(outputs[0]), r0, r1);
-    }
+    kernels::maxpool_nhwc_f32(in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_, ctx.data(inputs[0]),
+                              ctx.data(outputs[0]), r0, r1);
   });
 }
 

@@ -72,15 +72,12 @@ class Conv2dOp : public Op {
   std::shared_ptr<const PackedF32Weights> packed_;
 };
 
-/// 2-D max-pool over NHWC, float32 or int8 (max commutes with the monotonic quantization: an int8
-/// output keeps the input's parameters, exactly).
+/// 2-D max-pool over NHWC float32 (the int8 stem runs its own: ConvS8Op::fuse_max_pool).
 class MaxPoolOp : public Op {
  public:
-  MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, bool s8, ValueId input, ValueId output);
-  const char* type() const override { return s8_ ? "maxpool_s8" : "maxpool_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override {
-    return s8_ ? k.maxpool_s8.max_taps_name : "scalar";
-  }
+  MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output);
+  const char* type() const override { return "maxpool_f32"; }
+  std::string kernel(const kernels::KernelConfig&) const override { return "scalar"; }
   void run(const RunContext& ctx) const override;
   int kernel() const { return kernel_; }
   int stride() const { return stride_; }
@@ -88,7 +85,6 @@ class MaxPoolOp : public Op {
 
  private:
   int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
-  bool s8_;
 };
 
 /// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in], packed at build time;

@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "graph/aligned_buffer.h"
@@ -92,8 +93,11 @@ struct ConvS8Spec {
 class ConvS8Op : public Op {
  public:
   ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec, ValueId input, ValueId output);
-  const char* type() const override { return spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32"; }
+  const char* type() const override {
+    return max_pool_ ? "conv2d_s8_s8+maxpool_s8" : spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32";
+  }
   std::string kernel(const kernels::KernelConfig& k) const override {
+    if (max_pool_) return std::string(k.gemm_s8.s8out_name) + " + " + k.maxpool_s8.max_taps_name;
     return spec_.s8_out ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
   }
   void run(const RunContext& ctx) const override;
@@ -101,11 +105,25 @@ class ConvS8Op : public Op {
   double macs() const override;
   const ConvS8Spec& spec() const { return spec_; }
 
+  /// A max-pool of this conv's int8 output (the stem's), run by this op: `pooled` becomes its
+  /// second output. When nothing else reads the conv's own output (no kept intermediates), each task
+  /// computes bands of its rows in scratch and pools them there: the whole output (4.9 MB for the
+  /// stem at 480x640) never goes to memory and back. Same bits either way (max is exact).
+  struct MaxPool {
+    int kernel = 0, stride = 0, pad = 0, out_h = 0, out_w = 0;
+  };
+  void fuse_max_pool(int kernel, int stride, int pad, ValueId pooled);
+  const std::optional<MaxPool>& max_pool() const { return max_pool_; }
+
  private:
+  void run_pooled_bands(const RunContext& ctx, const kernels::ConvS8& conv, const kernels::GemmS8OutS8& out) const;
+  size_t band_offset() const;  // the band's place in a thread's scratch, after the conv's own
+
   ConvS8Spec spec_;
   int tile_pixels_;
   PackedWeights packed_;
   std::vector<float> requant_scale_;  // s8 out: s_in * s_w[n] / s_out
+  std::optional<MaxPool> max_pool_;
 };
 
 /// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x quantized per row at run time

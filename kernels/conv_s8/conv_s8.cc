@@ -60,11 +60,12 @@ size_t conv_s8_scratch_bytes(const Conv2dShape& s, int tile_pixels) {
 }
 
 void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
-                   int8_t* scratch, ConvChannels channels) {
+                   int8_t* scratch, ConvChannels channels, int out_pixel0) {
   const GemmS8Args args = tile_args(conv, input, pixel_begin, count, scratch);
   GemmS8OutS8 tile = out;
-  tile.c = out.c + static_cast<size_t>(pixel_begin) * out.ldc;
-  if (out.residual) tile.residual = out.residual + static_cast<size_t>(pixel_begin) * out.ldr;
+  const size_t out_pixel = static_cast<size_t>(pixel_begin - out_pixel0);
+  tile.c = out.c + out_pixel * out.ldc;
+  if (out.residual) tile.residual = out.residual + out_pixel * out.ldr;
   conv.kernels->s8out(args, tile, 0, count, channels.begin, channels.end < 0 ? args.n : channels.end);
 }
 

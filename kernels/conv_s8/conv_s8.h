@@ -41,10 +41,10 @@ struct ConvChannels {
 };
 
 /// Output pixels [pixel_begin, pixel_begin + count), channels `channels`, s8 out. `out.c` and `out.residual` address
-/// the whole output / residual ([out_h * out_w x out_c]). The input must be followed by
-/// kGemmS8ReadSlack addressable bytes.
+/// the whole output / residual ([out_h * out_w x out_c]) from pixel out_pixel0 on (a band of it held
+/// elsewhere; 0: all of it). The input must be followed by kGemmS8ReadSlack addressable bytes.
 void conv_s8_s8out(const ConvS8& conv, const int8_t* input, const GemmS8OutS8& out, int pixel_begin, int count,
-                   int8_t* scratch, ConvChannels channels = {});
+                   int8_t* scratch, ConvChannels channels = {}, int out_pixel0 = 0);
 /// The same with f32 out (dequantized, + bias, residual, ReLU; out.a_scale is the input's scale).
 void conv_s8_f32out(const ConvS8& conv, const int8_t* input, const GemmS8OutF32& out, int pixel_begin, int count,
                     int8_t* scratch, ConvChannels channels = {});

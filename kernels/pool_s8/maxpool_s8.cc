@@ -25,7 +25,7 @@ const MaxPoolS8Kernels* maxpool_s8_table_ref() {
 }
 
 void maxpool_nhwc_s8(const MaxPoolS8Kernels& k, int in_h, int in_w, int channels, int kernel, int stride, int pad,
-                     int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end) {
+                     int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end, int input_row0) {
   // Taps are gathered in batches; a window larger than one batch folds the running max (dst) in
   // as the first tap of the next batch.
   constexpr int kBatch = 32;
@@ -47,7 +47,7 @@ void maxpool_nhwc_s8(const MaxPoolS8Kernels& k, int in_h, int in_w, int channels
             taps[0] = dst;
             n = 1;
           }
-          taps[n++] = input + (static_cast<size_t>(iy) * in_w + ix) * channels;
+          taps[n++] = input + (static_cast<size_t>(iy - input_row0) * in_w + ix) * channels;
         }
       }
       if (n > (started ? 1 : 0)) {

@@ -25,7 +25,8 @@ struct MaxPoolS8Kernels {
 };
 
 /// Output rows [row_begin, row_end) with the variant `k`. Padding never wins (it is skipped).
+/// `input` holds the image's rows from input_row0 on (a band of them: those the output rows read).
 void maxpool_nhwc_s8(const MaxPoolS8Kernels& k, int in_h, int in_w, int channels, int kernel, int stride, int pad,
-                     int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end);
+                     int out_w, const int8_t* input, int8_t* output, int row_begin, int row_end, int input_row0 = 0);
 
 }  // namespace act::kernels

@@ -169,6 +169,70 @@ TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
   }
 }
 
+// A max-pool fused into an int8 conv (the stem's) gives, whether the conv's output is kept (computed
+// whole, then pooled) or not (computed and pooled band by band in scratch), the max over each
+// window's in-image outputs of the conv alone: shapes whose pooled rows split unevenly over 1 and 2
+// threads, tasks of several bands (the 190-row one: 24 or 12 pooled rows a task), a single row.
+TEST_P(OpsPerIsa, ConvS8WithFusedMaxPoolEqualsTheMaxOfItsOutput) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(17);
+  ThreadPool one(1);
+  for (const auto& s : {kernels::Conv2dShape::square(45, 37, 3, 64, 7, 2, 3), kernels::Conv2dShape::square(20, 9, 8, 16, 3, 1, 1),
+                        kernels::Conv2dShape::square(190, 12, 3, 16, 7, 2, 3), kernels::Conv2dShape::square(2, 5, 3, 8, 7, 2, 3)}) {
+    const int pixels = s.out_h * s.out_w, K = s.patch_size();
+    std::vector<int8_t> x(static_cast<size_t>(s.in_h) * s.in_w * s.in_c);
+    std::uniform_int_distribution<int> code(-128, 127);
+    for (int8_t& v : x) v = static_cast<int8_t>(code(rng));
+    const QuantizedWeights qw = quantize_weights(uniform(static_cast<size_t>(s.out_c) * K, rng, -0.5f, 0.5f), s.out_c, K);
+    const std::vector<float> bias = uniform(static_cast<size_t>(s.out_c), rng, -1.0f, 1.0f);
+    ConvS8Spec spec;
+    spec.shape = s;
+    spec.weight = qw.q.data();
+    spec.w_scale = qw.scale.data();
+    spec.bias = bias.data();
+    spec.input_q = kernels::choose_quant_s8(-1.0f, 1.0f);
+    spec.relu = true;
+    spec.output_q = kernels::choose_quant_s8(0.0f, 2.0f);
+    const int pooled_h = kernels::Conv2dShape::out_dim(s.out_h, 3, 2, 1, 1), pooled_w = kernels::Conv2dShape::out_dim(s.out_w, 3, 2, 1, 1);
+    for (ThreadPool* pool : {&one, &pool_}) {
+      std::vector<int8_t> conv_out, pooled[2];
+      for (const bool keep : {true, false}) {
+        Graph g;
+        const ValueId in = g.add_input("x", {s.in_h, s.in_w, s.in_c}, DataType::kS8);
+        const ValueId y = g.add_value("y", {s.out_h, s.out_w, s.out_c}, DataType::kS8);
+        const ValueId p = g.add_value("pooled", {pooled_h, pooled_w, s.out_c}, DataType::kS8);
+        auto& conv = g.add_op(std::make_unique<ConvS8Op>(k.gemm_s8, spec, in, y));
+        static_cast<ConvS8Op&>(conv).fuse_max_pool(3, 2, 1, p);
+        g.mark_output(p);
+        g.plan(pool->threads(), keep);
+        ASSERT_EQ(g.value(y).read, keep) << "the conv's own output is read only when kept: the band path runs otherwise";
+        std::copy(x.begin(), x.end(), g.data_s8(in));
+        g.run(*pool, k);
+        pooled[keep].assign(g.data_s8(p), g.data_s8(p) + static_cast<size_t>(pooled_h) * pooled_w * s.out_c);
+        if (keep) conv_out.assign(g.data_s8(y), g.data_s8(y) + static_cast<size_t>(pixels) * s.out_c);
+      }
+      for (int py = 0; py < pooled_h; ++py) {
+        for (int px = 0; px < pooled_w; ++px) {
+          for (int c = 0; c < s.out_c; ++c) {
+            int want = -129;
+            for (int iy = std::max(0, 2 * py - 1); iy < std::min(s.out_h, 2 * py + 2); ++iy) {
+              for (int ix = std::max(0, 2 * px - 1); ix < std::min(s.out_w, 2 * px + 2); ++ix) {
+                want = std::max<int>(want, conv_out[(static_cast<size_t>(iy) * s.out_w + ix) * s.out_c + c]);
+              }
+            }
+            const size_t i = (static_cast<size_t>(py) * pooled_w + px) * s.out_c + c;
+            for (const bool keep : {true, false}) {
+              ASSERT_EQ(pooled[keep][i], want) << kernels::isa_name(GetParam()) << " " << s.in_h << "x" << s.in_w << " k"
+                                               << s.kernel_h << " threads " << pool->threads() << (keep ? " whole" : " in bands")
+                                               << " pooled (" << py << ", " << px << ") channel " << c;
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 RowCodes row_codes(Graph& g, const std::string& name, int rows, int cols) {
   return {g.add_value(name + "_s8", {rows, cols}, DataType::kS8), g.add_value(name + "_scale", {rows}),
           g.add_value(name + "_zero_point", {rows}, DataType::kS32), cols};

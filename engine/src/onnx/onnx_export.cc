@@ -268,7 +268,9 @@ class OnnxBuilder {
   void translate(const graph::Op& op) {
     if (const auto* conv = dynamic_cast<const graph::Conv2dOp*>(&op)) return conv_f32(*conv);
     if (const auto* conv = dynamic_cast<const graph::ConvS8Op*>(&op)) return conv_s8(*conv);
-    if (const auto* pool = dynamic_cast<const graph::MaxPoolOp*>(&op)) return maxpool(*pool);
+    if (const auto* pool = dynamic_cast<const graph::MaxPoolOp*>(&op)) {
+      return maxpool(op.inputs[0], op.outputs[0], pool->kernel(), pool->stride(), pool->pad());
+    }
     if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) {
       const std::vector<float> w = lin->weight();
       return linear(op, lin->params(), w.data(), nullptr, nullptr);
@@ -377,18 +379,19 @@ class OnnxBuilder {
       q = spec.output_q;
     }
     set_conv_output(op.outputs[0], y, q, s.out_h, s.out_w);
+    if (const auto& pool = op.max_pool()) maxpool(op.outputs[0], op.outputs[1], pool->kernel, pool->stride, pool->pad);
   }
 
-  void maxpool(const graph::MaxPoolOp& op) {
-    const OnnxValue& in = value(op.inputs[0]);
-    onnx::NodeProto* n = node("MaxPool", {float_nchw(op.inputs[0])}, fresh("maxpool"));
-    attr_ints(n, "kernel_shape", {op.kernel(), op.kernel()});
-    attr_ints(n, "strides", {op.stride(), op.stride()});
-    attr_ints(n, "pads", {op.pad(), op.pad(), op.pad(), op.pad()});
+  void maxpool(ValueId input, ValueId output, int kernel, int stride, int pad) {
+    const OnnxValue& in = value(input);
+    onnx::NodeProto* n = node("MaxPool", {float_nchw(input)}, fresh("maxpool"));
+    attr_ints(n, "kernel_shape", {kernel, kernel});
+    attr_ints(n, "strides", {stride, stride});
+    attr_ints(n, "pads", {pad, pad, pad, pad});
     std::string y = n->output(0);
     // Max commutes with quantization: the output keeps the input's parameters.
     if (in.int8) y = quantize(y, *in.int8);
-    set(op.outputs[0], {y, true, in.int8});
+    set(output, {y, true, in.int8});
   }
 
   // y = act(x W^T + bias [+ residual]), W float, or int8 with per-row scales (dequantized in the graph).

@@ -1,5 +1,7 @@
 #include "graph/act_network.h"
 
+#include <algorithm>
+
 #include "weights/blob/blob_names.h"
 #include "weights/blob/error.h"
 
@@ -179,16 +181,21 @@ std::shared_ptr<const PackedF32Weights> ActNetwork::packed_weight(const std::str
 }
 
 void ActNetwork::calibration_point(CalibrationRole role, ValueId value) {
-  if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value});
+  if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value, ""});
 }
 
 ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                            MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
+  if (const ValueId whole = whole_value(x, rows, in); whole != kNoValue && stage_ != Stage::kOther) {
+    const bool seen = std::any_of(calibration_points_.begin(), calibration_points_.end(),
+                                  [&](const CalibrationPoint& p) { return p.value == whole; });
+    if (!seen) calibration_points_.push_back({CalibrationRole::kLinearInput, 0, whole, weight_name});
+  }
   const ValueId y = graph_.add_value(out_name, {rows, out});
   if (const ActbTensor* q8 = int8_weight(weight_name, {out, in})) {
     RowCodes x_codes = producer_row_codes(x, rows, in);
     const auto from = x_codes.present() ? LinearS8Op::InputCodes::kFromProducer : LinearS8Op::InputCodes::kQuantizedHere;
-    if (!x_codes.present()) x_codes = add_row_codes(out_name + ".x", rows, in);
+    if (!x_codes.present()) x_codes = add_row_codes(out_name + ".x", rows, in, linear_input_quant(x, rows, in));
     auto op = std::make_unique<LinearS8Op>(kernels_.gemm_s8, rows, in, out, x, x_codes, from,
                                            reinterpret_cast<const int8_t*>(q8->data), q8->quant.scales.data(), bias,
                                            residual, epilogue, y);
@@ -211,20 +218,40 @@ ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, 
 }
 
 // `name` by value: it may be a graph value's name, and adding values may move it.
-RowCodes ActNetwork::add_row_codes(std::string name, int rows, int cols) {
-  return {graph_.add_value(name + "_s8", {rows, cols}, DataType::kS8), graph_.add_value(name + "_scale", {rows}),
-          graph_.add_value(name + "_zero_point", {rows}, DataType::kS32), cols};
+RowCodes ActNetwork::add_row_codes(std::string name, int rows, int cols, std::optional<kernels::QuantS8> fixed) {
+  RowCodes codes;
+  codes.codes = graph_.add_value(name + "_s8", {rows, cols}, DataType::kS8);
+  codes.cols = cols;
+  codes.fixed = fixed;
+  if (fixed) {
+    graph_.value(codes.codes).quant = fixed;
+  } else {
+    codes.scale = graph_.add_value(name + "_scale", {rows});
+    codes.zero_point = graph_.add_value(name + "_zero_point", {rows}, DataType::kS32);
+  }
+  return codes;
+}
+
+ValueId ActNetwork::whole_value(const MatrixRef& x, int rows, int cols) const {
+  const bool whole = x.value != kNoValue && x.col_offset == 0 && x.ld == static_cast<size_t>(cols) &&
+                     graph_.value(x.value).shape == std::vector<int64_t>{rows, cols};
+  return whole ? x.value : kNoValue;
+}
+
+std::optional<kernels::QuantS8> ActNetwork::linear_input_quant(const MatrixRef& x, int rows, int cols) const {
+  const ValueId v = whole_value(x, rows, cols);
+  if (v == kNoValue) return std::nullopt;
+  const auto it = quant_.activations.find(graph_.value(v).name);
+  if (it == quant_.activations.end()) return std::nullopt;
+  return kernels::QuantS8{it->second.scale, it->second.zero_point};
 }
 
 RowCodes ActNetwork::producer_row_codes(const MatrixRef& x, int rows, int cols) {
-  if (x.value == kNoValue || x.col_offset != 0 || x.ld != static_cast<size_t>(cols) ||
-      graph_.value(x.value).shape != std::vector<int64_t>{rows, cols}) {
-    return {};
-  }
+  if (whole_value(x, rows, cols) == kNoValue) return {};
   if (auto it = row_codes_.find(x.value); it != row_codes_.end()) return it->second;
   const auto writer = row_codes_writers_.find(x.value);
   if (writer == row_codes_writers_.end()) return {};
-  const RowCodes codes = add_row_codes(graph_.value(x.value).name, rows, cols);
+  const RowCodes codes = add_row_codes(graph_.value(x.value).name, rows, cols, linear_input_quant(x, rows, cols));
   writer->second->write_row_codes(codes);
   return row_codes_[x.value] = codes;
 }

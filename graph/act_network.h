@@ -8,6 +8,7 @@
 #pragma once
 
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -27,15 +28,19 @@ enum class CalibrationRole {
   kConvOutput,       ///< a backbone conv (after its fused residual and ReLU)
   kMaxPoolOutput,    ///< the stem's max pool
   kImageProjection,  ///< the 1x1 projection of the backbone features to tokens
+  kLinearInput,      ///< a transformer matrix that int8 linears read as codes (per tensor if chosen)
 };
 
-/// A float value of a camera branch whose range a static INT8 blob records. Its parameters are
-/// stored in the blob's quantization section under the value's name (quant_config.h), which is
-/// where the builder of the INT8 network looks them up.
+/// A float value whose range a static INT8 blob may record: every value of the camera branches
+/// (all recorded), and the transformer's linear inputs (recorded for those the converter chooses
+/// per-tensor codes for; the others stay per token). Its parameters are stored in the blob's
+/// quantization section under the value's name (quant_config.h), which is where the builder of
+/// the INT8 network looks them up.
 struct CalibrationPoint {
   CalibrationRole role;
-  size_t camera;
+  size_t camera;       ///< camera branches only
   ValueId value;
+  std::string reader;  ///< linear inputs: the weight of the first linear that reads the value
 };
 
 /// A layer's op and output, for the accuracy report: every conv and linear layer, and the max pool
@@ -79,8 +84,8 @@ class ActNetwork {
 
   Graph& graph() { return graph_; }
   const ModelConfig& config() const { return config_; }
-  /// The float values of the camera branches, in graph order. Calibration reads them from an FP32
-  /// network, where every value of the branches is float: a static INT8 blob records them all.
+  /// The float values calibration observes, in graph order (CalibrationPoint). It reads them from an
+  /// FP32 network, where every value is float.
   const std::vector<CalibrationPoint>& calibration_points() const { return calibration_points_; }
   /// The conv and linear layers (and the int8 max pool), in graph order.
   const std::vector<NetworkLayer>& layers() const { return layers_; }
@@ -125,8 +130,13 @@ class ActNetwork {
   ValueId linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                  MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone);
   ValueId layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix);
-  /// Values for the row codes of a [rows, cols] matrix, named `name`_s8, _scale, _zero_point.
-  RowCodes add_row_codes(std::string name, int rows, int cols);
+  /// Values for the row codes of a [rows, cols] matrix, named `name`_s8, _scale, _zero_point; per
+  /// tensor (`fixed`), the codes alone.
+  RowCodes add_row_codes(std::string name, int rows, int cols, std::optional<kernels::QuantS8> fixed);
+  /// x as a whole [rows, cols] value (no column offset, no other width), or kNoValue.
+  ValueId whole_value(const MatrixRef& x, int rows, int cols) const;
+  /// The calibrated per-tensor parameters of a linear's input x, when the blob has them; none: per token.
+  std::optional<kernels::QuantS8> linear_input_quant(const MatrixRef& x, int rows, int cols) const;
   /// The row codes of x written by the op that produces it (asked of it on first use), when x is a
   /// whole [rows, cols] value of such an op; else none.
   RowCodes producer_row_codes(const MatrixRef& x, int rows, int cols);

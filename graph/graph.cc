@@ -60,10 +60,15 @@ std::vector<float> Graph::read_f32(ValueId id) {
 }
 
 void RowCodes::write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const {
-  const size_t row = static_cast<size_t>(r0);
-  kernels::quantize_rows_dynamic_f32_s8(ctx.kernels().quant, rows, cols, x, ldx,
-                                        ctx.data_s8(codes) + row * static_cast<size_t>(cols), static_cast<size_t>(cols),
-                                        ctx.data(scale) + row, ctx.data_s32(zero_point) + row);
+  const size_t row = static_cast<size_t>(r0), ldy = static_cast<size_t>(cols);
+  int8_t* y = ctx.data_s8(codes) + row * ldy;
+  const kernels::QuantS8Kernels& quant = ctx.kernels().quant;
+  if (per_tensor()) {
+    const float inv_scale = 1.0f / fixed->scale;
+    for (size_t r = 0; r < static_cast<size_t>(rows); ++r) quant.quantize(ldy, x + r * ldx, inv_scale, fixed->zero_point, y + r * ldy);
+    return;
+  }
+  kernels::quantize_rows_dynamic_f32_s8(quant, rows, cols, x, ldx, y, ldy, ctx.data(scale) + row, ctx.data_s32(zero_point) + row);
 }
 
 double Graph::total_macs() const {

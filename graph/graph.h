@@ -84,16 +84,24 @@ struct MatrixRef {
   static MatrixRef of_constant(const float* p, size_t ld) { return {kNoValue, p, 0, ld}; }
 };
 
-/// The per-token int8 codes of a float matrix [rows, cols], exactly as quantize_rows_dynamic_f32_s8
-/// makes them from its rows, written by the op that produces the matrix while its rows are in cache
-/// (LayerNorm, an int8 linear), so that the int8 linears reading it skip a quantization pass.
+/// The int8 codes of a float matrix [rows, cols] that int8 linears read, written by the op that
+/// produces the matrix while its rows are in cache (LayerNorm, an int8 linear), so that the linears
+/// reading it skip a quantization pass. Two kinds:
+///   per token  (dynamic) each row's parameters from its own range, exactly as
+///              quantize_rows_dynamic_f32_s8 makes them, into `scale` and `zero_point` [rows];
+///   per tensor (static)  the calibrated parameters `fixed` for every row (no scale values: the
+///              readers take `fixed`), one pass with no range to find.
 struct RowCodes {
   ValueId codes = kNoValue;       ///< int8 [rows, cols]
-  ValueId scale = kNoValue;       ///< float [rows]
-  ValueId zero_point = kNoValue;  ///< int32 [rows]
+  ValueId scale = kNoValue;       ///< float [rows] (per token only)
+  ValueId zero_point = kNoValue;  ///< int32 [rows] (per token only)
   int cols = 0;
+  std::optional<kernels::QuantS8> fixed;  ///< per tensor: the calibrated parameters
   bool present() const { return codes != kNoValue; }
-  std::vector<ValueId> values() const { return {codes, scale, zero_point}; }
+  bool per_tensor() const { return fixed.has_value(); }
+  std::vector<ValueId> values() const {
+    return per_tensor() ? std::vector<ValueId>{codes} : std::vector<ValueId>{codes, scale, zero_point};
+  }
   /// Quantizes `rows` rows of x (leading dimension ldx) into their rows r0, r0 + 1, ...
   void write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const;
 };

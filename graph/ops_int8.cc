@@ -43,6 +43,11 @@ PackedWeights::PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k
         "an int8 layer with " + std::to_string(k) + " inputs per output (the INT8 kernels take at most " +
             std::to_string(kernels::kGemmS8MaxK) + ")");
   buffer_ = AlignedBuffer(kernels.packed_size(n, k));
+  repack(kernels, n, k, w, bias, a_zero_point);
+}
+
+void PackedWeights::repack(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
+                           int32_t a_zero_point) {
   kernels.pack(n, k, w, static_cast<size_t>(k), bias, a_zero_point, buffer_.data());
 }
 
@@ -109,13 +114,21 @@ void DequantizeOp::run(const RunContext& ctx) const {
 
 namespace {
 
-// The int32 bias of the s8-out epilogue: bias / (s_in * s_w[n]), rounded and saturated.
-std::vector<int32_t> integer_bias(const ConvS8Spec& s) {
-  std::vector<int32_t> out(static_cast<size_t>(s.shape.out_c));
-  for (size_t n = 0; n < out.size(); ++n) {
-    const double v = std::nearbyint(static_cast<double>(s.bias[n]) / (static_cast<double>(s.input_q.scale) * s.w_scale[n]));
-    out[n] = static_cast<int32_t>(std::clamp(v, -2147483648.0, 2147483647.0));
+// The int32 bias of the s8-out epilogue: bias / (s_in * s_w[n]), rounded and saturated (none
+// without a float bias).
+std::vector<int32_t> integer_bias(int n, const float* bias, float input_scale, const float* w_scale) {
+  std::vector<int32_t> out(bias != nullptr ? static_cast<size_t>(n) : 0);
+  for (size_t c = 0; c < out.size(); ++c) {
+    const double v = std::nearbyint(static_cast<double>(bias[c]) / (static_cast<double>(input_scale) * w_scale[c]));
+    out[c] = static_cast<int32_t>(std::clamp(v, -2147483648.0, 2147483647.0));
   }
+  return out;
+}
+
+// The s8-out epilogue's per-channel multipliers: s_in * s_w[n] / s_out.
+std::vector<float> requant_scales(int n, float input_scale, const float* w_scale, float output_scale) {
+  std::vector<float> out(static_cast<size_t>(n));
+  for (size_t c = 0; c < out.size(); ++c) out[c] = input_scale * w_scale[c] / output_scale;
   return out;
 }
 
@@ -124,14 +137,10 @@ std::vector<int32_t> integer_bias(const ConvS8Spec& s) {
 ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec, ValueId input, ValueId output)
     : spec_(spec), tile_pixels_(kernels::conv_s8_tile_pixels(spec.shape)),
       packed_(kernels, spec.shape.out_c, spec.shape.patch_size(), spec.weight,
-              spec.s8_out ? integer_bias(spec).data() : nullptr, spec.input_params == kNoValue ? spec.input_q.zero_point : 0) {
+              spec.s8_out ? integer_bias(spec.shape.out_c, spec.bias, spec.input_q.scale, spec.w_scale).data() : nullptr,
+              spec.input_params == kNoValue ? spec.input_q.zero_point : 0) {
   check(!spec.s8_out || spec.input_params == kNoValue, ErrorCode::kInternal, "an int8-out conv needs static input parameters");
-  if (spec.s8_out) {
-    requant_scale_.resize(static_cast<size_t>(spec.shape.out_c));
-    for (size_t n = 0; n < requant_scale_.size(); ++n) {
-      requant_scale_[n] = spec.input_q.scale * spec.w_scale[n] / spec.output_q.scale;
-    }
-  }
+  if (spec.s8_out) requant_scale_ = requant_scales(spec.shape.out_c, spec.input_q.scale, spec.w_scale, spec.output_q.scale);
   inputs = {input};
   if (spec.input_params != kNoValue) inputs.push_back(spec.input_params);
   if (spec.residual != kNoValue) inputs.push_back(spec.residual);
@@ -286,7 +295,8 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
                        MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output)
     : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), x_codes_(x_codes),
       x_codes_from_(x_codes_from), weight_(weight), w_scale_(w_scale), epilogue_(epilogue), mr_(kernels.mr),
-      nr_(kernels.nr), table_cols_(out), packed_(kernels, out, in, weight, nullptr, 0) {
+      nr_(kernels.nr), table_cols_(out), gemm_(&kernels),
+      packed_(kernels, out, in, weight, nullptr, x_codes.per_tensor() ? x_codes.fixed->zero_point : 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
   check(!(bias_table && has_residual), ErrorCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
@@ -319,9 +329,9 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
 }
 
 std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
-  std::string variant = k.gemm_s8.f32out_name;
+  std::string variant = requantizes() ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
   if (x_codes_from_ == InputCodes::kQuantizedHere) variant = std::string(k.quant.quantize_name) + " + " + variant;
-  if (y_codes_.present()) variant += std::string(" + ") + k.quant.quantize_name;
+  if (y_codes_.present() && !requantizes()) variant += std::string(" + ") + k.quant.quantize_name;
   return variant;
 }
 
@@ -329,6 +339,16 @@ void LinearS8Op::write_row_codes(const RowCodes& codes) {
   check(!y_codes_.present() && codes.cols == out_, ErrorCode::kInternal, "LinearS8Op: row codes asked for twice or of another width");
   y_codes_ = codes;
   for (ValueId v : codes.values()) outputs.push_back(v);
+  const bool constant_bias_vector = bias_.value == kNoValue && bias_.ld == 0;
+  const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
+  if (x_codes_.per_tensor() && y_codes_.per_tensor() && constant_bias_vector && !has_residual &&
+      (epilogue_ == Epilogue::kNone || epilogue_ == Epilogue::kRelu)) {
+    const float s_x = x_codes_.fixed->scale;
+    const float* bias = bias_.constant != nullptr ? bias_.constant + bias_.col_offset : nullptr;
+    const std::vector<int32_t> int_bias = integer_bias(out_, bias, s_x, w_scale_);
+    packed_.repack(*gemm_, out_, in_, weight_, int_bias.empty() ? nullptr : int_bias.data(), x_codes_.fixed->zero_point);
+    requant_scale_ = requant_scales(out_, s_x, w_scale_, y_codes_.fixed->scale);
+  }
 }
 
 namespace {
@@ -351,12 +371,17 @@ void LinearS8Op::run(const RunContext& ctx) const {
   args.a = ctx.data_s8(x_codes_.codes);
   args.lda = static_cast<size_t>(in_);
   args.packed_w = packed_.data();
-  args.a_row_zero_point = ctx.data_s32(x_codes_.zero_point);
+  if (!x_codes_.per_tensor()) args.a_row_zero_point = ctx.data_s32(x_codes_.zero_point);
+  if (requantizes()) return run_requantized(ctx, args);
   kernels::GemmS8OutF32 o;
   o.c = ctx.data(outputs[0]);
   o.ldc = static_cast<size_t>(out_);
   o.w_scale = w_scale_;
-  o.a_row_scale = ctx.data(x_codes_.scale);
+  if (x_codes_.per_tensor()) {
+    o.a_scale = x_codes_.fixed->scale;
+  } else {
+    o.a_row_scale = ctx.data(x_codes_.scale);
+  }
   o.relu = epilogue_ == Epilogue::kRelu;
   const bool has_bias = bias_.value != kNoValue || bias_.constant != nullptr;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
@@ -387,10 +412,10 @@ void LinearS8Op::run(const RunContext& ctx) const {
     kernels::GemmS8Args a = args;
     a.m = r1 - r0;
     a.a += row * a.lda;
-    a.a_row_zero_point += row;
+    if (a.a_row_zero_point != nullptr) a.a_row_zero_point += row;
     kernels::GemmS8OutF32 to = o, shared = shared_bias_columns;
     to.c = shared.c = f32_in_scratch ? ctx.scratch(thread) : o.c + row * o.ldc;
-    to.a_row_scale += row;
+    if (to.a_row_scale != nullptr) to.a_row_scale += row;
     shared.a_row_scale = to.a_row_scale;
     if (to.residual != nullptr) to.residual += row * to.ldr;
     const int split = std::clamp(table_cols_, c0, c1);
@@ -404,8 +429,30 @@ void LinearS8Op::run(const RunContext& ctx) const {
   if (y_codes_.present() && !codes_per_task) write_codes_in_row_tiles(ctx, y_codes_, o.c, o.ldc, rows_);
 }
 
+// The GEMM requantizes into the output codes (bias and ReLU in its int32 epilogue). The float
+// output is made from the codes only when something reads it (the converter's per-layer report):
+// it is then exactly what the next linear reads.
+void LinearS8Op::run_requantized(const RunContext& ctx, const kernels::GemmS8Args& args) const {
+  kernels::GemmS8OutS8 o;
+  o.c = ctx.data_s8(y_codes_.codes);
+  o.ldc = static_cast<size_t>(out_);
+  o.scale = requant_scale_.data();
+  o.out_zero_point = y_codes_.fixed->zero_point;
+  o.qmin = epilogue_ == Epilogue::kRelu ? o.out_zero_point : -128;
+  const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
+  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads());
+  ctx.pool().parallel_for(tiling.count(), [&](size_t task, int) {
+    int r0, r1, c0, c1;
+    tiling.rect(task, r0, r1, c0, c1);
+    gemm.s8out(args, o, r0, r1, c0, c1);
+  });
+  if (!ctx.read(outputs[0])) return;
+  const size_t n = static_cast<size_t>(rows_) * static_cast<size_t>(out_);
+  ctx.kernels().quant.dequantize(n, o.c, y_codes_.fixed->scale, y_codes_.fixed->zero_point, ctx.data(outputs[0]));
+}
+
 size_t LinearS8Op::scratch_per_thread() const {
-  if (!y_codes_.present()) return 0;
+  if (!y_codes_.present() || requantizes()) return 0;
   // The largest whole-row task of any thread count: one thread's strips or two threads' tiles
   // (more threads get smaller ones).
   int tile_rows = 0;

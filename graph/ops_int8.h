@@ -5,9 +5,10 @@
 //
 // Two ways to quantize activations:
 //   static   the scale and zero point of every backbone value come from calibration (in the blob);
-//            the backbone stays int8 from conv to conv, requantization fused into each conv.
+//            the backbone stays int8 from conv to conv, requantization fused into each conv. The
+//            transformer's linear inputs the converter chose per-tensor codes for too.
 //   dynamic  the parameters are computed at run time from the data: per tensor (symmetric) for
-//            conv inputs, per row (per token, asymmetric) for the transformer's linears.
+//            conv inputs, per row (per token, asymmetric) for the other linear inputs.
 #pragma once
 
 #include <cstddef>
@@ -31,6 +32,8 @@ class PackedWeights {
   /// Packs w [n x k] (int8) with an optional int32 bias and the activation zero point folded in.
   PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
                 int32_t a_zero_point);
+  /// Packs them again in place with another bias and zero point (the same size: no new memory).
+  void repack(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias, int32_t a_zero_point);
   const void* data() const { return buffer_.data(); }
 
  private:
@@ -126,19 +129,21 @@ class ConvS8Op : public Op {
   std::optional<MaxPool> max_pool_;
 };
 
-/// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x quantized per row at run time
-/// (dynamic per-token quantization) into the int8 codes `x_codes`: by this op, or (kFromProducer)
-/// by the op that wrote x, which then need not be read at all. The bias is a vector (ld 0) or a
-/// per-row table (then there must be no residual: the table takes the residual's place in the
-/// kernel's epilogue). Asked to (write_row_codes), it also writes its output's codes, each task
-/// quantizing the rows it has just computed when the tiling gives tasks whole rows.
+/// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x read as the int8 codes `x_codes`,
+/// per token (quantized per row at run time) or per tensor (calibrated parameters): written by this
+/// op, or (kFromProducer) by the op that wrote x, which then need not be read at all. The bias is a
+/// vector (ld 0) or a per-row table (then there must be no residual: the table takes the residual's
+/// place in the kernel's epilogue). Asked to (write_row_codes), it also writes its output's codes,
+/// each task quantizing the rows it has just computed when the tiling gives tasks whole rows; when
+/// both codes are per tensor and the epilogue is a constant bias and ReLU at most (the FFN's hidden
+/// layer), the GEMM requantizes straight into the output codes (no float pass at all).
 class LinearS8Op : public Op, public RowCodesWriter {
  public:
   enum class InputCodes { kQuantizedHere, kFromProducer };
   LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, int out, MatrixRef x, const RowCodes& x_codes,
              InputCodes x_codes_from, const int8_t* weight, const float* w_scale, MatrixRef bias, MatrixRef residual,
              Epilogue epilogue, ValueId output);
-  const char* type() const override { return "linear_s8_dyn"; }
+  const char* type() const override { return x_codes_.per_tensor() ? "linear_s8" : "linear_s8_dyn"; }
   std::string kernel(const kernels::KernelConfig& k) const override;
   void run(const RunContext& ctx) const override;
   void write_row_codes(const RowCodes& codes) override;
@@ -148,8 +153,15 @@ class LinearS8Op : public Op, public RowCodesWriter {
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
   const float* w_scale() const { return w_scale_; }
+  /// The per-tensor parameters of the input codes and of the output codes, when they are.
+  std::optional<kernels::QuantS8> input_quant() const { return x_codes_.fixed; }
+  std::optional<kernels::QuantS8> output_quant() const { return y_codes_.fixed; }
 
  private:
+  /// True when the GEMM writes the output codes itself (requantizing, see above).
+  bool requantizes() const { return !requant_scale_.empty(); }
+  void run_requantized(const RunContext& ctx, const kernels::GemmS8Args& args) const;
+
   int rows_, in_, out_;
   MatrixRef x_, bias_, residual_;
   RowCodes x_codes_, y_codes_;
@@ -159,7 +171,9 @@ class LinearS8Op : public Op, public RowCodesWriter {
   Epilogue epilogue_;
   int mr_, nr_;  // the micro-tile of the gemm_s8 variant the weights are packed for (its tiling)
   int table_cols_;  // output columns that read a per-row bias table; the rest (if any) share row 0's
+  const kernels::GemmS8Kernels* gemm_;  // the variant the weights are packed for
   PackedWeights packed_;
+  std::vector<float> requant_scale_;  // requantizing: s_x * s_w[n] / s_y
 };
 
 /// softmax(q k^T / sqrt(d)) v per head with both matmuls on the int8 GEMM; AttentionOp is its float

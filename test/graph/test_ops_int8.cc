@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@
 #include "graph/thread_pool.h"
 #include "kernels/config/kernel_config.h"
 #include "kernels/quant/quant_s8.h"
+#include "kernels/quant/quant_s8_variants.h"
 
 namespace act::graph {
 namespace {
@@ -233,9 +235,17 @@ TEST_P(OpsPerIsa, ConvS8WithFusedMaxPoolEqualsTheMaxOfItsOutput) {
   }
 }
 
-RowCodes row_codes(Graph& g, const std::string& name, int rows, int cols) {
-  return {g.add_value(name + "_s8", {rows, cols}, DataType::kS8), g.add_value(name + "_scale", {rows}),
-          g.add_value(name + "_zero_point", {rows}, DataType::kS32), cols};
+// Per token without `fixed`, else per tensor with those parameters.
+RowCodes row_codes(Graph& g, const std::string& name, int rows, int cols, std::optional<kernels::QuantS8> fixed = {}) {
+  RowCodes codes;
+  codes.codes = g.add_value(name + "_s8", {rows, cols}, DataType::kS8);
+  codes.cols = cols;
+  codes.fixed = fixed;
+  if (!fixed) {
+    codes.scale = g.add_value(name + "_scale", {rows});
+    codes.zero_point = g.add_value(name + "_zero_point", {rows}, DataType::kS32);
+  }
+  return codes;
 }
 
 // LinearS8Op (activations quantized per row at run time) against LinearOp with the float weights:
@@ -246,8 +256,12 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
   const int in = 96, out = 70;
   for (int rows : {1, 7, 130}) {
     for (Epilogue epilogue : {Epilogue::kNone, Epilogue::kRelu}) {
+     for (const bool per_tensor : {false, true}) {
       std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -2.0f, 2.0f);
       for (int r = 0; r < rows; ++r) x[static_cast<size_t>(r) * in] = 8.0f * static_cast<float>(r % 3);  // row ranges differ
+      const auto [lo, hi] = std::minmax_element(x.begin(), x.end());
+      const std::optional<kernels::QuantS8> fixed =
+          per_tensor ? std::optional(kernels::choose_quant_s8(*lo, *hi)) : std::nullopt;
       const std::vector<float> w = uniform(static_cast<size_t>(out) * in, rng, -0.3f, 0.3f);
       const std::vector<float> bias = uniform(static_cast<size_t>(out), rng, -1.0f, 1.0f);
       const std::vector<float> residual = uniform(static_cast<size_t>(rows) * out, rng, -1.0f, 1.0f);
@@ -258,8 +272,7 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
       const ValueId rv = g.add_input("residual", {rows, out});
       const ValueId y_float = g.add_value("y_float", {rows, out});
       const ValueId y_q = g.add_value("y_q", {rows, out});
-      const RowCodes x_codes = row_codes(g, "x", rows, in);
-      const ValueId row_scale = x_codes.scale;
+      const RowCodes x_codes = row_codes(g, "x", rows, in, fixed);
       const MatrixRef xr = MatrixRef::of(xv, in), br = MatrixRef::of_constant(bias.data(), 0), rr = MatrixRef::of(rv, out);
       g.add_op(std::make_unique<LinearOp>(std::make_shared<PackedF32Weights>(k.gemm_f32, out, in, w.data()), rows, in, out, xr, br, rr,
                                           epilogue, y_float));
@@ -273,14 +286,75 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
       g.run(pool_, k);
 
       for (int r = 0; r < rows; ++r) {
-        const double s_x = g.data(row_scale)[r];
+        const double s_x = per_tensor ? fixed->scale : g.data(x_codes.scale)[r];
         for (int o = 0; o < out; ++o) {
           const size_t i = static_cast<size_t>(r) * out + o;
           const double bound = product_error_bound(x.data() + static_cast<size_t>(r) * in, w.data() + static_cast<size_t>(o) * in,
                                                    in, s_x, qw.scale[static_cast<size_t>(o)]);
           ASSERT_NEAR(g.data(y_q)[i], g.data(y_float)[i], bound + 1e-5 * (1 + std::fabs(g.data(y_float)[i])))
-              << kernels::isa_name(GetParam()) << " rows " << rows << " row " << r << " column " << o;
+              << kernels::isa_name(GetParam()) << (per_tensor ? " per tensor" : " per token") << " rows " << rows << " row "
+              << r << " column " << o;
         }
+      }
+     }
+    }
+  }
+}
+
+// A linear whose input and output codes are both per tensor (the FFN's hidden layer in a static
+// blob) requantizes in the GEMM: its codes against its float twin's output (the same input codes,
+// float out) quantized with the output's parameters: at most one code apart (the int32 bias and the
+// requantization round where the float epilogue does not), and rarely that; the float output, made
+// when something reads it, is exactly the codes' value. Ragged rows and columns, 1 and 2 threads.
+TEST_P(OpsPerIsa, LinearS8RequantizesIntoPerTensorCodes) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(17);
+  const int in = 72, out = 200;
+  const QuantizedWeights w = quantize_weights(uniform(static_cast<size_t>(out) * in, rng, -0.3f, 0.3f), out, in);
+  const std::vector<float> bias = uniform(static_cast<size_t>(out), rng, -1.0f, 1.0f);
+  const kernels::QuantS8 x_q = kernels::choose_quant_s8(-2.0f, 3.0f);
+  ThreadPool one(1);
+  for (ThreadPool* pool : {&one, &pool_}) {
+    for (int rows : {1, 7, 67, 131}) {
+      for (Epilogue epilogue : {Epilogue::kNone, Epilogue::kRelu}) {
+        const kernels::QuantS8 y_q = epilogue == Epilogue::kRelu ? kernels::choose_quant_s8(0.0f, 4.0f)
+                                                                 : kernels::choose_quant_s8(-4.0f, 4.0f);
+        const std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -2.0f, 3.0f);
+        Graph g;
+        const ValueId xv = g.add_input("x", {rows, in});
+        const ValueId y_requantized = g.add_value("y_requantized", {rows, out}), y_float = g.add_value("y_float", {rows, out});
+        const RowCodes x_codes = row_codes(g, "x", rows, in, x_q), y_codes = row_codes(g, "y", rows, out, y_q);
+        const MatrixRef xr = MatrixRef::of(xv, in), br = MatrixRef::of_constant(bias.data(), 0);
+        auto& requantizing = g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, x_codes,
+                                                                   LinearS8Op::InputCodes::kQuantizedHere, w.q.data(),
+                                                                   w.scale.data(), br, MatrixRef{}, epilogue, y_requantized));
+        requantizing.write_row_codes(y_codes);
+        ASSERT_EQ(requantizing.kernel(k), std::string(k.quant.quantize_name) + " + " + k.gemm_s8.s8out_name);
+        g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, out, xr, x_codes, LinearS8Op::InputCodes::kFromProducer,
+                                              w.q.data(), w.scale.data(), br, MatrixRef{}, epilogue, y_float));
+        g.mark_output(y_requantized);
+        g.mark_output(y_float);
+        g.mark_output(y_codes.codes);
+        g.plan(pool->threads(), false);
+        std::copy(x.begin(), x.end(), g.data(xv));
+        g.run(*pool, k);
+
+        const size_t n = static_cast<size_t>(rows) * out;
+        std::vector<int8_t> want(n);
+        kernels::quant_s8_table_ref()->quantize(n, g.data(y_float), 1.0f / y_q.scale, y_q.zero_point, want.data());
+        const int8_t* got = g.data_s8(y_codes.codes);
+        size_t off_by_one = 0;
+        for (size_t i = 0; i < n; ++i) {
+          ASSERT_LE(std::abs(got[i] - want[i]), 1) << kernels::isa_name(GetParam()) << " threads " << pool->threads()
+                                                   << " rows " << rows << " element " << i;
+          off_by_one += got[i] != want[i];
+          const float value = y_q.scale * (static_cast<float>(got[i]) - static_cast<float>(y_q.zero_point));
+          ASSERT_EQ(g.data(y_requantized)[i], value) << kernels::isa_name(GetParam()) << " element " << i;
+          if (epilogue == Epilogue::kRelu) {
+            ASSERT_GE(got[i], y_q.zero_point);
+          }
+        }
+        EXPECT_LE(off_by_one, n / 50) << kernels::isa_name(GetParam()) << " rows " << rows;
       }
     }
   }
@@ -299,9 +373,17 @@ TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
   const QuantizedWeights w2 = quantize_weights(uniform(static_cast<size_t>(dim) * hidden, rng, -0.3f, 0.3f), dim, hidden);
   const std::vector<float> b1 = uniform(hidden, rng, -1.0f, 1.0f), b2 = uniform(dim, rng, -1.0f, 1.0f);
   ThreadPool one(1);
+  // Per tensor too, with GELU (with ReLU the fused hidden layer requantizes instead: tested above).
+  struct Codes {
+    Epilogue act;
+    std::optional<kernels::QuantS8> normed, h;
+  };
+  const std::vector<Codes> kinds = {{Epilogue::kRelu, {}, {}},
+                                    {Epilogue::kGelu, {}, {}},
+                                    {Epilogue::kGelu, kernels::choose_quant_s8(-2.5f, 3.0f), kernels::choose_quant_s8(-0.2f, 6.0f)}};
   for (ThreadPool* pool : {&one, &pool_}) {
     for (int rows : {1, 5, 13, 67, 131}) {
-      for (Epilogue act : {Epilogue::kRelu, Epilogue::kGelu}) {
+      for (const auto& [act, normed_q, h_q] : kinds) {
         std::vector<float> x = uniform(static_cast<size_t>(rows) * dim, rng, -3.0f, 3.0f);
         std::vector<float> outputs[2];
         for (const bool fused : {false, true}) {
@@ -312,7 +394,7 @@ TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
           const ValueId y = g.add_value("y", {rows, dim});
           auto& norm = g.add_op(std::make_unique<LayerNormOp>(rows, dim, gamma.data(), beta.data(), xv, normed));
           const auto source = fused ? LinearS8Op::InputCodes::kFromProducer : LinearS8Op::InputCodes::kQuantizedHere;
-          const RowCodes normed_codes = row_codes(g, "normed", rows, dim), h_codes = row_codes(g, "h", rows, hidden);
+          const RowCodes normed_codes = row_codes(g, "normed", rows, dim, normed_q), h_codes = row_codes(g, "h", rows, hidden, h_q);
           if (fused) norm.write_row_codes(normed_codes);
           auto& linear1 = g.add_op(std::make_unique<LinearS8Op>(
               k.gemm_s8, rows, dim, hidden, MatrixRef::of(normed, dim), normed_codes, source, w1.q.data(), w1.scale.data(),
@@ -328,7 +410,8 @@ TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
           outputs[fused].assign(g.data(y), g.data(y) + static_cast<size_t>(rows) * dim);
         }
         ASSERT_EQ(0, std::memcmp(outputs[0].data(), outputs[1].data(), outputs[0].size() * sizeof(float)))
-            << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows;
+            << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows
+            << (normed_q ? " per tensor" : " per token");
       }
     }
   }

@@ -30,7 +30,7 @@ namespace {
 
 struct Options {
   std::string checkpoint, output, package, report_path;
-  std::string precision = "fp32", mode = "static", method = "mse", attention = "auto";
+  std::string precision = "fp32", mode = "static", method = "mse", attention = "auto", linear_inputs = "auto";
   bool quiet = false, explain = false;
   act::PthOptions pth;
   act::DeploymentOptions deployment;
@@ -76,6 +76,11 @@ void add_options(CLI::App& app, Options& o) {
                          "attention's matmuls: auto (default: int8 when that raises the held-out error by 25 % at "
                          "most), int8 or fp32")
       ->check(CLI::IsMember({"auto", "int8", "fp32"}));
+  int8_group->add_option("--linear-inputs", o.linear_inputs,
+                         "codes of the transformer linears' inputs (static, mixed): auto (default: calibrated per "
+                         "tensor where that raises the held-out error by 10 % at most, else per token), per-token or "
+                         "per-tensor")
+      ->check(CLI::IsMember({"auto", "per-token", "per-tensor"}));
   int8_group->add_option("--keep-float", o.int8.keep_float, "layers to keep in float, comma-separated, named as the "
                          "report's per-layer SQNR names them (their weights, e.g. backbone.conv1.weight)")->delimiter(',');
   int8_group->add_option("--target-mse", o.target_mse, "mixed: held-out action MSE to meet, normalised units");
@@ -127,8 +132,10 @@ void check_options(const CLI::App& app, Options& o) {
     return;
   }
   if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
-                                app.count("--report") || app.count("--attention") || app.count("--keep-float"))) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --keep-float, --max-mse and --report need --precision int8");
+                                app.count("--report") || app.count("--attention") || app.count("--keep-float") ||
+                                app.count("--linear-inputs"))) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse and "
+              "--report need --precision int8");
   }
   if (!o.package.empty()) {
     if (!o.output.empty()) act::fail(act::ErrorCode::kInvalidArgument, "give either -o or --package (which writes " +
@@ -149,6 +156,13 @@ void check_options(const CLI::App& app, Options& o) {
   int8.attention = o.attention == "int8"   ? act::AttentionPrecision::kInt8
                    : o.attention == "fp32" ? act::AttentionPrecision::kFp32
                                            : act::AttentionPrecision::kAuto;
+  int8.linear_inputs = o.linear_inputs == "per-token"    ? act::LinearInputCodes::kPerToken
+                       : o.linear_inputs == "per-tensor" ? act::LinearInputCodes::kPerTensor
+                                                         : act::LinearInputCodes::kAuto;
+  if (int8.mode == act::Int8Mode::kDynamic && app.count("--linear-inputs")) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--linear-inputs needs calibration (--mode static or mixed): dynamic "
+              "mode's linear inputs are always per token");
+  }
   if (app.count("--holdout")) int8.holdout = o.holdout;
   if (app.count("--target-mse")) int8.target_mse = o.target_mse;
   if (app.count("--max-mse")) int8.max_mse = o.max_mse;

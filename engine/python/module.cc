@@ -167,6 +167,7 @@ struct ConvertArgs {
   bool layer_report = true;
   py::object progress;
   std::string attention = "auto";
+  std::string linear_inputs = "auto";
   PthOptions pth;
   DeploymentOptions deployment;
 };
@@ -210,6 +211,17 @@ Int8Options int8_options(const ConvertArgs& a) {
     o.attention = AttentionPrecision::kFp32;
   } else if (a.attention != "auto") {
     throw py::value_error("attention must be 'auto', 'int8' or 'fp32', got '" + a.attention + "'");
+  }
+  if (a.linear_inputs == "per-token") {
+    o.linear_inputs = LinearInputCodes::kPerToken;
+  } else if (a.linear_inputs == "per-tensor") {
+    o.linear_inputs = LinearInputCodes::kPerTensor;
+  } else if (a.linear_inputs != "auto") {
+    throw py::value_error("linear_inputs must be 'auto', 'per-token' or 'per-tensor', got '" + a.linear_inputs + "'");
+  }
+  if (o.mode == Int8Mode::kDynamic && a.linear_inputs != "auto") {
+    throw py::value_error("linear_inputs needs calibration (mode='static' or 'mixed'): dynamic mode's linear inputs "
+                          "are always per token");
   }
   if (o.mode == Int8Mode::kMixed && !o.target_mse) {
     throw py::value_error("mode='mixed' needs target_mse (held-out MSE in normalised units)");
@@ -375,7 +387,7 @@ robot that keeps acting while the next chunk is inferred (actengine/scheduler.h)
          const std::optional<std::string>& mode, const std::vector<py::dict>& calib, size_t calib_samples,
          const std::optional<size_t>& holdout, const std::string& calib_method, double percentile,
          const std::optional<double>& target_mse, const std::optional<double>& max_mse, int threads, uint64_t seed,
-         bool layer_report, const py::object& progress, const std::string& attention,
+         bool layer_report, const py::object& progress, const std::string& attention, const std::string& linear_inputs,
          const std::optional<double>& temporal_ensemble_coeff, bool no_temporal_ensembling,
          const std::optional<std::string>& config,
          const std::vector<std::string>& stats, const std::optional<std::pair<int, int>>& image_size,
@@ -383,7 +395,7 @@ robot that keeps acting while the next chunk is inferred (actengine/scheduler.h)
          const std::optional<std::string>& activation, const std::vector<std::string>& cameras, bool lerobot_defaults,
          bool no_normalization, const std::optional<std::string>& state_dict_key) {
         ConvertArgs a{checkpoint, output, precision, mode, calib, calib_samples, holdout, calib_method, percentile,
-                      target_mse, max_mse, threads, seed, layer_report, progress, attention, {}, {}};
+                      target_mse, max_mse, threads, seed, layer_report, progress, attention, linear_inputs, {}, {}};
         if (temporal_ensemble_coeff && no_temporal_ensembling) {
           throw py::value_error("give temporal_ensemble_coeff or no_temporal_ensembling, not both");
         }
@@ -407,7 +419,8 @@ precision "int8" (default) or "fp32". INT8: mode "static" (default; needs calib)
 calibration) or "mixed" (needs target_mse); calib is a list of observation dicts (uint8 HxWx3 images at
 the model's input size, states optional); calib_samples, holdout, calib_method ("minmax", "percentile",
 "mse"), percentile, max_mse (fail, writing nothing, above it), threads, seed, layer_report,
-attention ("auto", "int8", "fp32": act_convert --attention) and progress (called with each
+attention ("auto", "int8", "fp32": act_convert --attention), linear_inputs ("auto", "per-token",
+"per-tensor": act_convert --linear-inputs) and progress (called with each
 progress line). Deployment settings for every input: n_action_steps, temporal_ensemble_coeff (turns
 ensembling on; needs n_action_steps 1) or no_temporal_ensembling. A .pth takes act_convert's
 options: config, stats, image_size (height, width), n_heads, activation, cameras, lerobot_defaults,
@@ -420,7 +433,7 @@ accuracy report against FP32 (report: act_convert --report's JSON). Nothing is w
       py::arg("holdout") = py::none(), py::arg("calib_method") = "mse", py::arg("percentile") = 99.99,
       py::arg("target_mse") = py::none(), py::arg("max_mse") = py::none(), py::arg("threads") = 0,
       py::arg("seed") = 1, py::arg("layer_report") = true, py::arg("progress") = py::none(),
-      py::arg("attention") = "auto", py::arg("temporal_ensemble_coeff") = py::none(),
+      py::arg("attention") = "auto", py::arg("linear_inputs") = "auto", py::arg("temporal_ensemble_coeff") = py::none(),
       py::arg("no_temporal_ensembling") = false,
       py::arg("config") = py::none(), py::arg("stats") = std::vector<std::string>{},
       py::arg("image_size") = py::none(), py::arg("n_action_steps") = py::none(), py::arg("n_heads") = py::none(),

@@ -242,6 +242,80 @@ TEST(ConvertApi, AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen) {
   }
 }
 
+// The linear inputs' codes: forced either way, the blob runs what was chosen (per-tensor inputs make
+// their readers "linear_s8", and the FFN's hidden layer requantizes in its GEMM); auto makes per
+// tensor a prefix of the inputs by estimated SQNR loss, within the error budget when any, and
+// reports both errors. Attention stays float so that the report's error is the choice's.
+TEST(ConvertApi, LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  auto frames = model->synthetic_calibration_set(6, 3);
+  ASSERT_TRUE(frames.ok());
+  const std::string dir = test::scratch_dir();
+  for (LinearInputCodes codes : {LinearInputCodes::kPerToken, LinearInputCodes::kPerTensor, LinearInputCodes::kAuto}) {
+    Int8Options o = quick_options();
+    o.linear_inputs = codes;
+    o.attention = AttentionPrecision::kFp32;
+    const std::string blob = dir + "/l" + std::to_string(static_cast<int>(codes)) + ".actb";
+    const auto r = model->write_int8(blob, *frames, o);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    ASSERT_FALSE(r->linear_inputs.empty());
+    size_t per_tensor = 0;
+    for (const LinearInputChoice& l : r->linear_inputs) {
+      EXPECT_TRUE(std::isfinite(l.sqnr_per_tensor_db) && std::isfinite(l.sqnr_per_token_db)) << l.value;
+      EXPECT_GT(l.sqnr_per_token_db, 10.0) << l.value;
+      EXPECT_GT(l.scale, 0.0f) << l.value;
+      per_tensor += l.per_tensor;
+    }
+    const nlohmann::json j = nlohmann::json::parse(r->to_json());
+    ASSERT_EQ(j["linear_inputs"].size(), r->linear_inputs.size());
+    for (size_t i = 0; i < r->linear_inputs.size(); ++i) {
+      EXPECT_EQ(j["linear_inputs"][i]["value"], r->linear_inputs[i].value);
+      EXPECT_EQ(j["linear_inputs"][i]["codes"], r->linear_inputs[i].per_tensor ? "per_tensor" : "per_token");
+    }
+    // The blob's int8 linears, by kind; the hidden layers' kernels.
+    auto e = Engine::open(blob, {.threads = 1, .profile = true});
+    ASSERT_TRUE(e.ok()) << e.status().to_string();
+    size_t static_linears = 0, dynamic_linears = 0, requantizing = 0;
+    for (const OpProfile& op : (*e)->op_profile()) {
+      static_linears += op.kind == "linear_s8";
+      dynamic_linears += op.kind == "linear_s8_dyn";
+      requantizing += op.name.ends_with(".ffn_hidden") && op.kernel.find("s8out") != std::string::npos;
+    }
+    if (codes == LinearInputCodes::kPerToken) {
+      EXPECT_EQ(per_tensor, 0u);
+      EXPECT_FALSE(r->chosen_inputs_error) << "not tried";
+      EXPECT_EQ(static_linears, 0u);
+      EXPECT_EQ(requantizing, 0u);
+      continue;
+    }
+    ASSERT_TRUE(r->per_token_inputs_error && r->chosen_inputs_error);
+    EXPECT_EQ(r->action_error.mse, r->chosen_inputs_error->mse) << "the report is the blob's";
+    if (codes == LinearInputCodes::kPerTensor) {
+      EXPECT_EQ(per_tensor, r->linear_inputs.size());
+      EXPECT_EQ(dynamic_linears, 0u);
+      EXPECT_GT(requantizing, 0u) << "the FFN's hidden layers requantize";
+      EXPECT_NE(r->chosen_inputs_error->mse, r->per_token_inputs_error->mse) << "per-tensor codes change the actions";
+      continue;
+    }
+    if (per_tensor > 0) {
+      const double allowed = 1.0 + kPerTensorCodesErrorBudget;
+      EXPECT_LE(r->chosen_inputs_error->mse, allowed * r->per_token_inputs_error->mse);
+      EXPECT_LE(r->chosen_inputs_error->max_abs, allowed * r->per_token_inputs_error->max_abs);
+      EXPECT_GT(static_linears, 0u);
+    }
+    // The chosen inputs are those that lose least.
+    double worst_chosen = -INFINITY, best_left = INFINITY;
+    for (const LinearInputChoice& l : r->linear_inputs) {
+      const double loss = l.sqnr_per_token_db - l.sqnr_per_tensor_db;
+      (l.per_tensor ? worst_chosen : best_left) = l.per_tensor ? std::max(worst_chosen, loss) : std::min(best_left, loss);
+    }
+    EXPECT_LE(worst_chosen, best_left) << r->to_text();
+    EXPECT_NE(r->to_text().find("linear inputs  " + std::to_string(per_tensor) + " of "), std::string::npos) << r->to_text();
+  }
+}
+
 TEST(ConvertApi, ReportStructMatchesItsJson) {
   ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
   const auto model = import_tiny();

@@ -3,7 +3,9 @@
 //
 //   {"mode": "dynamic" | "static" | "mixed",
 //    "calibration": "minmax" | "percentile" | "mse" | "",       (static and mixed)
-//    "activations": {"<value name>": [scale, zero_point], ...},  (static and mixed)
+//    "activations": {"<value name>": [scale, zero_point], ...},  (static and mixed: every backbone
+//                                                                 value, and the transformer's linear
+//                                                                 inputs read as per-tensor codes)
 //    "float_layers": ["<weight name>", ...],                     (layers kept in FP32)
 //    "attention": "int8" | "fp32"}                                (QK^T and PV; absent: fp32)
 //

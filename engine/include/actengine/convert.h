@@ -149,6 +149,13 @@ struct CalibrationSet {
   std::string preprocessing;       ///< how the images were made, for the report
 };
 
+/// The int8 codes the transformer's linears read (static and mixed modes): per token (each row's
+/// scale and zero point from its own range at run time) or per tensor (calibrated, fixed: no range
+/// to find, and the FFN's hidden layer then requantizes inside its GEMM instead of a float pass).
+enum class LinearInputCodes { kAuto, kPerToken, kPerTensor };
+/// kAuto's budget: per-tensor codes may raise the held-out error by this fraction at most.
+inline constexpr double kPerTensorCodesErrorBudget = 0.10;
+
 enum class AttentionPrecision { kAuto, kInt8, kFp32 };
 /// kAuto's budget: int8 attention may raise the held-out error by this fraction at most.
 inline constexpr double kInt8AttentionErrorBudget = 0.25;
@@ -178,6 +185,11 @@ struct Int8Options {
   /// held-out MSE and max |err| by at most kInt8AttentionErrorBudget (and, mixed, still meets the
   /// target); kInt8 and kFp32 force the choice.
   AttentionPrecision attention = AttentionPrecision::kAuto;
+  /// The linears' input codes: kAuto makes per tensor the inputs whose calibrated codes lose least
+  /// (estimated SQNR against per token), as many as keep the held-out MSE and max |err| within
+  /// kPerTensorCodesErrorBudget of all per token (and, mixed, the target); kPerToken and kPerTensor
+  /// force the choice. Dynamic mode has no calibration: always per token.
+  LinearInputCodes linear_inputs = LinearInputCodes::kAuto;
   /// Layers kept in float, by their weight tensors' names (LayerSqnr::layer, Int8Report::float_layers,
   /// e.g. "backbone.conv1.weight"); kMixed chooses more on top when the target needs them.
   std::vector<std::string> keep_float;
@@ -219,6 +231,18 @@ struct ActivationRange {
   double quantized_max() const { return static_cast<double>(scale) * (127 - zero_point); }
 };
 
+/// One matrix the transformer's int8 linears read, and the codes the converter chose for it.
+struct LinearInputChoice {
+  std::string value;   ///< e.g. "encoder_layer0.norm1"
+  std::string reader;  ///< the weight of the (first) linear that reads it
+  bool per_tensor = false;  ///< calibrated per-tensor codes; else per token at run time
+  float scale = 1;          ///< the calibrated parameters (what per tensor uses)
+  int32_t zero_point = 0;
+  /// Quantization SQNR of each kind of codes over the calibration frames (estimated: the rounding
+  /// noise of each row's step for per token, the histogram's expected error for per tensor).
+  double sqnr_per_tensor_db = 0, sqnr_per_token_db = 0;
+};
+
 struct LayerSensitivity {
   std::string layer;           ///< weight name
   double mse_alone_int8 = 0;   ///< held-out MSE with only this layer in int8
@@ -236,6 +260,10 @@ struct Int8Report {
   bool int8_attention = false;            ///< attention's matmuls on the int8 GEMM
   /// Held-out error with float and with int8 attention (the latter only when it was tried).
   std::optional<ActionError> fp32_attention_error, int8_attention_error;
+  /// Static and mixed: every linear input in graph order with its codes, and the held-out error with
+  /// all of them per token and with the choice (the latter only when one was tried).
+  std::vector<LinearInputChoice> linear_inputs;
+  std::optional<ActionError> per_token_inputs_error, chosen_inputs_error;
   ActionError action_error;
   int action_keys = 0;                    ///< action dimensions
   std::vector<LayerSensitivity> sensitivity;  ///< mixed, when the search ran: most sensitive first

@@ -56,6 +56,11 @@ def test_static_int8_calibrates_on_observation_dicts(act_tiny, tmp_path):
     assert (report["calibration"], report["calibration_frames"], report["holdout_frames"]) == ("minmax", 3, 1)
     assert report["layers"] == []
     assert actengine.Engine(tmp_path / "static.actb").model_info.precision == "int8 static"
+    # The linear inputs' codes, forced: every input listed, none per tensor.
+    result = actengine.convert(act_tiny.dir, tmp_path / "tokens.actb", "int8", calib=frames, calib_samples=3,
+                               holdout=1, layer_report=False, linear_inputs="per-token")
+    inputs = result["report"]["linear_inputs"]
+    assert inputs and {i["codes"] for i in inputs} == {"per_token"}
 
 
 def test_fp32_conversion_matches_act_convert(act_tiny, tiny_blob, tmp_path):
@@ -84,6 +89,8 @@ def test_conversion_errors_carry_act_converts_message(act_tiny, tiny_blob, tmp_p
     (dict(mode="dynamic", calib_method="median"), "median"),
     (dict(mode="dynamic", config="config.json"), "the .pth options (config, stats, ...) do not apply"),
     (dict(mode="dynamic", attention="int4"), "attention must be 'auto', 'int8' or 'fp32', got 'int4'"),
+    (dict(mode="dynamic", linear_inputs="per-row"), "linear_inputs must be 'auto', 'per-token' or 'per-tensor', got 'per-row'"),
+    (dict(mode="dynamic", linear_inputs="per-tensor"), "linear_inputs needs calibration"),
     (dict(mode="dynamic", temporal_ensemble_coeff=0.01, no_temporal_ensembling=True), "not both"),
     (dict(calib=[{CAMERA: np.zeros((3, 96, 128), np.float32)}]), "observation.images.front: expected uint8 96x128x3"),
 ])

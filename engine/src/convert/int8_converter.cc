@@ -15,6 +15,7 @@
 #include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/quantize/activation_ranges.h"
+#include "kernels/quant/quant_s8.h"
 #include "weights/quantize/quantize_model.h"
 
 namespace act {
@@ -58,6 +59,33 @@ std::string fmt(double v) {
 // The held-out frames when none is asked for: one per four calibration frames, 1 to 16.
 size_t default_holdout(size_t calibration_frames) { return std::clamp<size_t>(calibration_frames / 4, 1, 16); }
 
+double sqnr_db(double signal, double noise) { return noise > 0 ? 10.0 * std::log10(signal / noise) : 200.0; }
+
+// The rounding noise of per-token codes of [rows, cols] matrices: each row quantized with the
+// parameters of its own range (choose_quant_s8, as the kernels do) has uniform rounding error of
+// its step, step^2 / 12 per value.
+struct PerTokenNoise {
+  double signal = 0, noise = 0;
+  size_t count = 0;
+  void observe(const float* x, const std::vector<int64_t>& shape) {
+    const size_t rows = static_cast<size_t>(shape.at(0)), cols = static_cast<size_t>(shape.at(1));
+    for (size_t r = 0; r < rows; ++r) {
+      const float* row = x + r * cols;
+      float lo = 0.0f, hi = 0.0f;
+      for (size_t c = 0; c < cols; ++c) {
+        if (!std::isfinite(row[c])) continue;
+        lo = std::min(lo, row[c]);
+        hi = std::max(hi, row[c]);
+        signal += static_cast<double>(row[c]) * row[c];
+      }
+      const double step = kernels::choose_quant_s8(lo, hi).scale;
+      noise += step * step / 12.0 * static_cast<double>(cols);
+    }
+    count += rows * cols;
+  }
+  double sqnr_db() const { return act::sqnr_db(signal, noise); }
+};
+
 class Converter {
  public:
   Converter(const ImportedModel& model, const std::string& output, const Int8Options& options)
@@ -90,6 +118,7 @@ class Converter {
     auto [blob, err] = write_and_evaluate(quant);
     std::vector<LayerSensitivity> sensitivity;
     if (opt_.mode == Int8Mode::kMixed) choose_float_layers(quant, blob, err, sensitivity);
+    choose_linear_input_codes(quant, blob, err);
     choose_attention(quant, blob, err);
 
     Int8Report r = report(quant, *blob, err, std::move(sensitivity), fp32.bytes());
@@ -169,12 +198,15 @@ class Converter {
     fail(ErrorCode::kInvalidArgument, "unknown calibration method");
   }
 
-  // The calibration points' ranges over the calibration frames -> their parameters, by value name.
+  // The calibration points' ranges over the calibration frames -> the backbone's parameters, by
+  // value name; the transformer's linear inputs become candidates for per-tensor codes
+  // (linear_inputs_), each with its estimated SQNR per tensor and per token.
   std::map<std::string, ActivationQuant> calibrate() {
     graph::ActNetwork& network = fp32_->network();
     graph::Graph& g = network.graph();
     const std::vector<graph::CalibrationPoint>& points = network.calibration_points();
     std::vector<RangeObserver> observers(points.size());
+    std::vector<PerTokenNoise> per_token(points.size());
     std::vector<float> normalized(chunk_values());
     // One pass: each observer keeps its range and its histogram together.
     const std::string task = "calibrating (" + std::string(calibration_method_name(opt_.method)) + ")";
@@ -182,14 +214,24 @@ class Converter {
     for (size_t f = 0; f < calib_.size(); ++f) {
       fp32_->run(obs(calib_[f]), normalized);
       for (size_t k = 0; k < points.size(); ++k) {
-        observers[k].observe(std::span<const float>(g.data(points[k].value), g.value(points[k].value).elements));
+        const graph::Value& v = g.value(points[k].value);
+        observers[k].observe(std::span<const float>(g.data(points[k].value), v.elements));
+        if (points[k].role == graph::CalibrationRole::kLinearInput) per_token[k].observe(g.data(points[k].value), v.shape);
       }
       progress(task, f + 1, calib_.size(), "frames");
     }
     std::map<std::string, ActivationQuant> out;
     for (size_t k = 0; k < points.size(); ++k) {
       const std::string& name = g.value(points[k].value).name;
-      const ActivationQuant q = out[name] = choose(observers[k], points[k].role);
+      const ActivationQuant q = choose(observers[k], points[k].role);
+      if (points[k].role == graph::CalibrationRole::kLinearInput) {
+        const double per_value = per_token[k].signal / static_cast<double>(std::max<size_t>(1, per_token[k].count));
+        linear_inputs_.push_back({name, points[k].reader, false, q.scale, q.zero_point,
+                                  sqnr_db(per_value, observers[k].expected_squared_error(q)), per_token[k].sqnr_db()});
+        linear_input_ranges_.push_back({name, q.scale, q.zero_point, observers[k].min(), observers[k].max()});
+        continue;
+      }
+      out[name] = q;
       activations_.push_back({name, q.scale, q.zero_point, observers[k].min(), observers[k].max()});
     }
     return out;
@@ -294,6 +336,78 @@ class Converter {
     err = best_err;
   }
 
+  // Per-tensor codes for the transformer's linear inputs (Int8Options::linear_inputs): the candidates
+  // read by int8 linears, least estimated SQNR loss first; the longest prefix of them that keeps the
+  // held-out error within the budget (binary search, as the mixed search: the error grows as more
+  // inputs go per tensor).
+  void choose_linear_input_codes(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err) {
+    const std::vector<std::string> quantizable = quantizable_layers(model_);
+    const auto int8_reader = [&](const LinearInputChoice& c) {
+      return std::find(quantizable.begin(), quantizable.end(), c.reader) != quantizable.end() &&
+             std::find(quant.float_layers.begin(), quant.float_layers.end(), c.reader) == quant.float_layers.end();
+    };
+    size_t kept = 0;  // only the inputs of int8 linears matter
+    for (size_t i = 0; i < linear_inputs_.size(); ++i) {
+      if (!int8_reader(linear_inputs_[i])) continue;
+      linear_inputs_[kept] = linear_inputs_[i];
+      linear_input_ranges_[kept++] = linear_input_ranges_[i];
+    }
+    linear_inputs_.resize(kept);
+    linear_input_ranges_.resize(kept);
+    if (linear_inputs_.empty() || opt_.linear_inputs == LinearInputCodes::kPerToken) return;
+    std::vector<size_t> order(linear_inputs_.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    const auto loss = [&](size_t i) { return linear_inputs_[i].sqnr_per_token_db - linear_inputs_[i].sqnr_per_tensor_db; };
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return loss(a) < loss(b); });
+    const auto with_first = [&](size_t count) {
+      QuantConfig q = quant;
+      for (size_t i = 0; i < count; ++i) {
+        const LinearInputChoice& c = linear_inputs_[order[i]];
+        q.activations[c.value] = {c.scale, c.zero_point};
+      }
+      return q;
+    };
+    const ActionError base = err;
+    const double allowed = 1.0 + kPerTensorCodesErrorBudget;
+    const auto within_budget = [&](const ActionError& e) {
+      return e.mse <= allowed * base.mse && e.max_abs <= allowed * base.max_abs &&
+             (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
+    };
+    const std::string task = "per-tensor codes for the linears' inputs";
+    const auto try_count = [&](size_t count) {
+      auto [candidate, e] = write_and_evaluate(with_first(count));
+      progress(std::to_string(count) + " of " + std::to_string(order.size()) + " linear inputs per tensor: held-out MSE " +
+               fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (all per token: " + fmt(base.mse) + ", " + fmt(base.max_abs) + ")");
+      return std::pair{std::move(candidate), e};
+    };
+    progress(task);
+    size_t chosen = 0;
+    auto [all_blob, all_err] = try_count(order.size());
+    if (opt_.linear_inputs == LinearInputCodes::kPerTensor || within_budget(all_err)) {
+      chosen = order.size();
+      blob = std::move(all_blob);
+      err = all_err;
+    } else {
+      size_t good = 0, bad = order.size();  // counts known to meet and to miss the budget
+      while (bad - good > 1) {
+        const size_t mid = (good + bad) / 2;
+        auto [candidate, e] = try_count(mid);
+        if (within_budget(e)) {
+          good = mid;
+          blob = std::move(candidate);
+          err = e;
+        } else {
+          bad = mid;
+        }
+      }
+      chosen = good;
+    }
+    for (size_t i = 0; i < chosen; ++i) linear_inputs_[order[i]].per_tensor = true;
+    quant = with_first(chosen);
+    per_token_inputs_error_ = base;
+    chosen_inputs_error_ = err;
+  }
+
   // Attention's matmuls on the int8 GEMM (Int8Options::attention). Tried last, on the model as
   // chosen so far, so its cost is measured against everything else's.
   void choose_attention(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err) {
@@ -335,6 +449,12 @@ class Converter {
     r.action_keys = fp32_->config().action_dim;
     r.sensitivity = std::move(sensitivity);
     r.activations = activations_;
+    for (size_t i = 0; i < linear_inputs_.size(); ++i) {
+      if (linear_inputs_[i].per_tensor) r.activations.push_back(linear_input_ranges_[i]);
+    }
+    r.linear_inputs = linear_inputs_;
+    r.per_token_inputs_error = per_token_inputs_error_;
+    r.chosen_inputs_error = chosen_inputs_error_;
     if (opt_.layer_report) r.layers = layer_sqnr(blob.path(), quant.float_layers);
     return r;
   }
@@ -395,6 +515,9 @@ class Converter {
   Reference ref_;
   std::optional<ActionError> fp32_attention_error_, int8_attention_error_;
   std::vector<ActivationRange> activations_;  // calibrate()'s choices, for the report
+  std::optional<ActionError> per_token_inputs_error_, chosen_inputs_error_;
+  std::vector<LinearInputChoice> linear_inputs_;       // the candidates for per-tensor codes, graph order
+  std::vector<ActivationRange> linear_input_ranges_;  // and their ranges (the same order)
 };
 
 }  // namespace

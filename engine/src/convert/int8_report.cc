@@ -1,4 +1,5 @@
 // Int8Report as JSON (act_convert --report) and as the text act_convert prints.
+#include <algorithm>
 #include <cstdio>
 #include <sstream>
 
@@ -43,6 +44,18 @@ std::string Int8Report::to_json() const {
   r["attention"] = {{"precision", int8_attention ? "int8" : "fp32"}};
   if (fp32_attention_error) r["attention"]["fp32_action_error"] = action_error_json(*fp32_attention_error);
   if (int8_attention_error) r["attention"]["int8_action_error"] = action_error_json(*int8_attention_error);
+  r["linear_inputs"] = nlohmann::json::array();
+  for (const auto& l : linear_inputs) {
+    r["linear_inputs"].push_back({{"value", l.value},
+                                  {"reader", l.reader},
+                                  {"codes", l.per_tensor ? "per_tensor" : "per_token"},
+                                  {"scale", l.scale},
+                                  {"zero_point", l.zero_point},
+                                  {"sqnr_per_tensor_db", l.sqnr_per_tensor_db},
+                                  {"sqnr_per_token_db", l.sqnr_per_token_db}});
+  }
+  if (per_token_inputs_error) r["linear_inputs_per_token_error"] = action_error_json(*per_token_inputs_error);
+  if (chosen_inputs_error) r["linear_inputs_chosen_error"] = action_error_json(*chosen_inputs_error);
   r["action_error"] = action_error_json(action_error);
   r["action_keys"] = action_keys;
   if (!sensitivity.empty()) {
@@ -89,6 +102,19 @@ std::string Int8Report::to_text() const {
       << " with float)";
   }
   s << "\n";
+  if (!linear_inputs.empty()) {
+    const auto per_tensor = std::count_if(linear_inputs.begin(), linear_inputs.end(), [](const auto& l) { return l.per_tensor; });
+    s << "linear inputs  " << per_tensor << " of " << linear_inputs.size() << " with calibrated per-tensor codes, the rest per token";
+    if (per_token_inputs_error && chosen_inputs_error) {
+      s << " (held-out MSE " << fmt(chosen_inputs_error->mse) << ", max |err| " << fmt(chosen_inputs_error->max_abs)
+        << "; all per token " << fmt(per_token_inputs_error->mse) << ", " << fmt(per_token_inputs_error->max_abs) << ")";
+    }
+    s << "\n  codes        SQNR dB per tensor / per token (estimated)  value\n";
+    for (const auto& l : linear_inputs) {
+      s << "  " << (l.per_tensor ? "per tensor" : "per token ") << "   " << fmt(l.sqnr_per_tensor_db, "%6.1f") << " / "
+        << fmt(l.sqnr_per_token_db, "%6.1f") << "                           " << l.value << "\n";
+    }
+  }
   s << "layers in float " << (float_layers.empty() ? "none (besides the action head and state projections, always float)" : "")
     << "\n";
   for (const auto& l : float_layers) s << "  " << l << "\n";

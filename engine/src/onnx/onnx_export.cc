@@ -276,7 +276,7 @@ class OnnxBuilder {
       return linear(op, lin->params(), w.data(), nullptr, nullptr);
     }
     if (const auto* lin = dynamic_cast<const graph::LinearS8Op*>(&op)) {
-      return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale());
+      return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale(), lin->input_quant());
     }
     if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) return layernorm(*ln);
     if (const auto* att = dynamic_cast<const graph::AttentionOp*>(&op)) return attention(att->params(), op.outputs[0]);
@@ -395,7 +395,9 @@ class OnnxBuilder {
   }
 
   // y = act(x W^T + bias [+ residual]), W float, or int8 with per-row scales (dequantized in the graph).
-  void linear(const graph::Op& op, const graph::LinearParams& p, const float* w_f32, const int8_t* w_s8, const float* w_scale) {
+  // x_q: the int8 linear reads its input as per-tensor codes with these parameters (a QDQ pair here).
+  void linear(const graph::Op& op, const graph::LinearParams& p, const float* w_f32, const int8_t* w_s8, const float* w_scale,
+              std::optional<kernels::QuantS8> x_q = std::nullopt) {
     const int rows = p.rows, in = p.in, out = p.out;
     const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
     const size_t w_size = static_cast<size_t>(out) * static_cast<size_t>(in);
@@ -416,7 +418,9 @@ class OnnxBuilder {
     }
     weight = w_s8 ? dequantized_weight(w_s8, {out, in}, w_scale, {})
                   : constant_f32("weight", {out, in}, {w_f32, w_f32 + w_size});
-    onnx::NodeProto* gemm = node("Gemm", {matrix(x_ref, rows, in, "x"), weight, matrix(bias, rows, out, "bias")}, fresh("linear"));
+    std::string x = matrix(x_ref, rows, in, "x");
+    if (x_q) x = dequantize(quantize(x, *x_q), *x_q);
+    onnx::NodeProto* gemm = node("Gemm", {x, weight, matrix(bias, rows, out, "bias")}, fresh("linear"));
     attr_int(gemm, "transB", 1);
     y = gemm->output(0);
     if (residual.value != graph::kNoValue || residual.constant != nullptr) {

@@ -1,6 +1,7 @@
 #include "graph/act_network.h"
 
 #include <algorithm>
+#include <numeric>
 
 #include "weights/blob/blob_names.h"
 #include "weights/blob/error.h"
@@ -181,7 +182,7 @@ std::shared_ptr<const PackedF32Weights> ActNetwork::packed_weight(const std::str
 }
 
 void ActNetwork::calibration_point(CalibrationRole role, ValueId value) {
-  if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value, ""});
+  if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value, "", -1});
 }
 
 ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
@@ -189,7 +190,7 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
   if (const ValueId whole = whole_value(x, rows, in); whole != kNoValue && stage_ != Stage::kOther) {
     const bool seen = std::any_of(calibration_points_.begin(), calibration_points_.end(),
                                   [&](const CalibrationPoint& p) { return p.value == whole; });
-    if (!seen) calibration_points_.push_back({CalibrationRole::kLinearInput, 0, whole, weight_name});
+    if (!seen) calibration_points_.push_back({CalibrationRole::kLinearInput, 0, whole, weight_name, -1});
   }
   const ValueId y = graph_.add_value(out_name, {rows, out});
   if (const ActbTensor* q8 = int8_weight(weight_name, {out, in})) {
@@ -371,8 +372,19 @@ ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId 
     add(std::move(op), out_name + ".ffn_glu");
     h = g;
   }
-  return linear(out_name, rows, hidden, D, MatrixRef::of(h, static_cast<size_t>(hidden)), prefix + "linear2.weight",
-                MatrixRef::of_constant(weight(prefix + "linear2.bias", {D}), 0), MatrixRef::of(residual, static_cast<size_t>(D)));
+  const ValueId y = linear(out_name, rows, hidden, D, MatrixRef::of(h, static_cast<size_t>(hidden)), prefix + "linear2.weight",
+                           MatrixRef::of_constant(weight(prefix + "linear2.bias", {D}), 0),
+                           MatrixRef::of(residual, static_cast<size_t>(D)));
+  if (!glu && act != Epilogue::kGelu) tag_ffn_codes({x, h});  // GELU has no int32 epilogue: no requantizing
+  return y;
+}
+
+void ActNetwork::tag_ffn_codes(std::initializer_list<ValueId> values) {
+  const int ffn = 1 + std::accumulate(calibration_points_.begin(), calibration_points_.end(), -1,
+                                      [](int most, const CalibrationPoint& p) { return std::max(most, p.ffn); });
+  for (CalibrationPoint& p : calibration_points_) {
+    if (p.role == CalibrationRole::kLinearInput && std::find(values.begin(), values.end(), p.value) != values.end()) p.ffn = ffn;
+  }
 }
 
 ValueId ActNetwork::self_attention_block(const std::string& p, int rows, ValueId x, const std::string& w) {

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -242,10 +243,11 @@ TEST(ConvertApi, AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen) {
   }
 }
 
-// The linear inputs' codes: forced either way, the blob runs what was chosen (per-tensor inputs make
-// their readers "linear_s8", and the FFN's hidden layer requantizes in its GEMM); auto makes per
-// tensor a prefix of the inputs by estimated SQNR loss, within the error budget when any, and
-// reports both errors. Attention stays float so that the report's error is the choice's.
+// The linear inputs' codes: forced either way, the blob runs what was chosen (per tensor: the FFNs'
+// inputs and hidden activations, whose hidden layers then requantize in their GEMMs; the other
+// inputs stay per token); auto makes per tensor the FFNs whose pairs lose least by estimated SQNR,
+// within the error budget when any, and reports both errors. Attention stays float so that the
+// report's error is the choice's.
 TEST(ConvertApi, LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen) {
   ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
   const auto model = import_tiny();
@@ -261,41 +263,49 @@ TEST(ConvertApi, LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen) {
     const auto r = model->write_int8(blob, *frames, o);
     ASSERT_TRUE(r.ok()) << r.status().to_string();
     ASSERT_FALSE(r->linear_inputs.empty());
+    std::map<int, std::vector<const LinearInputChoice*>> ffns;
     size_t per_tensor = 0;
     for (const LinearInputChoice& l : r->linear_inputs) {
       EXPECT_TRUE(std::isfinite(l.sqnr_per_tensor_db) && std::isfinite(l.sqnr_per_token_db)) << l.value;
       EXPECT_GT(l.sqnr_per_token_db, 10.0) << l.value;
       EXPECT_GT(l.scale, 0.0f) << l.value;
       per_tensor += l.per_tensor;
+      if (l.ffn >= 0) ffns[l.ffn].push_back(&l);
+      if (l.ffn < 0) {
+        EXPECT_FALSE(l.per_tensor) << l.value << ": no FFN's, never per tensor";
+      }
+    }
+    ASSERT_FALSE(ffns.empty()) << r->to_text();
+    for (const auto& [ffn, pair] : ffns) {
+      ASSERT_EQ(pair.size(), 2u) << "FFN " << ffn << ": its input and hidden activation";
+      EXPECT_EQ(pair[0]->per_tensor, pair[1]->per_tensor) << "FFN " << ffn << " goes per tensor whole";
     }
     const nlohmann::json j = nlohmann::json::parse(r->to_json());
     ASSERT_EQ(j["linear_inputs"].size(), r->linear_inputs.size());
     for (size_t i = 0; i < r->linear_inputs.size(); ++i) {
       EXPECT_EQ(j["linear_inputs"][i]["value"], r->linear_inputs[i].value);
+      EXPECT_EQ(j["linear_inputs"][i]["ffn"], r->linear_inputs[i].ffn);
       EXPECT_EQ(j["linear_inputs"][i]["codes"], r->linear_inputs[i].per_tensor ? "per_tensor" : "per_token");
     }
-    // The blob's int8 linears, by kind; the hidden layers' kernels.
+    // The blob's hidden layers that requantize, and its int8 linears reading per-tensor codes.
     auto e = Engine::open(blob, {.threads = 1, .profile = true});
     ASSERT_TRUE(e.ok()) << e.status().to_string();
-    size_t static_linears = 0, dynamic_linears = 0, requantizing = 0;
+    size_t static_linears = 0, requantizing = 0;
     for (const OpProfile& op : (*e)->op_profile()) {
       static_linears += op.kind == "linear_s8";
-      dynamic_linears += op.kind == "linear_s8_dyn";
       requantizing += op.name.ends_with(".ffn_hidden") && op.kernel.find("s8out") != std::string::npos;
     }
+    EXPECT_EQ(requantizing, per_tensor / 2) << "each FFN per tensor requantizes";
+    EXPECT_EQ(static_linears, per_tensor) << "each per-tensor input has one reader here";
     if (codes == LinearInputCodes::kPerToken) {
       EXPECT_EQ(per_tensor, 0u);
       EXPECT_FALSE(r->chosen_inputs_error) << "not tried";
-      EXPECT_EQ(static_linears, 0u);
-      EXPECT_EQ(requantizing, 0u);
       continue;
     }
     ASSERT_TRUE(r->per_token_inputs_error && r->chosen_inputs_error);
     EXPECT_EQ(r->action_error.mse, r->chosen_inputs_error->mse) << "the report is the blob's";
     if (codes == LinearInputCodes::kPerTensor) {
-      EXPECT_EQ(per_tensor, r->linear_inputs.size());
-      EXPECT_EQ(dynamic_linears, 0u);
-      EXPECT_GT(requantizing, 0u) << "the FFN's hidden layers requantize";
+      EXPECT_EQ(per_tensor, 2 * ffns.size());
       EXPECT_NE(r->chosen_inputs_error->mse, r->per_token_inputs_error->mse) << "per-tensor codes change the actions";
       continue;
     }
@@ -303,13 +313,17 @@ TEST(ConvertApi, LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen) {
       const double allowed = 1.0 + kPerTensorCodesErrorBudget;
       EXPECT_LE(r->chosen_inputs_error->mse, allowed * r->per_token_inputs_error->mse);
       EXPECT_LE(r->chosen_inputs_error->max_abs, allowed * r->per_token_inputs_error->max_abs);
-      EXPECT_GT(static_linears, 0u);
     }
-    // The chosen inputs are those that lose least.
+    // The FFNs chosen are those whose pairs lose least.
     double worst_chosen = -INFINITY, best_left = INFINITY;
-    for (const LinearInputChoice& l : r->linear_inputs) {
-      const double loss = l.sqnr_per_token_db - l.sqnr_per_tensor_db;
-      (l.per_tensor ? worst_chosen : best_left) = l.per_tensor ? std::max(worst_chosen, loss) : std::min(best_left, loss);
+    for (const auto& [ffn, pair] : ffns) {
+      double loss = -INFINITY;
+      for (const LinearInputChoice* l : pair) loss = std::max(loss, l->sqnr_per_token_db - l->sqnr_per_tensor_db);
+      if (pair[0]->per_tensor) {
+        worst_chosen = std::max(worst_chosen, loss);
+      } else {
+        best_left = std::min(best_left, loss);
+      }
     }
     EXPECT_LE(worst_chosen, best_left) << r->to_text();
     EXPECT_NE(r->to_text().find("linear inputs  " + std::to_string(per_tensor) + " of "), std::string::npos) << r->to_text();

@@ -226,7 +226,7 @@ class Converter {
       const ActivationQuant q = choose(observers[k], points[k].role);
       if (points[k].role == graph::CalibrationRole::kLinearInput) {
         const double per_value = per_token[k].signal / static_cast<double>(std::max<size_t>(1, per_token[k].count));
-        linear_inputs_.push_back({name, points[k].reader, false, q.scale, q.zero_point,
+        linear_inputs_.push_back({name, points[k].reader, points[k].ffn, false, q.scale, q.zero_point,
                                   sqnr_db(per_value, observers[k].expected_squared_error(q)), per_token[k].sqnr_db()});
         linear_input_ranges_.push_back({name, q.scale, q.zero_point, observers[k].min(), observers[k].max()});
         continue;
@@ -336,10 +336,11 @@ class Converter {
     err = best_err;
   }
 
-  // Per-tensor codes for the transformer's linear inputs (Int8Options::linear_inputs): the candidates
-  // read by int8 linears, least estimated SQNR loss first; the longest prefix of them that keeps the
-  // held-out error within the budget (binary search, as the mixed search: the error grows as more
-  // inputs go per tensor).
+  // Per-tensor codes for the transformer's linear inputs (Int8Options::linear_inputs), tried by FFN
+  // (input and hidden activation together: what lets the hidden layer requantize), the FFNs whose
+  // codes lose least first (estimated SQNR, the worse of the pair); the longest prefix of them that
+  // keeps the held-out error within the budget (binary search, as the mixed search: the error grows
+  // as more inputs go per tensor).
   void choose_linear_input_codes(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err) {
     const std::vector<std::string> quantizable = quantizable_layers(model_);
     const auto int8_reader = [&](const LinearInputChoice& c) {
@@ -354,16 +355,27 @@ class Converter {
     }
     linear_inputs_.resize(kept);
     linear_input_ranges_.resize(kept);
-    if (linear_inputs_.empty() || opt_.linear_inputs == LinearInputCodes::kPerToken) return;
-    std::vector<size_t> order(linear_inputs_.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    const auto loss = [&](size_t i) { return linear_inputs_[i].sqnr_per_token_db - linear_inputs_[i].sqnr_per_tensor_db; };
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return loss(a) < loss(b); });
+    // The FFNs both of whose codes are read by int8 linears, with the SQNR their pair loses.
+    std::map<int, std::vector<size_t>> members;
+    for (size_t i = 0; i < linear_inputs_.size(); ++i) {
+      if (linear_inputs_[i].ffn >= 0) members[linear_inputs_[i].ffn].push_back(i);
+    }
+    std::vector<std::pair<double, std::vector<size_t>>> ffns;  // (loss in dB, its inputs)
+    for (auto& [ffn, inputs] : members) {
+      if (inputs.size() != 2) {  // a half of a pair buys nothing
+        for (size_t i : inputs) linear_inputs_[i].ffn = -1;
+        continue;
+      }
+      double loss = -INFINITY;
+      for (size_t i : inputs) loss = std::max(loss, linear_inputs_[i].sqnr_per_token_db - linear_inputs_[i].sqnr_per_tensor_db);
+      ffns.emplace_back(loss, inputs);
+    }
+    if (ffns.empty() || opt_.linear_inputs == LinearInputCodes::kPerToken) return;
+    std::stable_sort(ffns.begin(), ffns.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     const auto with_first = [&](size_t count) {
       QuantConfig q = quant;
-      for (size_t i = 0; i < count; ++i) {
-        const LinearInputChoice& c = linear_inputs_[order[i]];
-        q.activations[c.value] = {c.scale, c.zero_point};
+      for (size_t f = 0; f < count; ++f) {
+        for (size_t i : ffns[f].second) q.activations[linear_inputs_[i].value] = {linear_inputs_[i].scale, linear_inputs_[i].zero_point};
       }
       return q;
     };
@@ -373,22 +385,20 @@ class Converter {
       return e.mse <= allowed * base.mse && e.max_abs <= allowed * base.max_abs &&
              (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
     };
-    const std::string task = "per-tensor codes for the linears' inputs";
     const auto try_count = [&](size_t count) {
       auto [candidate, e] = write_and_evaluate(with_first(count));
-      progress(std::to_string(count) + " of " + std::to_string(order.size()) + " linear inputs per tensor: held-out MSE " +
+      progress(std::to_string(count) + " of " + std::to_string(ffns.size()) + " FFNs with per-tensor codes: held-out MSE " +
                fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (all per token: " + fmt(base.mse) + ", " + fmt(base.max_abs) + ")");
       return std::pair{std::move(candidate), e};
     };
-    progress(task);
     size_t chosen = 0;
-    auto [all_blob, all_err] = try_count(order.size());
+    auto [all_blob, all_err] = try_count(ffns.size());
     if (opt_.linear_inputs == LinearInputCodes::kPerTensor || within_budget(all_err)) {
-      chosen = order.size();
+      chosen = ffns.size();
       blob = std::move(all_blob);
       err = all_err;
     } else {
-      size_t good = 0, bad = order.size();  // counts known to meet and to miss the budget
+      size_t good = 0, bad = ffns.size();  // counts known to meet and to miss the budget
       while (bad - good > 1) {
         const size_t mid = (good + bad) / 2;
         auto [candidate, e] = try_count(mid);
@@ -402,7 +412,9 @@ class Converter {
       }
       chosen = good;
     }
-    for (size_t i = 0; i < chosen; ++i) linear_inputs_[order[i]].per_tensor = true;
+    for (size_t f = 0; f < chosen; ++f) {
+      for (size_t i : ffns[f].second) linear_inputs_[i].per_tensor = true;
+    }
     quant = with_first(chosen);
     per_token_inputs_error_ = base;
     chosen_inputs_error_ = err;

@@ -48,6 +48,7 @@ std::string Int8Report::to_json() const {
   for (const auto& l : linear_inputs) {
     r["linear_inputs"].push_back({{"value", l.value},
                                   {"reader", l.reader},
+                                  {"ffn", l.ffn},
                                   {"codes", l.per_tensor ? "per_tensor" : "per_token"},
                                   {"scale", l.scale},
                                   {"zero_point", l.zero_point},
@@ -104,7 +105,9 @@ std::string Int8Report::to_text() const {
   s << "\n";
   if (!linear_inputs.empty()) {
     const auto per_tensor = std::count_if(linear_inputs.begin(), linear_inputs.end(), [](const auto& l) { return l.per_tensor; });
-    s << "linear inputs  " << per_tensor << " of " << linear_inputs.size() << " with calibrated per-tensor codes, the rest per token";
+    const auto tried = std::count_if(linear_inputs.begin(), linear_inputs.end(), [](const auto& l) { return l.ffn >= 0; });
+    s << "linear inputs  " << per_tensor << " of " << linear_inputs.size() << " with calibrated per-tensor codes (" << tried
+      << " tried: the FFNs' inputs and hidden activations), the rest per token";
     if (per_token_inputs_error && chosen_inputs_error) {
       s << " (held-out MSE " << fmt(chosen_inputs_error->mse) << ", max |err| " << fmt(chosen_inputs_error->max_abs)
         << "; all per token " << fmt(per_token_inputs_error->mse) << ", " << fmt(per_token_inputs_error->max_abs) << ")";
@@ -112,7 +115,8 @@ std::string Int8Report::to_text() const {
     s << "\n  codes        SQNR dB per tensor / per token (estimated)  value\n";
     for (const auto& l : linear_inputs) {
       s << "  " << (l.per_tensor ? "per tensor" : "per token ") << "   " << fmt(l.sqnr_per_tensor_db, "%6.1f") << " / "
-        << fmt(l.sqnr_per_token_db, "%6.1f") << "                           " << l.value << "\n";
+        << fmt(l.sqnr_per_token_db, "%6.1f") << "                           " << l.value
+        << (l.ffn >= 0 ? " (FFN " + std::to_string(l.ffn) + ")" : "") << "\n";
     }
   }
   s << "layers in float " << (float_layers.empty() ? "none (besides the action head and state projections, always float)" : "")

@@ -105,8 +105,8 @@ void MaxPoolOp::run(const RunContext& ctx) const {
   ctx.pool().parallel_for(ceil_div(static_cast<size_t>(out_h_), kRows), [&](size_t task, int) {
     const int r0 = static_cast<int>(task) * kRows;
     const int r1 = std::min(out_h_, r0 + kRows);
-    kernels::maxpool_nhwc_f32(in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_, ctx.data(inputs[0]),
-                              ctx.data(outputs[0]), r0, r1);
+    kernels::maxpool_nhwc_f32(ctx.kernels().elementwise, in_h_, in_w_, channels_, kernel_, stride_, pad_, out_w_,
+                              ctx.data(inputs[0]), ctx.data(outputs[0]), r0, r1);
   });
 }
 

@@ -77,7 +77,7 @@ class MaxPoolOp : public Op {
  public:
   MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output);
   const char* type() const override { return "maxpool_f32"; }
-  std::string kernel(const kernels::KernelConfig&) const override { return "scalar"; }
+  std::string kernel(const kernels::KernelConfig& k) const override { return k.elementwise.max_taps_name; }
   void run(const RunContext& ctx) const override;
   int kernel() const { return kernel_; }
   int stride() const { return stride_; }

@@ -33,6 +33,7 @@ struct ElementwiseF32Kernels {
   const char* relu_name;
   const char* gelu_name;
   const char* add_name;
+  const char* max_taps_name;
   /// Row-wise LayerNorm over `cols` values: (x - mean) / sqrt(biased var + eps) * gamma + beta.
   void (*layernorm_rows)(int rows, int cols, const float* x, size_t ldx, const float* gamma, const float* beta,
                          float eps, float* y, size_t ldy);
@@ -49,6 +50,10 @@ struct ElementwiseF32Kernels {
   void (*gelu)(size_t n, float* x);
   /// y[i] = a[i] + b[i]; y may be a or b.
   void (*add)(size_t n, const float* a, const float* b, float* y);
+  /// The max-pool's channel max (MaxTapsFn, kernels/common/maxpool_window.h): dst[c] = the running
+  /// max of taps[0][c], taps[1][c], ... where a tap replaces it only when greater (NaN never does,
+  /// as a first tap it stays). Bit-exact in every variant.
+  void (*max_taps)(const float* const* taps, int ntaps, int channels, float* dst);
 };
 
 /// The table compiled for each ISA (nullptr when that file compiled to nothing on this target).

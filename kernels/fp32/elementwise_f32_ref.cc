@@ -73,13 +73,23 @@ void add_f32_ref(size_t n, const float* a, const float* b, float* y) {
   for (size_t i = 0; i < n; ++i) y[i] = a[i] + b[i];
 }
 
+void max_taps_f32_ref(const float* const* taps, int ntaps, int channels, float* dst) {
+  for (int c = 0; c < channels; ++c) {
+    float m = taps[0][c];
+    for (int t = 1; t < ntaps; ++t) m = taps[t][c] > m ? taps[t][c] : m;
+    dst[c] = m;
+  }
+}
+
 }  // namespace
 
 const ElementwiseF32Kernels* elementwise_f32_table_ref() {
   static constexpr ElementwiseF32Kernels kTable = {
       Isa::kRef,
       "layernorm_rows_f32_ref", "softmax_rows_f32_ref", "softmax_rows_s8_ref", "relu_f32_ref", "gelu_f32_ref", "add_f32_ref",
+      "max_taps_f32_ref",
       layernorm_rows_f32_ref, softmax_rows_f32_ref, softmax_rows_s8_ref, relu_f32_ref, gelu_f32_ref, add_f32_ref,
+      max_taps_f32_ref,
   };
   return &kTable;
 }

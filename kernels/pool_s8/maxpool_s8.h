@@ -1,21 +1,22 @@
 // 2-D max-pool over NHWC int8. Max commutes with the (monotonic) affine quantization, so the
 // output has the input's scale and zero point and the result is exact.
 //
-// One portable driver (maxpool_s8.cc) walks the pooling window once, in one place, and hands each
-// output pixel's in-image taps (pointers to channel vectors, as XNNPACK's indirection buffers) to a
-// per-ISA channel-max primitive, so padding and geometry are never re-implemented per ISA.
+// One portable driver (kernels/common/maxpool_window.h, shared with the float max-pool) walks the
+// pooling window once, in one place, and hands each output pixel's in-image taps (pointers to
+// channel vectors, as XNNPACK's indirection buffers) to a per-ISA channel-max primitive, so padding
+// and geometry are never re-implemented per ISA.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 
 #include "kernels/common/isa.h"
+#include "kernels/common/maxpool_window.h"
 
 namespace act::kernels {
 
-/// dst[c] = max over t < ntaps of taps[t][c], for c < channels. ntaps >= 1; dst may be one of the
-/// taps (same address), never a partial overlap. Reads exactly `channels` bytes of each tap.
-using MaxS8TapsFn = void (*)(const int8_t* const* taps, int ntaps, int channels, int8_t* dst);
+/// MaxTapsFn (maxpool_window.h) over int8. Reads exactly `channels` bytes of each tap.
+using MaxS8TapsFn = MaxTapsFn<int8_t>;
 
 /// One variant of the family (maxpool_s8_variants.h lists them; an Engine runs its KernelConfig's).
 struct MaxPoolS8Kernels {

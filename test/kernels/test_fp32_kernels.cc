@@ -101,7 +101,7 @@ TEST(Fp32Kernels, MaxPoolIgnoresPadding) {
   const auto x = random_vector(static_cast<size_t>(h) * w * c, rng, -5.0f, -1.0f);
   const int oh = Conv2dShape::out_dim(h, 3, 2, 1, 1), ow = Conv2dShape::out_dim(w, 3, 2, 1, 1);
   std::vector<float> y(static_cast<size_t>(oh) * ow * c);
-  maxpool_nhwc_f32(h, w, c, 3, 2, 1, oh, ow, x.data(), y.data(), 0, oh);
+  maxpool_nhwc_f32(*elementwise_f32_table_ref(), h, w, c, 3, 2, 1, ow, x.data(), y.data(), 0, oh);
   for (int oy = 0; oy < oh; ++oy)
     for (int ox = 0; ox < ow; ++ox)
       for (int ch = 0; ch < c; ++ch) {

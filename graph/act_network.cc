@@ -375,15 +375,15 @@ ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId 
   const ValueId y = linear(out_name, rows, hidden, D, MatrixRef::of(h, static_cast<size_t>(hidden)), prefix + "linear2.weight",
                            MatrixRef::of_constant(weight(prefix + "linear2.bias", {D}), 0),
                            MatrixRef::of(residual, static_cast<size_t>(D)));
-  if (!glu && act != Epilogue::kGelu) tag_ffn_codes({x, h});  // GELU has no int32 epilogue: no requantizing
+  if (!glu && act != Epilogue::kGelu) tag_ffn_hidden(h);  // GELU has no int32 epilogue: no requantizing
   return y;
 }
 
-void ActNetwork::tag_ffn_codes(std::initializer_list<ValueId> values) {
+void ActNetwork::tag_ffn_hidden(ValueId h) {
   const int ffn = 1 + std::accumulate(calibration_points_.begin(), calibration_points_.end(), -1,
                                       [](int most, const CalibrationPoint& p) { return std::max(most, p.ffn); });
   for (CalibrationPoint& p : calibration_points_) {
-    if (p.role == CalibrationRole::kLinearInput && std::find(values.begin(), values.end(), p.value) != values.end()) p.ffn = ffn;
+    if (p.role == CalibrationRole::kLinearInput && p.value == h) p.ffn = ffn;
   }
 }
 

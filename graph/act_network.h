@@ -7,7 +7,6 @@
 // quantized. Quantize/dequantize ops are inserted where a value crosses between the two.
 #pragma once
 
-#include <initializer_list>
 #include <map>
 #include <optional>
 #include <string>
@@ -42,10 +41,9 @@ struct CalibrationPoint {
   size_t camera;       ///< camera branches only
   ValueId value;
   std::string reader;  ///< linear inputs: the weight of the first linear that reads the value
-  /// Linear inputs: the FFN (0, 1, ... in graph order) whose hidden layer requantizes in its GEMM when
-  /// this value (its input or its hidden activation) and the other one both have per-tensor codes,
-  /// which is what per tensor buys in speed; -1 for the other inputs (per tensor would only save
-  /// finding each row's range there).
+  /// Linear inputs: the FFN (0, 1, ... in graph order) whose hidden activation this is, when its
+  /// hidden layer can requantize in its GEMM into per-tensor codes of it (what per tensor buys in
+  /// speed); -1 for the other inputs (per tensor would only save finding each row's range there).
   int ffn = -1;
 };
 
@@ -133,8 +131,8 @@ class ActNetwork {
   ValueId encoder_layer(int layer, ValueId x);
   ValueId decoder_layer(int layer, ValueId y, ValueId memory);
   ValueId ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name);
-  /// Tags the calibration points of linear inputs `values` with the next FFN number (CalibrationPoint::ffn).
-  void tag_ffn_codes(std::initializer_list<ValueId> values);
+  /// Tags the calibration point of an FFN's hidden activation h with the next FFN number (CalibrationPoint::ffn).
+  void tag_ffn_hidden(ValueId h);
   ValueId linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                  MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone);
   ValueId layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix);

@@ -341,13 +341,24 @@ void LinearS8Op::write_row_codes(const RowCodes& codes) {
   for (ValueId v : codes.values()) outputs.push_back(v);
   const bool constant_bias_vector = bias_.value == kNoValue && bias_.ld == 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
-  if (x_codes_.per_tensor() && y_codes_.per_tensor() && constant_bias_vector && !has_residual &&
-      (epilogue_ == Epilogue::kNone || epilogue_ == Epilogue::kRelu)) {
+  if (!y_codes_.per_tensor() || !constant_bias_vector || has_residual ||
+      (epilogue_ != Epilogue::kNone && epilogue_ != Epilogue::kRelu)) {
+    return;
+  }
+  const float s_y = y_codes_.fixed->scale;
+  const float* bias = bias_.constant != nullptr ? bias_.constant + bias_.col_offset : nullptr;
+  if (x_codes_.per_tensor()) {  // one input scale: the bias as int32 in the packed weights
     const float s_x = x_codes_.fixed->scale;
-    const float* bias = bias_.constant != nullptr ? bias_.constant + bias_.col_offset : nullptr;
     const std::vector<int32_t> int_bias = integer_bias(out_, bias, s_x, w_scale_);
     packed_.repack(*gemm_, out_, in_, weight_, int_bias.empty() ? nullptr : int_bias.data(), x_codes_.fixed->zero_point);
-    requant_scale_ = requant_scales(out_, s_x, w_scale_, y_codes_.fixed->scale);
+    requant_scale_ = requant_scales(out_, s_x, w_scale_, s_y);
+    return;
+  }
+  // Per-token input: the rows' scales go into the epilogue, the bias in float (output units).
+  requant_scale_ = requant_scales(out_, 1.0f, w_scale_, s_y);
+  if (bias != nullptr) {
+    requant_bias_.resize(static_cast<size_t>(out_));
+    for (size_t n = 0; n < requant_bias_.size(); ++n) requant_bias_[n] = bias[n] / s_y;
   }
 }
 
@@ -437,6 +448,8 @@ void LinearS8Op::run_requantized(const RunContext& ctx, const kernels::GemmS8Arg
   o.c = ctx.data_s8(y_codes_.codes);
   o.ldc = static_cast<size_t>(out_);
   o.scale = requant_scale_.data();
+  if (!x_codes_.per_tensor()) o.a_row_scale = ctx.data(x_codes_.scale);
+  if (!requant_bias_.empty()) o.bias = requant_bias_.data();
   o.out_zero_point = y_codes_.fixed->zero_point;
   o.qmin = epilogue_ == Epilogue::kRelu ? o.out_zero_point : -128;
   const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;

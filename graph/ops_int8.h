@@ -135,8 +135,9 @@ class ConvS8Op : public Op {
 /// vector (ld 0) or a per-row table (then there must be no residual: the table takes the residual's
 /// place in the kernel's epilogue). Asked to (write_row_codes), it also writes its output's codes,
 /// each task quantizing the rows it has just computed when the tiling gives tasks whole rows; when
-/// both codes are per tensor and the epilogue is a constant bias and ReLU at most (the FFN's hidden
-/// layer), the GEMM requantizes straight into the output codes (no float pass at all).
+/// the output codes are per tensor and the epilogue is a constant bias and ReLU at most (the FFN's
+/// hidden layer), the GEMM requantizes straight into them (no float pass at all), with the input's
+/// per-row scales in its epilogue when the input is per token.
 class LinearS8Op : public Op, public RowCodesWriter {
  public:
   enum class InputCodes { kQuantizedHere, kFromProducer };
@@ -173,7 +174,8 @@ class LinearS8Op : public Op, public RowCodesWriter {
   int table_cols_;  // output columns that read a per-row bias table; the rest (if any) share row 0's
   const kernels::GemmS8Kernels* gemm_;  // the variant the weights are packed for
   PackedWeights packed_;
-  std::vector<float> requant_scale_;  // requantizing: s_x * s_w[n] / s_y
+  std::vector<float> requant_scale_;  // requantizing: s_x * s_w[n] / s_y (per-token x: s_w[n] / s_y)
+  std::vector<float> requant_bias_;   // requantizing a per-token x: bias[n] / s_y (else in the packed weights)
 };
 
 /// softmax(q k^T / sqrt(d)) v per head with both matmuls on the int8 GEMM; AttentionOp is its float

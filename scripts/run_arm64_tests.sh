@@ -44,6 +44,7 @@ slow_tests=(
   # INT8 conversions (each evaluates its held-out frames with and without int8 attention): 12-140 s
   # here; the int8 attention's NEON path runs in OpsPerIsa.AttentionS8* within a second.
   'ConvertApi\.AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen'
+  'ConvertApi\.LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen'
   'ConvertApi\.ReportStructMatchesItsJson'
   'ConvertApi\.MissedMaxMseWritesNothing'
   'Modes/SchedulerVsPolicy\.ZeroLatencyOnRawChunksMatchesPolicySelectAction/TemporalEnsembling'  # 83 s

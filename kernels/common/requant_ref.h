@@ -4,6 +4,10 @@
 // int32 accumulator -> int8 (the "s8 out" epilogue), per output channel n:
 //
 //   v = float(acc) * scale[n]                          scale[n] = s_a * s_w[n] / s_out
+//     or, with per-row activation scales a[m] and a float bias b[n] (output units):
+//   s = a[m] * scale[n]                                scale[n] = s_w[n] / s_out
+//   v = float(acc) * s
+//   v = v + b[n]
 //   v = v + float(r - z_r) * residual_scale            optional residual r (int8, zero point z_r),
 //                                                        residual_scale = s_r / s_out
 //   v = v + float(z_out)
@@ -66,6 +70,13 @@ inline int8_t finish_s8(float v, int32_t out_zero_point, int32_t qmin, int32_t q
   v = v > lo ? v : lo;
   v = v < hi ? v : hi;
   return static_cast<int8_t>(round_half_even(v));
+}
+
+/// float(acc) * (a_scale * scale) + bias, the s8-out rule's scaling with a per-row activation scale
+/// and a float bias; a_scale 1 and bias 0 give scale_acc(acc, scale)'s value exactly.
+inline float scale_acc_row(int32_t acc, float a_scale, float scale, float bias) {
+  const float s = fp_barrier(a_scale * scale);
+  return fp_barrier(fp_barrier(static_cast<float>(acc) * s) + bias);
 }
 
 /// The s8-out rule without a residual.

@@ -9,7 +9,8 @@
 //   acc[m][n] = sum_k (A[m][k] - z_a) * W[n][k] + bias_i32[n]      (int32, wraps modulo 2^32)
 //
 // Three epilogues, all fused into the micro-kernel (see kernels/common/requant_ref.h):
-//   s8 out   requantize with a per-channel float scale, optional int8 residual, clamp, z_out;
+//   s8 out   requantize with a per-channel float scale (times an optional per-row one, plus an
+//            optional float bias), optional int8 residual, clamp, z_out;
 //   f32 out  dequantize with s_a (per tensor or per row) * s_w[n], + f32 bias, optional f32
 //            residual, optional ReLU;
 //   s32 out  the raw accumulators (tests, and ops that need them).
@@ -89,7 +90,12 @@ struct GemmS8Args {
 struct GemmS8OutS8 {
   int8_t* c = nullptr;
   size_t ldc = 0;                    ///< >= n
-  const float* scale = nullptr;      ///< [n] s_a * s_w[n] / s_out; finite, > 0
+  const float* scale = nullptr;      ///< [n] s_a * s_w[n] / s_out (s_w[n] / s_out with a_row_scale); finite, > 0
+  /// Optional [m]: per-row activation scales s_a (dynamic per-token input), multiplied into scale[n].
+  const float* a_row_scale = nullptr;
+  /// Optional [n]: a float bias in output units (bias / s_out), added after the scaling (the int32
+  /// bias packed into the weights assumes one s_a for every row).
+  const float* bias = nullptr;
   int32_t out_zero_point = 0;        ///< in [-128, 127]
   int32_t qmin = -128, qmax = 127;   ///< -128 <= qmin <= qmax <= 127
   const int8_t* residual = nullptr;  ///< optional [m x n] int8, row stride ldr

@@ -105,11 +105,12 @@ __m256 load_cols(const float* p, int n, int lo, int hi) {
 
 struct EpiS8 {
   const GemmS8OutS8& o;
-  __m256 scale{}, zo{}, qmin{}, qmax{}, rscale{};
+  __m256 scale{}, bias{}, zo{}, qmin{}, qmax{}, rscale{};
   __m256i rzp{};
 
   void begin_panel(int n, int lo, int hi) {
     scale = load_cols(o.scale, n, lo, hi);
+    if (o.bias != nullptr) bias = load_cols(o.bias, n, lo, hi);
     zo = _mm256_set1_ps(static_cast<float>(o.out_zero_point));
     qmin = _mm256_set1_ps(static_cast<float>(o.qmin));
     qmax = _mm256_set1_ps(static_cast<float>(o.qmax));
@@ -118,7 +119,9 @@ struct EpiS8 {
   }
   void row(int m, int n, int lo, int hi, __m256i acc) const {
     const bool full = lo == 0 && hi == kNR;
-    __m256 v = _mm256_mul_ps(_mm256_cvtepi32_ps(acc), scale);
+    const __m256 s = o.a_row_scale != nullptr ? _mm256_mul_ps(_mm256_set1_ps(o.a_row_scale[m]), scale) : scale;
+    __m256 v = _mm256_mul_ps(_mm256_cvtepi32_ps(acc), s);
+    if (o.bias != nullptr) v = _mm256_add_ps(v, bias);
     if (o.residual != nullptr) {
       const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n;
       int64_t bytes = 0;

@@ -136,7 +136,7 @@ inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgr
 
 struct EpiS8 {
   const GemmS8OutS8& o;
-  __m512 scale[kVecs]{};
+  __m512 scale[kVecs]{}, bias[kVecs]{};
   __mmask16 mask[kVecs]{};
   bool full_panel = false;
 
@@ -145,6 +145,7 @@ struct EpiS8 {
     for (int j = 0; j < kVecs; ++j) {
       mask[j] = vec_mask(j, lo, hi);
       scale[j] = _mm512_maskz_loadu_ps(mask[j], o.scale + n + 16 * j);
+      if (o.bias != nullptr) bias[j] = _mm512_maskz_loadu_ps(mask[j], o.bias + n + 16 * j);
     }
   }
   void row(int m, int n, const __m512i (&acc)[kVecs]) const {
@@ -154,7 +155,9 @@ struct EpiS8 {
     int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
     __m512i q[kVecs];
     for (int j = 0; j < kVecs; ++j) {
-      __m512 v = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), scale[j]);
+      const __m512 s = o.a_row_scale != nullptr ? _mm512_mul_ps(_mm512_set1_ps(o.a_row_scale[m]), scale[j]) : scale[j];
+      __m512 v = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), s);
+      if (o.bias != nullptr) v = _mm512_add_ps(v, bias[j]);
       if (o.residual != nullptr) {
         const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n + 16 * j;
         const __m512i r = _mm512_sub_epi32(_mm512_cvtepi8_epi32(_mm_maskz_loadu_epi8(mask[j], rp)),

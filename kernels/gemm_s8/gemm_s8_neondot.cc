@@ -123,13 +123,20 @@ void load_cols(const float* p, int n, int lo, int hi, float32x4_t (&out)[4]) {
 
 struct EpiS8 {
   const GemmS8OutS8& o;
-  float32x4_t scale[4]{};
+  float32x4_t scale[4]{}, bias[4]{};
 
-  void begin_panel(int n, int lo, int hi) { load_cols(o.scale, n, lo, hi, scale); }
+  void begin_panel(int n, int lo, int hi) {
+    load_cols(o.scale, n, lo, hi, scale);
+    if (o.bias != nullptr) load_cols(o.bias, n, lo, hi, bias);
+  }
   void row(int m, int n, int lo, int hi, const int32x4_t (&acc)[4]) const {
     const bool full = lo == 0 && hi == kNR;
     float32x4_t v[4];
-    for (int j = 0; j < 4; ++j) v[j] = vmulq_f32(vcvtq_f32_s32(acc[j]), scale[j]);
+    for (int j = 0; j < 4; ++j) {
+      const float32x4_t s = o.a_row_scale != nullptr ? vmulq_f32(vdupq_n_f32(o.a_row_scale[m]), scale[j]) : scale[j];
+      v[j] = vmulq_f32(vcvtq_f32_s32(acc[j]), s);
+      if (o.bias != nullptr) v[j] = vaddq_f32(v[j], bias[j]);
+    }
     if (o.residual != nullptr) {
       const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n;
       int8_t tmp[kNR] = {};

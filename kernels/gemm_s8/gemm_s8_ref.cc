@@ -69,7 +69,15 @@ void gemm_s8s8_s8out_1x1c1_ref(const GemmS8Args& g, const GemmS8OutS8& o, int m0
     for (int n = n0; n < n1; ++n) {
       const int32_t acc = accumulate(g, m, n);
       int8_t q;
-      if (o.residual != nullptr) {
+      if (o.a_row_scale != nullptr || o.bias != nullptr) {
+        float v = ref::scale_acc_row(acc, o.a_row_scale != nullptr ? o.a_row_scale[m] : 1.0f, o.scale[n],
+                                     o.bias != nullptr ? o.bias[n] : 0.0f);
+        if (o.residual != nullptr) {
+          v = ref::fp_barrier(v + ref::residual_term(o.residual[static_cast<size_t>(m) * o.ldr + n], o.residual_zero_point,
+                                                     o.residual_scale));
+        }
+        q = ref::finish_s8(v, o.out_zero_point, o.qmin, o.qmax);
+      } else if (o.residual != nullptr) {
         q = ref::requantize_s8_residual(acc, o.scale[n], o.residual[static_cast<size_t>(m) * o.ldr + n],
                                         o.residual_zero_point, o.residual_scale, o.out_zero_point, o.qmin, o.qmax);
       } else {

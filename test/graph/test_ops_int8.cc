@@ -301,10 +301,10 @@ TEST_P(OpsPerIsa, LinearS8MatchesFloatLinearWithinQuantizationError) {
   }
 }
 
-// A linear whose input and output codes are both per tensor (the FFN's hidden layer in a static
-// blob) requantizes in the GEMM: its codes against its float twin's output (the same input codes,
-// float out) quantized with the output's parameters: at most one code apart (the int32 bias and the
-// requantization round where the float epilogue does not), and rarely that; the float output, made
+// A linear whose output codes are per tensor (the FFN's hidden layer in a static blob) requantizes
+// in the GEMM, its input per tensor or per token: its codes against its float twin's output (the
+// same input codes, float out) quantized with the output's parameters: at most one code apart (the
+// requantization rounds where the float epilogue does not), and rarely that; the float output, made
 // when something reads it, is exactly the codes' value. Ragged rows and columns, 1 and 2 threads.
 TEST_P(OpsPerIsa, LinearS8RequantizesIntoPerTensorCodes) {
   const kernels::KernelConfig k = config();
@@ -312,9 +312,10 @@ TEST_P(OpsPerIsa, LinearS8RequantizesIntoPerTensorCodes) {
   const int in = 72, out = 200;
   const QuantizedWeights w = quantize_weights(uniform(static_cast<size_t>(out) * in, rng, -0.3f, 0.3f), out, in);
   const std::vector<float> bias = uniform(static_cast<size_t>(out), rng, -1.0f, 1.0f);
-  const kernels::QuantS8 x_q = kernels::choose_quant_s8(-2.0f, 3.0f);
   ThreadPool one(1);
   for (ThreadPool* pool : {&one, &pool_}) {
+   for (const std::optional<kernels::QuantS8> x_q : {std::optional(kernels::choose_quant_s8(-2.0f, 3.0f)),
+                                                      std::optional<kernels::QuantS8>()}) {
     for (int rows : {1, 7, 67, 131}) {
       for (Epilogue epilogue : {Epilogue::kNone, Epilogue::kRelu}) {
         const kernels::QuantS8 y_q = epilogue == Epilogue::kRelu ? kernels::choose_quant_s8(0.0f, 4.0f)
@@ -354,9 +355,11 @@ TEST_P(OpsPerIsa, LinearS8RequantizesIntoPerTensorCodes) {
             ASSERT_GE(got[i], y_q.zero_point);
           }
         }
-        EXPECT_LE(off_by_one, n / 50) << kernels::isa_name(GetParam()) << " rows " << rows;
+        EXPECT_LE(off_by_one, n / 50) << kernels::isa_name(GetParam()) << " rows " << rows
+                                      << (x_q ? " per-tensor input" : " per-token input");
       }
     }
+   }
   }
 }
 

@@ -175,7 +175,9 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
     bias_i32[j] = uniform(-(1 << 18), 1 << 18);
     bias_f32[j] = std::uniform_real_distribution<float>(-5.0f, 5.0f)(rng);
   }
-  const bool int_bias = bias_ && out_ != GemmOut::kF32;
+  // s8 out with per-row scales takes its bias in float (output units), as f32 out does.
+  const bool float_bias = bias_ && (out_ == GemmOut::kF32 || (out_ == GemmOut::kS8 && per_row_));
+  const bool int_bias = bias_ && !float_bias;
   std::vector<int32_t> row_zp(static_cast<size_t>(m_));
   std::vector<float> row_scale(static_cast<size_t>(m_));
   for (int i = 0; i < m_; ++i) {
@@ -330,6 +332,8 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
         o.out_zero_point = zo_;
         o.qmin = qmin_;
         o.qmax = qmax_;
+        if (per_row_) o.a_row_scale = row_scale.data();
+        if (float_bias) o.bias = bias_f32.data();
         if (residual_) {
           o.residual = in_place_ ? c : res_s8.data();
           o.ldr = ldr;
@@ -340,6 +344,11 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
       };
       auto expect_at = [&](int i, int j) {
         const int32_t x = acc[static_cast<size_t>(i) * n_ + j];
+        if (per_row_) {
+          float y = ref::scale_acc_row(x, row_scale[i], scale[j], float_bias ? bias_f32[j] : 0.0f);
+          if (residual_) y = ref::fp_barrier(y + ref::residual_term(res_s8[i * ldr + j], rzp, rscale));
+          return ref::finish_s8(y, zo_, qmin_, qmax_);
+        }
         return residual_ ? ref::requantize_s8_residual(x, scale[j], res_s8[i * ldr + j], rzp, rscale, zo_, qmin_, qmax_)
                          : ref::requantize_s8(x, scale[j], zo_, qmin_, qmax_);
       };

@@ -152,6 +152,16 @@ TEST_P(GemmS8Variant, PerRowZeroPointsAndScales) {
           variant());
     }
   }
+  // s8 out with per-row scales and a float bias (a per-token input requantized to a per-tensor
+  // output): with and without the bias, ReLU's clamp, a residual, ragged shapes and sub-rectangles.
+  for (bool bias : {true, false}) {
+    for (int m : {1, mr() + 1, 2 * mr() + 3}) {
+      GemmS8Tester().m(m).n(2 * nr() + 5).k(71).per_row(true).bias(bias).out(GemmOut::kS8).out_zero_point(-128).qmin(-128)
+          .seed(seed++).test(variant());
+      GemmS8Tester().m(m).n(nr() + 3).k(2 * kblock() + 3).per_row(true).bias(bias).residual(true).out(GemmOut::kS8)
+          .out_zero_point(9).qmin(9).seed(seed++).test(variant());
+    }
+  }
 }
 
 TEST_P(GemmS8Variant, TinyAndHugeScales) {

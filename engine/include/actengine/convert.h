@@ -151,13 +151,15 @@ struct CalibrationSet {
 
 /// The int8 codes the transformer's linears read (static and mixed modes): per token (each row's
 /// scale and zero point from its own range at run time) or per tensor (calibrated, fixed). Per
-/// tensor is tried where it buys speed: an FFN's input and hidden activation together, whose hidden
-/// layer then requantizes inside its GEMM instead of a float pass (elsewhere it would save only
-/// finding each row's range, and a calibrated range there, attention's output, say, clips more on
-/// frames unlike the calibration frames).
+/// tensor is tried where it buys speed: an FFN's hidden activation, which its hidden layer then
+/// requantizes into inside its GEMM instead of a float pass (elsewhere it would save only finding
+/// each row's range, and a calibrated range there, attention's output, say, clips more on frames
+/// unlike the calibration frames).
 enum class LinearInputCodes { kAuto, kPerToken, kPerTensor };
-/// kAuto's budget: per-tensor codes may raise the held-out error by this fraction at most.
+/// kAuto's budget: per-tensor codes may raise the held-out MSE by this fraction at most, and its
+/// max |err| (one value of a few frames' chunks, a noisier figure) by kPerTensorCodesMaxErrorBudget.
 inline constexpr double kPerTensorCodesErrorBudget = 0.10;
+inline constexpr double kPerTensorCodesMaxErrorBudget = 0.25;
 
 enum class AttentionPrecision { kAuto, kInt8, kFp32 };
 /// kAuto's budget: int8 attention may raise the held-out error by this fraction at most.
@@ -188,11 +190,12 @@ struct Int8Options {
   /// held-out MSE and max |err| by at most kInt8AttentionErrorBudget (and, mixed, still meets the
   /// target); kInt8 and kFp32 force the choice.
   AttentionPrecision attention = AttentionPrecision::kAuto;
-  /// The linears' input codes: kAuto makes per tensor the FFNs whose calibrated codes lose least
-  /// (estimated SQNR against per token, the worse of input and hidden activation), as many as keep
-  /// the held-out MSE and max |err| within kPerTensorCodesErrorBudget of all per token (and, mixed,
-  /// the target); kPerToken and kPerTensor force the choice (per tensor: every FFN's pair). Dynamic
-  /// mode has no calibration: always per token.
+  /// The linears' input codes: kAuto makes per tensor the FFN hidden activations whose calibrated
+  /// codes lose least (estimated SQNR against per token), as many as keep the held-out MSE and
+  /// max |err| within kPerTensorCodesErrorBudget and kPerTensorCodesMaxErrorBudget of all per
+  /// token (and, mixed, the target);
+  /// kPerToken and kPerTensor force the choice (per tensor: every FFN's). Dynamic mode has no
+  /// calibration: always per token.
   LinearInputCodes linear_inputs = LinearInputCodes::kAuto;
   /// Layers kept in float, by their weight tensors' names (LayerSqnr::layer, Int8Report::float_layers,
   /// e.g. "backbone.conv1.weight"); kMixed chooses more on top when the target needs them.
@@ -239,9 +242,9 @@ struct ActivationRange {
 struct LinearInputChoice {
   std::string value;   ///< e.g. "encoder_layer0.norm1"
   std::string reader;  ///< the weight of the (first) linear that reads it
-  /// The FFN (0, 1, ... in graph order) whose input or hidden activation it is, when that FFN's
-  /// hidden layer can requantize in its GEMM (ReLU or no activation): the inputs tried per tensor,
-  /// in pairs. -1: always per token.
+  /// The FFN (0, 1, ... in graph order) whose hidden activation it is, when that FFN's hidden layer
+  /// can requantize in its GEMM (ReLU or no activation): the inputs tried per tensor. -1: always
+  /// per token.
   int ffn = -1;
   bool per_tensor = false;  ///< calibrated per-tensor codes; else per token at run time
   float scale = 1;          ///< the calibrated parameters (what per tensor uses)

@@ -336,11 +336,10 @@ class Converter {
     err = best_err;
   }
 
-  // Per-tensor codes for the transformer's linear inputs (Int8Options::linear_inputs), tried by FFN
-  // (input and hidden activation together: what lets the hidden layer requantize), the FFNs whose
-  // codes lose least first (estimated SQNR, the worse of the pair); the longest prefix of them that
-  // keeps the held-out error within the budget (binary search, as the mixed search: the error grows
-  // as more inputs go per tensor).
+  // Per-tensor codes for the transformer's linear inputs (Int8Options::linear_inputs), tried for the
+  // FFNs' hidden activations (what lets a hidden layer requantize), those whose codes lose least
+  // first (estimated SQNR); the longest prefix of them that keeps the held-out error within the
+  // budget (binary search, as the mixed search: the error grows as more inputs go per tensor).
   void choose_linear_input_codes(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err) {
     const std::vector<std::string> quantizable = quantizable_layers(model_);
     const auto int8_reader = [&](const LinearInputChoice& c) {
@@ -355,34 +354,25 @@ class Converter {
     }
     linear_inputs_.resize(kept);
     linear_input_ranges_.resize(kept);
-    // The FFNs both of whose codes are read by int8 linears, with the SQNR their pair loses.
-    std::map<int, std::vector<size_t>> members;
+    std::vector<size_t> ffns;  // the candidates, least SQNR lost first
     for (size_t i = 0; i < linear_inputs_.size(); ++i) {
-      if (linear_inputs_[i].ffn >= 0) members[linear_inputs_[i].ffn].push_back(i);
+      if (linear_inputs_[i].ffn >= 0) ffns.push_back(i);
     }
-    std::vector<std::pair<double, std::vector<size_t>>> ffns;  // (loss in dB, its inputs)
-    for (auto& [ffn, inputs] : members) {
-      if (inputs.size() != 2) {  // a half of a pair buys nothing
-        for (size_t i : inputs) linear_inputs_[i].ffn = -1;
-        continue;
-      }
-      double loss = -INFINITY;
-      for (size_t i : inputs) loss = std::max(loss, linear_inputs_[i].sqnr_per_token_db - linear_inputs_[i].sqnr_per_tensor_db);
-      ffns.emplace_back(loss, inputs);
-    }
+    const auto loss = [&](size_t i) { return linear_inputs_[i].sqnr_per_token_db - linear_inputs_[i].sqnr_per_tensor_db; };
+    std::stable_sort(ffns.begin(), ffns.end(), [&](size_t a, size_t b) { return loss(a) < loss(b); });
     if (ffns.empty() || opt_.linear_inputs == LinearInputCodes::kPerToken) return;
-    std::stable_sort(ffns.begin(), ffns.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     const auto with_first = [&](size_t count) {
       QuantConfig q = quant;
       for (size_t f = 0; f < count; ++f) {
-        for (size_t i : ffns[f].second) q.activations[linear_inputs_[i].value] = {linear_inputs_[i].scale, linear_inputs_[i].zero_point};
+        const LinearInputChoice& c = linear_inputs_[ffns[f]];
+        q.activations[c.value] = {c.scale, c.zero_point};
       }
       return q;
     };
     const ActionError base = err;
-    const double allowed = 1.0 + kPerTensorCodesErrorBudget;
     const auto within_budget = [&](const ActionError& e) {
-      return e.mse <= allowed * base.mse && e.max_abs <= allowed * base.max_abs &&
+      return e.mse <= (1.0 + kPerTensorCodesErrorBudget) * base.mse &&
+             e.max_abs <= (1.0 + kPerTensorCodesMaxErrorBudget) * base.max_abs &&
              (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
     };
     const auto try_count = [&](size_t count) {
@@ -412,9 +402,7 @@ class Converter {
       }
       chosen = good;
     }
-    for (size_t f = 0; f < chosen; ++f) {
-      for (size_t i : ffns[f].second) linear_inputs_[i].per_tensor = true;
-    }
+    for (size_t f = 0; f < chosen; ++f) linear_inputs_[ffns[f]].per_tensor = true;
     quant = with_first(chosen);
     per_token_inputs_error_ = base;
     chosen_inputs_error_ = err;

@@ -107,7 +107,7 @@ std::string Int8Report::to_text() const {
     const auto per_tensor = std::count_if(linear_inputs.begin(), linear_inputs.end(), [](const auto& l) { return l.per_tensor; });
     const auto tried = std::count_if(linear_inputs.begin(), linear_inputs.end(), [](const auto& l) { return l.ffn >= 0; });
     s << "linear inputs  " << per_tensor << " of " << linear_inputs.size() << " with calibrated per-tensor codes (" << tried
-      << " tried: the FFNs' inputs and hidden activations), the rest per token";
+      << " tried: the FFNs' hidden activations), the rest per token";
     if (per_token_inputs_error && chosen_inputs_error) {
       s << " (held-out MSE " << fmt(chosen_inputs_error->mse) << ", max |err| " << fmt(chosen_inputs_error->max_abs)
         << "; all per token " << fmt(per_token_inputs_error->mse) << ", " << fmt(per_token_inputs_error->max_abs) << ")";

@@ -48,6 +48,11 @@ slow_tests=(
   'ConvertApi\.ReportStructMatchesItsJson'
   'ConvertApi\.MissedMaxMseWritesNothing'
   'Modes/SchedulerVsPolicy\.ZeroLatencyOnRawChunksMatchesPolicySelectAction/TemporalEnsembling'  # 83 s
+  'Modes/SchedulerVsPolicy\.ZeroLatencyOnRawChunksMatchesPolicySelectAction/Queue'  # 29 s
+  # Whole-model inference repeated for the profiler and the blob's mapping (18-21 s each here): no
+  # kernel of their own; the NEON variants run in EveryIsaThisCpuRunsGivesTheSameActions.
+  'EngineApiTest\.ProfilerTimesEveryOpAndTracesEveryThread'
+  'EngineApiTest\.TheRunningModelCannotChangeUnderIt'
 )
 # A parameterized test's ctest name ends in "  # GetParam() = ...": the names above match up to it.
 exclude="^($(IFS='|'; echo "${slow_tests[*]}"))( .*)?\$"

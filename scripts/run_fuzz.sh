@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the parsers' libFuzzer targets (test/fuzz, clang, ASan + UBSan; only the parser sources)
-# and runs each for ACT_FUZZ_SECONDS (default 45) from its seed corpus in test/fuzz/corpus/, ACT_JOBS
+# and runs each for ACT_FUZZ_SECONDS (default 30) from its seed corpus in test/fuzz/corpus/, ACT_JOBS
 # (default 2) targets at a time.
 # Prints the executions per target; fails on any crash, leak, sanitizer report or timeout, leaving
 # the input in $ACT_FUZZ_BUILD_DIR/findings/ (store it under test/fuzz/regressions/ with a test).
@@ -9,7 +9,7 @@
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${ACT_FUZZ_BUILD_DIR:-$root/build-fuzz}"
-seconds="${ACT_FUZZ_SECONDS:-45}"
+seconds="${ACT_FUZZ_SECONDS:-30}"
 jobs="${ACT_JOBS:-2}"
 
 if ! command -v clang++ >/dev/null; then ACT_SKIP_ARM64=1 "$root/scripts/install_deps.sh"; fi

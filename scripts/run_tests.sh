@@ -10,7 +10,7 @@
 #   3. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
 #      Debian packages (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
 #   4. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
-#   5. each parser's libFuzzer target for ACT_FUZZ_SECONDS (default 45; scripts/run_fuzz.sh;
+#   5. each parser's libFuzzer target for ACT_FUZZ_SECONDS (default 30; scripts/run_fuzz.sh;
 #      ACT_SKIP_FUZZ=1 skips it).
 # The Release build users run (scripts/build.sh) compiles the same sources; its speed is measured by
 # act_bench and act_kernel_bench, never asserted by a test.

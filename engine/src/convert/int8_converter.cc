@@ -226,9 +226,9 @@ class Converter {
       const ActivationQuant q = choose(observers[k], points[k].role);
       if (points[k].role == graph::CalibrationRole::kLinearInput) {
         const double per_value = per_token[k].signal / static_cast<double>(std::max<size_t>(1, per_token[k].count));
-        linear_inputs_.push_back({name, points[k].reader, points[k].ffn, false, q.scale, q.zero_point,
-                                  sqnr_db(per_value, observers[k].expected_squared_error(q)), per_token[k].sqnr_db()});
-        linear_input_ranges_.push_back({name, q.scale, q.zero_point, observers[k].min(), observers[k].max()});
+        linear_inputs_.push_back({{name, points[k].reader, points[k].ffn, false, q.scale, q.zero_point,
+                                   sqnr_db(per_value, observers[k].expected_squared_error(q)), per_token[k].sqnr_db()},
+                                  {name, q.scale, q.zero_point, observers[k].min(), observers[k].max()}});
         continue;
       }
       out[name] = q;
@@ -342,29 +342,24 @@ class Converter {
   // budget (binary search, as the mixed search: the error grows as more inputs go per tensor).
   void choose_linear_input_codes(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err) {
     const std::vector<std::string> quantizable = quantizable_layers(model_);
-    const auto int8_reader = [&](const LinearInputChoice& c) {
-      return std::find(quantizable.begin(), quantizable.end(), c.reader) != quantizable.end() &&
-             std::find(quant.float_layers.begin(), quant.float_layers.end(), c.reader) == quant.float_layers.end();
-    };
-    size_t kept = 0;  // only the inputs of int8 linears matter
-    for (size_t i = 0; i < linear_inputs_.size(); ++i) {
-      if (!int8_reader(linear_inputs_[i])) continue;
-      linear_inputs_[kept] = linear_inputs_[i];
-      linear_input_ranges_[kept++] = linear_input_ranges_[i];
-    }
-    linear_inputs_.resize(kept);
-    linear_input_ranges_.resize(kept);
+    // Only the inputs of int8 linears matter.
+    std::erase_if(linear_inputs_, [&](const LinearInput& l) {
+      return std::find(quantizable.begin(), quantizable.end(), l.choice.reader) == quantizable.end() ||
+             std::find(quant.float_layers.begin(), quant.float_layers.end(), l.choice.reader) != quant.float_layers.end();
+    });
     std::vector<size_t> ffns;  // the candidates, least SQNR lost first
     for (size_t i = 0; i < linear_inputs_.size(); ++i) {
-      if (linear_inputs_[i].ffn >= 0) ffns.push_back(i);
+      if (linear_inputs_[i].choice.ffn >= 0) ffns.push_back(i);
     }
-    const auto loss = [&](size_t i) { return linear_inputs_[i].sqnr_per_token_db - linear_inputs_[i].sqnr_per_tensor_db; };
+    const auto loss = [&](size_t i) {
+      return linear_inputs_[i].choice.sqnr_per_token_db - linear_inputs_[i].choice.sqnr_per_tensor_db;
+    };
     std::stable_sort(ffns.begin(), ffns.end(), [&](size_t a, size_t b) { return loss(a) < loss(b); });
     if (ffns.empty() || opt_.linear_inputs == LinearInputCodes::kPerToken) return;
     const auto with_first = [&](size_t count) {
       QuantConfig q = quant;
       for (size_t f = 0; f < count; ++f) {
-        const LinearInputChoice& c = linear_inputs_[ffns[f]];
+        const LinearInputChoice& c = linear_inputs_[ffns[f]].choice;
         q.activations[c.value] = {c.scale, c.zero_point};
       }
       return q;
@@ -372,8 +367,7 @@ class Converter {
     const ActionError base = err;
     const auto within_budget = [&](const ActionError& e) {
       return e.mse <= (1.0 + kPerTensorCodesErrorBudget) * base.mse &&
-             e.max_abs <= (1.0 + kPerTensorCodesMaxErrorBudget) * base.max_abs &&
-             (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
+             e.max_abs <= (1.0 + kPerTensorCodesMaxErrorBudget) * base.max_abs && meets_mixed_target(e);
     };
     const auto try_count = [&](size_t count) {
       auto [candidate, e] = write_and_evaluate(with_first(count));
@@ -402,10 +396,15 @@ class Converter {
       }
       chosen = good;
     }
-    for (size_t f = 0; f < chosen; ++f) linear_inputs_[ffns[f]].per_tensor = true;
+    for (size_t f = 0; f < chosen; ++f) linear_inputs_[ffns[f]].choice.per_tensor = true;
     quant = with_first(chosen);
     per_token_inputs_error_ = base;
     chosen_inputs_error_ = err;
+  }
+
+  // A later choice's error still meets mixed mode's target (any error does in the other modes).
+  bool meets_mixed_target(const ActionError& e) const {
+    return !opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse;
   }
 
   // Attention's matmuls on the int8 GEMM (Int8Options::attention). Tried last, on the model as
@@ -418,8 +417,7 @@ class Converter {
     auto [candidate, e] = write_and_evaluate(with);
     int8_attention_error_ = e;
     const double allowed = 1.0 + kInt8AttentionErrorBudget;
-    const bool within_budget = e.mse <= allowed * err.mse && e.max_abs <= allowed * err.max_abs &&
-                               (!opt_.target_mse || opt_.mode != Int8Mode::kMixed || e.mse <= *opt_.target_mse);
+    const bool within_budget = e.mse <= allowed * err.mse && e.max_abs <= allowed * err.max_abs && meets_mixed_target(e);
     const bool keep = opt_.attention == AttentionPrecision::kInt8 || within_budget;
     progress(std::string("attention in int8: held-out MSE ") + fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (float: " +
              fmt(err.mse) + ", " + fmt(err.max_abs) + ") -> " + (keep ? "int8" : "float"));
@@ -449,10 +447,10 @@ class Converter {
     r.action_keys = fp32_->config().action_dim;
     r.sensitivity = std::move(sensitivity);
     r.activations = activations_;
-    for (size_t i = 0; i < linear_inputs_.size(); ++i) {
-      if (linear_inputs_[i].per_tensor) r.activations.push_back(linear_input_ranges_[i]);
+    for (const LinearInput& l : linear_inputs_) {
+      r.linear_inputs.push_back(l.choice);
+      if (l.choice.per_tensor) r.activations.push_back(l.range);
     }
-    r.linear_inputs = linear_inputs_;
     r.per_token_inputs_error = per_token_inputs_error_;
     r.chosen_inputs_error = chosen_inputs_error_;
     if (opt_.layer_report) r.layers = layer_sqnr(blob.path(), quant.float_layers);
@@ -516,8 +514,11 @@ class Converter {
   std::optional<ActionError> fp32_attention_error_, int8_attention_error_;
   std::vector<ActivationRange> activations_;  // calibrate()'s choices, for the report
   std::optional<ActionError> per_token_inputs_error_, chosen_inputs_error_;
-  std::vector<LinearInputChoice> linear_inputs_;       // the candidates for per-tensor codes, graph order
-  std::vector<ActivationRange> linear_input_ranges_;  // and their ranges (the same order)
+  struct LinearInput {
+    LinearInputChoice choice;
+    ActivationRange range;  // for the report's activations, when chosen
+  };
+  std::vector<LinearInput> linear_inputs_;  // the candidates for per-tensor codes, graph order
 };
 
 }  // namespace

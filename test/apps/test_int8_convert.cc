@@ -202,6 +202,36 @@ TEST(ActConvertInt8, Fp32WithInt8FlagsIsAUsageError) {
   EXPECT_NE(r.output.find("--precision int8"), std::string::npos) << r.output;
 }
 
+// --linear-inputs as a user gives it: per tensor makes every FFN hidden activation per tensor in
+// the report (the other inputs stay per token) and the text says so; it needs int8 and calibration.
+TEST(ActConvertInt8, LinearInputCodesFlag) {
+  const std::string src = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  const std::string dir = test::scratch_dir();
+  const Converted c = convert_int8("act-tiny", dir + "/t.actb", "--mode static --calib " + q(src) +
+                                                               " --holdout 1 --linear-inputs per-tensor --attention fp32");
+  ASSERT_EQ(c.result.exit_code, 0) << c.result.output;
+  const auto& inputs = c.report["linear_inputs"];
+  ASSERT_FALSE(inputs.empty()) << c.report.dump(2);
+  size_t per_tensor = 0;
+  for (const auto& l : inputs) {
+    EXPECT_EQ(l["codes"], l["ffn"].get<int>() >= 0 ? "per_tensor" : "per_token") << l;
+    per_tensor += l["codes"] == "per_tensor";
+  }
+  EXPECT_GT(per_tensor, 0u);
+  EXPECT_NE(c.result.output.find("linear inputs  " + std::to_string(per_tensor) + " of " + std::to_string(inputs.size())),
+            std::string::npos) << c.result.output;
+
+  const Converted dynamic = convert_int8("act-tiny", dir + "/d.actb", "--mode dynamic --linear-inputs per-tensor");
+  EXPECT_EQ(dynamic.result.exit_code, 1);
+  EXPECT_NE(dynamic.result.output.find("--linear-inputs needs calibration"), std::string::npos) << dynamic.result.output;
+  EXPECT_FALSE(fs::exists(dir + "/d.actb"));
+  const CommandResult fp32 = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/f.actb") +
+                                         " --linear-inputs per-token");
+  EXPECT_EQ(fp32.exit_code, 1);
+  EXPECT_NE(fp32.output.find("--precision int8"), std::string::npos) << fp32.output;
+}
+
 TEST(ActConvertInt8, UnreadableCalibrationSourceIsNamed) {
   const std::string src = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(src);

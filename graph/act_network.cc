@@ -295,15 +295,15 @@ ValueId ActNetwork::backbone(size_t camera) {
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   const std::string pool_name = p + "backbone.maxpool";
   const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, x.s8 ? DataType::kS8 : DataType::kF32);
-  if (x.s8) graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
+  // The stem runs its max-pool itself (fuse_max_pool): conv() added it last.
+  Op* stem = graph_.ops().back().get();
+  check(stem->outputs[0] == x.id, ErrorCode::kInternal, "the stem is not the last op");
   if (x.s8) {
-    // The int8 stem runs its max-pool itself (ConvS8Op::fuse_max_pool): conv() added it last.
-    auto* stem = dynamic_cast<ConvS8Op*>(graph_.ops().back().get());
-    check(stem != nullptr && stem->outputs[0] == x.id, ErrorCode::kInternal, "the int8 stem is not the last op");
-    stem->fuse_max_pool(3, 2, 1, pooled);
+    graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
+    dynamic_cast<ConvS8Op&>(*stem).fuse_max_pool(3, 2, 1, pooled);
     layers_.push_back({stem, pooled, "", true});
   } else {
-    add(std::make_unique<MaxPoolOp>(h, w, 64, 3, 2, 1, x.id, pooled), pool_name);
+    dynamic_cast<Conv2dOp&>(*stem).fuse_max_pool(3, 2, 1, pooled);
     calibration_point(CalibrationRole::kMaxPoolOutput, pooled);
   }
   x.id = pooled;

@@ -65,7 +65,22 @@ Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels
   outputs = {output};
 }
 
-size_t Conv2dOp::scratch_per_thread() const { return kernels::conv_f32_scratch_floats(s_, tile_pixels_); }
+void Conv2dOp::fuse_max_pool(int kernel, int stride, int pad, ValueId pooled) {
+  check(residual_ == kNoValue && !max_pool_, ErrorCode::kInternal, "Conv2dOp: a max-pool fused into a conv with a residual or a pool already");
+  max_pool_ = FusedMaxPool::over(s_, kernel, stride, pad);
+  outputs.push_back(pooled);
+}
+
+size_t Conv2dOp::band_offset() const {
+  // In floats; a whole number of 64-byte lines so that the band starts as aligned as the scratch.
+  constexpr size_t kLineFloats = 64 / sizeof(float);
+  return (kernels::conv_f32_scratch_floats(s_, tile_pixels_) + kLineFloats - 1) / kLineFloats * kLineFloats;
+}
+
+size_t Conv2dOp::scratch_per_thread() const {
+  if (!max_pool_) return kernels::conv_f32_scratch_floats(s_, tile_pixels_);
+  return band_offset() + max_pool_->band_bytes(static_cast<size_t>(s_.out_w) * s_.out_c * sizeof(float)) / sizeof(float);
+}
 
 double Conv2dOp::macs() const {
   return static_cast<double>(s_.out_h) * s_.out_w * s_.out_c * s_.patch_size();
@@ -82,32 +97,30 @@ void Conv2dOp::run(const RunContext& ctx) const {
     epilogue.residual_ld = static_cast<size_t>(s_.out_c);
   }
   epilogue.activation = relu_ ? kernels::GemmF32Activation::kRelu : kernels::GemmF32Activation::kNone;
+  const auto pool_rows = [&](const float* conv_rows, int q0, int q1, int conv_row0) {
+    const FusedMaxPool& mp = *max_pool_;
+    kernels::maxpool_nhwc_f32(ctx.kernels().elementwise, s_.out_h, s_.out_w, s_.out_c, mp.kernel, mp.stride, mp.pad,
+                              mp.out_w, conv_rows, ctx.data(outputs[1]), q0, q1, conv_row0);
+  };
+  if (max_pool_ && !ctx.read(outputs[0])) {
+    return run_in_pooled_bands(
+        ctx.pool(), *max_pool_, s_, sizeof(float), kernels::kConvF32TileQuantum, tile_pixels_,
+        [&](int thread) { return reinterpret_cast<std::byte*>(ctx.scratch(thread) + band_offset()); },
+        [&](std::byte* band, int first, int count, int band_row0, int thread) {
+          kernels::conv_f32(conv, x, reinterpret_cast<float*>(band), epilogue, first, count, ctx.scratch(thread),
+                            band_row0 * s_.out_w);
+        },
+        [&](const std::byte* band, int q0, int q1, int band_row0) {
+          pool_rows(reinterpret_cast<const float*>(band), q0, q1, band_row0);
+        });
+  }
   const EvenSplit tiles = split_evenly(s_.out_h * s_.out_w, kernels::kConvF32TileQuantum, tile_pixels_, ctx.pool().threads());
   ctx.pool().parallel_for(static_cast<size_t>(tiles.parts), [&](size_t task, int thread) {
     int p0, p1;
     tiles.range(static_cast<int>(task), p0, p1);
     kernels::conv_f32(conv, x, y, epilogue, p0, p1 - p0, ctx.scratch(thread));
   });
-}
-
-// ------------------------------------------------------------------------------------ MaxPool
-
-MaxPoolOp::MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output)
-    : in_h_(in_h), in_w_(in_w), channels_(channels), kernel_(kernel), stride_(stride), pad_(pad),
-      out_h_(kernels::Conv2dShape::out_dim(in_h, kernel, stride, pad, 1)),
-      out_w_(kernels::Conv2dShape::out_dim(in_w, kernel, stride, pad, 1)) {
-  inputs = {input};
-  outputs = {output};
-}
-
-void MaxPoolOp::run(const RunContext& ctx) const {
-  constexpr int kRows = 4;
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(out_h_), kRows), [&](size_t task, int) {
-    const int r0 = static_cast<int>(task) * kRows;
-    const int r1 = std::min(out_h_, r0 + kRows);
-    kernels::maxpool_nhwc_f32(ctx.kernels().elementwise, in_h_, in_w_, channels_, kernel_, stride_, pad_, out_w_,
-                              ctx.data(inputs[0]), ctx.data(outputs[0]), r0, r1);
-  });
+  if (max_pool_) run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) { pool_rows(y, q0, q1, 0); });
 }
 
 // ------------------------------------------------------------------------------------- Linear

@@ -3,9 +3,12 @@
 #pragma once
 
 #include <memory>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "graph/aligned_buffer.h"
+#include "graph/fused_max_pool.h"
 #include "graph/graph.h"
 #include "kernels/common/conv2d_shape.h"
 #include "kernels/fp32/conv_f32.h"
@@ -52,8 +55,10 @@ class Conv2dOp : public Op {
  public:
   Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels::Conv2dShape& shape, const float* bias, bool relu,
            ValueId input, ValueId residual, ValueId output);
-  const char* type() const override { return "conv2d_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.gemm_f32.name; }
+  const char* type() const override { return max_pool_ ? "conv2d_f32+maxpool_f32" : "conv2d_f32"; }
+  std::string kernel(const kernels::KernelConfig& k) const override {
+    return max_pool_ ? std::string(k.gemm_f32.name) + " + " + k.elementwise.max_taps_name : k.gemm_f32.name;
+  }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
@@ -63,28 +68,22 @@ class Conv2dOp : public Op {
   bool relu() const { return relu_; }
   ValueId residual() const { return residual_; }
 
+  /// A max-pool of this conv's output (the stem's), run by this op as the int8 stem's is
+  /// (ConvS8Op::fuse_max_pool): `pooled` becomes its second output; unless the conv's own output
+  /// is read, it is computed and pooled band by band in scratch (19.7 MB never written at 480x640).
+  void fuse_max_pool(int kernel, int stride, int pad, ValueId pooled);
+  const std::optional<FusedMaxPool>& max_pool() const { return max_pool_; }
+
  private:
+  size_t band_offset() const;  // a fused max-pool's band in a thread's scratch, after the conv's own
+
   kernels::Conv2dShape s_;
   const float* bias_;
   bool relu_;
   ValueId residual_;
   int tile_pixels_;
   std::shared_ptr<const PackedF32Weights> packed_;
-};
-
-/// 2-D max-pool over NHWC float32 (the int8 stem runs its own: ConvS8Op::fuse_max_pool).
-class MaxPoolOp : public Op {
- public:
-  MaxPoolOp(int in_h, int in_w, int channels, int kernel, int stride, int pad, ValueId input, ValueId output);
-  const char* type() const override { return "maxpool_f32"; }
-  std::string kernel(const kernels::KernelConfig& k) const override { return k.elementwise.max_taps_name; }
-  void run(const RunContext& ctx) const override;
-  int kernel() const { return kernel_; }
-  int stride() const { return stride_; }
-  int pad() const { return pad_; }
-
- private:
-  int in_h_, in_w_, channels_, kernel_, stride_, pad_, out_h_, out_w_;
+  std::optional<FusedMaxPool> max_pool_;
 };
 
 /// y[rows, out] = act(x W^T + bias [+ residual]). W is [out, in], packed at build time;

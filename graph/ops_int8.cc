@@ -19,8 +19,6 @@ namespace {
 constexpr size_t kElementwiseChunk = 1 << 16;  // elements per quantize/dequantize task
 constexpr int kQuantizeTileRows = 32;
 constexpr size_t kChannelBlock = 64;           // a multiple of every gemm_s8 NR
-constexpr int kPooledRowsPerBand = 4;          // a fused max-pool's rows per band (the stem's: 9 conv rows, 184 KB)
-constexpr int kMaxPoolTaskRows = 4;            // a max-pool's rows per task
 
 size_t ceil_div(size_t a, size_t b) { return (a + b - 1) / b; }
 // `bytes` rounded up to whole 64-byte lines, the alignment packed weights need.
@@ -148,11 +146,9 @@ ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec
 }
 
 void ConvS8Op::fuse_max_pool(int kernel, int stride, int pad, ValueId pooled) {
-  const kernels::Conv2dShape& s = spec_.shape;
   check(spec_.s8_out && spec_.residual == kNoValue && !max_pool_, ErrorCode::kInternal,
         "ConvS8Op: a max-pool fused into a conv with a float output, a residual or a pool already");
-  max_pool_ = MaxPool{kernel, stride, pad, kernels::Conv2dShape::out_dim(s.out_h, kernel, stride, pad, 1),
-                      kernels::Conv2dShape::out_dim(s.out_w, kernel, stride, pad, 1)};
+  max_pool_ = FusedMaxPool::over(spec_.shape, kernel, stride, pad);
   outputs.push_back(pooled);
 }
 
@@ -162,50 +158,8 @@ size_t ConvS8Op::band_offset() const {
 
 size_t ConvS8Op::scratch_per_thread() const {
   size_t bytes = kernels::conv_s8_scratch_bytes(spec_.shape, tile_pixels_);
-  if (max_pool_) {
-    const int band_rows = (kPooledRowsPerBand - 1) * max_pool_->stride + max_pool_->kernel;
-    bytes = band_offset() + static_cast<size_t>(band_rows) * spec_.shape.out_w * spec_.shape.out_c;
-  }
+  if (max_pool_) bytes = band_offset() + max_pool_->band_bytes(static_cast<size_t>(spec_.shape.out_w) * spec_.shape.out_c);
   return ceil_div(bytes, sizeof(float));
-}
-
-// Tasks of whole pooled rows. A task walks its rows kPooledRowsPerBand at a time: the conv rows
-// those read go into a band in the thread's scratch (the rows the last band shares with this one
-// moved to its front, not computed again), then are pooled from there. Only rows at a task's start
-// are computed twice (by the task before it too), so tasks are few: two per thread, which at 2
-// threads recomputes one conv row of the stem's 60 per task.
-void ConvS8Op::run_pooled_bands(const RunContext& ctx, const kernels::ConvS8& conv, const kernels::GemmS8OutS8& out) const {
-  const kernels::Conv2dShape& s = spec_.shape;
-  const MaxPool& mp = *max_pool_;
-  const int8_t* x = ctx.data_s8(inputs[0]);
-  int8_t* pooled = ctx.data_s8(outputs[1]);
-  const size_t row_bytes = static_cast<size_t>(s.out_w) * static_cast<size_t>(s.out_c);
-  const int tasks = std::min(mp.out_h, 2 * ctx.pool().threads());
-  ctx.pool().parallel_for(static_cast<size_t>(tasks), [&](size_t task, int thread) {
-    const int p_begin = static_cast<int>(task) * mp.out_h / tasks, p_end = (static_cast<int>(task) + 1) * mp.out_h / tasks;
-    int8_t* scratch = ctx.scratch_s8(thread);
-    kernels::GemmS8OutS8 band = out;
-    band.c = scratch + band_offset();
-    int band_begin = 0, band_end = 0;  // conv rows [band_begin, band_end) are in the band
-    for (int q0 = p_begin; q0 < p_end; q0 += kPooledRowsPerBand) {
-      const int q1 = std::min(p_end, q0 + kPooledRowsPerBand);
-      const int lo = std::max(0, q0 * mp.stride - mp.pad), hi = std::min(s.out_h, (q1 - 1) * mp.stride - mp.pad + mp.kernel);
-      const int kept = std::max(0, band_end - lo);
-      if (kept > 0) std::memmove(band.c, band.c + static_cast<size_t>(lo - band_begin) * row_bytes, static_cast<size_t>(kept) * row_bytes);
-      // The new rows in tiles of even size (a band's 2560 stem pixels in 14 of ~183, not 13 of 192 and 64).
-      const int first = (lo + kept) * s.out_w;
-      const EvenSplit tiles = split_evenly(hi * s.out_w - first, kernels::kConvS8TileQuantum, tile_pixels_, 1);
-      for (int t = 0; t < tiles.parts; ++t) {
-        int t0, t1;
-        tiles.range(t, t0, t1);
-        kernels::conv_s8_s8out(conv, x, band, first + t0, t1 - t0, scratch, {}, lo * s.out_w);
-      }
-      band_begin = lo;
-      band_end = hi;
-      kernels::maxpool_nhwc_s8(ctx.kernels().maxpool_s8, s.out_h, s.out_w, s.out_c, mp.kernel, mp.stride, mp.pad, mp.out_w,
-                               band.c, pooled, q0, q1, lo);
-    }
-  });
 }
 
 double ConvS8Op::macs() const {
@@ -255,20 +209,30 @@ void ConvS8Op::run(const RunContext& ctx) const {
       out.residual_zero_point = spec_.residual_q.zero_point;
       out.residual_scale = spec_.residual_q.scale / spec_.output_q.scale;
     }
-    if (max_pool_ && !ctx.read(outputs[0])) return run_pooled_bands(ctx, conv, out);
+    const kernels::Conv2dShape& s = spec_.shape;
+    const auto pool_rows = [&](const int8_t* conv_rows, int q0, int q1, int conv_row0) {
+      const FusedMaxPool& mp = *max_pool_;
+      kernels::maxpool_nhwc_s8(ctx.kernels().maxpool_s8, s.out_h, s.out_w, s.out_c, mp.kernel, mp.stride, mp.pad, mp.out_w,
+                               conv_rows, ctx.data_s8(outputs[1]), q0, q1, conv_row0);
+    };
+    if (max_pool_ && !ctx.read(outputs[0])) {
+      return run_in_pooled_bands(
+          ctx.pool(), *max_pool_, s, sizeof(int8_t), kernels::kConvS8TileQuantum, tile_pixels_,
+          [&](int thread) { return reinterpret_cast<std::byte*>(ctx.scratch_s8(thread)) + band_offset(); },
+          [&](std::byte* band, int first, int count, int band_row0, int thread) {
+            kernels::GemmS8OutS8 band_out = out;
+            band_out.c = reinterpret_cast<int8_t*>(band);
+            kernels::conv_s8_s8out(conv, x, band_out, first, count, ctx.scratch_s8(thread), {}, band_row0 * s.out_w);
+          },
+          [&](const std::byte* band, int q0, int q1, int band_row0) {
+            pool_rows(reinterpret_cast<const int8_t*>(band), q0, q1, band_row0);
+          });
+    }
     ctx.pool().parallel_for(tasks, [&](size_t task, int thread) {
       const Tile t = tile(task);
       if (t.channels.begin < t.channels.end) kernels::conv_s8_s8out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
     });
-    if (max_pool_) {
-      const MaxPool& mp = *max_pool_;
-      ctx.pool().parallel_for(ceil_div(static_cast<size_t>(mp.out_h), kMaxPoolTaskRows), [&](size_t task, int) {
-        const int r0 = static_cast<int>(task) * kMaxPoolTaskRows;
-        const kernels::Conv2dShape& s = spec_.shape;
-        kernels::maxpool_nhwc_s8(ctx.kernels().maxpool_s8, s.out_h, s.out_w, s.out_c, mp.kernel, mp.stride, mp.pad, mp.out_w,
-                                 out.c, ctx.data_s8(outputs[1]), r0, std::min(mp.out_h, r0 + kMaxPoolTaskRows));
-      });
-    }
+    if (max_pool_) run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) { pool_rows(out.c, q0, q1, 0); });
   } else {
     kernels::GemmS8OutF32 out;
     out.c = ctx.data(outputs[0]);

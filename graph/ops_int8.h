@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "graph/aligned_buffer.h"
+#include "graph/fused_max_pool.h"
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
 #include "kernels/conv_s8/conv_s8.h"
@@ -110,23 +111,20 @@ class ConvS8Op : public Op {
 
   /// A max-pool of this conv's int8 output (the stem's), run by this op: `pooled` becomes its
   /// second output. When nothing else reads the conv's own output (no kept intermediates), each task
-  /// computes bands of its rows in scratch and pools them there: the whole output (4.9 MB for the
-  /// stem at 480x640) never goes to memory and back. Same bits either way (max is exact).
-  struct MaxPool {
-    int kernel = 0, stride = 0, pad = 0, out_h = 0, out_w = 0;
-  };
+  /// computes bands of its rows in scratch and pools them there (graph/fused_max_pool.h): the whole
+  /// output (4.9 MB for the stem at 480x640) never goes to memory and back. Same bits either way
+  /// (max is exact).
   void fuse_max_pool(int kernel, int stride, int pad, ValueId pooled);
-  const std::optional<MaxPool>& max_pool() const { return max_pool_; }
+  const std::optional<FusedMaxPool>& max_pool() const { return max_pool_; }
 
  private:
-  void run_pooled_bands(const RunContext& ctx, const kernels::ConvS8& conv, const kernels::GemmS8OutS8& out) const;
-  size_t band_offset() const;  // the band's place in a thread's scratch, after the conv's own
+  size_t band_offset() const;  // a fused max-pool's band in a thread's scratch, after the conv's own
 
   ConvS8Spec spec_;
   int tile_pixels_;
   PackedWeights packed_;
   std::vector<float> requant_scale_;  // s8 out: s_in * s_w[n] / s_out
-  std::optional<MaxPool> max_pool_;
+  std::optional<FusedMaxPool> max_pool_;
 };
 
 /// y[rows, out] = act(x W^T + bias [+ residual]) with W int8 and x read as the int8 codes `x_codes`,

@@ -32,7 +32,7 @@ size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels) {
 }
 
 void conv_f32(const ConvF32& conv, const float* input, float* y, const GemmF32Epilogue& epilogue, int pixel_begin,
-              int count, float* scratch) {
+              int count, float* scratch, int out_pixel0) {
   const Conv2dShape& s = conv.shape;
   GemmF32PackedArgs args;
   args.m = count;
@@ -52,10 +52,11 @@ void conv_f32(const ConvF32& conv, const float* input, float* y, const GemmF32Ep
     args.a = scratch;
   }
   args.packed_b = conv.packed_w;
-  args.c = y + static_cast<size_t>(pixel_begin) * static_cast<size_t>(s.out_c);
+  const size_t band_pixel = static_cast<size_t>(pixel_begin - out_pixel0);
+  args.c = y + band_pixel * static_cast<size_t>(s.out_c);
   args.ldc = static_cast<size_t>(s.out_c);
   args.epilogue = epilogue;
-  if (epilogue.residual != nullptr) args.epilogue.residual += static_cast<size_t>(pixel_begin) * epilogue.residual_ld;
+  if (epilogue.residual != nullptr) args.epilogue.residual += band_pixel * epilogue.residual_ld;
   conv.kernels->packed(args);
 }
 

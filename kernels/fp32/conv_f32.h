@@ -30,8 +30,9 @@ int conv_f32_tile_pixels(const Conv2dShape& s);
 size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels);
 
 /// Output pixels [pixel_begin, pixel_begin + count) of y = act(conv(x) + bias + residual), y and the
-/// residual [pixels x out_c]. `epilogue` points at pixel 0: bias one row (ld 0), residual ld out_c.
+/// residual [pixels x out_c] from pixel out_pixel0 on (a band of the output held elsewhere; 0: all
+/// of it). `epilogue`: bias one row (ld 0), residual ld out_c.
 void conv_f32(const ConvF32& conv, const float* input, float* y, const GemmF32Epilogue& epilogue, int pixel_begin,
-              int count, float* scratch);
+              int count, float* scratch, int out_pixel0 = 0);
 
 }  // namespace act::kernels

@@ -7,9 +7,9 @@
 namespace act::kernels {
 
 void maxpool_nhwc_f32(const ElementwiseF32Kernels& k, int in_h, int in_w, int channels, int kernel, int stride, int pad,
-                      int out_w, const float* input, float* output, int row_begin, int row_end) {
+                      int out_w, const float* input, float* output, int row_begin, int row_end, int input_row0) {
   maxpool_nhwc_with<float>(k.max_taps, in_h, in_w, channels, kernel, stride, pad, out_w, input, output, row_begin, row_end,
-                           0, -std::numeric_limits<float>::infinity());
+                           input_row0, -std::numeric_limits<float>::infinity());
 }
 
 }  // namespace act::kernels

@@ -14,8 +14,9 @@
 namespace act::kernels {
 
 /// 2-D max-pool over NHWC for output rows [row_begin, row_end) with the variant `k`. Padding never
-/// wins (it is skipped); a window entirely in the padding gives -inf.
+/// wins (it is skipped); a window entirely in the padding gives -inf. `input` holds the image's
+/// rows from input_row0 on (a band of them: those the output rows read).
 void maxpool_nhwc_f32(const ElementwiseF32Kernels& k, int in_h, int in_w, int channels, int kernel, int stride, int pad,
-                      int out_w, const float* input, float* output, int row_begin, int row_end);
+                      int out_w, const float* input, float* output, int row_begin, int row_end, int input_row0 = 0);
 
 }  // namespace act::kernels

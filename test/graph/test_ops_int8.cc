@@ -11,10 +11,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <random>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "graph/graph.h"
@@ -171,17 +174,71 @@ TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
   }
 }
 
-// A max-pool fused into an int8 conv (the stem's) gives, whether the conv's output is kept (computed
-// whole, then pooled) or not (computed and pooled band by band in scratch), the max over each
-// window's in-image outputs of the conv alone: shapes whose pooled rows split unevenly over 1 and 2
-// threads, tasks of several bands (the 190-row one: 24 or 12 pooled rows a task), a single row.
+// Runs a conv with a fused 3x3/2 max-pool (pad 1) from `make_conv(input, conv output, pooled)`
+// twice, its own output kept (computed whole, then pooled) and not (computed and pooled band by
+// band in scratch), and checks that both pooled outputs are the max over each window's in-image
+// outputs of the conv alone.
+template <typename T>
+void expect_fused_max_pool_is_the_max_of_the_conv(
+    const kernels::Conv2dShape& s, const std::vector<T>& x, ThreadPool& pool, const kernels::KernelConfig& k,
+    const std::function<std::unique_ptr<Op>(ValueId, ValueId, ValueId)>& make_conv, const std::string& what) {
+  constexpr DataType type = std::is_same_v<T, float> ? DataType::kF32 : DataType::kS8;
+  const auto data = [](Graph& g, ValueId v) {
+    if constexpr (std::is_same_v<T, float>) return g.data(v);
+    else return g.data_s8(v);
+  };
+  const int pooled_h = kernels::Conv2dShape::out_dim(s.out_h, 3, 2, 1, 1), pooled_w = kernels::Conv2dShape::out_dim(s.out_w, 3, 2, 1, 1);
+  std::vector<T> conv_out, pooled[2];
+  for (const bool keep : {true, false}) {
+    Graph g;
+    const ValueId in = g.add_input("x", {s.in_h, s.in_w, s.in_c}, type);
+    const ValueId y = g.add_value("y", {s.out_h, s.out_w, s.out_c}, type);
+    const ValueId p = g.add_value("pooled", {pooled_h, pooled_w, s.out_c}, type);
+    g.add_op(make_conv(in, y, p));
+    g.mark_output(p);
+    g.plan(pool.threads(), keep);
+    ASSERT_EQ(g.value(y).read, keep) << "the conv's own output is read only when kept: the band path runs otherwise";
+    std::copy(x.begin(), x.end(), data(g, in));
+    g.run(pool, k);
+    pooled[keep].assign(data(g, p), data(g, p) + static_cast<size_t>(pooled_h) * pooled_w * s.out_c);
+    if (keep) conv_out.assign(data(g, y), data(g, y) + static_cast<size_t>(s.out_h) * s.out_w * s.out_c);
+  }
+  for (int py = 0; py < pooled_h; ++py) {
+    for (int px = 0; px < pooled_w; ++px) {
+      for (int c = 0; c < s.out_c; ++c) {
+        T want = std::numeric_limits<T>::lowest();
+        for (int iy = std::max(0, 2 * py - 1); iy < std::min(s.out_h, 2 * py + 2); ++iy) {
+          for (int ix = std::max(0, 2 * px - 1); ix < std::min(s.out_w, 2 * px + 2); ++ix) {
+            want = std::max(want, conv_out[(static_cast<size_t>(iy) * s.out_w + ix) * s.out_c + c]);
+          }
+        }
+        const size_t i = (static_cast<size_t>(py) * pooled_w + px) * s.out_c + c;
+        for (const bool keep : {true, false}) {
+          ASSERT_EQ(pooled[keep][i], want) << what << " " << s.in_h << "x" << s.in_w << " k" << s.kernel_h << " threads "
+                                           << pool.threads() << (keep ? " whole" : " in bands") << " pooled (" << py
+                                           << ", " << px << ") channel " << c;
+        }
+      }
+    }
+  }
+}
+
+// Shapes whose pooled rows split unevenly over 1 and 2 threads, tasks of several bands (the
+// 190-row one: 24 or 12 pooled rows a task, all in one band; the 640-wide one: 5 pooled rows a task
+// on one thread, in bands of 4 (int8) or 1 (float), as the stems'), a single row.
+std::vector<kernels::Conv2dShape> fused_max_pool_shapes() {
+  return {kernels::Conv2dShape::square(45, 37, 3, 64, 7, 2, 3), kernels::Conv2dShape::square(20, 9, 8, 16, 3, 1, 1),
+          kernels::Conv2dShape::square(190, 12, 3, 16, 7, 2, 3), kernels::Conv2dShape::square(2, 5, 3, 8, 7, 2, 3),
+          kernels::Conv2dShape::square(40, 640, 3, 64, 7, 2, 3)};
+}
+
+// A max-pool fused into an int8 conv (the stem's) is the max of the conv's output.
 TEST_P(OpsPerIsa, ConvS8WithFusedMaxPoolEqualsTheMaxOfItsOutput) {
   const kernels::KernelConfig k = config();
   std::mt19937 rng(17);
   ThreadPool one(1);
-  for (const auto& s : {kernels::Conv2dShape::square(45, 37, 3, 64, 7, 2, 3), kernels::Conv2dShape::square(20, 9, 8, 16, 3, 1, 1),
-                        kernels::Conv2dShape::square(190, 12, 3, 16, 7, 2, 3), kernels::Conv2dShape::square(2, 5, 3, 8, 7, 2, 3)}) {
-    const int pixels = s.out_h * s.out_w, K = s.patch_size();
+  for (const auto& s : fused_max_pool_shapes()) {
+    const int K = s.patch_size();
     std::vector<int8_t> x(static_cast<size_t>(s.in_h) * s.in_w * s.in_c);
     std::uniform_int_distribution<int> code(-128, 127);
     for (int8_t& v : x) v = static_cast<int8_t>(code(rng));
@@ -195,42 +252,38 @@ TEST_P(OpsPerIsa, ConvS8WithFusedMaxPoolEqualsTheMaxOfItsOutput) {
     spec.input_q = kernels::choose_quant_s8(-1.0f, 1.0f);
     spec.relu = true;
     spec.output_q = kernels::choose_quant_s8(0.0f, 2.0f);
-    const int pooled_h = kernels::Conv2dShape::out_dim(s.out_h, 3, 2, 1, 1), pooled_w = kernels::Conv2dShape::out_dim(s.out_w, 3, 2, 1, 1);
     for (ThreadPool* pool : {&one, &pool_}) {
-      std::vector<int8_t> conv_out, pooled[2];
-      for (const bool keep : {true, false}) {
-        Graph g;
-        const ValueId in = g.add_input("x", {s.in_h, s.in_w, s.in_c}, DataType::kS8);
-        const ValueId y = g.add_value("y", {s.out_h, s.out_w, s.out_c}, DataType::kS8);
-        const ValueId p = g.add_value("pooled", {pooled_h, pooled_w, s.out_c}, DataType::kS8);
-        auto& conv = g.add_op(std::make_unique<ConvS8Op>(k.gemm_s8, spec, in, y));
-        static_cast<ConvS8Op&>(conv).fuse_max_pool(3, 2, 1, p);
-        g.mark_output(p);
-        g.plan(pool->threads(), keep);
-        ASSERT_EQ(g.value(y).read, keep) << "the conv's own output is read only when kept: the band path runs otherwise";
-        std::copy(x.begin(), x.end(), g.data_s8(in));
-        g.run(*pool, k);
-        pooled[keep].assign(g.data_s8(p), g.data_s8(p) + static_cast<size_t>(pooled_h) * pooled_w * s.out_c);
-        if (keep) conv_out.assign(g.data_s8(y), g.data_s8(y) + static_cast<size_t>(pixels) * s.out_c);
-      }
-      for (int py = 0; py < pooled_h; ++py) {
-        for (int px = 0; px < pooled_w; ++px) {
-          for (int c = 0; c < s.out_c; ++c) {
-            int want = -129;
-            for (int iy = std::max(0, 2 * py - 1); iy < std::min(s.out_h, 2 * py + 2); ++iy) {
-              for (int ix = std::max(0, 2 * px - 1); ix < std::min(s.out_w, 2 * px + 2); ++ix) {
-                want = std::max<int>(want, conv_out[(static_cast<size_t>(iy) * s.out_w + ix) * s.out_c + c]);
-              }
-            }
-            const size_t i = (static_cast<size_t>(py) * pooled_w + px) * s.out_c + c;
-            for (const bool keep : {true, false}) {
-              ASSERT_EQ(pooled[keep][i], want) << kernels::isa_name(GetParam()) << " " << s.in_h << "x" << s.in_w << " k"
-                                               << s.kernel_h << " threads " << pool->threads() << (keep ? " whole" : " in bands")
-                                               << " pooled (" << py << ", " << px << ") channel " << c;
-            }
-          }
-        }
-      }
+      expect_fused_max_pool_is_the_max_of_the_conv<int8_t>(
+          s, x, *pool, k,
+          [&](ValueId in, ValueId y, ValueId pooled) {
+            auto conv = std::make_unique<ConvS8Op>(k.gemm_s8, spec, in, y);
+            conv->fuse_max_pool(3, 2, 1, pooled);
+            return conv;
+          },
+          std::string("int8 ") + kernels::isa_name(GetParam()));
+    }
+  }
+}
+
+// The float stem's fused max-pool likewise (bias and ReLU, so that some windows are all zero).
+TEST_P(OpsPerIsa, FloatConvWithFusedMaxPoolEqualsTheMaxOfItsOutput) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(18);
+  ThreadPool one(1);
+  for (const auto& s : fused_max_pool_shapes()) {
+    const std::vector<float> x = uniform(static_cast<size_t>(s.in_h) * s.in_w * s.in_c, rng, -1.0f, 1.0f);
+    const std::vector<float> w = uniform(static_cast<size_t>(s.out_c) * s.patch_size(), rng, -0.5f, 0.5f);
+    const std::vector<float> bias = uniform(static_cast<size_t>(s.out_c), rng, -1.0f, 1.0f);
+    const auto packed = std::make_shared<PackedF32Weights>(k.gemm_f32, s.out_c, s.patch_size(), w.data());
+    for (ThreadPool* pool : {&one, &pool_}) {
+      expect_fused_max_pool_is_the_max_of_the_conv<float>(
+          s, x, *pool, k,
+          [&](ValueId in, ValueId y, ValueId pooled) {
+            auto conv = std::make_unique<Conv2dOp>(packed, s, bias.data(), true, in, kNoValue, y);
+            conv->fuse_max_pool(3, 2, 1, pooled);
+            return conv;
+          },
+          std::string("float ") + kernels::isa_name(GetParam()));
     }
   }
 }

@@ -268,9 +268,6 @@ class OnnxBuilder {
   void translate(const graph::Op& op) {
     if (const auto* conv = dynamic_cast<const graph::Conv2dOp*>(&op)) return conv_f32(*conv);
     if (const auto* conv = dynamic_cast<const graph::ConvS8Op*>(&op)) return conv_s8(*conv);
-    if (const auto* pool = dynamic_cast<const graph::MaxPoolOp*>(&op)) {
-      return maxpool(op.inputs[0], op.outputs[0], pool->kernel(), pool->stride(), pool->pad());
-    }
     if (const auto* lin = dynamic_cast<const graph::LinearOp*>(&op)) {
       const std::vector<float> w = lin->weight();
       return linear(op, lin->params(), w.data(), nullptr, nullptr);
@@ -344,6 +341,7 @@ class OnnxBuilder {
     const std::string residual = op.residual() == graph::kNoValue ? "" : float_nchw(op.residual());
     const std::string y = conv_node(s, float_nchw(op.inputs[0]), weight, op.bias(), residual, op.relu(), "conv");
     set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
+    if (const auto& pool = op.max_pool()) maxpool(op.outputs[0], op.outputs[1], pool->kernel, pool->stride, pool->pad);
   }
 
   // DequantizeLinear of int8 weights [rows, ...] with one scale per row (axis 0).

@@ -295,15 +295,19 @@ ValueId ActNetwork::backbone(size_t camera) {
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   const std::string pool_name = p + "backbone.maxpool";
   const ValueId pooled = graph_.add_value(pool_name, {pooled_h, pooled_w, 64}, x.s8 ? DataType::kS8 : DataType::kF32);
-  // The stem runs its max-pool itself (fuse_max_pool): conv() added it last.
+  // The stem (float, or int8 with an int8 or float output) runs its max-pool itself
+  // (fuse_max_pool): conv() added it last.
   Op* stem = graph_.ops().back().get();
   check(stem->outputs[0] == x.id, ErrorCode::kInternal, "the stem is not the last op");
-  if (x.s8) {
-    graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
-    dynamic_cast<ConvS8Op&>(*stem).fuse_max_pool(3, 2, 1, pooled);
-    layers_.push_back({stem, pooled, "", true});
+  if (auto* int8_stem = dynamic_cast<ConvS8Op*>(stem)) {
+    int8_stem->fuse_max_pool(3, 2, 1, pooled);
   } else {
     dynamic_cast<Conv2dOp&>(*stem).fuse_max_pool(3, 2, 1, pooled);
+  }
+  if (x.s8) {
+    graph_.value(pooled).quant = x.q;  // max commutes with quantization: same parameters
+    layers_.push_back({stem, pooled, "", true});
+  } else {
     calibration_point(CalibrationRole::kMaxPoolOutput, pooled);
   }
   x.id = pooled;

@@ -146,8 +146,8 @@ ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec
 }
 
 void ConvS8Op::fuse_max_pool(int kernel, int stride, int pad, ValueId pooled) {
-  check(spec_.s8_out && spec_.residual == kNoValue && !max_pool_, ErrorCode::kInternal,
-        "ConvS8Op: a max-pool fused into a conv with a float output, a residual or a pool already");
+  check(spec_.residual == kNoValue && !max_pool_, ErrorCode::kInternal,
+        "ConvS8Op: a max-pool fused into a conv with a residual or a pool already");
   max_pool_ = FusedMaxPool::over(spec_.shape, kernel, stride, pad);
   outputs.push_back(pooled);
 }
@@ -249,6 +249,14 @@ void ConvS8Op::run(const RunContext& ctx) const {
       const Tile t = tile(task);
       if (t.channels.begin < t.channels.end) kernels::conv_s8_f32out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
     });
+    if (max_pool_) {
+      const kernels::Conv2dShape& s = spec_.shape;
+      run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) {
+        const FusedMaxPool& mp = *max_pool_;
+        kernels::maxpool_nhwc_f32(ctx.kernels().elementwise, s.out_h, s.out_w, s.out_c, mp.kernel, mp.stride, mp.pad,
+                                  mp.out_w, out.c, ctx.data(outputs[1]), q0, q1);
+      });
+    }
   }
 }
 

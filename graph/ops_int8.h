@@ -98,22 +98,24 @@ class ConvS8Op : public Op {
  public:
   ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec, ValueId input, ValueId output);
   const char* type() const override {
-    return max_pool_ ? "conv2d_s8_s8+maxpool_s8" : spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32";
+    if (max_pool_) return spec_.s8_out ? "conv2d_s8_s8+maxpool_s8" : "conv2d_s8_f32+maxpool_f32";
+    return spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32";
   }
   std::string kernel(const kernels::KernelConfig& k) const override {
-    if (max_pool_) return std::string(k.gemm_s8.s8out_name) + " + " + k.maxpool_s8.max_taps_name;
-    return spec_.s8_out ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
+    const char* gemm = spec_.s8_out ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
+    if (!max_pool_) return gemm;
+    return std::string(gemm) + " + " + (spec_.s8_out ? k.maxpool_s8.max_taps_name : k.elementwise.max_taps_name);
   }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;
   double macs() const override;
   const ConvS8Spec& spec() const { return spec_; }
 
-  /// A max-pool of this conv's int8 output (the stem's), run by this op: `pooled` becomes its
-  /// second output. When nothing else reads the conv's own output (no kept intermediates), each task
+  /// A max-pool of this conv's output (the stem's), run by this op: `pooled` becomes its second
+  /// output. With an int8 output that nothing else reads (no kept intermediates), each task
   /// computes bands of its rows in scratch and pools them there (graph/fused_max_pool.h): the whole
   /// output (4.9 MB for the stem at 480x640) never goes to memory and back. Same bits either way
-  /// (max is exact).
+  /// (max is exact). A float output (dynamic mode's stem) is pooled after the whole conv.
   void fuse_max_pool(int kernel, int stride, int pad, ValueId pooled);
   const std::optional<FusedMaxPool>& max_pool() const { return max_pool_; }
 

@@ -198,7 +198,7 @@ TEST(ConvertApi, MissedMaxMseWritesNothing) {
   const std::string dir = test::scratch_dir();
   const auto r = model->write_int8(dir + "/d.actb", CalibrationSet{}, o);
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(r.status().code(), StatusCode::kFailedPrecondition) << r.status().message();
   EXPECT_NE(r.status().message().find("held-out error"), std::string::npos) << "the message holds the report";
   EXPECT_TRUE(files_in(dir).empty()) << testing::PrintToString(files_in(dir));
 }

@@ -179,26 +179,30 @@ TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
 // band in scratch), and checks that both pooled outputs are the max over each window's in-image
 // outputs of the conv alone.
 template <typename T>
+T* data_of(Graph& g, ValueId v) {
+  if constexpr (std::is_same_v<T, float>) return g.data(v);
+  else return g.data_s8(v);
+}
+
+template <typename In, typename T>
 void expect_fused_max_pool_is_the_max_of_the_conv(
-    const kernels::Conv2dShape& s, const std::vector<T>& x, ThreadPool& pool, const kernels::KernelConfig& k,
+    const kernels::Conv2dShape& s, const std::vector<In>& x, ThreadPool& pool, const kernels::KernelConfig& k,
     const std::function<std::unique_ptr<Op>(ValueId, ValueId, ValueId)>& make_conv, const std::string& what) {
+  constexpr DataType in_type = std::is_same_v<In, float> ? DataType::kF32 : DataType::kS8;
   constexpr DataType type = std::is_same_v<T, float> ? DataType::kF32 : DataType::kS8;
-  const auto data = [](Graph& g, ValueId v) {
-    if constexpr (std::is_same_v<T, float>) return g.data(v);
-    else return g.data_s8(v);
-  };
+  const auto data = [](Graph& g, ValueId v) { return data_of<T>(g, v); };
   const int pooled_h = kernels::Conv2dShape::out_dim(s.out_h, 3, 2, 1, 1), pooled_w = kernels::Conv2dShape::out_dim(s.out_w, 3, 2, 1, 1);
   std::vector<T> conv_out, pooled[2];
   for (const bool keep : {true, false}) {
     Graph g;
-    const ValueId in = g.add_input("x", {s.in_h, s.in_w, s.in_c}, type);
+    const ValueId in = g.add_input("x", {s.in_h, s.in_w, s.in_c}, in_type);
     const ValueId y = g.add_value("y", {s.out_h, s.out_w, s.out_c}, type);
     const ValueId p = g.add_value("pooled", {pooled_h, pooled_w, s.out_c}, type);
     g.add_op(make_conv(in, y, p));
     g.mark_output(p);
     g.plan(pool.threads(), keep);
     ASSERT_EQ(g.value(y).read, keep) << "the conv's own output is read only when kept: the band path runs otherwise";
-    std::copy(x.begin(), x.end(), data(g, in));
+    std::copy(x.begin(), x.end(), data_of<In>(g, in));
     g.run(pool, k);
     pooled[keep].assign(data(g, p), data(g, p) + static_cast<size_t>(pooled_h) * pooled_w * s.out_c);
     if (keep) conv_out.assign(data(g, y), data(g, y) + static_cast<size_t>(s.out_h) * s.out_w * s.out_c);
@@ -232,7 +236,8 @@ std::vector<kernels::Conv2dShape> fused_max_pool_shapes() {
           kernels::Conv2dShape::square(40, 640, 3, 64, 7, 2, 3)};
 }
 
-// A max-pool fused into an int8 conv (the stem's) is the max of the conv's output.
+// A max-pool fused into an int8 conv (the stem's) is the max of the conv's output, int8 or float
+// (dynamic mode's stem).
 TEST_P(OpsPerIsa, ConvS8WithFusedMaxPoolEqualsTheMaxOfItsOutput) {
   const kernels::KernelConfig k = config();
   std::mt19937 rng(17);
@@ -252,15 +257,20 @@ TEST_P(OpsPerIsa, ConvS8WithFusedMaxPoolEqualsTheMaxOfItsOutput) {
     spec.input_q = kernels::choose_quant_s8(-1.0f, 1.0f);
     spec.relu = true;
     spec.output_q = kernels::choose_quant_s8(0.0f, 2.0f);
+    const auto make_conv = [&](const ConvS8Spec& with) {
+      return [&k, with](ValueId in, ValueId y, ValueId pooled) {
+        auto conv = std::make_unique<ConvS8Op>(k.gemm_s8, with, in, y);
+        conv->fuse_max_pool(3, 2, 1, pooled);
+        return conv;
+      };
+    };
+    ConvS8Spec float_out = spec;
+    float_out.s8_out = false;
     for (ThreadPool* pool : {&one, &pool_}) {
-      expect_fused_max_pool_is_the_max_of_the_conv<int8_t>(
-          s, x, *pool, k,
-          [&](ValueId in, ValueId y, ValueId pooled) {
-            auto conv = std::make_unique<ConvS8Op>(k.gemm_s8, spec, in, y);
-            conv->fuse_max_pool(3, 2, 1, pooled);
-            return conv;
-          },
-          std::string("int8 ") + kernels::isa_name(GetParam()));
+      expect_fused_max_pool_is_the_max_of_the_conv<int8_t, int8_t>(s, x, *pool, k, make_conv(spec),
+                                                                  std::string("int8 ") + kernels::isa_name(GetParam()));
+      expect_fused_max_pool_is_the_max_of_the_conv<int8_t, float>(
+          s, x, *pool, k, make_conv(float_out), std::string("int8 to float ") + kernels::isa_name(GetParam()));
     }
   }
 }
@@ -276,7 +286,7 @@ TEST_P(OpsPerIsa, FloatConvWithFusedMaxPoolEqualsTheMaxOfItsOutput) {
     const std::vector<float> bias = uniform(static_cast<size_t>(s.out_c), rng, -1.0f, 1.0f);
     const auto packed = std::make_shared<PackedF32Weights>(k.gemm_f32, s.out_c, s.patch_size(), w.data());
     for (ThreadPool* pool : {&one, &pool_}) {
-      expect_fused_max_pool_is_the_max_of_the_conv<float>(
+      expect_fused_max_pool_is_the_max_of_the_conv<float, float>(
           s, x, *pool, k,
           [&](ValueId in, ValueId y, ValueId pooled) {
             auto conv = std::make_unique<Conv2dOp>(packed, s, bias.data(), true, in, kNoValue, y);

@@ -188,6 +188,25 @@ TEST(ConvertApi, MixedNeedsATarget) {
   EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
 }
 
+// Linear-input codes are chosen from calibrated ranges: dynamic mode has none to choose from, and
+// says so rather than silently running per token.
+TEST(ConvertApi, LinearInputCodesNeedCalibration) {
+  ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
+  const auto model = import_tiny();
+  ASSERT_TRUE(model);
+  for (const LinearInputCodes codes : {LinearInputCodes::kPerToken, LinearInputCodes::kPerTensor}) {
+    Int8Options o = quick_options();
+    o.mode = Int8Mode::kDynamic;
+    o.linear_inputs = codes;
+    const std::string dir = test::scratch_dir();
+    const auto r = model->write_int8(dir + "/d.actb", CalibrationSet{}, o);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(r.status().message().find("linear_inputs needs calibration"), std::string::npos) << r.status().to_string();
+    EXPECT_TRUE(files_in(dir).empty()) << testing::PrintToString(files_in(dir));
+  }
+}
+
 TEST(ConvertApi, MissedMaxMseWritesNothing) {
   ACT_REQUIRE_PATH(test::fixture_dir("act-tiny"));
   const auto model = import_tiny();

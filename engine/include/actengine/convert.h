@@ -195,7 +195,7 @@ struct Int8Options {
   /// max |err| within kPerTensorCodesErrorBudget and kPerTensorCodesMaxErrorBudget of all per
   /// token (and, mixed, the target);
   /// kPerToken and kPerTensor force the choice (per tensor: every FFN's). Dynamic mode has no
-  /// calibration: always per token.
+  /// calibration: always per token, and anything but kAuto is refused (kInvalidArgument).
   LinearInputCodes linear_inputs = LinearInputCodes::kAuto;
   /// Layers kept in float, by their weight tensors' names (LayerSqnr::layer, Int8Report::float_layers,
   /// e.g. "backbone.conv1.weight"); kMixed chooses more on top when the target needs them.

@@ -96,6 +96,10 @@ class Converter {
     if (opt_.mode == Int8Mode::kMixed && !opt_.target_mse) {
       fail(ErrorCode::kInvalidArgument, "mixed mode needs a target MSE (held-out, normalised units)");
     }
+    if (opt_.mode == Int8Mode::kDynamic && opt_.linear_inputs != LinearInputCodes::kAuto) {
+      fail(ErrorCode::kInvalidArgument, "linear_inputs needs calibration (static or mixed mode): dynamic mode's linear "
+                                        "inputs are all per token, with no calibrated ranges for per-tensor codes");
+    }
     if (!(opt_.percentile >= 50.0 && opt_.percentile <= 100.0)) {
       fail(ErrorCode::kInvalidArgument, "percentile " + fmt(opt_.percentile) + " is outside [50, 100]");
     }

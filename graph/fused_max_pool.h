@@ -35,8 +35,8 @@ struct FusedMaxPool {
 };
 
 /// Computes a conv's output band by band and pools it, the whole output never in memory. Tasks of
-/// whole pooled rows (two per thread: each recomputes only the conv rows it shares with the task
-/// before); a task walks its rows a band at a time: the conv rows those read go into its band (the
+/// whole pooled rows (one on one thread; two per thread on more, so that a late worker is caught up
+/// by the others: each task recomputes the conv rows it shares with the task before); a task walks its rows a band at a time: the conv rows those read go into its band (the
 /// rows the last band shares with this one moved to its front, not computed again), then are pooled
 /// from there.
 ///   band_of(thread)                          -> the thread's band (band_bytes(row_bytes) bytes)
@@ -49,7 +49,7 @@ void run_in_pooled_bands(ThreadPool& pool, const FusedMaxPool& mp, const kernels
                          const PoolRows& pool_rows) {
   const size_t row_bytes = static_cast<size_t>(s.out_w) * static_cast<size_t>(s.out_c) * element_bytes;
   const int rows_per_band = mp.pooled_rows_per_band(row_bytes);
-  const int tasks = std::min(mp.out_h, 2 * pool.threads());
+  const int tasks = std::min(mp.out_h, pool.threads() == 1 ? 1 : 2 * pool.threads());
   pool.parallel_for(static_cast<size_t>(tasks), [&](size_t task, int thread) {
     const int p_begin = static_cast<int>(task) * mp.out_h / tasks, p_end = (static_cast<int>(task) + 1) * mp.out_h / tasks;
     std::byte* band = band_of(thread);

@@ -228,8 +228,8 @@ void expect_fused_max_pool_is_the_max_of_the_conv(
 }
 
 // Shapes whose pooled rows split unevenly over 1 and 2 threads, tasks of several bands (the
-// 190-row one: 24 or 12 pooled rows a task, all in one band; the 640-wide one: 5 pooled rows a task
-// on one thread, in bands of 4 (int8) or 1 (float), as the stems'), a single row.
+// 190-row one: 48 or 12 pooled rows a task, all in one band; the 640-wide one: its 10 pooled rows in
+// one task on one thread, in bands of 4 (int8) or 1 (float), as the stems'), a single row.
 std::vector<kernels::Conv2dShape> fused_max_pool_shapes() {
   return {kernels::Conv2dShape::square(45, 37, 3, 64, 7, 2, 3), kernels::Conv2dShape::square(20, 9, 8, 16, 3, 1, 1),
           kernels::Conv2dShape::square(190, 12, 3, 16, 7, 2, 3), kernels::Conv2dShape::square(2, 5, 3, 8, 7, 2, 3),

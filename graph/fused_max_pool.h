@@ -9,6 +9,8 @@
 #include "graph/gemm_tiling.h"
 #include "graph/thread_pool.h"
 #include "kernels/common/conv2d_shape.h"
+#include "kernels/fp32/fp32_kernels.h"
+#include "kernels/pool_s8/maxpool_s8.h"
 
 namespace act::graph {
 
@@ -31,6 +33,17 @@ struct FusedMaxPool {
   /// Bytes of the band of conv rows that `pooled_rows` pooled rows read at most.
   size_t band_bytes(size_t row_bytes) const {
     return static_cast<size_t>((pooled_rows_per_band(row_bytes) - 1) * stride + kernel) * row_bytes;
+  }
+  /// Pooled rows [q0, q1) of the output of `conv`, whose rows from conv_row0 on are at conv_rows.
+  void pool_rows(const kernels::MaxPoolS8Kernels& k, const kernels::Conv2dShape& conv, const int8_t* conv_rows,
+                 int8_t* pooled, int q0, int q1, int conv_row0) const {
+    kernels::maxpool_nhwc_s8(k, conv.out_h, conv.out_w, conv.out_c, kernel, stride, pad, out_w, conv_rows, pooled, q0, q1,
+                             conv_row0);
+  }
+  void pool_rows(const kernels::ElementwiseF32Kernels& k, const kernels::Conv2dShape& conv, const float* conv_rows,
+                 float* pooled, int q0, int q1, int conv_row0) const {
+    kernels::maxpool_nhwc_f32(k, conv.out_h, conv.out_w, conv.out_c, kernel, stride, pad, out_w, conv_rows, pooled, q0, q1,
+                              conv_row0);
   }
 };
 

@@ -5,7 +5,6 @@
 #include <cstring>
 
 #include "graph/gemm_tiling.h"
-#include "kernels/pool_s8/maxpool_s8.h"
 #include "weights/blob/error.h"
 
 namespace act::graph {
@@ -98,9 +97,7 @@ void Conv2dOp::run(const RunContext& ctx) const {
   }
   epilogue.activation = relu_ ? kernels::GemmF32Activation::kRelu : kernels::GemmF32Activation::kNone;
   const auto pool_rows = [&](const float* conv_rows, int q0, int q1, int conv_row0) {
-    const FusedMaxPool& mp = *max_pool_;
-    kernels::maxpool_nhwc_f32(ctx.kernels().elementwise, s_.out_h, s_.out_w, s_.out_c, mp.kernel, mp.stride, mp.pad,
-                              mp.out_w, conv_rows, ctx.data(outputs[1]), q0, q1, conv_row0);
+    max_pool_->pool_rows(ctx.kernels().elementwise, s_, conv_rows, ctx.data(outputs[1]), q0, q1, conv_row0);
   };
   if (max_pool_ && !ctx.read(outputs[0])) {
     return run_in_pooled_bands(

@@ -211,9 +211,7 @@ void ConvS8Op::run(const RunContext& ctx) const {
     }
     const kernels::Conv2dShape& s = spec_.shape;
     const auto pool_rows = [&](const int8_t* conv_rows, int q0, int q1, int conv_row0) {
-      const FusedMaxPool& mp = *max_pool_;
-      kernels::maxpool_nhwc_s8(ctx.kernels().maxpool_s8, s.out_h, s.out_w, s.out_c, mp.kernel, mp.stride, mp.pad, mp.out_w,
-                               conv_rows, ctx.data_s8(outputs[1]), q0, q1, conv_row0);
+      max_pool_->pool_rows(ctx.kernels().maxpool_s8, s, conv_rows, ctx.data_s8(outputs[1]), q0, q1, conv_row0);
     };
     if (max_pool_ && !ctx.read(outputs[0])) {
       return run_in_pooled_bands(
@@ -250,11 +248,8 @@ void ConvS8Op::run(const RunContext& ctx) const {
       if (t.channels.begin < t.channels.end) kernels::conv_s8_f32out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
     });
     if (max_pool_) {
-      const kernels::Conv2dShape& s = spec_.shape;
       run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) {
-        const FusedMaxPool& mp = *max_pool_;
-        kernels::maxpool_nhwc_f32(ctx.kernels().elementwise, s.out_h, s.out_w, s.out_c, mp.kernel, mp.stride, mp.pad,
-                                  mp.out_w, out.c, ctx.data(outputs[1]), q0, q1);
+        max_pool_->pool_rows(ctx.kernels().elementwise, spec_.shape, out.c, ctx.data(outputs[1]), q0, q1, 0);
       });
     }
   }

@@ -47,15 +47,6 @@ void minmax_f32_ref(size_t n, const float* x, float* lo, float* hi) {
   *hi = b;
 }
 
-float symmetric_scale_s8(float lo, float hi, float* inv_scale) {
-  const float absmax = std::isfinite(lo) && std::isfinite(hi) ? std::max(-lo, hi) : 0.0f;
-  const float scale = std::max(absmax / 127.0f, std::numeric_limits<float>::min());
-  // 1 / scale may round so that max |x| lands a hair past 127: the clamp keeps it at 127, and
-  // -max |x| cannot reach -128.
-  *inv_scale = absmax > 0.0f ? 1.0f / scale : 0.0f;
-  return scale;
-}
-
 void quantize_rows_symmetric_f32_s8_ref(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
                                         float* row_scale) {
   quantize_rows_symmetric_with<minmax_f32_ref, quantize_f32_s8_ref>(rows, cols, x, ldx, y, ldy, row_scale);

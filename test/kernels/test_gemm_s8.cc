@@ -6,6 +6,7 @@
 // ACT_ISA=<isa> restricts the variant tests to the variant an Engine at that level runs.
 // ACT_TEST_REQUIRE_ISAS=avx2,avx512,avx512vnni (CI) makes the run fail unless those levels' variants
 // are available and ran.
+#include <limits>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -173,6 +174,19 @@ TEST_P(GemmS8Variant, TinyAndHugeScales) {
     GemmS8Tester().m(mr() + 2).n(nr() + 2).k(61).scales(lo, hi).residual(true).out(GemmOut::kS8).seed(seed++).test(
         variant());
     GemmS8Tester().m(mr() + 2).n(nr() + 2).k(61).scales(lo, hi).out(GemmOut::kF32).seed(seed++).test(variant());
+  }
+}
+
+// A NaN scale makes every v NaN, which the rule clamps to qmin (requant_ref.h): the order of a
+// kernel's min and max matters here, since x86's min/max return their second operand on a NaN.
+TEST_P(GemmS8Variant, NaNBecomesQmin) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  uint32_t seed = 550;
+  for (int qmin : {-128, -5}) {
+    for (bool residual : {false, true}) {
+      GemmS8Tester().m(mr() + 1).n(nr() + 5).k(19).scales(nan, nan).qmin(qmin).residual(residual).out(GemmOut::kS8)
+          .seed(seed++).test(variant());
+    }
   }
 }
 

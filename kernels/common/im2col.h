@@ -62,13 +62,29 @@ void point_at_kernel_rows(const Conv2dShape& s, const T* input, T pad, int pixel
   T* copies = scratch + seg;
   // The pixel's coordinates step along the tile (a division per pixel cost as much as the rest).
   int oy = pixel_begin / s.out_w, ox = pixel_begin % s.out_w;
-  for (int i = 0; i < count; ++i, rows += s.kernel_h) {
+  const size_t pixel_step = static_cast<size_t>(s.stride) * c;
+  // The end of the output columns whose windows are inside the image horizontally (used only from
+  // such a column, so the numerator is not negative).
+  const int ox_inside_end = std::min(s.out_w, (s.in_w - s.kernel_w + s.pad) / s.stride + 1);
+  for (int i = 0; i < count;) {
     const int ix0 = ox * s.stride - s.pad, iy0 = oy * s.stride - s.pad;
     const bool inside_x = ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
     if (inside_x && iy0 >= 0 && iy0 + s.kernel_h <= s.in_h) {
-      // The whole window inside the image (nearly every pixel): kernel rows a row stride apart.
-      const T* row = input + static_cast<size_t>(iy0) * row_stride + static_cast<size_t>(ix0) * c;
-      for (int ky = 0; ky < s.kernel_h; ++ky, row += row_stride) rows[ky] = row;
+      // The whole window inside the image (nearly every pixel): kernel rows a row stride apart, and
+      // the next pixels of this output row, up to its right edge, one stride further each.
+      const int run = std::min(count - i, ox_inside_end - ox);
+      const T* first = input + static_cast<size_t>(iy0) * row_stride + static_cast<size_t>(ix0) * c;
+      for (int j = 0; j < run; ++j, first += pixel_step, rows += s.kernel_h) {
+        const T* row = first;
+        for (int ky = 0; ky < s.kernel_h; ++ky, row += row_stride) rows[ky] = row;
+      }
+      i += run;
+      ox += run;
+      if (ox == s.out_w) {
+        ox = 0;
+        ++oy;
+      }
+      continue;
     } else {
       for (int ky = 0; ky < s.kernel_h; ++ky) {
         const int iy = iy0 + ky;
@@ -94,6 +110,8 @@ void point_at_kernel_rows(const Conv2dShape& s, const T* input, T pad, int pixel
         }
       }
     }
+    ++i;
+    rows += s.kernel_h;
     if (++ox == s.out_w) {
       ox = 0;
       ++oy;

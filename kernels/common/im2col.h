@@ -96,15 +96,12 @@ void point_at_kernel_rows(const Conv2dShape& s, const T* input, T pad, int pixel
         if (inside_x) {
           rows[ky] = row + static_cast<size_t>(ix0) * c;
         } else {
-          for (int kx = 0; kx < s.kernel_w; ++kx) {
-            const int ix = ix0 + kx;
-            T* dst = copies + static_cast<size_t>(kx) * c;
-            if (ix < 0 || ix >= s.in_w) {
-              std::fill(dst, dst + c, pad);
-            } else {
-              std::copy(row + static_cast<size_t>(ix) * c, row + static_cast<size_t>(ix + 1) * c, dst);
-            }
-          }
+          // The taps inside the image in one copy, the padding either side filled.
+          const int kx0 = std::clamp(-ix0, 0, s.kernel_w), kx1 = std::clamp(s.in_w - ix0, kx0, s.kernel_w);
+          std::fill(copies, copies + static_cast<size_t>(kx0) * c, pad);
+          std::copy(row + static_cast<size_t>(ix0 + kx0) * c, row + static_cast<size_t>(ix0 + kx1) * c,
+                    copies + static_cast<size_t>(kx0) * c);
+          std::fill(copies + static_cast<size_t>(kx1) * c, copies + seg, pad);
           rows[ky] = copies;
           copies += seg;
         }

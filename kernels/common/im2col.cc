@@ -119,6 +119,19 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
         for (int j = j_begin; j < j_end; ++j) {
           int8_t* d = tile_row + static_cast<size_t>(j) * ld + static_cast<size_t>(ky) * kernel_row_bytes;
           const int ix0 = (ox_begin + j) * s.stride - s.pad;
+          if (s.dilation == 1) {
+            // The taps inside the image in one run, the padding either side filled (3 calls, not
+            // one per tap: the stem's edge pixels went tap by tap, 3 bytes a call).
+            const int kx0 = row_inside ? std::clamp(-ix0, 0, s.kernel_w) : s.kernel_w;
+            const int kx1 = row_inside ? std::clamp(s.in_w - ix0, kx0, s.kernel_w) : s.kernel_w;
+            std::memset(d, pad_value, static_cast<size_t>(kx0) * run);
+            if (kx1 > kx0) {
+              copy_run(d + static_cast<size_t>(kx0) * run, input_row + static_cast<size_t>(ix0 + kx0) * run,
+                       static_cast<size_t>(kx1 - kx0) * run);
+            }
+            std::memset(d + static_cast<size_t>(kx1) * run, pad_value, static_cast<size_t>(s.kernel_w - kx1) * run);
+            continue;
+          }
           for (int kx = 0; kx < s.kernel_w; ++kx, d += run) {
             const int ix = ix0 + kx * s.dilation;
             if (!row_inside || ix < 0 || ix >= s.in_w) {

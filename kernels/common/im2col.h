@@ -48,6 +48,36 @@ size_t kernel_row_scratch_elements(const Conv2dShape& s, int pixels) {
   return kernel_row_pointers_offset<T>(s, pixels) + (pointers * sizeof(const T*) + sizeof(T) - 1) / sizeof(T);
 }
 
+/// point_at_kernel_rows for one pixel whose window crosses the image's edge (its top-left input
+/// pixel at iy0, ix0): its kernel rows rows[0..kernel_h) point at `pad_row` (a row of `pad`), into
+/// the input, or at a padded copy made at `copies` (which then moves past it).
+template <class T>
+void point_at_edge_window(const Conv2dShape& s, const T* input, T pad, const T* pad_row, int iy0, int ix0,
+                          bool inside_x, T*& copies, const T** rows) {
+  const size_t seg = kernel_row_elements(s), c = static_cast<size_t>(s.in_c);
+  const size_t row_stride = static_cast<size_t>(s.in_w) * c;
+  for (int ky = 0; ky < s.kernel_h; ++ky) {
+    const int iy = iy0 + ky;
+    if (iy < 0 || iy >= s.in_h) {
+      rows[ky] = pad_row;
+      continue;
+    }
+    const T* row = input + static_cast<size_t>(iy) * row_stride;
+    if (inside_x) {
+      rows[ky] = row + static_cast<size_t>(ix0) * c;
+    } else {
+      // The taps inside the image in one copy, the padding either side filled.
+      const int kx0 = std::clamp(-ix0, 0, s.kernel_w), kx1 = std::clamp(s.in_w - ix0, kx0, s.kernel_w);
+      std::fill(copies, copies + static_cast<size_t>(kx0) * c, pad);
+      std::copy(row + static_cast<size_t>(ix0 + kx0) * c, row + static_cast<size_t>(ix0 + kx1) * c,
+                copies + static_cast<size_t>(kx0) * c);
+      std::fill(copies + static_cast<size_t>(kx1) * c, copies + seg, pad);
+      rows[ky] = copies;
+      copies += seg;
+    }
+  }
+}
+
 /// Points rows[i * kernel_h + ky] at kernel row ky of output pixel pixel_begin + i (dilation 1):
 /// in the input where the row lies inside it, else at a row of `pad` (above or below the image) or
 /// at a copy with its padding (across the left or right edge), both in `scratch`
@@ -69,47 +99,23 @@ void point_at_kernel_rows(const Conv2dShape& s, const T* input, T pad, int pixel
   for (int i = 0; i < count;) {
     const int ix0 = ox * s.stride - s.pad, iy0 = oy * s.stride - s.pad;
     const bool inside_x = ix0 >= 0 && ix0 + s.kernel_w <= s.in_w;
+    int done = 1;  // pixels handled this step
     if (inside_x && iy0 >= 0 && iy0 + s.kernel_h <= s.in_h) {
       // The whole window inside the image (nearly every pixel): kernel rows a row stride apart, and
       // the next pixels of this output row, up to its right edge, one stride further each.
-      const int run = std::min(count - i, ox_inside_end - ox);
+      done = std::min(count - i, ox_inside_end - ox);
       const T* first = input + static_cast<size_t>(iy0) * row_stride + static_cast<size_t>(ix0) * c;
-      for (int j = 0; j < run; ++j, first += pixel_step, rows += s.kernel_h) {
+      for (int j = 0; j < done; ++j, first += pixel_step, rows += s.kernel_h) {
         const T* row = first;
         for (int ky = 0; ky < s.kernel_h; ++ky, row += row_stride) rows[ky] = row;
       }
-      i += run;
-      ox += run;
-      if (ox == s.out_w) {
-        ox = 0;
-        ++oy;
-      }
-      continue;
     } else {
-      for (int ky = 0; ky < s.kernel_h; ++ky) {
-        const int iy = iy0 + ky;
-        if (iy < 0 || iy >= s.in_h) {
-          rows[ky] = pad_row;
-          continue;
-        }
-        const T* row = input + static_cast<size_t>(iy) * row_stride;
-        if (inside_x) {
-          rows[ky] = row + static_cast<size_t>(ix0) * c;
-        } else {
-          // The taps inside the image in one copy, the padding either side filled.
-          const int kx0 = std::clamp(-ix0, 0, s.kernel_w), kx1 = std::clamp(s.in_w - ix0, kx0, s.kernel_w);
-          std::fill(copies, copies + static_cast<size_t>(kx0) * c, pad);
-          std::copy(row + static_cast<size_t>(ix0 + kx0) * c, row + static_cast<size_t>(ix0 + kx1) * c,
-                    copies + static_cast<size_t>(kx0) * c);
-          std::fill(copies + static_cast<size_t>(kx1) * c, copies + seg, pad);
-          rows[ky] = copies;
-          copies += seg;
-        }
-      }
+      point_at_edge_window(s, input, pad, pad_row, iy0, ix0, inside_x, copies, rows);
+      rows += s.kernel_h;
     }
-    ++i;
-    rows += s.kernel_h;
-    if (++ox == s.out_w) {
+    i += done;
+    ox += done;
+    if (ox == s.out_w) {
       ox = 0;
       ++oy;
     }

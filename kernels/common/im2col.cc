@@ -40,17 +40,11 @@ void im2col_nhwc_f32(const Conv2dShape& s, const float* input, int pixel_begin, 
     const int ix0 = ox * s.stride - s.pad;
     for (int ky = 0; ky < s.kernel_h; ++ky) {
       const int iy = oy * s.stride - s.pad + ky * s.dilation;
-      if (s.dilation == 1 && iy >= 0 && iy < s.in_h) {
+      if (s.dilation == 1) {
         // Undilated taps of one kernel row are adjacent input pixels: one copy for those inside the
         // image (the stem's 7 taps of 3 channels in one go), zeros either side.
-        const int kx0 = std::clamp(-ix0, 0, s.kernel_w), kx1 = std::clamp(s.in_w - ix0, kx0, s.kernel_w);
-        std::memset(dst, 0, static_cast<size_t>(kx0) * run * sizeof(float));
-        if (kx1 > kx0) {
-          std::memcpy(dst + static_cast<size_t>(kx0) * run,
-                      input + (static_cast<size_t>(iy) * s.in_w + static_cast<size_t>(ix0 + kx0)) * run,
-                      static_cast<size_t>(kx1 - kx0) * run * sizeof(float));
-        }
-        std::memset(dst + static_cast<size_t>(kx1) * run, 0, static_cast<size_t>(s.kernel_w - kx1) * run * sizeof(float));
+        const bool row_inside = iy >= 0 && iy < s.in_h;
+        copy_kernel_row_padded(s, row_inside ? input + static_cast<size_t>(iy) * s.in_w * run : nullptr, ix0, 0.0f, dst);
         dst += static_cast<size_t>(s.kernel_w) * run;
         continue;
       }
@@ -119,17 +113,8 @@ void im2col_nhwc_s8(const Conv2dShape& s, const int8_t* input, int8_t pad_value,
         for (int j = j_begin; j < j_end; ++j) {
           int8_t* d = tile_row + static_cast<size_t>(j) * ld + static_cast<size_t>(ky) * kernel_row_bytes;
           const int ix0 = (ox_begin + j) * s.stride - s.pad;
-          if (s.dilation == 1) {
-            // The taps inside the image in one run, the padding either side filled (3 calls, not
-            // one per tap: the stem's edge pixels went tap by tap, 3 bytes a call).
-            const int kx0 = row_inside ? std::clamp(-ix0, 0, s.kernel_w) : s.kernel_w;
-            const int kx1 = row_inside ? std::clamp(s.in_w - ix0, kx0, s.kernel_w) : s.kernel_w;
-            std::memset(d, pad_value, static_cast<size_t>(kx0) * run);
-            if (kx1 > kx0) {
-              copy_run(d + static_cast<size_t>(kx0) * run, input_row + static_cast<size_t>(ix0 + kx0) * run,
-                       static_cast<size_t>(kx1 - kx0) * run);
-            }
-            std::memset(d + static_cast<size_t>(kx1) * run, pad_value, static_cast<size_t>(s.kernel_w - kx1) * run);
+          if (s.dilation == 1) {  // in one run, not tap by tap (the stem's edge pixels: 3 bytes a call)
+            copy_kernel_row_padded(s, input_row, ix0, pad_value, d);
             continue;
           }
           for (int kx = 0; kx < s.kernel_w; ++kx, d += run) {

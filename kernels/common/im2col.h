@@ -48,6 +48,22 @@ size_t kernel_row_scratch_elements(const Conv2dShape& s, int pixels) {
   return kernel_row_pointers_offset<T>(s, pixels) + (pointers * sizeof(const T*) + sizeof(T) - 1) / sizeof(T);
 }
 
+/// Kernel row [ix0, ix0 + kernel_w) of one input row (undilated) into dst, kernel_row_elements
+/// long: the taps inside the image in one copy, the rest `pad`; all `pad` when input_row is null (a
+/// row above or below the image). The edge pixels' path of im2col and of point_at_kernel_rows.
+template <class T>
+void copy_kernel_row_padded(const Conv2dShape& s, const T* input_row, int ix0, T pad, T* dst) {
+  const size_t c = static_cast<size_t>(s.in_c);
+  const int kx0 = input_row != nullptr ? std::clamp(-ix0, 0, s.kernel_w) : s.kernel_w;
+  const int kx1 = input_row != nullptr ? std::clamp(s.in_w - ix0, kx0, s.kernel_w) : s.kernel_w;
+  std::fill(dst, dst + static_cast<size_t>(kx0) * c, pad);
+  if (kx1 > kx0) {
+    std::copy(input_row + static_cast<size_t>(ix0 + kx0) * c, input_row + static_cast<size_t>(ix0 + kx1) * c,
+              dst + static_cast<size_t>(kx0) * c);
+  }
+  std::fill(dst + static_cast<size_t>(kx1) * c, dst + kernel_row_elements(s), pad);
+}
+
 /// point_at_kernel_rows for one pixel whose window crosses the image's edge (its top-left input
 /// pixel at iy0, ix0): its kernel rows rows[0..kernel_h) point at `pad_row` (a row of `pad`), into
 /// the input, or at a padded copy made at `copies` (which then moves past it).
@@ -66,12 +82,7 @@ void point_at_edge_window(const Conv2dShape& s, const T* input, T pad, const T* 
     if (inside_x) {
       rows[ky] = row + static_cast<size_t>(ix0) * c;
     } else {
-      // The taps inside the image in one copy, the padding either side filled.
-      const int kx0 = std::clamp(-ix0, 0, s.kernel_w), kx1 = std::clamp(s.in_w - ix0, kx0, s.kernel_w);
-      std::fill(copies, copies + static_cast<size_t>(kx0) * c, pad);
-      std::copy(row + static_cast<size_t>(ix0 + kx0) * c, row + static_cast<size_t>(ix0 + kx1) * c,
-                copies + static_cast<size_t>(kx0) * c);
-      std::fill(copies + static_cast<size_t>(kx1) * c, copies + seg, pad);
+      copy_kernel_row_padded(s, row, ix0, pad, copies);
       rows[ky] = copies;
       copies += seg;
     }

@@ -33,12 +33,20 @@ float lane_tree_sum<Arch>(const BatchF<Arch>& v) {
 }
 
 // 2^t as vscalefps(2^f, n): n by vrndscaleps, the exponent added by the instruction (two integer
-// operations and the rounding-bias pair fewer than the generic form).
-template <>
-BatchF<Arch> exp2_nonpositive<Arch>(const BatchF<Arch>& t_in) {
-  const __m512 t = _mm512_max_ps(t_in, _mm512_set1_ps(kExp2Lowest));
+// operations and the rounding-bias pair fewer than the generic form). The clamp keeps a NaN.
+template <int Degree>
+BatchF<Arch> exp2_by_scalef(const BatchF<Arch>& t_in) {
+  const __m512 t = _mm512_max_ps(_mm512_set1_ps(kExp2Lowest), t_in);
   const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  return _mm512_scalef_ps(exp2_fraction<Arch>(BatchF<Arch>(_mm512_sub_ps(t, n))), n);
+  return _mm512_scalef_ps(exp2_fraction<Arch, Degree>(BatchF<Arch>(_mm512_sub_ps(t, n))), n);
+}
+template <>
+BatchF<Arch> exp2_nonpositive<Arch, 4>(const BatchF<Arch>& t) {
+  return exp2_by_scalef<4>(t);
+}
+template <>
+BatchF<Arch> exp2_nonpositive<Arch, 5>(const BatchF<Arch>& t) {
+  return exp2_by_scalef<5>(t);
 }
 
 // vpmovdb into a register, then one 16-byte store (the store form of vpmovdb is several times slower).

@@ -144,6 +144,31 @@ TEST_P(ElementwiseF32Variant, SoftmaxWithinTolerance) {
   }
 }
 
+// A NaN logit anywhere in a row (first, in a whole batch, in the ragged end) makes that row's
+// probabilities NaN, and the int8 softmax's row scale NaN, as std::exp makes the reference's: the
+// SIMD exp's clamp must not turn it into a tiny finite number. The other row stays finite.
+TEST_P(ElementwiseF32Variant, SoftmaxNaNLogitMakesItsRowNaN) {
+  std::mt19937 rng(44);
+  for (int cols : col_sizes()) {
+    for (int at : {0, cols / 2, cols - 1}) {
+      const size_t ld = static_cast<size_t>(cols) + 1;
+      std::vector<float> x = random_floats(2 * ld, rng, -4.0f, 4.0f);
+      x[static_cast<size_t>(at)] = kNaN;
+      std::vector<float> p = x;
+      v().softmax_rows(2, cols, p.data(), ld);
+      std::vector<int8_t> codes(2 * ld);
+      float scale[2];
+      v().softmax_rows_s8(2, cols, x.data(), ld, codes.data(), ld, scale);
+      for (int c = 0; c < cols; ++c) {
+        ASSERT_TRUE(std::isnan(p[static_cast<size_t>(c)])) << v().softmax_name << " cols=" << cols << " NaN at " << at << ", " << c;
+        ASSERT_TRUE(std::isfinite(p[ld + static_cast<size_t>(c)])) << v().softmax_name << " cols=" << cols;
+      }
+      EXPECT_TRUE(std::isnan(scale[0])) << v().softmax_s8_name << " cols=" << cols << " NaN at " << at;
+      EXPECT_TRUE(std::isfinite(scale[1])) << v().softmax_s8_name << " cols=" << cols;
+    }
+  }
+}
+
 // The fused softmax + int8: every variant within the stated bounds of the reference, and the
 // reference's dequantized probabilities within half a code (plus float rounding) of the softmax.
 TEST_P(ElementwiseF32Variant, SoftmaxS8WithinToleranceAndHalfACodeOfTheSoftmax) {

@@ -3,6 +3,7 @@
 // stream: rate, values within calibration, neutral on shutdown and within 250 ms of each fault.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -350,11 +351,24 @@ TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
   rig.info.state_high = {0.1f, 0.9f};
   rig.options.initial_state = {0.0f, 0.8f};
   auto camera = video_camera(rig.dir, 150);
-  rig.run(*camera, [] { sleep_ms(1000); });
+  // Until a few inferences after the first chunk are recorded (not a fixed second: on a loaded machine
+  // the first chunk can come late, leaving one observation, the initial state, in the recording).
+  rig.run(*camera, [&] {
+    const auto deadline = Clock::now() + std::chrono::seconds(10);
+    const auto recorded = [&] {
+      const auto commands = drive_commands(*rig.board);
+      const bool driven = std::any_of(commands.begin(), commands.end(), [](const auto& c) { return c.steering_us == 1700; });
+      std::ifstream log(rig.recording + "/log.jsonl");
+      const auto lines = std::count(std::istreambuf_iterator<char>(log), std::istreambuf_iterator<char>(), '\n');
+      return driven && lines >= 4;
+    };
+    while (!recorded() && Clock::now() < deadline) sleep_ms(20);
+  });
   std::ifstream observations(rig.recording + "/log.jsonl");
   std::string first, line, last;
   std::getline(observations, first);
   while (std::getline(observations, line)) last = line;
+  ASSERT_FALSE(last.empty()) << "one observation recorded: " << rig.log.str();
   EXPECT_EQ(nlohmann::json::parse(first)["state"], (std::vector<float>{0.0f, 0.8f}));
   EXPECT_EQ(nlohmann::json::parse(last)["state"], (std::vector<float>{0.5f, 0.8f}));  // the fake model's action
   const std::string log = rig.log.str();

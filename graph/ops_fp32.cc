@@ -18,8 +18,6 @@ namespace {
 constexpr int kLinearTileCols = 128;
 constexpr int kLinearTileRows = 320;
 
-size_t ceil_div(size_t a, size_t b) { return (a + b - 1) / b; }
-
 kernels::GemmF32Activation activation_of(Epilogue e) {
   switch (e) {
     case Epilogue::kRelu:
@@ -143,17 +141,19 @@ void LinearOp::run(const RunContext& ctx) const {
   const float* bias = has_bias ? bias_.resolve(ctx) : nullptr;
   const float* residual = has_residual ? residual_.resolve(ctx) : nullptr;
   float* y = ctx.data(outputs[0]);
-  // Whole panels per task, as many tasks of each size as the threads can share evenly.
+  // Whole panels per task, as many tasks of each size as the threads can share evenly; the rows too
+  // when there are fewer panels than threads (the action head's 14 columns ran on one thread).
+  const int threads = ctx.pool().threads();
   const int tile_cols = (kLinearTileCols + gemm.nr - 1) / gemm.nr * gemm.nr;
-  const EvenSplit col_tiles = split_evenly(out_, gemm.nr, tile_cols, ctx.pool().threads());
-  const size_t row_tiles = ceil_div(static_cast<size_t>(rows_), kLinearTileRows);
+  const EvenSplit col_tiles = split_evenly(out_, gemm.nr, tile_cols, threads);
+  const EvenSplit row_tiles = split_evenly(rows_, gemm.mr, kLinearTileRows, col_tiles.parts < threads ? threads : 1);
   const size_t ldy = static_cast<size_t>(out_);
-  ctx.pool().parallel_for(static_cast<size_t>(col_tiles.parts) * row_tiles, [&](size_t task, int) {
-    int c0, c1;
+  ctx.pool().parallel_for(static_cast<size_t>(col_tiles.parts) * static_cast<size_t>(row_tiles.parts), [&](size_t task, int) {
+    int c0, c1, r0, r1;
     col_tiles.range(static_cast<int>(task % static_cast<size_t>(col_tiles.parts)), c0, c1);
-    const int r0 = static_cast<int>(task / static_cast<size_t>(col_tiles.parts)) * kLinearTileRows;
+    row_tiles.range(static_cast<int>(task / static_cast<size_t>(col_tiles.parts)), r0, r1);
     kernels::GemmF32PackedArgs args;
-    args.m = std::min(kLinearTileRows, rows_ - r0);
+    args.m = r1 - r0;
     args.n = c1 - c0;
     args.k = in_;
     args.a = x + static_cast<size_t>(r0) * x_.ld;
@@ -211,13 +211,11 @@ void LayerNormOp::write_row_codes(const RowCodes& codes) {
 void LayerNormOp::run(const RunContext& ctx) const {
   const float* x = ctx.data(inputs[0]);
   float* y = ctx.data(outputs[0]);
-  constexpr int kRows = 32;  // with codes, quantized while the task's 64 KB of rows are in L2
+  constexpr int kMaxRows = 32;  // with codes, quantized while the task's 64 KB of rows are in L2
   const size_t ld = static_cast<size_t>(cols_);
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(rows_), kRows), [&](size_t task, int) {
-    const int r0 = static_cast<int>(task) * kRows;
-    const int rows = std::min(kRows, rows_ - r0);
-    ctx.kernels().elementwise.layernorm_rows(rows, cols_, x + r0 * ld, ld, gamma_, beta_, kLayerNormEps, y + r0 * ld, ld);
-    if (codes_.present()) codes_.write(ctx, y + r0 * ld, ld, r0, rows);
+  parallel_ranges(ctx.pool(), rows_, 1, kMaxRows, [&](int r0, int r1, int) {
+    ctx.kernels().elementwise.layernorm_rows(r1 - r0, cols_, x + r0 * ld, ld, gamma_, beta_, kLayerNormEps, y + r0 * ld, ld);
+    if (codes_.present()) codes_.write(ctx, y + r0 * ld, ld, r0, r1 - r0);
   });
 }
 
@@ -290,13 +288,12 @@ ConcatRowsOp::ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output) : 
 }
 
 void ConcatRowsOp::run(const RunContext& ctx) const {
-  constexpr int kRows = 32;
+  constexpr int kMaxRows = 32;
   float* y = ctx.data(outputs[0]);
   int total_rows = 0;
   for (const auto& p : parts_) total_rows += p.rows;
   // Bands of output rows over the pool; each band copies its rows from whichever parts they lie in.
-  ctx.pool().parallel_for(ceil_div(static_cast<size_t>(total_rows), static_cast<size_t>(kRows)), [&](size_t task, int) {
-    const int begin = static_cast<int>(task) * kRows, end = std::min(total_rows, begin + kRows);
+  parallel_ranges(ctx.pool(), total_rows, 1, kMaxRows, [&](int begin, int end, int) {
     int part_start = 0;
     for (const auto& p : parts_) {
       const int from = std::max(begin, part_start), to = std::min(end, part_start + p.rows);

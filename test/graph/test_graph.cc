@@ -156,6 +156,29 @@ TEST(EvenSplit, TilesTheRangeInNearEqualPartsSharedByTheThreads) {
   }
 }
 
+// parallel_ranges visits every item of [0, total) exactly once, in ranges of at most max_size items
+// that start on whole quanta, with thread indices of the pool.
+TEST(ParallelRanges, EveryItemOnceInBoundedRangesOnThePoolsThreads) {
+  for (int threads : {1, 2, 3}) {
+    ThreadPool pool(threads);
+    for (int total : {1, 14, 100, 302}) {
+      for (int quantum : {1, 6}) {
+        std::vector<std::atomic<int>> visits(static_cast<size_t>(total));
+        std::atomic<bool> bad_range{false}, bad_thread{false};
+        parallel_ranges(pool, total, quantum, 32, [&](int begin, int end, int thread) {
+          if (begin % quantum != 0 || end - begin > 32 || begin >= end) bad_range = true;
+          if (thread < 0 || thread >= threads) bad_thread = true;
+          for (int i = begin; i < end; ++i) visits[static_cast<size_t>(i)]++;
+        });
+        SCOPED_TRACE(testing::Message() << "threads " << threads << " total " << total << " quantum " << quantum);
+        EXPECT_FALSE(bad_range);
+        EXPECT_FALSE(bad_thread);
+        for (const auto& v : visits) ASSERT_EQ(v.load(), 1);
+      }
+    }
+  }
+}
+
 TEST(GraphPlanner, ReusesDeadBuffersAndKeepsLiveOnesApart) {
   Graph g;
   const int rows = 4, cols = 64;

@@ -81,6 +81,10 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   if (j["peak"]["gmac_per_s_per_core"].get<double>() > 0) {
     const double want = 100.0 * j["achieved_gmac_per_s"].get<double>() / (j["peak"]["gmac_per_s_per_core"].get<double>() * 1);
     EXPECT_NEAR(j["peak"]["percent_of_peak"].get<double>(), want, 1e-6 * want);
+    // ... and at the median run: the GMAC over the total's p50.
+    const double want_p50 = 100.0 * expected_gmac / (lat["total"]["p50"].get<double>() / 1e3) /
+                            j["peak"]["gmac_per_s_per_core"].get<double>();
+    EXPECT_NEAR(j["peak"]["percent_of_peak_p50"].get<double>(), want_p50, 1e-6 * want_p50);
     EXPECT_EQ(j["peak"]["kind"], "fp32");
   }
   EXPECT_FALSE(j["machine"]["cpu_model"].get<std::string>().empty());

@@ -33,6 +33,11 @@ CpuFeatures detect() {
     f.avx512bw = cpuinfo_has_x86_avx512bw();
     f.avx512vl = cpuinfo_has_x86_avx512vl();
     f.avx512vnni = cpuinfo_has_x86_avx512vnni();
+    if (const cpuinfo_core* core = cpuinfo_get_core(0); core != nullptr && core->vendor == cpuinfo_vendor_amd) {
+      const uint32_t signature = core->cpuid;  // CPUID leaf 1 EAX: family = base + extended when base is 0xF
+      const uint32_t family = ((signature >> 8) & 0xF) + (((signature >> 8) & 0xF) == 0xF ? (signature >> 20) & 0xFF : 0);
+      f.amd_zen4 = family == 0x19 && f.avx512f;
+    }
 #elif defined(__aarch64__)
     f.neon = cpuinfo_has_arm_neon();
     f.dotprod = cpuinfo_has_arm_neon_dot();

@@ -39,6 +39,10 @@ struct CpuFeatures {
   bool avx2 = false, fma = false;                                       // x86-64
   bool avx512f = false, avx512bw = false, avx512vl = false, avx512vnni = false;
   bool neon = false, dotprod = false;                                   // AArch64
+  /// An AMD family 19h core with AVX-512: Zen 4 (Zen 3, the same family, has no AVX-512). From
+  /// cpuinfo's CPUID signature (Debian 12's cpuinfo names no Zen 4 uarch); false without cpuinfo.
+  /// Only a kernel tuning depends on it (gemm_f32_table_avx512).
+  bool amd_zen4 = false;
   /// How the features were found: "cpuinfo", "cpuinfo+auxv", "auxv", "cpuid" or "none".
   const char* source = "none";
 };

@@ -15,7 +15,8 @@ IsaTables isa_tables(Isa isa) {
       return {gemm_s8_table_avx2(), gemm_f32_table_avx2(), quant_s8_table_avx2(), elementwise_f32_table_avx2(),
               maxpool_s8_table_avx2()};
     case Isa::kAvx512:
-      return {nullptr, gemm_f32_table_avx512(), quant_s8_table_avx512(), elementwise_f32_table_avx512(),
+      return {nullptr, gemm_f32_table_avx512(/*software_prefetch=*/!cpu_features().amd_zen4), quant_s8_table_avx512(),
+              elementwise_f32_table_avx512(),
               maxpool_s8_table_avx512()};
     case Isa::kAvx512Vnni:
       return {gemm_s8_table_avx512vnni(), nullptr, nullptr, nullptr, nullptr};

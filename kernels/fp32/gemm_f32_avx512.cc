@@ -1,5 +1,6 @@
 // FP32 GEMM with this file's avx512 flags (cmake/ActLayer.cmake): the packed micro-kernels of
-// gemm_f32_packed.inc on a 8x32 register tile, B prefetched 1 KB ahead (8 k steps).
+// gemm_f32_packed.inc on a 8x32 register tile, with B prefetched 1 KB ahead (8 k steps) or not
+// (gemm_f32.h says which CPU runs which).
 #include "kernels/fp32/gemm_f32.h"
 
 #if defined(__x86_64__)
@@ -26,17 +27,22 @@ xsimd::batch<float, xsimd::avx512f> multiply_add<xsimd::avx512f>(const xsimd::ba
   return _mm512_fmadd_ps(a, b, c);
 }
 
-using Packed = PackedGemm<xsimd::avx512f, 8, 2, 1024>;
-void gemm_packed_avx512(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
+using Prefetching = PackedGemm<xsimd::avx512f, 8, 2, 1024>;
+using Plain = PackedGemm<xsimd::avx512f, 8, 2, 0>;
+void gemm_packed_avx512(const GemmF32PackedArgs& args) { Prefetching::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
+void gemm_packed_avx512_plain(const GemmF32PackedArgs& args) { Plain::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
 }  // namespace
 
-const GemmF32Kernels* gemm_f32_table_avx512() {
-  static const GemmF32Kernels table{Isa::kAvx512, "gemm_f32 8x32 avx512", Packed::kMr, Packed::NR, gemm_packed_avx512};
-  return &table;
+const GemmF32Kernels* gemm_f32_table_avx512(bool software_prefetch) {
+  static const GemmF32Kernels prefetching{Isa::kAvx512, "gemm_f32 8x32 avx512", Prefetching::kMr, Prefetching::NR,
+                                          gemm_packed_avx512};
+  static const GemmF32Kernels plain{Isa::kAvx512, "gemm_f32 8x32 avx512 (no B prefetch)", Plain::kMr, Plain::NR,
+                                    gemm_packed_avx512_plain};
+  return software_prefetch ? &prefetching : &plain;
 }
 }  // namespace act::kernels
 #else
 namespace act::kernels {
-const GemmF32Kernels* gemm_f32_table_avx512() { return nullptr; }
+const GemmF32Kernels* gemm_f32_table_avx512(bool) { return nullptr; }
 }  // namespace act::kernels
 #endif

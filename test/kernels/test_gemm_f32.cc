@@ -139,8 +139,18 @@ TEST(GemmF32Packed, EveryVariantMatchesTheDoubleProduct) {
   std::mt19937 rng(15);
   const auto isas = test::isas_under_test(&IsaTables::gemm_f32);
   ASSERT_FALSE(isas.empty());
+  // Every level's variant for this CPU, and at avx512 the other B-prefetch choice too.
+  std::vector<const GemmF32Kernels*> variants;
   for (Isa isa : isas) {
-    const GemmF32Kernels& g = test::table_of(isa, &IsaTables::gemm_f32);
+    variants.push_back(&test::table_of(isa, &IsaTables::gemm_f32));
+    if (isa == Isa::kAvx512) {
+      const GemmF32Kernels* other = gemm_f32_table_avx512(variants.back() != gemm_f32_table_avx512(true));
+      variants.push_back(other);
+    }
+  }
+  for (const GemmF32Kernels* variant : variants) {
+    const GemmF32Kernels& g = *variant;
+    const Isa isa = g.isa;
     const int mr = g.mr, nr = g.nr;
     const Case cases[] = {
         // Exact tile multiples, one k block and several (the kernels block k by 256).

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -43,6 +44,16 @@ inline Calibration test_calibration() {
 }
 
 inline double ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
+
+/// Polls `done` until it holds or `limit` passes (a hang detector, not a timing requirement).
+inline bool eventually(const std::function<bool()>& done, std::chrono::seconds limit = std::chrono::seconds(10)) {
+  const auto deadline = Clock::now() + limit;
+  while (!done()) {
+    if (Clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
+}
 
 /// What a FakeModel does; shared between the test and the model living on the worker thread.
 struct FakeModelControls {

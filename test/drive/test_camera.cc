@@ -67,16 +67,6 @@ TEST(Camera, EachFailureNamesTheSource) {
   EXPECT_NE(error.find("cannot open camera"), std::string::npos) << error;
 }
 
-// Polls `done` until it holds or `limit` passes (a hang detector, not a timing requirement).
-bool eventually(const std::function<bool()>& done, std::chrono::seconds limit = std::chrono::seconds(10)) {
-  const auto deadline = Clock::now() + limit;
-  while (!done()) {
-    if (Clock::now() > deadline) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return true;
-}
-
 TEST(Camera, ReopensANetworkStreamThatStalls) {
   const std::string dir = act::test::scratch_dir();
   StallingStreamServer server(write_test_video(dir + "/v.avi", 30, 30), std::chrono::milliseconds(0));

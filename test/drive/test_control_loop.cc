@@ -354,15 +354,12 @@ TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
   // Until a few inferences after the first chunk are recorded (not a fixed second: on a loaded machine
   // the first chunk can come late, leaving one observation, the initial state, in the recording).
   rig.run(*camera, [&] {
-    const auto deadline = Clock::now() + std::chrono::seconds(10);
-    const auto recorded = [&] {
+    eventually([&] {
       const auto commands = drive_commands(*rig.board);
       const bool driven = std::any_of(commands.begin(), commands.end(), [](const auto& c) { return c.steering_us == 1700; });
       std::ifstream log(rig.recording + "/log.jsonl");
-      const auto lines = std::count(std::istreambuf_iterator<char>(log), std::istreambuf_iterator<char>(), '\n');
-      return driven && lines >= 4;
-    };
-    while (!recorded() && Clock::now() < deadline) sleep_ms(20);
+      return driven && std::count(std::istreambuf_iterator<char>(log), std::istreambuf_iterator<char>(), '\n') >= 4;
+    });
   });
   std::ifstream observations(rig.recording + "/log.jsonl");
   std::string first, line, last;

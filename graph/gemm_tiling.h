@@ -50,7 +50,7 @@ void parallel_ranges(Pool& pool, int total, int quantum, int max_size, F&& f) {
   pool.parallel_for(static_cast<size_t>(split.parts), [&](size_t task, int thread) {
     int begin, end;
     split.range(static_cast<int>(task), begin, end);
-    if (begin < end) f(begin, end, thread);
+    f(begin, end, thread);  // never empty: split_evenly gives every part at least one quantum
   });
 }
 

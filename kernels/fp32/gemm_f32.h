@@ -71,7 +71,8 @@ const GemmF32Kernels* gemm_f32_table_ref();
 const GemmF32Kernels* gemm_f32_table_avx2();
 /// AVX-512 with B prefetched 1 KB ahead in software (two 512-bit FMA ports take a panel from L2
 /// faster than the hardware prefetchers bring it: a Xeon's float GEMMs 10-20 % faster) or without
-/// (a Zen 4's float convs 1-4 % faster, layer4's 3x3 14 %, its linears 0-3 % slower).
+/// (a Zen 4's layer4 3x3 conv 7-14 % faster, its other float convs within a few %, its linears
+/// 0-3 % slower).
 /// isa_tables() holds the one for this CPU (without on Zen 4); the tests run both.
 const GemmF32Kernels* gemm_f32_table_avx512(bool software_prefetch = true);
 const GemmF32Kernels* gemm_f32_table_neon();

@@ -29,15 +29,15 @@ xsimd::batch<float, xsimd::avx512f> multiply_add<xsimd::avx512f>(const xsimd::ba
 
 using Prefetching = PackedGemm<xsimd::avx512f, 8, 2, 1024>;
 using Plain = PackedGemm<xsimd::avx512f, 8, 2, 0>;
-void gemm_packed_avx512(const GemmF32PackedArgs& args) { Prefetching::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
-void gemm_packed_avx512_plain(const GemmF32PackedArgs& args) { Plain::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
+template <class Gemm>
+void gemm_packed(const GemmF32PackedArgs& args) { Gemm::run(Isa::kAvx512, args, elementwise_f32_table_avx512()->gelu); }
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_avx512(bool software_prefetch) {
   static const GemmF32Kernels prefetching{Isa::kAvx512, "gemm_f32 8x32 avx512", Prefetching::kMr, Prefetching::NR,
-                                          gemm_packed_avx512};
+                                          gemm_packed<Prefetching>};
   static const GemmF32Kernels plain{Isa::kAvx512, "gemm_f32 8x32 avx512 (no B prefetch)", Plain::kMr, Plain::NR,
-                                    gemm_packed_avx512_plain};
+                                    gemm_packed<Plain>};
   return software_prefetch ? &prefetching : &plain;
 }
 }  // namespace act::kernels

@@ -50,7 +50,7 @@ struct KernelConfig {
   const ElementwiseF32Kernels& elementwise;
   const MaxPoolS8Kernels& maxpool_s8;
 
-  /// The variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32 8x32 avx512, ...".
+  /// The variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32 6x64 avx512, ...".
   std::string describe() const;
 };
 

@@ -52,7 +52,7 @@ struct GemmF32PackedArgs {
 
 struct GemmF32Kernels {
   Isa isa;
-  const char* name;  ///< e.g. "gemm_f32 8x32 avx512"
+  const char* name;  ///< e.g. "gemm_f32 6x64 avx512"
   int mr, nr;        ///< the register tile (nr: columns per packed panel)
   void (*packed)(const GemmF32PackedArgs& args);
 };

@@ -106,7 +106,7 @@ struct ModelInfo {
   double temporal_ensemble_coeff = 0.0;
   std::string precision;  ///< "fp32", "int8 static", "int8 dynamic" or "int8 mixed"
   std::string isa;        ///< the instruction set the kernels were chosen for, e.g. "avx512vnni"
-  std::string kernels;    ///< the kernel variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32 8x32 avx512, ..."
+  std::string kernels;    ///< the kernel variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32 6x64 avx512, ..."
   std::string summary;    ///< one line: backbone, dims, layers, cameras
   /// Where each part runs: "backbone: actengine (cpu), transformer: actengine (cpu)", or with
   /// EngineOptions::external_backbone "backbone: external (features given by the caller), ...".

@@ -51,10 +51,11 @@ struct ElementwiseF32Kernels {
   void (*gelu)(size_t n, float* x);
   /// y[i] = a[i] + b[i]; y may be a or b.
   void (*add)(size_t n, const float* a, const float* b, float* y);
-  /// The max-pool's channel max (MaxTapsFn, kernels/common/maxpool_window.h): dst[c] = the running
-  /// max of taps[0][c], taps[1][c], ... where a tap replaces it only when greater (NaN never does,
-  /// as a first tap it stays). Bit-exact in every variant.
-  void (*max_taps)(const float* const* taps, int ntaps, int channels, float* dst);
+  /// The max-pool's channel max over a run of windows (MaxTapsFn, kernels/common/maxpool_window.h):
+  /// dst[i * channels + c] = the running max of taps[0][i * pixel_step + c], taps[1][...], ...
+  /// where a tap replaces it only when greater (NaN never does, as a first tap it stays).
+  /// Bit-exact in every variant.
+  void (*max_taps)(const float* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, float* dst);
 };
 
 /// The table compiled for each ISA (nullptr when that file compiled to nothing on this target).

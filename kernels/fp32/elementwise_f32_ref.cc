@@ -73,11 +73,14 @@ void add_f32_ref(size_t n, const float* a, const float* b, float* y) {
   for (size_t i = 0; i < n; ++i) y[i] = a[i] + b[i];
 }
 
-void max_taps_f32_ref(const float* const* taps, int ntaps, int channels, float* dst) {
-  for (int c = 0; c < channels; ++c) {
-    float m = taps[0][c];
-    for (int t = 1; t < ntaps; ++t) m = taps[t][c] > m ? taps[t][c] : m;
-    dst[c] = m;
+void max_taps_f32_ref(const float* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, float* dst) {
+  for (int i = 0; i < pixels; ++i, dst += channels) {
+    const size_t at = static_cast<size_t>(i) * pixel_step;
+    for (int c = 0; c < channels; ++c) {
+      float m = taps[0][at + c];
+      for (int t = 1; t < ntaps; ++t) m = taps[t][at + c] > m ? taps[t][at + c] : m;
+      dst[c] = m;
+    }
   }
 }
 

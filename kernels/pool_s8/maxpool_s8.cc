@@ -8,11 +8,14 @@ namespace act::kernels {
 
 namespace {
 
-void max_taps_s8_ref(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
-  for (int c = 0; c < channels; ++c) {
-    int8_t m = taps[0][c];
-    for (int t = 1; t < ntaps; ++t) m = taps[t][c] > m ? taps[t][c] : m;
-    dst[c] = m;
+void max_taps_s8_ref(const int8_t* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, int8_t* dst) {
+  for (int i = 0; i < pixels; ++i, dst += channels) {
+    const size_t at = static_cast<size_t>(i) * pixel_step;
+    for (int c = 0; c < channels; ++c) {
+      int8_t m = taps[0][at + c];
+      for (int t = 1; t < ntaps; ++t) m = taps[t][at + c] > m ? taps[t][at + c] : m;
+      dst[c] = m;
+    }
   }
 }
 

@@ -15,7 +15,7 @@
 
 namespace act::kernels {
 
-/// MaxTapsFn (maxpool_window.h) over int8. Reads exactly `channels` bytes of each tap.
+/// MaxTapsFn (maxpool_window.h) over int8. Reads exactly `channels` bytes of each tap per pixel.
 using MaxS8TapsFn = MaxTapsFn<int8_t>;
 
 /// One variant of the family (maxpool_s8_variants.h lists them; an Engine runs its KernelConfig's).

@@ -19,13 +19,17 @@ namespace act::kernels {
 
 namespace {
 
-void max_taps_s8_avx512(const int8_t* const* taps, int ntaps, int channels, int8_t* dst) {
-  for (int c = 0; c < channels; c += 64) {
-    const int left = channels - c;
-    const __mmask64 k = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
-    __m512i m = _mm512_maskz_loadu_epi8(k, taps[0] + c);
-    for (int t = 1; t < ntaps; ++t) m = _mm512_max_epi8(m, _mm512_maskz_loadu_epi8(k, taps[t] + c));
-    _mm512_mask_storeu_epi8(dst + c, k, m);
+void max_taps_s8_avx512(const int8_t* const* taps_of_first, int ntaps, int pixels, size_t pixel_step, int channels,
+                        int8_t* dst) {
+  for (int i = 0; i < pixels; ++i, dst += channels) {
+    const auto taps = [&](int t) { return taps_of_first[t] + static_cast<size_t>(i) * pixel_step; };
+    for (int c = 0; c < channels; c += 64) {
+      const int left = channels - c;
+      const __mmask64 k = left >= 64 ? ~__mmask64{0} : (__mmask64{1} << left) - 1;
+      __m512i m = _mm512_maskz_loadu_epi8(k, taps(0) + c);
+      for (int t = 1; t < ntaps; ++t) m = _mm512_max_epi8(m, _mm512_maskz_loadu_epi8(k, taps(t) + c));
+      _mm512_mask_storeu_epi8(dst + c, k, m);
+    }
   }
 }
 

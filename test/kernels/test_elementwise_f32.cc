@@ -65,31 +65,40 @@ TEST_P(ElementwiseF32Variant, ReluAndAddAreBitExact) {
 }
 
 // The max-pool's channel max: bit-exact on ragged channel counts and tap counts, NaN and -0 among
-// the taps (a NaN first tap stays, a later one never wins), dst one of the taps.
+// the taps (a NaN first tap stays, a later one never wins), over a run of three windows a stride
+// apart and, for one window, into one of the taps.
 TEST_P(ElementwiseF32Variant, MaxTapsIsBitExact) {
   std::mt19937 rng(43);
   for (int channels : col_sizes()) {
     for (int ntaps : {1, 2, 3, 9, 32}) {
+      constexpr int kPixels = 3;
+      const size_t step = 2 * static_cast<size_t>(channels) + 1;  // a stride-2 pool's, plus one
       std::vector<std::vector<float>> taps(static_cast<size_t>(ntaps));
       std::vector<const float*> pointers;
       for (auto& t : taps) {
-        t = random_floats(static_cast<size_t>(channels), rng, -3.0f, 3.0f);
+        t = random_floats((kPixels - 1) * step + static_cast<size_t>(channels), rng, -3.0f, 3.0f);
         t[0] = -0.0f;
         if (channels > 2) t[2] = rng() % 2 ? kNaN : t[2];
         pointers.push_back(t.data());
       }
-      std::vector<float> a(static_cast<size_t>(channels) + 2, 7.0f), b = a;
-      ref().max_taps(pointers.data(), ntaps, channels, a.data());
-      v().max_taps(pointers.data(), ntaps, channels, b.data());
+      std::vector<float> a(kPixels * static_cast<size_t>(channels) + 2, 7.0f), b = a, naive = a;
+      ref().max_taps(pointers.data(), ntaps, kPixels, step, channels, a.data());
+      v().max_taps(pointers.data(), ntaps, kPixels, step, channels, b.data());
       ASSERT_EQ(std::memcmp(a.data(), b.data(), b.size() * 4), 0) << v().max_taps_name << " channels " << channels << " taps " << ntaps;
+      for (int i = 0; i < kPixels; ++i) {  // window by window, as the driver's border pixels
+        std::vector<const float*> window;
+        for (const float* p : pointers) window.push_back(p + static_cast<size_t>(i) * step);
+        v().max_taps(window.data(), ntaps, 1, 0, channels, naive.data() + static_cast<size_t>(i) * channels);
+      }
+      ASSERT_EQ(std::memcmp(naive.data(), b.data(), b.size() * 4), 0) << v().max_taps_name << " run against window by window";
       // Into the first tap.
       std::vector<float> first_ref = taps[0], first_v = taps[0];
       pointers[0] = first_ref.data();
-      ref().max_taps(pointers.data(), ntaps, channels, first_ref.data());
+      ref().max_taps(pointers.data(), ntaps, 1, 0, channels, first_ref.data());
       pointers[0] = first_v.data();
-      v().max_taps(pointers.data(), ntaps, channels, first_v.data());
-      ASSERT_EQ(std::memcmp(first_ref.data(), first_v.data(), first_v.size() * 4), 0) << v().max_taps_name << " in place";
-      ASSERT_EQ(std::memcmp(first_ref.data(), a.data(), first_ref.size() * 4), 0) << "in place gives the same";
+      v().max_taps(pointers.data(), ntaps, 1, 0, channels, first_v.data());
+      ASSERT_EQ(std::memcmp(first_ref.data(), first_v.data(), static_cast<size_t>(channels) * 4), 0) << v().max_taps_name << " in place";
+      ASSERT_EQ(std::memcmp(first_ref.data(), a.data(), static_cast<size_t>(channels) * 4), 0) << "in place gives the same";
     }
   }
 }

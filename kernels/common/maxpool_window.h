@@ -17,6 +17,20 @@ namespace act::kernels {
 template <typename T>
 using MaxTapsFn = void (*)(const T* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, T* dst);
 
+/// The scalar MaxTapsFn, both families' reference: a tap replaces the running max only when greater
+/// (for floats, a NaN never does and a NaN first tap stays).
+template <typename T>
+void max_taps_scalar(const T* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, T* dst) {
+  for (int i = 0; i < pixels; ++i, dst += channels) {
+    const size_t at = static_cast<size_t>(i) * pixel_step;
+    for (int c = 0; c < channels; ++c) {
+      T m = taps[0][at + c];
+      for (int t = 1; t < ntaps; ++t) m = taps[t][at + c] > m ? taps[t][at + c] : m;
+      dst[c] = m;
+    }
+  }
+}
+
 /// Output rows [row_begin, row_end) of a max-pool with the primitive `max_taps`. Padding never wins
 /// (it is skipped); a window entirely in the padding gives `empty`. `input` holds the image's rows
 /// from input_row0 on (a band of them: those the output rows read).

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "kernels/common/maxpool_window.h"
 #include "kernels/fp32/elementwise_f32.h"
 
 namespace act::kernels {
@@ -73,17 +74,6 @@ void add_f32_ref(size_t n, const float* a, const float* b, float* y) {
   for (size_t i = 0; i < n; ++i) y[i] = a[i] + b[i];
 }
 
-void max_taps_f32_ref(const float* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, float* dst) {
-  for (int i = 0; i < pixels; ++i, dst += channels) {
-    const size_t at = static_cast<size_t>(i) * pixel_step;
-    for (int c = 0; c < channels; ++c) {
-      float m = taps[0][at + c];
-      for (int t = 1; t < ntaps; ++t) m = taps[t][at + c] > m ? taps[t][at + c] : m;
-      dst[c] = m;
-    }
-  }
-}
-
 }  // namespace
 
 const ElementwiseF32Kernels* elementwise_f32_table_ref() {
@@ -92,7 +82,7 @@ const ElementwiseF32Kernels* elementwise_f32_table_ref() {
       "layernorm_rows_f32_ref", "softmax_rows_f32_ref", "softmax_rows_s8_ref", "relu_f32_ref", "gelu_f32_ref", "add_f32_ref",
       "max_taps_f32_ref",
       layernorm_rows_f32_ref, softmax_rows_f32_ref, softmax_rows_s8_ref, relu_f32_ref, gelu_f32_ref, add_f32_ref,
-      max_taps_f32_ref,
+      max_taps_scalar<float>,
   };
   return &kTable;
 }

@@ -1,4 +1,5 @@
-// The int8 max-pool (kernels/common/maxpool_window.h's driver) and the reference channel-max primitive.
+// The int8 max-pool (kernels/common/maxpool_window.h's driver) and its reference variant (the
+// driver's max_taps_scalar, shared with the float family's).
 #include "kernels/pool_s8/maxpool_s8.h"
 
 #include "kernels/common/maxpool_window.h"
@@ -6,23 +7,8 @@
 
 namespace act::kernels {
 
-namespace {
-
-void max_taps_s8_ref(const int8_t* const* taps, int ntaps, int pixels, size_t pixel_step, int channels, int8_t* dst) {
-  for (int i = 0; i < pixels; ++i, dst += channels) {
-    const size_t at = static_cast<size_t>(i) * pixel_step;
-    for (int c = 0; c < channels; ++c) {
-      int8_t m = taps[0][at + c];
-      for (int t = 1; t < ntaps; ++t) m = taps[t][at + c] > m ? taps[t][at + c] : m;
-      dst[c] = m;
-    }
-  }
-}
-
-}  // namespace
-
 const MaxPoolS8Kernels* maxpool_s8_table_ref() {
-  static constexpr MaxPoolS8Kernels kTable = {Isa::kRef, "max_taps_s8_ref", max_taps_s8_ref};
+  static constexpr MaxPoolS8Kernels kTable = {Isa::kRef, "max_taps_s8_ref", max_taps_scalar<int8_t>};
   return &kTable;
 }
 

@@ -165,7 +165,7 @@ TEST(GemmF32Packed, EveryVariantMatchesTheDoubleProduct) {
         {mr + 1, nr / 4 + 1, 64, 0, mr + 1, 0, nr / 4 + 1, 1, 1, GemmF32Activation::kRelu},
         {2 * mr, nr + nr / 2 + 1, 130, 0, 2 * mr, 0, nr + nr / 2 + 1, 2, 0, GemmF32Activation::kNone},
         {mr, 2 * nr + 3 * nr / 4 + 1, 147, 0, mr, 0, 2 * nr + 3 * nr / 4 + 1, 1, 2, GemmF32Activation::kGelu, 21},
-        // More columns than one cache block (16 panels) with a k tail.
+        // More columns than one cache block (at most 512 columns) with a k tail.
         {mr + 2, 17 * nr + 7, 260, 0, mr + 2, 0, 17 * nr + 7, 1, 1, GemmF32Activation::kGelu},
         // Sub-rectangles of a layer: rows from the middle, columns from the second panel, to the edge or not.
         {3 * mr + 2, 4 * nr + 3, 70, mr + 1, mr + 1, 1, 2 * nr, 2, 1, GemmF32Activation::kRelu},

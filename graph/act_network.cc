@@ -212,7 +212,18 @@ ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int ou
 ValueId ActNetwork::layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix) {
   const int D = config_.dim_model;
   const ValueId y = graph_.add_value(out_name, {rows, D});
-  auto op = std::make_unique<LayerNormOp>(rows, D, weight(weight_prefix + ".weight", {D}), weight(weight_prefix + ".bias", {D}), x, y);
+  const float* gamma = weight(weight_prefix + ".weight", {D});
+  const float* beta = weight(weight_prefix + ".bias", {D});
+  // Right after the int8 linear that wrote x (post-norm: its residual add), the linear normalizes
+  // its own rows; its codes, if any are asked for, become the norm's.
+  auto* linear = dynamic_cast<LinearS8Op*>(graph_.ops().back().get());
+  if (linear != nullptr && linear->row_output() == x && !row_codes_.contains(x)) {
+    linear->fuse_layernorm(gamma, beta, y);
+    row_codes_writers_.erase(x);
+    row_codes_writers_[y] = linear;
+    return y;
+  }
+  auto op = std::make_unique<LayerNormOp>(rows, D, gamma, beta, x, y);
   row_codes_writers_[y] = op.get();
   add(std::move(op), out_name);
   return y;

@@ -295,17 +295,30 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
   }
 }
 
+const char* LinearS8Op::type() const {
+  if (norms_.empty()) return x_codes_.per_tensor() ? "linear_s8" : "linear_s8_dyn";
+  return x_codes_.per_tensor() ? "linear_s8+layernorm_f32" : "linear_s8_dyn+layernorm_f32";
+}
+
 std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
   std::string variant = requantizes() ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
   if (x_codes_from_ == InputCodes::kQuantizedHere) variant = std::string(k.quant.quantize_name) + " + " + variant;
+  if (!norms_.empty()) variant += std::string(" + ") + k.elementwise.layernorm_name;
   if (y_codes_.present() && !requantizes()) variant += std::string(" + ") + k.quant.quantize_name;
   return variant;
+}
+
+void LinearS8Op::fuse_layernorm(const float* gamma, const float* beta, ValueId normed) {
+  check(!y_codes_.present(), ErrorCode::kInternal, "LinearS8Op: a LayerNorm fused after the output's codes were asked for");
+  norms_.push_back({gamma, beta, normed});
+  outputs.push_back(normed);
 }
 
 void LinearS8Op::write_row_codes(const RowCodes& codes) {
   check(!y_codes_.present() && codes.cols == out_, ErrorCode::kInternal, "LinearS8Op: row codes asked for twice or of another width");
   y_codes_ = codes;
   for (ValueId v : codes.values()) outputs.push_back(v);
+  if (!norms_.empty()) return;  // the codes of the last norm's output: never requantized by the GEMM
   const bool constant_bias_vector = bias_.value == kNoValue && bias_.ld == 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
   if (!y_codes_.per_tensor() || !constant_bias_vector || has_residual ||
@@ -375,12 +388,12 @@ void LinearS8Op::run(const RunContext& ctx) const {
     }
   }
   const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
-  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), y_codes_.present());
-  // Tasks of whole rows quantize their rows while they are still in cache; else a pass of its own.
-  // When nothing reads the float output (its readers take the codes), those rows go to the task's
-  // scratch only, never to memory.
-  const bool codes_per_task = y_codes_.present() && tiling.cols.parts == 1;
-  const bool f32_in_scratch = codes_per_task && !ctx.read(outputs[0]);
+  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), finishes_rows());
+  // Tasks of whole rows normalize and quantize their rows while they are still in cache; else a
+  // pass of its own. When nothing reads the float output (its readers take the codes or the
+  // norm's output), those rows go to the task's scratch only, never to memory.
+  const bool finish_per_task = finishes_rows() && tiling.cols.parts == 1;
+  const bool f32_in_scratch = finish_per_task && !ctx.read(outputs[0]);
   ctx.pool().parallel_for(tiling.count(), [&](size_t task, int thread) {
     int r0, r1, c0, c1;
     tiling.rect(task, r0, r1, c0, c1);
@@ -401,9 +414,24 @@ void LinearS8Op::run(const RunContext& ctx) const {
     if (epilogue_ == Epilogue::kGelu) {
       for (int r = 0; r < a.m; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), to.c + static_cast<size_t>(r) * to.ldc + c0);
     }
-    if (codes_per_task) y_codes_.write(ctx, to.c, to.ldc, r0, a.m);
+    if (finish_per_task) finish_rows(ctx, to.c, to.ldc, r0, a.m);
   });
-  if (y_codes_.present() && !codes_per_task) write_codes_in_row_tiles(ctx, y_codes_, o.c, o.ldc, rows_);
+  if (finishes_rows() && !finish_per_task) {
+    parallel_ranges(ctx.pool(), rows_, 1, kQuantizeTileRows, [&](int r0, int r1, int) {
+      finish_rows(ctx, o.c + static_cast<size_t>(r0) * o.ldc, o.ldc, r0, r1 - r0);
+    });
+  }
+}
+
+void LinearS8Op::finish_rows(const RunContext& ctx, const float* y, size_t ldy, int r0, int rows) const {
+  const size_t ld = static_cast<size_t>(out_);
+  for (const FusedLayerNorm& norm : norms_) {
+    float* normed = ctx.data(norm.output) + static_cast<size_t>(r0) * ld;
+    ctx.kernels().elementwise.layernorm_rows(rows, out_, y, ldy, norm.gamma, norm.beta, kLayerNormEps, normed, ld);
+    y = normed;
+    ldy = ld;
+  }
+  if (y_codes_.present()) y_codes_.write(ctx, y, ldy, r0, rows);
 }
 
 // The GEMM requantizes into the output codes (bias and ReLU in its int32 epilogue). The float
@@ -431,7 +459,7 @@ void LinearS8Op::run_requantized(const RunContext& ctx, const kernels::GemmS8Arg
 }
 
 size_t LinearS8Op::scratch_per_thread() const {
-  if (!y_codes_.present() || requantizes()) return 0;
+  if (!finishes_rows() || requantizes()) return 0;
   // The largest whole-row task of any thread count: one thread's strips or two threads' tiles
   // (more threads get smaller ones).
   int tile_rows = 0;

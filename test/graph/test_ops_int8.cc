@@ -483,6 +483,71 @@ TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
   }
 }
 
+// Post-norm's tail: linear + residual -> LayerNorm -> LayerNorm -> a linear reading the last norm's
+// codes. With both norms fused into the first linear (LinearS8Op::fuse_layernorm), against
+// LayerNormOps of their own: the same bits in both norms' outputs and in the next linear's, for
+// ragged row counts on 1 and 2 threads (whole-row tasks, and column tiles followed by a pass of
+// their own), per-token and per-tensor codes, and with the linear's own output kept or in scratch.
+TEST_P(OpsPerIsa, LayerNormsFusedIntoTheLinearGiveTheSameBits) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(34);
+  const int in = 72, dim = 136;
+  const QuantizedWeights w1 = quantize_weights(uniform(static_cast<size_t>(dim) * in, rng, -0.3f, 0.3f), dim, in);
+  const QuantizedWeights w2 = quantize_weights(uniform(static_cast<size_t>(dim) * dim, rng, -0.3f, 0.3f), dim, dim);
+  const std::vector<float> b1 = uniform(dim, rng, -1.0f, 1.0f);
+  const std::vector<float> gamma1 = uniform(dim, rng, 0.5f, 1.5f), beta1 = uniform(dim, rng, -0.5f, 0.5f);
+  const std::vector<float> gamma2 = uniform(dim, rng, 0.5f, 1.5f), beta2 = uniform(dim, rng, -0.5f, 0.5f);
+  ThreadPool one(1);
+  for (ThreadPool* pool : {&one, &pool_}) {
+    for (int rows : {1, 5, 13, 67, 131}) {
+      for (const std::optional<kernels::QuantS8> normed_q : {std::optional<kernels::QuantS8>{}, std::optional(kernels::choose_quant_s8(-2.5f, 3.0f))}) {
+        for (const bool keep_all : {false, true}) {
+          const std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -3.0f, 3.0f);
+          const std::vector<float> residual = uniform(static_cast<size_t>(rows) * dim, rng, -2.0f, 2.0f);
+          std::vector<float> results[2][4];  // [fused][linear, norm1, norm2, y]
+          for (const bool fused : {false, true}) {
+            Graph g;
+            const ValueId xv = g.add_input("x", {rows, in});
+            const ValueId rv = g.add_input("residual", {rows, dim});
+            const ValueId lin = g.add_value("linear", {rows, dim});
+            const ValueId n1 = g.add_value("norm1", {rows, dim});
+            const ValueId n2 = g.add_value("norm2", {rows, dim});
+            const ValueId y = g.add_value("y", {rows, dim});
+            auto& linear = g.add_op(std::make_unique<LinearS8Op>(
+                k.gemm_s8, rows, in, dim, MatrixRef::of(xv, in), row_codes(g, "x", rows, in),
+                LinearS8Op::InputCodes::kQuantizedHere, w1.q.data(), w1.scale.data(), MatrixRef::of_constant(b1.data(), 0),
+                MatrixRef::of(rv, dim), Epilogue::kNone, lin));
+            const RowCodes n2_codes = row_codes(g, "norm2", rows, dim, normed_q);
+            if (fused) {
+              linear.fuse_layernorm(gamma1.data(), beta1.data(), n1);
+              linear.fuse_layernorm(gamma2.data(), beta2.data(), n2);
+              linear.write_row_codes(n2_codes);
+            } else {
+              g.add_op(std::make_unique<LayerNormOp>(rows, dim, gamma1.data(), beta1.data(), lin, n1));
+              g.add_op(std::make_unique<LayerNormOp>(rows, dim, gamma2.data(), beta2.data(), n1, n2)).write_row_codes(n2_codes);
+            }
+            g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, dim, dim, MatrixRef::of(n2, dim), n2_codes,
+                                                  LinearS8Op::InputCodes::kFromProducer, w2.q.data(), w2.scale.data(),
+                                                  MatrixRef{}, MatrixRef::of(n1, dim), Epilogue::kNone, y));
+            g.mark_output(y);
+            g.plan(pool->threads(), keep_all);
+            std::copy(x.begin(), x.end(), g.data(xv));
+            std::copy(residual.begin(), residual.end(), g.data(rv));
+            g.run(*pool, k);
+            const ValueId kept[] = {lin, n1, n2, y};
+            for (int i = 0; i < 4; ++i) results[fused][i].assign(g.data(kept[i]), g.data(kept[i]) + static_cast<size_t>(rows) * dim);
+          }
+          for (int i = keep_all ? 0 : 3; i < 4; ++i) {  // intermediates are kept only with keep_all
+            ASSERT_EQ(0, std::memcmp(results[0][i].data(), results[1][i].data(), results[0][i].size() * sizeof(float)))
+                << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows << " value " << i
+                << (normed_q ? " per tensor" : " per token") << (keep_all ? " kept" : "");
+          }
+        }
+      }
+    }
+  }
+}
+
 // A constant per-row bias table whose last columns are the same in every row (the fused qkv's value
 // third) is read there as a bias vector: the same bits as the table read whole (from a graph value,
 // which the op cannot inspect), with ReLU, on 1 and 2 threads.

@@ -273,9 +273,17 @@ class OnnxBuilder {
       return linear(op, lin->params(), w.data(), nullptr, nullptr);
     }
     if (const auto* lin = dynamic_cast<const graph::LinearS8Op*>(&op)) {
-      return linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale(), lin->input_quant());
+      linear(op, lin->params(), nullptr, lin->weight(), lin->w_scale(), lin->input_quant());
+      ValueId x = op.outputs[0];
+      for (const auto& norm : lin->fused_layernorms()) {
+        layernorm(x, norm.gamma, norm.beta, norm.output);
+        x = norm.output;
+      }
+      return;
     }
-    if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) return layernorm(*ln);
+    if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) {
+      return layernorm(op.inputs[0], ln->gamma(), ln->beta(), op.outputs[0]);
+    }
     if (const auto* att = dynamic_cast<const graph::AttentionOp*>(&op)) return attention(att->params(), op.outputs[0]);
     // Int8 attention quantizes its keys and values at every run, which has no fixed QDQ form: the
     // export computes it in float, as the QDQ model's other run-time-quantized activations.
@@ -446,16 +454,15 @@ class OnnxBuilder {
     set(op.outputs[0], {op1("Mul", {a, op1("Sigmoid", {b}, "glu")}, "glu"), false, std::nullopt});
   }
 
-  void layernorm(const graph::LayerNormOp& op) {
-    const int64_t D = g_.value(op.outputs[0]).shape[1];
+  void layernorm(ValueId x, const float* gamma, const float* beta, ValueId output) {
+    const int64_t D = g_.value(output).shape[1];
     const size_t d = static_cast<size_t>(D);
     onnx::NodeProto* n = node("LayerNormalization",
-                              {float_of(op.inputs[0]), constant_f32("gamma", {D}, {op.gamma(), op.gamma() + d}),
-                               constant_f32("beta", {D}, {op.beta(), op.beta() + d})},
+                              {float_of(x), constant_f32("gamma", {D}, {gamma, gamma + d}), constant_f32("beta", {D}, {beta, beta + d})},
                               fresh("layernorm"));
     attr_int(n, "axis", -1);
     attr_float(n, "epsilon", graph::kLayerNormEps);
-    set(op.outputs[0], {n->output(0), false, std::nullopt});
+    set(output, {n->output(0), false, std::nullopt});
   }
 
   // Multi-head attention: heads split by Reshape/Transpose, softmax(q k^T / sqrt(hd)) v.

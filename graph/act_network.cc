@@ -488,17 +488,18 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
 
   std::vector<ConcatRowsOp::Part> tokens;
   tokens.push_back({MatrixRef::of_constant(weight(bn::kLatentToken, {D}), d), 1});
+  // The state tokens are projected by the concatenation (ConcatRowsOp): their weights are always float.
   if (config_.state_dim > 0) {
-    state_input_ = graph_.add_input("state", {1, config_.state_dim});
-    const ValueId t = linear("state_token", 1, config_.state_dim, D, MatrixRef::of(state_input_, static_cast<size_t>(config_.state_dim)),
-                             bn::kStateProjWeight, MatrixRef::of_constant(weight(bn::kStateProjBias, {D}), 0));
-    tokens.push_back({MatrixRef::of(t, d), 1});
+    const int S = config_.state_dim;
+    state_input_ = graph_.add_input("state", {1, S});
+    tokens.push_back({MatrixRef::of(state_input_, static_cast<size_t>(S)), 1, packed_weight(bn::kStateProjWeight, {D, S}),
+                      weight(bn::kStateProjBias, {D})});
   }
   if (config_.env_state_dim > 0) {
-    env_input_ = graph_.add_input("env_state", {1, config_.env_state_dim});
-    const ValueId t = linear("env_token", 1, config_.env_state_dim, D, MatrixRef::of(env_input_, static_cast<size_t>(config_.env_state_dim)),
-                             bn::kEnvProjWeight, MatrixRef::of_constant(weight(bn::kEnvProjBias, {D}), 0));
-    tokens.push_back({MatrixRef::of(t, d), 1});
+    const int E = config_.env_state_dim;
+    env_input_ = graph_.add_input("env_state", {1, E});
+    tokens.push_back({MatrixRef::of(env_input_, static_cast<size_t>(E)), 1, packed_weight(bn::kEnvProjWeight, {D, E}),
+                      weight(bn::kEnvProjBias, {D})});
   }
   stage_ = Stage::kBackbone;
   for (size_t c = 0; c < config_.cameras.size(); ++c) {

@@ -282,9 +282,24 @@ void AttentionOp::run(const RunContext& ctx) const {
 
 ConcatRowsOp::ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output) : cols_(cols), parts_(std::move(parts)) {
   for (const auto& p : parts_) {
+    check(p.projection == nullptr || (p.projection->rows() == cols && p.bias != nullptr), ErrorCode::kInternal,
+          "concat_rows_f32: a projection of another width, or without its bias");
     if (p.source.value != kNoValue) inputs.push_back(p.source.value);
   }
   outputs = {output};
+}
+
+std::string ConcatRowsOp::kernel(const kernels::KernelConfig& k) const {
+  const bool projects = std::any_of(parts_.begin(), parts_.end(), [](const Part& p) { return p.projection != nullptr; });
+  return projects ? std::string("memcpy + ") + k.gemm_f32.name : "memcpy";
+}
+
+double ConcatRowsOp::macs() const {
+  double macs = 0;
+  for (const auto& p : parts_) {
+    if (p.projection != nullptr) macs += static_cast<double>(p.rows) * p.projection->cols() * cols_;
+  }
+  return macs;
 }
 
 void ConcatRowsOp::run(const RunContext& ctx) const {
@@ -297,10 +312,24 @@ void ConcatRowsOp::run(const RunContext& ctx) const {
     int part_start = 0;
     for (const auto& p : parts_) {
       const int from = std::max(begin, part_start), to = std::min(end, part_start + p.rows);
-      const float* src = from < to ? p.source.resolve(ctx) : nullptr;
-      for (int r = from; r < to; ++r) {
-        std::memcpy(y + static_cast<size_t>(r) * cols_, src + static_cast<size_t>(r - part_start) * p.source.ld,
-                    static_cast<size_t>(cols_) * sizeof(float));
+      const float* src = from < to ? p.source.resolve(ctx) + static_cast<size_t>(from - part_start) * p.source.ld : nullptr;
+      if (from < to && p.projection != nullptr) {
+        kernels::GemmF32PackedArgs args;
+        args.m = to - from;
+        args.n = cols_;
+        args.k = p.projection->cols();
+        args.a = src;
+        args.lda = p.source.ld;
+        args.packed_b = p.projection->for_kernels(ctx.kernels().gemm_f32);
+        args.c = y + static_cast<size_t>(from) * cols_;
+        args.ldc = static_cast<size_t>(cols_);
+        args.epilogue = {p.bias, 0};
+        ctx.kernels().gemm_f32.packed(args);
+      } else {
+        for (int r = from; r < to; ++r) {
+          std::memcpy(y + static_cast<size_t>(r) * cols_, src + static_cast<size_t>(r - from) * p.source.ld,
+                      static_cast<size_t>(cols_) * sizeof(float));
+        }
       }
       part_start += p.rows;
     }

@@ -166,17 +166,23 @@ class AttentionOp : public Op {
   int nr_;  ///< the panel width scratch is sized for
 };
 
-/// Stacks row blocks (graph values or constant rows) into one [rows, cols] value.
+/// Stacks row blocks (graph values or constant rows) into one [rows, cols] value; a block may be
+/// projected on the way (source W^T + bias, W [cols, source width]): the encoder's robot-state and
+/// environment-state tokens, a row each. Projected here, they are no ops of their own: a one-row
+/// linear ran no faster on two threads than on one, and cost a dispatch on every inference.
 class ConcatRowsOp : public Op {
  public:
   struct Part {
     MatrixRef source;
     int rows;
+    std::shared_ptr<const PackedF32Weights> projection = nullptr;  ///< none: the rows as they are
+    const float* bias = nullptr;                                    ///< the projection's [cols]
   };
   ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output);
   const char* type() const override { return "concat_rows_f32"; }
-  std::string kernel(const kernels::KernelConfig&) const override { return "memcpy"; }
+  std::string kernel(const kernels::KernelConfig& k) const override;
   void run(const RunContext& ctx) const override;
+  double macs() const override;
   const std::vector<Part>& parts() const { return parts_; }
 
  private:

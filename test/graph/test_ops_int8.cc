@@ -483,6 +483,65 @@ TEST_P(OpsPerIsa, RowCodesWrittenByProducersGiveTheSameBits) {
   }
 }
 
+// The encoder's input tokens: a constant row, a projected state row, a projected env-state row in
+// the middle of a band, then feature rows. Each projected row has the bits of a LinearOp over the
+// same weights; the other rows are copies. Ragged feature counts (bands of 32 rows), 1 and 2 threads.
+TEST_P(OpsPerIsa, ConcatRowsProjectsItsStateRowsAsALinearDoes) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(55);
+  const int cols = 72, state_dim = 6, env_dim = 3;
+  const std::vector<float> latent = uniform(cols, rng, -1.0f, 1.0f);
+  const std::vector<float> w_state = uniform(static_cast<size_t>(cols) * state_dim, rng, -1.0f, 1.0f);
+  const std::vector<float> w_env = uniform(static_cast<size_t>(cols) * env_dim, rng, -1.0f, 1.0f);
+  const std::vector<float> b_state = uniform(cols, rng, -1.0f, 1.0f), b_env = uniform(cols, rng, -1.0f, 1.0f);
+  const auto packed_state = std::make_shared<const PackedF32Weights>(k.gemm_f32, cols, state_dim, w_state.data());
+  const auto packed_env = std::make_shared<const PackedF32Weights>(k.gemm_f32, cols, env_dim, w_env.data());
+  ThreadPool one(1);
+  for (ThreadPool* pool : {&one, &pool_}) {
+    for (const int features : {1, 29, 30, 95}) {
+      const std::vector<float> state = uniform(state_dim, rng, -2.0f, 2.0f), env = uniform(env_dim, rng, -2.0f, 2.0f);
+      const std::vector<float> feats = uniform(static_cast<size_t>(features) * cols, rng, -2.0f, 2.0f);
+      const int rows = features + 3;
+      Graph g;
+      const ValueId sv = g.add_input("state", {1, state_dim});
+      const ValueId ev = g.add_input("env", {1, env_dim});
+      const ValueId fv = g.add_input("features", {features, cols});
+      const ValueId tokens = g.add_value("tokens", {rows, cols});
+      const ValueId state_row = g.add_value("state_row", {1, cols});
+      const ValueId env_row = g.add_value("env_row", {1, cols});
+      // The place of the env row: after the state row, or (with 29 or 30 features) the last in a band.
+      std::vector<ConcatRowsOp::Part> parts = {{MatrixRef::of_constant(latent.data(), cols), 1},
+                                               {MatrixRef::of(sv, state_dim), 1, packed_state, b_state.data()}};
+      const bool env_last = features == 29 || features == 30;
+      if (!env_last) parts.push_back({MatrixRef::of(ev, env_dim), 1, packed_env, b_env.data()});
+      parts.push_back({MatrixRef::of(fv, cols), features});
+      if (env_last) parts.push_back({MatrixRef::of(ev, env_dim), 1, packed_env, b_env.data()});
+      g.add_op(std::make_unique<ConcatRowsOp>(cols, parts, tokens));
+      g.add_op(std::make_unique<LinearOp>(packed_state, 1, state_dim, cols, MatrixRef::of(sv, state_dim),
+                                          MatrixRef::of_constant(b_state.data(), 0), MatrixRef{}, Epilogue::kNone, state_row));
+      g.add_op(std::make_unique<LinearOp>(packed_env, 1, env_dim, cols, MatrixRef::of(ev, env_dim),
+                                          MatrixRef::of_constant(b_env.data(), 0), MatrixRef{}, Epilogue::kNone, env_row));
+      for (ValueId v : {tokens, state_row, env_row}) g.mark_output(v);
+      g.plan(pool->threads(), false);
+      std::copy(state.begin(), state.end(), g.data(sv));
+      std::copy(env.begin(), env.end(), g.data(ev));
+      std::copy(feats.begin(), feats.end(), g.data(fv));
+      g.run(*pool, k);
+      const auto row = [&](int r) { return g.data(tokens) + static_cast<size_t>(r) * cols; };
+      const size_t bytes = cols * sizeof(float);
+      const std::string where = std::string(kernels::isa_name(GetParam())) + " threads " + std::to_string(pool->threads()) +
+                                " features " + std::to_string(features);
+      EXPECT_EQ(0, std::memcmp(row(0), latent.data(), bytes)) << where;
+      EXPECT_EQ(0, std::memcmp(row(1), g.data(state_row), bytes)) << where;
+      EXPECT_EQ(0, std::memcmp(row(env_last ? rows - 1 : 2), g.data(env_row), bytes)) << where;
+      EXPECT_EQ(0, std::memcmp(row(env_last ? 2 : 3), feats.data(), static_cast<size_t>(features) * bytes)) << where;
+      float expected_state0 = b_state[0];  // and the projection is one: its first output by hand
+      for (int i = 0; i < state_dim; ++i) expected_state0 += state[static_cast<size_t>(i)] * w_state[static_cast<size_t>(i)];
+      EXPECT_NEAR(row(1)[0], expected_state0, 1e-4f) << where;
+    }
+  }
+}
+
 // Post-norm's tail: linear + residual -> LayerNorm -> LayerNorm -> a linear reading the last norm's
 // codes. With both norms fused into the first linear (LinearS8Op::fuse_layernorm), against
 // LayerNormOps of their own: the same bits in both norms' outputs and in the next linear's, for

@@ -491,7 +491,19 @@ class OnnxBuilder {
   void concat(const graph::ConcatRowsOp& op) {
     const int cols = static_cast<int>(g_.value(op.outputs[0]).shape[1]);
     std::vector<std::string> parts;
-    for (const auto& p : op.parts()) parts.push_back(matrix(p.source, p.rows, cols, "token"));
+    for (const auto& p : op.parts()) {
+      if (p.projection == nullptr) {
+        parts.push_back(matrix(p.source, p.rows, cols, "token"));
+        continue;
+      }
+      const int in = p.projection->cols();
+      const std::vector<float> w = p.projection->unpacked();
+      onnx::NodeProto* gemm = node("Gemm", {matrix(p.source, p.rows, in, "state"), constant_f32("weight", {cols, in}, w),
+                                            constant_f32("bias", {cols}, {p.bias, p.bias + cols})},
+                                   fresh("token"));
+      attr_int(gemm, "transB", 1);
+      parts.push_back(gemm->output(0));
+    }
     onnx::NodeProto* n = node("Concat", parts, fresh("tokens"));
     attr_int(n, "axis", 0);
     set(op.outputs[0], {n->output(0), false, std::nullopt});

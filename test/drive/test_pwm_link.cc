@@ -230,7 +230,9 @@ TEST(PwmControlLoop, NeutralWithin250msOfTheModelReturningNaN) {
   std::optional<Clock::time_point> nan_at;
   rig.run(camera, [&] {
     EXPECT_TRUE(rig.tree.wait_until_not(kSafe, milliseconds(3000)));
-    EXPECT_TRUE(rig.tree.current().is(kDriving));
+    // Waited for, not read once: the fake reads the two channels' files one after the other, so
+    // the first sample off neutral can hold the new steering beside the old throttle.
+    EXPECT_TRUE(rig.tree.wait_until_is(kDriving, milliseconds(1000)));
     rig.controls->return_nan.store(true);
     std::this_thread::sleep_for(milliseconds(600));
     std::lock_guard lock(rig.controls->mutex);

@@ -186,13 +186,13 @@ void ActNetwork::calibration_point(CalibrationRole role, ValueId value) {
 }
 
 ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
-                           MatrixRef bias, MatrixRef residual, Epilogue epilogue) {
+                           MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output) {
   if (const ValueId whole = whole_value(x, rows, in); whole != kNoValue && stage_ != Stage::kOther) {
     const bool seen = std::any_of(calibration_points_.begin(), calibration_points_.end(),
                                   [&](const CalibrationPoint& p) { return p.value == whole; });
     if (!seen) calibration_points_.push_back({CalibrationRole::kLinearInput, 0, whole, weight_name, -1});
   }
-  const ValueId y = graph_.add_value(out_name, {rows, out});
+  const ValueId y = output != kNoValue ? output : graph_.add_value(out_name, {rows, out});
   if (const ActbTensor* q8 = int8_weight(weight_name, {out, in})) {
     RowCodes x_codes = producer_row_codes(x, rows, in);
     const auto from = x_codes.present() ? LinearS8Op::InputCodes::kFromProducer : LinearS8Op::InputCodes::kQuantizedHere;
@@ -279,7 +279,7 @@ ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, Matri
   return y;
 }
 
-ValueId ActNetwork::backbone(size_t camera) {
+ValueId ActNetwork::backbone(size_t camera, int first_row) {
   const CameraConfig& cam = config_.cameras[camera];
   const std::string p = cam_prefix(camera);
   camera_ = camera;
@@ -360,13 +360,14 @@ ValueId ActNetwork::backbone(size_t camera) {
     spec.bias = proj_bias;
     spec.input_q = x.q;
     spec.s8_out = false;
-    const ValueId y = graph_.add_value(proj_name, {h * w, D});
+    const ValueId y = graph_.add_row_view(proj_name, encoder_tokens_, first_row, h * w);
     add_layer(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, x.id, y), proj_name, y, bn::kImgProjWeight, true);
     calibration_point(CalibrationRole::kImageProjection, y);
     return y;
   }
   const ValueId y = linear(proj_name, h * w, C, D, MatrixRef::of(as_f32(x).id, static_cast<size_t>(C)), bn::kImgProjWeight,
-                           MatrixRef::of_constant(proj_bias, 0));
+                           MatrixRef::of_constant(proj_bias, 0), {}, Epilogue::kNone,
+                           graph_.add_row_view(proj_name, encoder_tokens_, first_row, h * w));
   calibration_point(CalibrationRole::kImageProjection, y);
   return y;
 }
@@ -501,18 +502,25 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
     tokens.push_back({MatrixRef::of(env_input_, static_cast<size_t>(E)), 1, packed_weight(bn::kEnvProjWeight, {D, E}),
                       weight(bn::kEnvProjBias, {D})});
   }
+  // The image features follow those rows: each camera's projection writes its rows in place (the
+  // concatenation then skips them; an external backbone's features are inputs, copied).
+  encoder_tokens_ = graph_.add_value("encoder_in_tokens", {N, D});
+  int token_row = static_cast<int>(tokens.size());
   stage_ = Stage::kBackbone;
   for (size_t c = 0; c < config_.cameras.size(); ++c) {
-    const ValueId feats = external_backbone ? external_features(c) : backbone(c);
-    tokens.push_back({MatrixRef::of(feats, d), static_cast<int>(graph_.value(feats).shape[0])});
+    const ValueId feats = external_backbone ? external_features(c) : backbone(c, token_row);
+    const int rows = static_cast<int>(graph_.value(feats).shape[0]);
+    tokens.push_back({MatrixRef::of(feats, d), rows});
+    token_row += rows;
   }
   if (external_backbone) {
     tensors_.skip("backbone.");
     tensors_.skip(bn::kImgProjWeight);
     tensors_.skip(bn::kImgProjBias);
   }
+  check(token_row == N, ErrorCode::kInternal, "the encoder's tokens do not add up to n_tokens");
   stage_ = Stage::kEncoder;
-  ValueId x = graph_.add_value("encoder_in_tokens", {N, D});
+  ValueId x = encoder_tokens_;
   auto concat = std::make_unique<ConcatRowsOp>(D, std::move(tokens), x);
   add(std::move(concat), "encoder_in_tokens");
   weight(bn::kEncoderPos, {N, D});  // present for inspection; its effect is folded into the bias tables

@@ -122,7 +122,9 @@ class ActNetwork {
   void add_layer(std::unique_ptr<Op> op, const std::string& name, ValueId output, const std::string& weight, bool int8);
   /// Records a float value of camera `camera_` (the branch being built) as a calibration point.
   void calibration_point(CalibrationRole role, ValueId value);
-  ValueId backbone(size_t camera);
+  /// Camera `camera`'s backbone and input projection, whose output is rows [first_row, first_row +
+  /// h * w) of the encoder's input tokens (a row view: written in place).
+  ValueId backbone(size_t camera, int first_row);
   /// The input that takes an external backbone's output for `camera` (its tokens, [h * w, D]).
   ValueId external_features(size_t camera);
   /// [LayerNorm1 (pre-norm)] -> fused qkv projection -> attention -> out projection + residual x
@@ -133,8 +135,9 @@ class ActNetwork {
   ValueId ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name);
   /// Tags the calibration point of an FFN's hidden activation h with the next FFN number (CalibrationPoint::ffn).
   void tag_ffn_hidden(ValueId h);
+  /// `output`: the [rows, out] value to write (a row view), else a new one named out_name.
   ValueId linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
-                 MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone);
+                 MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone, ValueId output = kNoValue);
   ValueId layernorm(const std::string& out_name, int rows, ValueId x, const std::string& weight_prefix);
   /// Values for the row codes of a [rows, cols] matrix, named `name`_s8, _scale, _zero_point; per
   /// tensor (`fixed`), the codes alone.
@@ -158,6 +161,7 @@ class ActNetwork {
   std::vector<AlignedBuffer> owned_tables_;  // the bias tables the ops read
   std::map<std::string, std::shared_ptr<const PackedF32Weights>> packed_weights_;  // by blob tensor name
   Graph graph_;
+  ValueId encoder_tokens_ = kNoValue;  // the encoder's input [N, D]: latent, state rows, image features
   std::vector<ValueId> camera_inputs_;
   ValueId state_input_ = kNoValue;
   ValueId env_input_ = kNoValue;

@@ -37,6 +37,18 @@ ValueId Graph::add_input(std::string name, std::vector<int64_t> shape, DataType 
   return id;
 }
 
+ValueId Graph::add_row_view(std::string name, ValueId parent, int first_row, int rows) {
+  const Value& p = value(parent);
+  check(p.dtype == DataType::kF32 && p.shape.size() == 2 && p.view_of == kNoValue && first_row >= 0 && rows >= 0 &&
+            first_row + rows <= p.shape[0],
+        ErrorCode::kInternal, "row view of \"" + p.name + "\": not rows of a float matrix");
+  const int64_t cols = p.shape[1];
+  const ValueId id = add_value(std::move(name), {rows, cols});
+  values_.back().view_of = parent;
+  values_.back().view_offset = static_cast<size_t>(first_row) * static_cast<size_t>(cols);
+  return id;
+}
+
 void Graph::mark_output(ValueId id) { values_[static_cast<size_t>(id)].pinned = true; }
 
 ValueId Graph::find(const std::string& name) const {
@@ -95,6 +107,18 @@ void Graph::plan(int threads, bool keep_all_values) {
       v.last_use = std::max(v.last_use, idx);
     }
   }
+  // A view's uses are its parent's: the parent's memory holds the view's rows.
+  for (Value& v : values_) {
+    if (v.view_of == kNoValue) continue;
+    Value& parent = values_[static_cast<size_t>(v.view_of)];
+    if (v.first_use >= 0) parent.first_use = parent.first_use < 0 ? v.first_use : std::min(parent.first_use, v.first_use);
+    parent.last_use = std::max(parent.last_use, v.last_use);
+    parent.pinned = parent.pinned || v.pinned;
+    parent.read = parent.read || v.read;
+  }
+  for (Value& v : values_) {
+    if (v.view_of != kNoValue) v.read = v.read || values_[static_cast<size_t>(v.view_of)].read;
+  }
   const int end = static_cast<int>(ops_.size());
   // Greedy placement, largest values first, each at the lowest offset that does not overlap a value
   // whose lifetime intersects its own.
@@ -109,6 +133,7 @@ void Graph::plan(int threads, bool keep_all_values) {
   size_t total = 0;
   for (size_t i : order) {
     Value& v = values_[i];
+    if (v.view_of != kNoValue) continue;  // placed with its parent
     const bool whole_run = v.pinned || keep_all_values;
     const int first = whole_run ? -1 : v.first_use;
     const int last = whole_run ? end : v.last_use;
@@ -126,6 +151,9 @@ void Graph::plan(int threads, bool keep_all_values) {
     v.offset = offset;
     placed.push_back({offset, offset + size, first, last});
     total = std::max(total, offset + size);
+  }
+  for (Value& v : values_) {
+    if (v.view_of != kNoValue) v.offset = values_[static_cast<size_t>(v.view_of)].offset + v.view_offset;
   }
   scratch_per_thread_ = 0;
   for (const auto& op : ops_) scratch_per_thread_ = std::max(scratch_per_thread_, align_up(op->scratch_per_thread()));

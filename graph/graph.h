@@ -42,6 +42,10 @@ struct Value {
   /// False when no op reads it and it is neither pinned nor kept (plan()): its producer may leave it
   /// unwritten (an int8 linear whose consumers read only its row codes).
   bool read = true;
+  /// A row view (Graph::add_row_view): no memory of its own, its rows those of view_of from
+  /// view_offset floats on.
+  ValueId view_of = kNoValue;
+  size_t view_offset = 0;
 };
 
 /// What an op sees when it runs: the arena, the pool, per-thread scratch and the kernels to call (the
@@ -154,6 +158,10 @@ class Graph {
   ValueId add_value(std::string name, std::vector<int64_t> shape, DataType dtype = DataType::kF32);
   /// A value the caller writes before run() (pinned).
   ValueId add_input(std::string name, std::vector<int64_t> shape, DataType dtype = DataType::kF32);
+  /// Rows [first_row, first_row + rows) of the float matrix `parent`, as a value of their own: its
+  /// producer writes them in place (the image projection straight into the encoder's tokens, no
+  /// copy). The parent lives while any of its views does.
+  ValueId add_row_view(std::string name, ValueId parent, int first_row, int rows);
   /// Keeps a value alive to the end of the run so the caller can read it.
   void mark_output(ValueId id);
   /// Appends an op; its inputs/outputs must already be set.

@@ -325,7 +325,7 @@ void ConcatRowsOp::run(const RunContext& ctx) const {
         args.ldc = static_cast<size_t>(cols_);
         args.epilogue = {p.bias, 0};
         ctx.kernels().gemm_f32.packed(args);
-      } else {
+      } else if (src != y + static_cast<size_t>(from) * cols_) {  // else written in place (a row view)
         for (int r = from; r < to; ++r) {
           std::memcpy(y + static_cast<size_t>(r) * cols_, src + static_cast<size_t>(r - from) * p.source.ld,
                       static_cast<size_t>(cols_) * sizeof(float));

@@ -169,7 +169,8 @@ class AttentionOp : public Op {
 /// Stacks row blocks (graph values or constant rows) into one [rows, cols] value; a block may be
 /// projected on the way (source W^T + bias, W [cols, source width]): the encoder's robot-state and
 /// environment-state tokens, a row each. Projected here, they are no ops of their own: a one-row
-/// linear ran no faster on two threads than on one, and cost a dispatch on every inference.
+/// linear ran no faster on two threads than on one, and cost a dispatch on every inference. A block
+/// already in place (a row view of the output, written by its producer) is not copied.
 class ConcatRowsOp : public Op {
  public:
   struct Part {

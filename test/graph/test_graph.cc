@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <set>
 #include <thread>
 
@@ -207,6 +208,58 @@ TEST(GraphPlanner, ReusesDeadBuffersAndKeepsLiveOnesApart) {
   for (ValueId v : chain) distinct.insert(g.value(v).offset);
   EXPECT_EQ(distinct.size(), chain.size());
   EXPECT_GT(g.arena_bytes(), planned);
+}
+
+// A row view is its parent's rows: the producer writes them in place, a concatenation skips them,
+// and the parent is kept from the view's first write on (a temporary made between the view's write
+// and the parent's own op must not share its memory).
+TEST(GraphPlanner, RowViewsAreTheirParentsRowsAndKeepItAlive) {
+  Graph g;
+  const int cols = 16, rows = 3, lead = 2;
+  std::vector<float> gamma(cols, 1.0f), beta(cols, 0.0f), constant(static_cast<size_t>(lead) * cols);
+  for (size_t i = 0; i < constant.size(); ++i) constant[i] = static_cast<float>(i) - 7.5f;
+  const ValueId a = g.add_input("a", {rows, cols});
+  const ValueId parent = g.add_value("parent", {lead + rows, cols});
+  const ValueId view = g.add_row_view("view", parent, lead, rows);
+  const ValueId temp = g.add_value("temp", {rows, cols});  // dead before the parent's own op
+  const ValueId temp2 = g.add_value("temp2", {rows, cols});
+  const ValueId out = g.add_value("out", {lead + 2 * rows, cols});
+  g.add_op(std::make_unique<LayerNormOp>(rows, cols, gamma.data(), beta.data(), a, view));
+  g.add_op(std::make_unique<LayerNormOp>(rows, cols, gamma.data(), beta.data(), a, temp));
+  g.add_op(std::make_unique<LayerNormOp>(rows, cols, gamma.data(), beta.data(), temp, temp2));
+  g.add_op(std::make_unique<ConcatRowsOp>(
+      cols, std::vector<ConcatRowsOp::Part>{{MatrixRef::of_constant(constant.data(), cols), lead}, {MatrixRef::of(view, cols), rows}},
+      parent));
+  g.add_op(std::make_unique<ConcatRowsOp>(
+      cols, std::vector<ConcatRowsOp::Part>{{MatrixRef::of(parent, cols), lead + rows}, {MatrixRef::of(temp2, cols), rows}}, out));
+  g.mark_output(out);
+  g.plan(1, false);
+  EXPECT_EQ(g.data(view), g.data(parent) + lead * cols);
+  const auto overlap = [&](ValueId x, ValueId y) {
+    const float *x0 = g.data(x), *y0 = g.data(y);
+    const float *x1 = x0 + g.value(x).elements, *y1 = y0 + g.value(y).elements;
+    return x0 < y1 && y0 < x1;
+  };
+  EXPECT_FALSE(overlap(parent, temp)) << "the parent is live from its view's write on";
+  std::vector<float> x(static_cast<size_t>(rows) * cols);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = static_cast<float>((i * 7) % 11);
+  std::copy(x.begin(), x.end(), g.data(a));
+  ThreadPool pool(1);
+  g.run(pool, kernels::kernel_config_for(kernels::Isa::kRef));
+  const float* o = g.data(out);
+  EXPECT_TRUE(std::equal(constant.begin(), constant.end(), o)) << "the leading rows";
+  for (int r = 0; r < rows; ++r) {  // the view's rows: the LayerNorm of a's, in place
+    const float* xr = x.data() + static_cast<size_t>(r) * cols;
+    double mean = 0, var = 0;
+    for (int c = 0; c < cols; ++c) mean += xr[c];
+    mean /= cols;
+    for (int c = 0; c < cols; ++c) var += (xr[c] - mean) * (xr[c] - mean);
+    var /= cols;
+    for (int c = 0; c < cols; ++c) {
+      EXPECT_NEAR(o[static_cast<size_t>(lead + r) * cols + c], (xr[c] - mean) / std::sqrt(var + kLayerNormEps), 1e-5)
+          << "row " << r << " col " << c;
+    }
+  }
 }
 
 }  // namespace

@@ -352,8 +352,7 @@ void write_codes_in_row_tiles(const RunContext& ctx, const RowCodes& codes, cons
 }  // namespace
 
 void LinearS8Op::run(const RunContext& ctx) const {
-  if (x_codes_from_ == InputCodes::kQuantizedHere) write_codes_in_row_tiles(ctx, x_codes_, x_.resolve(ctx), x_.ld, rows_);
-
+  const bool quantize_here = x_codes_from_ == InputCodes::kQuantizedHere;
   kernels::GemmS8Args args;
   args.m = rows_;
   args.n = out_;
@@ -362,7 +361,10 @@ void LinearS8Op::run(const RunContext& ctx) const {
   args.lda = static_cast<size_t>(in_);
   args.packed_w = packed_.data();
   if (!x_codes_.per_tensor()) args.a_row_zero_point = ctx.data_s32(x_codes_.zero_point);
-  if (requantizes()) return run_requantized(ctx, args);
+  if (requantizes()) {
+    if (quantize_here) write_codes_in_row_tiles(ctx, x_codes_, x_.resolve(ctx), x_.ld, rows_);
+    return run_requantized(ctx, args);
+  }
   kernels::GemmS8OutF32 o;
   o.c = ctx.data(outputs[0]);
   o.ldc = static_cast<size_t>(out_);
@@ -394,9 +396,15 @@ void LinearS8Op::run(const RunContext& ctx) const {
   // norm's output), those rows go to the task's scratch only, never to memory.
   const bool finish_per_task = finishes_rows() && tiling.cols.parts == 1;
   const bool f32_in_scratch = finish_per_task && !ctx.read(outputs[0]);
+  // Likewise the input: tasks of whole rows quantize the rows they read first (no pass, no
+  // dispatch of its own; the codes still in cache for the GEMM).
+  const bool quantize_per_task = quantize_here && tiling.cols.parts == 1;
+  const float* x = quantize_here ? x_.resolve(ctx) : nullptr;
+  if (quantize_here && !quantize_per_task) write_codes_in_row_tiles(ctx, x_codes_, x, x_.ld, rows_);
   ctx.pool().parallel_for(tiling.count(), [&](size_t task, int thread) {
     int r0, r1, c0, c1;
     tiling.rect(task, r0, r1, c0, c1);
+    if (quantize_per_task) x_codes_.write(ctx, x + static_cast<size_t>(r0) * x_.ld, x_.ld, r0, r1 - r0);
     // The task's rows as a GEMM of their own, starting at row r0.
     const size_t row = static_cast<size_t>(r0);
     kernels::GemmS8Args a = args;

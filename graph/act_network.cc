@@ -185,13 +185,17 @@ void ActNetwork::calibration_point(CalibrationRole role, ValueId value) {
   if (stage_ == Stage::kBackbone) calibration_points_.push_back({role, camera_, value, "", -1});
 }
 
-ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
-                           MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output) {
+void ActNetwork::note_linear_input(const MatrixRef& x, int rows, int in, const std::string& weight_name) {
   if (const ValueId whole = whole_value(x, rows, in); whole != kNoValue && stage_ != Stage::kOther) {
     const bool seen = std::any_of(calibration_points_.begin(), calibration_points_.end(),
                                   [&](const CalibrationPoint& p) { return p.value == whole; });
     if (!seen) calibration_points_.push_back({CalibrationRole::kLinearInput, 0, whole, weight_name, -1});
   }
+}
+
+ValueId ActNetwork::linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
+                           MatrixRef bias, MatrixRef residual, Epilogue epilogue, ValueId output) {
+  note_linear_input(x, rows, in, weight_name);
   const ValueId y = output != kNoValue ? output : graph_.add_value(out_name, {rows, out});
   if (const ActbTensor* q8 = int8_weight(weight_name, {out, in})) {
     RowCodes x_codes = producer_row_codes(x, rows, in);
@@ -532,8 +536,17 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
   ValueId y = kNoValue;
   for (int l = 0; l < config_.n_decoder_layers; ++l) y = decoder_layer(l, y, memory);
   const ValueId out = layernorm("decoder_out", T, y, "decoder.norm");
-  actions_ = linear("actions_normalized", T, D, config_.action_dim, MatrixRef::of(out, d), bn::kHeadWeight,
-                    MatrixRef::of_constant(weight(bn::kHeadBias, {config_.action_dim}), 0));
+  const int A = config_.action_dim;
+  // After an int8 linear that runs decoder.norm, the (float) action head runs in its tasks too.
+  auto* last = dynamic_cast<LinearS8Op*>(graph_.ops().back().get());
+  if (last != nullptr && last->row_output() == out && int8_weight(bn::kHeadWeight, {A, D}) == nullptr) {
+    note_linear_input(MatrixRef::of(out, d), T, D, bn::kHeadWeight);
+    actions_ = graph_.add_value("actions_normalized", {T, A});
+    last->fuse_head(packed_weight(bn::kHeadWeight, {A, D}), weight(bn::kHeadBias, {A}), actions_);
+  } else {
+    actions_ = linear("actions_normalized", T, D, A, MatrixRef::of(out, d), bn::kHeadWeight,
+                      MatrixRef::of_constant(weight(bn::kHeadBias, {A}), 0));
+  }
   graph_.mark_output(actions_);
 
   // Activation parameters are looked up by value name: one naming no value would never be used.

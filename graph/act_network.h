@@ -135,6 +135,8 @@ class ActNetwork {
   ValueId ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name);
   /// Tags the calibration point of an FFN's hidden activation h with the next FFN number (CalibrationPoint::ffn).
   void tag_ffn_hidden(ValueId h);
+  /// Records a linear's whole input value as a calibration point (once).
+  void note_linear_input(const MatrixRef& x, int rows, int in, const std::string& weight_name);
   /// `output`: the [rows, out] value to write (a row view), else a new one named out_name.
   ValueId linear(const std::string& out_name, int rows, int in, int out, MatrixRef x, const std::string& weight_name,
                  MatrixRef bias, MatrixRef residual = {}, Epilogue epilogue = Epilogue::kNone, ValueId output = kNoValue);

@@ -297,7 +297,20 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
 
 const char* LinearS8Op::type() const {
   if (norms_.empty()) return x_codes_.per_tensor() ? "linear_s8" : "linear_s8_dyn";
+  if (head_) return x_codes_.per_tensor() ? "linear_s8+layernorm_f32+linear_f32" : "linear_s8_dyn+layernorm_f32+linear_f32";
   return x_codes_.per_tensor() ? "linear_s8+layernorm_f32" : "linear_s8_dyn+layernorm_f32";
+}
+
+double LinearS8Op::macs() const {
+  const double head = head_ ? static_cast<double>(rows_) * out_ * head_->weight->rows() : 0.0;
+  return static_cast<double>(rows_) * in_ * out_ + head;
+}
+
+void LinearS8Op::fuse_head(std::shared_ptr<const PackedF32Weights> weight, const float* bias, ValueId output) {
+  check(!head_ && weight->cols() == out_ && bias != nullptr, ErrorCode::kInternal,
+        "LinearS8Op: a second head, or one of another width");
+  head_ = FusedHead{std::move(weight), bias, output};
+  outputs.push_back(output);
 }
 
 std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
@@ -305,6 +318,7 @@ std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
   if (x_codes_from_ == InputCodes::kQuantizedHere) variant = std::string(k.quant.quantize_name) + " + " + variant;
   if (!norms_.empty()) variant += std::string(" + ") + k.elementwise.layernorm_name;
   if (y_codes_.present() && !requantizes()) variant += std::string(" + ") + k.quant.quantize_name;
+  if (head_) variant += std::string(" + ") + k.gemm_f32.name;
   return variant;
 }
 
@@ -440,6 +454,20 @@ void LinearS8Op::finish_rows(const RunContext& ctx, const float* y, size_t ldy, 
     ldy = ld;
   }
   if (y_codes_.present()) y_codes_.write(ctx, y, ldy, r0, rows);
+  if (head_) {
+    const int n = head_->weight->rows();
+    kernels::GemmF32PackedArgs args;
+    args.m = rows;
+    args.n = n;
+    args.k = out_;
+    args.a = y;
+    args.lda = ldy;
+    args.packed_b = head_->weight->for_kernels(ctx.kernels().gemm_f32);
+    args.c = ctx.data(head_->output) + static_cast<size_t>(r0) * static_cast<size_t>(n);
+    args.ldc = static_cast<size_t>(n);
+    args.epilogue = {head_->bias, 0};
+    ctx.kernels().gemm_f32.packed(args);
+  }
 }
 
 // The GEMM requantizes into the output codes (bias and ReLU in its int32 epilogue). The float

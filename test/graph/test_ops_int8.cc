@@ -543,11 +543,12 @@ TEST_P(OpsPerIsa, ConcatRowsProjectsItsStateRowsAsALinearDoes) {
 }
 
 // Post-norm's tail: linear + residual -> LayerNorm -> LayerNorm -> a linear reading the last norm's
-// codes. With both norms fused into the first linear (LinearS8Op::fuse_layernorm), against
-// LayerNormOps of their own: the same bits in both norms' outputs and in the next linear's, for
-// ragged row counts on 1 and 2 threads (whole-row tasks, and column tiles followed by a pass of
+// codes, and a float head (6 columns) of the last norm's rows. With both norms and the head fused
+// into the first linear (LinearS8Op::fuse_layernorm, fuse_head), against LayerNormOps and a
+// LinearOp of their own: the same bits in both norms' outputs, the next linear's and the head's,
+// for ragged row counts on 1 and 2 threads (whole-row tasks, and column tiles followed by a pass of
 // their own), per-token and per-tensor codes, and with the linear's own output kept or in scratch.
-TEST_P(OpsPerIsa, LayerNormsFusedIntoTheLinearGiveTheSameBits) {
+TEST_P(OpsPerIsa, LayerNormsAndHeadFusedIntoTheLinearGiveTheSameBits) {
   const kernels::KernelConfig k = config();
   std::mt19937 rng(34);
   const int in = 72, dim = 136;
@@ -556,6 +557,10 @@ TEST_P(OpsPerIsa, LayerNormsFusedIntoTheLinearGiveTheSameBits) {
   const std::vector<float> b1 = uniform(dim, rng, -1.0f, 1.0f);
   const std::vector<float> gamma1 = uniform(dim, rng, 0.5f, 1.5f), beta1 = uniform(dim, rng, -0.5f, 0.5f);
   const std::vector<float> gamma2 = uniform(dim, rng, 0.5f, 1.5f), beta2 = uniform(dim, rng, -0.5f, 0.5f);
+  const int head_cols = 6;
+  const std::vector<float> w_head = uniform(static_cast<size_t>(head_cols) * dim, rng, -0.3f, 0.3f);
+  const std::vector<float> b_head = uniform(head_cols, rng, -1.0f, 1.0f);
+  const auto head = std::make_shared<const PackedF32Weights>(k.gemm_f32, head_cols, dim, w_head.data());
   ThreadPool one(1);
   for (ThreadPool* pool : {&one, &pool_}) {
     for (int rows : {1, 5, 13, 67, 131}) {
@@ -563,7 +568,7 @@ TEST_P(OpsPerIsa, LayerNormsFusedIntoTheLinearGiveTheSameBits) {
         for (const bool keep_all : {false, true}) {
           const std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -3.0f, 3.0f);
           const std::vector<float> residual = uniform(static_cast<size_t>(rows) * dim, rng, -2.0f, 2.0f);
-          std::vector<float> results[2][4];  // [fused][linear, norm1, norm2, y]
+          std::vector<float> results[2][5];  // [fused][linear, norm1, norm2, y, head]
           for (const bool fused : {false, true}) {
             Graph g;
             const ValueId xv = g.add_input("x", {rows, in});
@@ -572,6 +577,7 @@ TEST_P(OpsPerIsa, LayerNormsFusedIntoTheLinearGiveTheSameBits) {
             const ValueId n1 = g.add_value("norm1", {rows, dim});
             const ValueId n2 = g.add_value("norm2", {rows, dim});
             const ValueId y = g.add_value("y", {rows, dim});
+            const ValueId actions = g.add_value("actions", {rows, head_cols});
             auto& linear = g.add_op(std::make_unique<LinearS8Op>(
                 k.gemm_s8, rows, in, dim, MatrixRef::of(xv, in), row_codes(g, "x", rows, in),
                 LinearS8Op::InputCodes::kQuantizedHere, w1.q.data(), w1.scale.data(), MatrixRef::of_constant(b1.data(), 0),
@@ -581,22 +587,28 @@ TEST_P(OpsPerIsa, LayerNormsFusedIntoTheLinearGiveTheSameBits) {
               linear.fuse_layernorm(gamma1.data(), beta1.data(), n1);
               linear.fuse_layernorm(gamma2.data(), beta2.data(), n2);
               linear.write_row_codes(n2_codes);
+              linear.fuse_head(head, b_head.data(), actions);
             } else {
               g.add_op(std::make_unique<LayerNormOp>(rows, dim, gamma1.data(), beta1.data(), lin, n1));
               g.add_op(std::make_unique<LayerNormOp>(rows, dim, gamma2.data(), beta2.data(), n1, n2)).write_row_codes(n2_codes);
+              g.add_op(std::make_unique<LinearOp>(head, rows, dim, head_cols, MatrixRef::of(n2, dim),
+                                                  MatrixRef::of_constant(b_head.data(), 0), MatrixRef{}, Epilogue::kNone, actions));
             }
             g.add_op(std::make_unique<LinearS8Op>(k.gemm_s8, rows, dim, dim, MatrixRef::of(n2, dim), n2_codes,
                                                   LinearS8Op::InputCodes::kFromProducer, w2.q.data(), w2.scale.data(),
                                                   MatrixRef{}, MatrixRef::of(n1, dim), Epilogue::kNone, y));
             g.mark_output(y);
+            g.mark_output(actions);
             g.plan(pool->threads(), keep_all);
             std::copy(x.begin(), x.end(), g.data(xv));
             std::copy(residual.begin(), residual.end(), g.data(rv));
             g.run(*pool, k);
-            const ValueId kept[] = {lin, n1, n2, y};
-            for (int i = 0; i < 4; ++i) results[fused][i].assign(g.data(kept[i]), g.data(kept[i]) + static_cast<size_t>(rows) * dim);
+            const ValueId kept[] = {lin, n1, n2, y, actions};
+            for (int i = 0; i < 5; ++i) {
+              results[fused][i].assign(g.data(kept[i]), g.data(kept[i]) + g.value(kept[i]).elements);
+            }
           }
-          for (int i = keep_all ? 0 : 3; i < 4; ++i) {  // intermediates are kept only with keep_all
+          for (int i = keep_all ? 0 : 3; i < 5; ++i) {  // intermediates are kept only with keep_all
             ASSERT_EQ(0, std::memcmp(results[0][i].data(), results[1][i].data(), results[0][i].size() * sizeof(float)))
                 << kernels::isa_name(GetParam()) << " threads " << pool->threads() << " rows " << rows << " value " << i
                 << (normed_q ? " per tensor" : " per token") << (keep_all ? " kept" : "");

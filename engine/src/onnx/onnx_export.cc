@@ -279,6 +279,12 @@ class OnnxBuilder {
         layernorm(x, norm.gamma, norm.beta, norm.output);
         x = norm.output;
       }
+      if (const auto& head = lin->fused_head()) {
+        const int rows = static_cast<int>(g_.value(x).shape[0]), in = head->weight->cols(), out = head->weight->rows();
+        const std::vector<float> w = head->weight->unpacked();
+        linear(op, {rows, in, out, MatrixRef::of(x, static_cast<size_t>(in)), MatrixRef::of_constant(head->bias, 0), {}, graph::Epilogue::kNone},
+               w.data(), nullptr, nullptr, std::nullopt, head->output);
+      }
       return;
     }
     if (const auto* ln = dynamic_cast<const graph::LayerNormOp*>(&op)) {
@@ -402,8 +408,9 @@ class OnnxBuilder {
 
   // y = act(x W^T + bias [+ residual]), W float, or int8 with per-row scales (dequantized in the graph).
   // x_q: the int8 linear reads its input as per-tensor codes with these parameters (a QDQ pair here).
+  // `output`: the value the result is (a fused head's), else the op's first output.
   void linear(const graph::Op& op, const graph::LinearParams& p, const float* w_f32, const int8_t* w_s8, const float* w_scale,
-              std::optional<kernels::QuantS8> x_q = std::nullopt) {
+              std::optional<kernels::QuantS8> x_q = std::nullopt, ValueId output = graph::kNoValue) {
     const int rows = p.rows, in = p.in, out = p.out;
     const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
     const size_t w_size = static_cast<size_t>(out) * static_cast<size_t>(in);
@@ -434,7 +441,7 @@ class OnnxBuilder {
     }
     if (p.epilogue == graph::Epilogue::kRelu) y = op1("Relu", {y}, "relu");
     if (p.epilogue == graph::Epilogue::kGelu) y = gelu(y);
-    set(op.outputs[0], {y, false, std::nullopt});
+    set(output != graph::kNoValue ? output : op.outputs[0], {y, false, std::nullopt});
   }
 
   // Exact GELU (opset 17 has no Gelu): 0.5 x (1 + erf(x / sqrt 2)).

@@ -355,6 +355,7 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
   const int C = config_.feature_channels(), D = config_.dim_model;
   const std::string proj_name = p + "img_feat_proj";
   const float* proj_bias = weight(bn::kImgProjBias, {D});
+  const ValueId y = graph_.add_row_view(proj_name, encoder_tokens_, first_row, h * w);  // written in place
   if (const ActbTensor* q8 = int8_weight(bn::kImgProjWeight, {D, C}); q8 != nullptr && x.s8) {
     // Static int8 features: the projection is a 1x1 int8 conv with a float output.
     ConvS8Spec spec;
@@ -364,14 +365,12 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
     spec.bias = proj_bias;
     spec.input_q = x.q;
     spec.s8_out = false;
-    const ValueId y = graph_.add_row_view(proj_name, encoder_tokens_, first_row, h * w);
     add_layer(std::make_unique<ConvS8Op>(kernels_.gemm_s8, spec, x.id, y), proj_name, y, bn::kImgProjWeight, true);
     calibration_point(CalibrationRole::kImageProjection, y);
     return y;
   }
-  const ValueId y = linear(proj_name, h * w, C, D, MatrixRef::of(as_f32(x).id, static_cast<size_t>(C)), bn::kImgProjWeight,
-                           MatrixRef::of_constant(proj_bias, 0), {}, Epilogue::kNone,
-                           graph_.add_row_view(proj_name, encoder_tokens_, first_row, h * w));
+  linear(proj_name, h * w, C, D, MatrixRef::of(as_f32(x).id, static_cast<size_t>(C)), bn::kImgProjWeight,
+         MatrixRef::of_constant(proj_bias, 0), {}, Epilogue::kNone, y);
   calibration_point(CalibrationRole::kImageProjection, y);
   return y;
 }

@@ -51,6 +51,21 @@ const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernel
   return panels_.floats();
 }
 
+void PackedF32Weights::project_rows(const kernels::GemmF32Kernels& kernels, int rows, const float* x, size_t ldx,
+                                    const float* bias, float* y, size_t ldy) const {
+  kernels::GemmF32PackedArgs args;
+  args.m = rows;
+  args.n = n_;
+  args.k = k_;
+  args.a = x;
+  args.lda = ldx;
+  args.packed_b = for_kernels(kernels);
+  args.c = y;
+  args.ldc = ldy;
+  args.epilogue = {bias, 0};
+  kernels.packed(args);
+}
+
 Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels::Conv2dShape& shape, const float* bias,
                    bool relu, ValueId input, ValueId residual, ValueId output)
     : s_(shape), bias_(bias), relu_(relu), residual_(residual), tile_pixels_(kernels::conv_f32_tile_pixels(shape)),
@@ -314,17 +329,8 @@ void ConcatRowsOp::run(const RunContext& ctx) const {
       const int from = std::max(begin, part_start), to = std::min(end, part_start + p.rows);
       const float* src = from < to ? p.source.resolve(ctx) + static_cast<size_t>(from - part_start) * p.source.ld : nullptr;
       if (from < to && p.projection != nullptr) {
-        kernels::GemmF32PackedArgs args;
-        args.m = to - from;
-        args.n = cols_;
-        args.k = p.projection->cols();
-        args.a = src;
-        args.lda = p.source.ld;
-        args.packed_b = p.projection->for_kernels(ctx.kernels().gemm_f32);
-        args.c = y + static_cast<size_t>(from) * cols_;
-        args.ldc = static_cast<size_t>(cols_);
-        args.epilogue = {p.bias, 0};
-        ctx.kernels().gemm_f32.packed(args);
+        p.projection->project_rows(ctx.kernels().gemm_f32, to - from, src, p.source.ld, p.bias,
+                                   y + static_cast<size_t>(from) * cols_, static_cast<size_t>(cols_));
       } else if (src != y + static_cast<size_t>(from) * cols_) {  // else written in place (a row view)
         for (int r = from; r < to; ++r) {
           std::memcpy(y + static_cast<size_t>(r) * cols_, src + static_cast<size_t>(r - from) * p.source.ld,

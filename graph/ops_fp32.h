@@ -40,6 +40,10 @@ class PackedF32Weights {
   const float* for_kernels(const kernels::GemmF32Kernels& kernels) const;
   /// The weights as given, [n x k], unpacked from the panels (for exporters).
   std::vector<float> unpacked() const;
+  /// y[rows, n] (row stride ldy) = x[rows, k] W^T + bias[n]: every column, one call of the GEMM
+  /// (the few rows the token concatenation and a fused head project).
+  void project_rows(const kernels::GemmF32Kernels& kernels, int rows, const float* x, size_t ldx, const float* bias,
+                    float* y, size_t ldy) const;
   int rows() const { return n_; }
   int cols() const { return k_; }
 

@@ -455,18 +455,9 @@ void LinearS8Op::finish_rows(const RunContext& ctx, const float* y, size_t ldy, 
   }
   if (y_codes_.present()) y_codes_.write(ctx, y, ldy, r0, rows);
   if (head_) {
-    const int n = head_->weight->rows();
-    kernels::GemmF32PackedArgs args;
-    args.m = rows;
-    args.n = n;
-    args.k = out_;
-    args.a = y;
-    args.lda = ldy;
-    args.packed_b = head_->weight->for_kernels(ctx.kernels().gemm_f32);
-    args.c = ctx.data(head_->output) + static_cast<size_t>(r0) * static_cast<size_t>(n);
-    args.ldc = static_cast<size_t>(n);
-    args.epilogue = {head_->bias, 0};
-    ctx.kernels().gemm_f32.packed(args);
+    const size_t n = static_cast<size_t>(head_->weight->rows());
+    head_->weight->project_rows(ctx.kernels().gemm_f32, rows, y, ldy, head_->bias,
+                                ctx.data(head_->output) + static_cast<size_t>(r0) * n, n);
   }
 }
 

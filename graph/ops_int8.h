@@ -188,10 +188,10 @@ class LinearS8Op : public Op, public RowCodesWriter {
  private:
   /// True when the GEMM writes the output codes itself (requantizing, see above).
   bool requantizes() const { return !requant_scale_.empty(); }
-  /// True when the float output rows have more to go through: LayerNorms, quantization.
+  /// True when the float output rows have more to go through: LayerNorms, quantization, a head.
   bool finishes_rows() const { return y_codes_.present() || !norms_.empty() || head_.has_value(); }
   void run_requantized(const RunContext& ctx, const kernels::GemmS8Args& args) const;
-  /// The fused LayerNorms and the output codes of `rows` float output rows from row r0.
+  /// The fused LayerNorms, the output codes and the fused head of `rows` float output rows from row r0.
   void finish_rows(const RunContext& ctx, const float* y, size_t ldy, int r0, int rows) const;
 
   int rows_, in_, out_;

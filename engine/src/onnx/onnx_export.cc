@@ -280,10 +280,9 @@ class OnnxBuilder {
         x = norm.output;
       }
       if (const auto& head = lin->fused_head()) {
-        const int rows = static_cast<int>(g_.value(x).shape[0]), in = head->weight->cols(), out = head->weight->rows();
-        const std::vector<float> w = head->weight->unpacked();
-        linear(op, {rows, in, out, MatrixRef::of(x, static_cast<size_t>(in)), MatrixRef::of_constant(head->bias, 0), {}, graph::Epilogue::kNone},
-               w.data(), nullptr, nullptr, std::nullopt, head->output);
+        const int rows = static_cast<int>(g_.value(x).shape[0]);
+        set(head->output, {projection(*head->weight, MatrixRef::of(x, static_cast<size_t>(head->weight->cols())), rows, head->bias),
+                           false, std::nullopt});
       }
       return;
     }
@@ -408,40 +407,53 @@ class OnnxBuilder {
 
   // y = act(x W^T + bias [+ residual]), W float, or int8 with per-row scales (dequantized in the graph).
   // x_q: the int8 linear reads its input as per-tensor codes with these parameters (a QDQ pair here).
-  // `output`: the value the result is (a fused head's), else the op's first output.
   void linear(const graph::Op& op, const graph::LinearParams& p, const float* w_f32, const int8_t* w_s8, const float* w_scale,
-              std::optional<kernels::QuantS8> x_q = std::nullopt, ValueId output = graph::kNoValue) {
-    const int rows = p.rows, in = p.in, out = p.out;
-    const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
+              std::optional<kernels::QuantS8> x_q = std::nullopt) {
+    const int in = p.in, out = p.out;
+    const MatrixRef &x_ref = p.x, &bias = p.bias;
     const size_t w_size = static_cast<size_t>(out) * static_cast<size_t>(in);
-    std::string weight;
-    std::string y;
     const bool image_input = x_ref.value != graph::kNoValue && value(x_ref.value).nchw;
     if (image_input) {
       // The 1x1 input projection over a feature map: a Conv, so that the backbone stays NCHW.
       const graph::Value& fm = g_.value(x_ref.value);
       const kernels::Conv2dShape s = kernels::Conv2dShape::square(static_cast<int>(fm.shape[0]), static_cast<int>(fm.shape[1]),
                                                                   in, out, 1, 1, 0);
-      weight = w_s8 ? dequantized_weight(w_s8, {out, in, 1, 1}, w_scale, {})
-                    : constant_f32("weight", {out, in, 1, 1}, {w_f32, w_f32 + w_size});
+      const std::string weight = w_s8 ? dequantized_weight(w_s8, {out, in, 1, 1}, w_scale, {})
+                                      : constant_f32("weight", {out, in, 1, 1}, {w_f32, w_f32 + w_size});
       check(bias.value == graph::kNoValue && bias.ld == 0, ErrorCode::kInternal, "ONNX export: projection bias is no vector");
-      y = conv_node(s, float_nchw(x_ref.value), weight, bias.constant + bias.col_offset, "", false, "proj");
+      const std::string y = conv_node(s, float_nchw(x_ref.value), weight, bias.constant + bias.col_offset, "", false, "proj");
       set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
       return;
     }
-    weight = w_s8 ? dequantized_weight(w_s8, {out, in}, w_scale, {})
-                  : constant_f32("weight", {out, in}, {w_f32, w_f32 + w_size});
+    const std::string weight = w_s8 ? dequantized_weight(w_s8, {out, in}, w_scale, {})
+                                    : constant_f32("weight", {out, in}, {w_f32, w_f32 + w_size});
+    set(op.outputs[0], {product(p, weight, x_q), false, std::nullopt});
+  }
+
+  // rows of x W^T + bias (W float, packed), for the rows an op projects itself (the token
+  // concatenation's state rows, a linear's fused head).
+  std::string projection(const graph::PackedF32Weights& w, const MatrixRef& x, int rows, const float* bias) {
+    const int in = w.cols(), out = w.rows();
+    const std::vector<float> unpacked = w.unpacked();
+    return product({rows, in, out, x, MatrixRef::of_constant(bias, 0), {}, graph::Epilogue::kNone},
+                   constant_f32("weight", {out, in}, unpacked), std::nullopt);
+  }
+
+  // act(x W^T + bias [+ residual]) as ONNX nodes, W the initializer `weight` [out, in].
+  std::string product(const graph::LinearParams& p, const std::string& weight, std::optional<kernels::QuantS8> x_q) {
+    const int rows = p.rows, in = p.in, out = p.out;
+    const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
     std::string x = matrix(x_ref, rows, in, "x");
     if (x_q) x = dequantize(quantize(x, *x_q), *x_q);
     onnx::NodeProto* gemm = node("Gemm", {x, weight, matrix(bias, rows, out, "bias")}, fresh("linear"));
     attr_int(gemm, "transB", 1);
-    y = gemm->output(0);
+    std::string y = gemm->output(0);
     if (residual.value != graph::kNoValue || residual.constant != nullptr) {
       y = op1("Add", {y, matrix(residual, rows, out, "residual")}, "linear");
     }
     if (p.epilogue == graph::Epilogue::kRelu) y = op1("Relu", {y}, "relu");
     if (p.epilogue == graph::Epilogue::kGelu) y = gelu(y);
-    set(output != graph::kNoValue ? output : op.outputs[0], {y, false, std::nullopt});
+    return y;
   }
 
   // Exact GELU (opset 17 has no Gelu): 0.5 x (1 + erf(x / sqrt 2)).
@@ -503,13 +515,7 @@ class OnnxBuilder {
         parts.push_back(matrix(p.source, p.rows, cols, "token"));
         continue;
       }
-      const int in = p.projection->cols();
-      const std::vector<float> w = p.projection->unpacked();
-      onnx::NodeProto* gemm = node("Gemm", {matrix(p.source, p.rows, in, "state"), constant_f32("weight", {cols, in}, w),
-                                            constant_f32("bias", {cols}, {p.bias, p.bias + cols})},
-                                   fresh("token"));
-      attr_int(gemm, "transB", 1);
-      parts.push_back(gemm->output(0));
+      parts.push_back(projection(*p.projection, p.source, p.rows, p.bias));
     }
     onnx::NodeProto* n = node("Concat", parts, fresh("tokens"));
     attr_int(n, "axis", 0);

@@ -263,6 +263,7 @@ void bm_gemm_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, Shap
 struct ConvBench {
   std::string name;
   kernels::Conv2dShape shape;
+  bool unsigned_input = false;  ///< input codes stored as uint8 (GemmS8Kernels::pack_u8a), as the stem's
   uint64_t macs() const {
     return static_cast<uint64_t>(shape.out_h) * shape.out_w * shape.out_c * static_cast<uint64_t>(shape.patch_size());
   }
@@ -307,8 +308,14 @@ void bm_conv(benchmark::State& state, const GemmS8Kernels* v, ConvBench cb, doub
   std::vector<int32_t> bias(static_cast<size_t>(s.out_c), 1000);
   std::unique_ptr<uint8_t, Aligned> packed(
       static_cast<uint8_t*>(std::aligned_alloc(kernels::kGemmS8PackedAlign, v->packed_size(s.out_c, k))));
-  v->pack(s.out_c, k, w.data(), static_cast<size_t>(k), bias.data(), -5, packed.get());
-  const kernels::ConvS8 conv{s, v, packed.get(), -5};
+  // The same input either way: codes x with zero point -5, or their unsigned bytes x + 128 with 123.
+  if (cb.unsigned_input) {
+    for (auto& b : x) b = static_cast<int8_t>(b ^ 0x80);
+    v->pack_u8a(s.out_c, k, w.data(), static_cast<size_t>(k), bias.data(), 123, packed.get());
+  } else {
+    v->pack(s.out_c, k, w.data(), static_cast<size_t>(k), bias.data(), -5, packed.get());
+  }
+  const kernels::ConvS8 conv{s, v, packed.get(), static_cast<int8_t>(cb.unsigned_input ? 123 - 256 : -5)};
   const int pixels = s.out_h * s.out_w;
   const int tile = kernels::conv_s8_tile_pixels(s);
   const int tiles = (pixels + tile - 1) / tile;
@@ -607,7 +614,13 @@ int main(int argc, char** argv) {
     if (v == nullptr || isa == kernels::Isa::kRef) continue;
     const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
-      for (const bench::ConvBench& cb : bench::resnet18_convs(h, w)) {
+      std::vector<bench::ConvBench> convs = bench::resnet18_convs(h, w);
+      if (v->pack_u8a != nullptr) {  // the stem as the network runs it where the variant has one
+        convs.insert(convs.begin() + 1, convs.front());
+        convs[1].name += "_u8a";
+        convs[1].unsigned_input = true;
+      }
+      for (const bench::ConvBench& cb : convs) {
         const std::string key = std::string("conv_s8/") + kernels::isa_name(isa) + "/" + std::to_string(h) + "x" +
                                 std::to_string(w) + "/" + cb.name;
         for (int t = 1; t <= max_threads; ++t) {

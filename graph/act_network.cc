@@ -72,16 +72,22 @@ ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
 
 float* ActNetwork::camera_input(size_t camera) {
   const ValueId id = camera_inputs_.at(camera);
-  return graph_.value(id).dtype == DataType::kS8 ? nullptr : graph_.data(id);
+  return graph_.value(id).dtype == DataType::kF32 ? graph_.data(id) : nullptr;
 }
 
 int8_t* ActNetwork::camera_input_s8(size_t camera) {
   const ValueId id = camera_inputs_.at(camera);
-  return graph_.value(id).dtype == DataType::kS8 ? graph_.data_s8(id) : nullptr;
+  return graph_.value(id).dtype == DataType::kF32 ? nullptr : graph_.data_s8(id);
+}
+
+bool ActNetwork::camera_input_unsigned(size_t camera) const {
+  return graph_.value(camera_inputs_.at(camera)).dtype == DataType::kU8;
 }
 
 kernels::QuantS8 ActNetwork::camera_input_quant(size_t camera) const {
-  return graph_.value(camera_inputs_.at(camera)).quant.value_or(kernels::QuantS8{});
+  const Value& v = graph_.value(camera_inputs_.at(camera));
+  const kernels::QuantS8 q = v.quant.value_or(kernels::QuantS8{});
+  return v.dtype == DataType::kU8 ? kernels::QuantS8{q.scale, q.zero_point - 128} : q;
 }
 
 ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
@@ -145,6 +151,7 @@ ActNetwork::Tensor ActNetwork::conv(const ConvSpec& c, const Tensor& x, int& h, 
   }
   const Tensor xq = as_s8(x);
   spec.input_q = xq.q;
+  spec.unsigned_input = graph_.value(xq.id).dtype == DataType::kU8;
   const ActivationQuant& oq = quant_.activation(name);
   spec.output_q = {oq.scale, oq.zero_point};
   if (residual) {
@@ -289,15 +296,18 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
   camera_ = camera;
   const std::vector<int64_t> image_shape = {cam.height, cam.width, 3};
   // An int8 stem with static activations quantizes the image with fixed parameters: the engine
-  // writes those codes itself (what as_s8() would make of the float image), no float image.
+  // writes those codes itself (what as_s8() would make of the float image), no float image; stored
+  // unsigned where the kernels take unsigned activations (no row sums in the stem's GEMM).
   const ActbTensor* stem_weight = tensors_.find(bn::conv_weight(config_.stem().name));
   const bool s8_image = quant_.static_activations() && stem_weight != nullptr && stem_weight->dtype == DType::kI8;
   Tensor image;
   if (s8_image) {
     const ActivationQuant& a = quant_.activation(p + "image");
     const kernels::QuantS8 q{a.scale, a.zero_point};
-    image = Tensor{graph_.add_input(p + "image", image_shape, DataType::kS8), true, q, kNoValue};
-    graph_.value(image.id).quant = q;
+    const bool stored_unsigned = kernels_.gemm_s8.pack_u8a != nullptr;
+    image = Tensor{graph_.add_input(p + "image", image_shape, stored_unsigned ? DataType::kU8 : DataType::kS8), true, q,
+                   kNoValue};
+    graph_.value(image.id).quant = kernels::QuantS8{q.scale, q.zero_point + (stored_unsigned ? 128 : 0)};
   } else {
     image = Tensor{graph_.add_input(p + "image", image_shape), false, {}, kNoValue};
     calibration_point(CalibrationRole::kCameraImage, image.id);

@@ -79,8 +79,10 @@ class ActNetwork {
   float* camera_input(size_t camera);
   /// A static INT8 stem takes its [H, W, 3] image as int8 codes with the calibrated parameters of
   /// camera_input_quant(), which the engine writes straight from the pixels (normalisation and
-  /// quantization in one table lookup, no float image); null when the input is float.
+  /// quantization in one table lookup, no float image); null when the input is float. Stored
+  /// unsigned (each code XOR 0x80, DataType::kU8) when camera_input_unsigned().
   int8_t* camera_input_s8(size_t camera);
+  bool camera_input_unsigned(size_t camera) const;
   kernels::QuantS8 camera_input_quant(size_t camera) const;
   float* state_input() { return graph_.data(state_input_); }                          ///< [state_dim]
   float* env_state_input() { return graph_.data(env_input_); }                        ///< [env_state_dim]

@@ -15,7 +15,7 @@ constexpr size_t kAlignFloats = 16;  // 64 bytes
 size_t align_up(size_t n) { return (n + kAlignFloats - 1) / kAlignFloats * kAlignFloats; }
 // Arena units (4 bytes) a value occupies.
 size_t value_units(const Value& v) {
-  if (v.dtype != DataType::kS8) return v.elements;
+  if (v.dtype != DataType::kS8 && v.dtype != DataType::kU8) return v.elements;
   return (v.elements + kernels::kGemmS8ReadSlack + 3) / 4;
 }
 }  // namespace
@@ -67,6 +67,12 @@ std::vector<float> Graph::read_f32(ValueId id) {
   } else if (v.dtype == DataType::kS8 && v.quant) {
     out.resize(v.elements);
     kernels::quant_s8_table_ref()->dequantize(v.elements, data_s8(id), v.quant->scale, v.quant->zero_point, out.data());
+  } else if (v.dtype == DataType::kU8 && v.quant) {
+    // Back to the int8 codes they store (XOR 0x80 = code - 128), dequantized by the same rule.
+    std::vector<int8_t> codes(data_s8(id), data_s8(id) + v.elements);
+    for (int8_t& c : codes) c = static_cast<int8_t>(c ^ 0x80);
+    out.resize(v.elements);
+    kernels::quant_s8_table_ref()->dequantize(v.elements, codes.data(), v.quant->scale, v.quant->zero_point - 128, out.data());
   }
   return out;
 }

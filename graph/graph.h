@@ -25,14 +25,16 @@ namespace act::graph {
 using ValueId = int;
 inline constexpr ValueId kNoValue = -1;
 
-enum class DataType { kF32, kS8, kS32 };
+/// kU8 holds int8 codes stored unsigned (code + 128, zero point + 128) for kernels whose
+/// activations are unsigned (kernels::GemmS8Kernels::pack_u8a): the static INT8 stem's image.
+enum class DataType { kF32, kS8, kU8, kS32 };
 
 struct Value {
   std::string name;
   std::vector<int64_t> shape;
   DataType dtype = DataType::kF32;
   /// int8 values with static quantization: their scale and zero point (for dequantizing them in
-  /// reports and tests; the ops hold their own copies).
+  /// reports and tests; the ops hold their own copies). A kU8 value's zero point is its uint8 one.
   std::optional<kernels::QuantS8> quant;
   size_t elements = 0;
   size_t offset = 0;   ///< in floats (4-byte units), into the arena (valid after plan())

@@ -36,12 +36,17 @@ kernels::QuantS8 symmetric_quant(float absmax) {
 // --------------------------------------------------------------------------------- PackedWeights
 
 PackedWeights::PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
-                             int32_t a_zero_point) {
+                             int32_t a_zero_point, bool unsigned_activations) {
   check(k >= 1 && k <= kernels::kGemmS8MaxK, ErrorCode::kUnimplemented,
         "an int8 layer with " + std::to_string(k) + " inputs per output (the INT8 kernels take at most " +
             std::to_string(kernels::kGemmS8MaxK) + ")");
   buffer_ = AlignedBuffer(kernels.packed_size(n, k));
-  repack(kernels, n, k, w, bias, a_zero_point);
+  if (unsigned_activations) {
+    check(kernels.pack_u8a != nullptr, ErrorCode::kInternal, "unsigned activations on a gemm_s8 variant without them");
+    kernels.pack_u8a(n, k, w, static_cast<size_t>(k), bias, a_zero_point, buffer_.data());
+  } else {
+    repack(kernels, n, k, w, bias, a_zero_point);
+  }
 }
 
 void PackedWeights::repack(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
@@ -136,8 +141,10 @@ ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec
     : spec_(spec), tile_pixels_(kernels::conv_s8_tile_pixels(spec.shape)),
       packed_(kernels, spec.shape.out_c, spec.shape.patch_size(), spec.weight,
               spec.s8_out ? integer_bias(spec.shape.out_c, spec.bias, spec.input_q.scale, spec.w_scale).data() : nullptr,
-              spec.input_params == kNoValue ? spec.input_q.zero_point : 0) {
+              spec.input_params != kNoValue ? 0 : spec.input_q.zero_point + (spec.unsigned_input ? 128 : 0),
+              spec.unsigned_input) {
   check(!spec.s8_out || spec.input_params == kNoValue, ErrorCode::kInternal, "an int8-out conv needs static input parameters");
+  check(!spec.unsigned_input || spec.input_params == kNoValue, ErrorCode::kInternal, "unsigned conv input with dynamic parameters");
   if (spec.s8_out) requant_scale_ = requant_scales(spec.shape.out_c, spec.input_q.scale, spec.w_scale, spec.output_q.scale);
   inputs = {input};
   if (spec.input_params != kNoValue) inputs.push_back(spec.input_params);
@@ -172,7 +179,9 @@ void ConvS8Op::run(const RunContext& ctx) const {
     const float* params = ctx.data(spec_.input_params);
     in_q = {params[0], static_cast<int32_t>(params[1])};
   }
-  const kernels::ConvS8 conv{spec_.shape, &ctx.kernels().gemm_s8, packed_.data(), static_cast<int8_t>(in_q.zero_point)};
+  // The padding byte: the zero point's code, stored as the input stores its codes.
+  const auto pad = static_cast<int8_t>(spec_.unsigned_input ? in_q.zero_point ^ 0x80 : in_q.zero_point);
+  const kernels::ConvS8 conv{spec_.shape, &ctx.kernels().gemm_s8, packed_.data(), pad};
   const int8_t* x = ctx.data_s8(inputs[0]);
   const size_t n = static_cast<size_t>(spec_.shape.out_c);
   const EvenSplit pixel_split = split_evenly(spec_.shape.out_h * spec_.shape.out_w, kernels::kConvS8TileQuantum,

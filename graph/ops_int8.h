@@ -30,9 +30,10 @@ namespace act::graph {
 /// Weights packed for one gemm_s8 variant, 64-byte aligned, owned by the op that uses them.
 class PackedWeights {
  public:
-  /// Packs w [n x k] (int8) with an optional int32 bias and the activation zero point folded in.
+  /// Packs w [n x k] (int8) with an optional int32 bias and the activation zero point folded in;
+  /// with unsigned_activations, by kernels.pack_u8a for uint8 codes (a_zero_point in [0, 255]).
   PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
-                int32_t a_zero_point);
+                int32_t a_zero_point, bool unsigned_activations = false);
   /// Packs them again in place with another bias and zero point (the same size: no new memory).
   void repack(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias, int32_t a_zero_point);
   const void* data() const { return buffer_.data(); }
@@ -84,6 +85,9 @@ struct ConvS8Spec {
   /// Input parameters: static, or (when input_params is a value) dynamic from a QuantizeOp.
   kernels::QuantS8 input_q;
   ValueId input_params = kNoValue;
+  /// The input is stored unsigned (DataType::kU8: code + 128), as kernels with pack_u8a read it
+  /// without the signed kernels' row sums; static input parameters only.
+  bool unsigned_input = false;
   /// Output: int8 with static parameters (requantized), or float (dequantized).
   bool s8_out = true;
   kernels::QuantS8 output_q;
@@ -102,9 +106,10 @@ class ConvS8Op : public Op {
     return spec_.s8_out ? "conv2d_s8_s8" : "conv2d_s8_f32";
   }
   std::string kernel(const kernels::KernelConfig& k) const override {
-    const char* gemm = spec_.s8_out ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
+    std::string gemm = spec_.s8_out ? k.gemm_s8.s8out_name : k.gemm_s8.f32out_name;
+    if (spec_.unsigned_input) gemm += std::string(" (") + k.gemm_s8.pack_u8a_name + ")";
     if (!max_pool_) return gemm;
-    return std::string(gemm) + " + " + (spec_.s8_out ? k.maxpool_s8.max_taps_name : k.elementwise.max_taps_name);
+    return gemm + " + " + (spec_.s8_out ? k.maxpool_s8.max_taps_name : k.elementwise.max_taps_name);
   }
   void run(const RunContext& ctx) const override;
   size_t scratch_per_thread() const override;

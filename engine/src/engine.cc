@@ -181,7 +181,14 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   // so the codes are bit-identical and no float image is written.
   int8_t* dst_s8 = network_->camera_input_s8(camera);
   const kernels::QuantS8 q = network_->camera_input_quant(camera);
-  const auto quantize = [&](size_t n, const float* x, int8_t* y) { kernels_.quant.quantize(n, x, 1.0f / q.scale, q.zero_point, y); };
+  // The codes, stored unsigned (XOR 0x80) where the stem's kernels read them so.
+  const auto sign_flip = static_cast<int8_t>(network_->camera_input_unsigned(camera) ? 0x80 : 0);
+  const auto quantize = [&](size_t n, const float* x, int8_t* y) {
+    kernels_.quant.quantize(n, x, 1.0f / q.scale, q.zero_point, y);
+    if (sign_flip != 0) {
+      for (size_t i = 0; i < n; ++i) y[i] = static_cast<int8_t>(y[i] ^ sign_flip);
+    }
+  };
   const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
   if (image.format == ImageView::Format::kRgbU8Hwc) {
     const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;

@@ -18,6 +18,7 @@ enum KernelPath : uint32_t {
   kPathRowZeroPoint = 1u << 3, ///< per-row activation zero points
   kPathSegmentedA = 1u << 4,   ///< A rows read in segments (GemmS8Args::a_segments)
   kPathStreamedWeights = 1u << 5,  ///< weights prefetched ahead (more panels than L1 keeps; AVX-512 VNNI)
+  kPathUnsignedA = 1u << 6,    ///< activations stored unsigned (GemmS8Kernels::pack_u8a)
 };
 
 /// A record of (Isa, KernelPath) pairs that ran. Thread-safe: kernels running on several threads

@@ -18,7 +18,9 @@ struct ConvS8 {
   const GemmS8Kernels* kernels = nullptr;
   /// OHWI weights [out_c x patch_size] packed by kernels->pack with the input zero point folded in.
   const void* packed_w = nullptr;
-  int8_t input_zero_point = 0;  ///< also the padding value
+  /// Also the padding value. With weights packed by pack_u8a (input stored unsigned), the byte of
+  /// the uint8 zero point.
+  int8_t input_zero_point = 0;
   /// True when the conv reads its input in place (1x1, stride 1, no padding).
   bool direct() const { return shape.reads_input_in_place(); }
 };

@@ -44,6 +44,7 @@ enum class GemmS8Layout : uint32_t {
   kAvx2_8x8 = 2,  ///< nr=8, kr=8: columns paired (j, j+4) for the vpmaddwd reduction
   kVnni64x4 = 3,  ///< nr=64, kr=4: 64 columns x 4 bytes per k-group, weights stored + 128 (u8)
   kNeon16x4 = 4,  ///< nr=16, kr=4: 16 columns x 4 bytes per k-group
+  kVnni64x4U8A = 5,  ///< as kVnni64x4 with the weights as they are (s8), for unsigned activations
 };
 
 inline constexpr uint32_t kGemmS8PackedMagic = 0x38534741u;  // "AGS8"
@@ -150,6 +151,11 @@ struct GemmS8Kernels {
   GemmS8S8OutFn s8out;
   GemmS8F32OutFn f32out;
   GemmS8S32OutFn s32out;
+  /// Packs W for activations stored unsigned: A's bytes are read as uint8 with a per-tensor zero
+  /// point in [0, 255] (no per-row zero points), and the same kernels take them. Null where the ISA
+  /// has no unsigned x signed product (AVX2 and NEON SDOT: their kernels' A is signed).
+  const char* pack_u8a_name = nullptr;
+  GemmS8PackFn pack_u8a = nullptr;
 };
 
 }  // namespace act::kernels

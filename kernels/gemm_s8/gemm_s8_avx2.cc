@@ -38,6 +38,7 @@ constexpr int kNR = 8;
 constexpr int kKR = 8;
 constexpr Isa kIsa = Isa::kAvx2;
 constexpr GemmS8Layout kLayout = GemmS8Layout::kAvx2_8x8;
+constexpr bool own_layout(GemmS8Layout l) { return l == kLayout; }
 // Weight panels processed per sweep over the rows: keep them in L2 while every row block reuses them.
 constexpr size_t kPanelBlockBytes = size_t{512} << 10;
 

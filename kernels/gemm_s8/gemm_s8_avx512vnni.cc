@@ -10,6 +10,8 @@
 // bytes per vpdpbusd against a vector of ones (K / 64 instructions per row, not K / 4). No XOR in
 // the k loop: an XOR per broadcast competed with vpdpbusd for the same ports (about 20% of the
 // peak), and flipping A into a buffer instead stalled on store forwarding when N <= 64.
+// A stored unsigned (weights packed by pack_w_s8_64x4_goi_u8a, read in the header) swaps the
+// sides: A's broadcast is the u8 operand, the weights the s8 one, and there are no row sums.
 //
 // Tile: 6 rows x 64 columns (4 zmm) x k-groups of 4. One k-group step = 4 weight loads, 6
 // broadcasts (folded into vpdpbusd as {1to16} memory operands), 24 vpdpbusd; 24 accumulators + 4
@@ -42,6 +44,10 @@ constexpr int kNR = 64;
 constexpr int kKR = 4;
 constexpr Isa kIsa = Isa::kAvx512Vnni;
 constexpr GemmS8Layout kLayout = GemmS8Layout::kVnni64x4;
+// Unsigned activations (pack_w_s8_64x4_goi_u8a): A takes vpdpbusd's u8 side as it is, the weights
+// the s8 side, the zero point (in [0, 255]) folded into kbias: no row sums.
+constexpr GemmS8Layout kLayoutU8A = GemmS8Layout::kVnni64x4U8A;
+constexpr bool own_layout(GemmS8Layout l) { return l == kLayout || l == kLayoutU8A; }
 constexpr int kVecs = kNR / 16;
 constexpr size_t kPanelBlockBytes = size_t{1} << 20;  // weight panels kept in L2 per sweep
 constexpr uint64_t kL1PanelBytes = 32 * 1024;          // a panel this small stays in L1 across row tiles
@@ -86,7 +92,7 @@ void row_corrections(const GemmS8Args& g, int m, int32_t (&corr)[R]) {
 // out-parameter array would be stored every iteration.
 // kStreamWeights: the panel does not stay in L1 between tiles (see row_tile), so its bytes are
 // prefetched kWeightPrefetchBytes ahead (past its end: the next panel's, which the sweep reads next).
-template <int R, bool kStreamWeights>
+template <int R, bool kStreamWeights, bool kUnsignedA>
 inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgroups, const int32_t (&corr)[R],
                        __m512i (&out)[R][kVecs]) {
   const uint8_t* w = panel + 8 * kNR;
@@ -95,7 +101,7 @@ inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgr
   for (int j = 0; j < kVecs; ++j) {
     const __m512i kbias = _mm512_loadu_si512(panel + 64 * j);
 #pragma GCC unroll 6
-    for (int r = 0; r < R; ++r) acc[r][j] = _mm512_sub_epi32(kbias, _mm512_set1_epi32(corr[r]));
+    for (int r = 0; r < R; ++r) acc[r][j] = kUnsignedA ? kbias : _mm512_sub_epi32(kbias, _mm512_set1_epi32(corr[r]));
   }
   const int segments = segment_count(g), segment_groups = kgroups / segments;
   for (int s = 0; s < segments; ++s) {
@@ -120,10 +126,17 @@ inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgr
         int32_t quad;
         std::memcpy(&quad, rows[r] + static_cast<size_t>(gi) * kKR, 4);
         const __m512i av = _mm512_set1_epi32(quad);
-        acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], w0, av);
-        acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], w1, av);
-        acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], w2, av);
-        acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], w3, av);
+        if constexpr (kUnsignedA) {
+          acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], av, w0);
+          acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], av, w1);
+          acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], av, w2);
+          acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], av, w3);
+        } else {
+          acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], w0, av);
+          acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], w1, av);
+          acc[r][2] = _mm512_dpbusd_epi32(acc[r][2], w2, av);
+          acc[r][3] = _mm512_dpbusd_epi32(acc[r][3], w3, av);
+        }
       }
     }
   }
@@ -150,7 +163,7 @@ struct EpiS8 {
   }
   void row(int m, int n, const __m512i (&acc)[kVecs]) const {
     const __m512 zo = _mm512_set1_ps(static_cast<float>(o.out_zero_point));
-    const __m512 qmin = _mm512_set1_ps(static_cast<float>(o.qmin));
+    const __m512i qmin = _mm512_set1_epi8(static_cast<char>(o.qmin));
     const __m512 qmax = _mm512_set1_ps(static_cast<float>(o.qmax));
     int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
     __m512i q[kVecs];
@@ -165,20 +178,25 @@ struct EpiS8 {
         v = _mm512_add_ps(v, _mm512_mul_ps(_mm512_cvtepi32_ps(r), _mm512_set1_ps(o.residual_scale)));
       }
       v = _mm512_add_ps(v, zo);
-      v = _mm512_max_ps(v, qmin);  // v > qmin ? v : qmin, as requant_ref.h
-      v = _mm512_min_ps(v, qmax);
-      // Round half to even (MXCSR default); the ints are within [qmin, qmax], so narrowing is exact.
-      q[j] = _mm512_cvtps_epi32(v);
+      // v < qmax ? v : qmax, a NaN kept (minps returns its second operand on NaN); rounded half to
+      // even (MXCSR default). The low clamp comes after narrowing, on the bytes: rounding is monotone
+      // and qmin an integer, so max(round(v), qmin) = round(max(v, qmin)), and a NaN or anything
+      // below -2^31 converts to INT32_MIN, which the saturating narrowing takes to -128 and the max
+      // to qmin, as requant_ref.h's float clamp does.
+      q[j] = _mm512_cvtps_epi32(_mm512_min_ps(qmax, v));
     }
     if (full_panel) {
-      // 64 columns narrowed by two saturating packs (exact here) into one store; the packs
+      // 64 columns narrowed by two saturating packs into one store (then the low clamp); the packs
       // interleave 128-bit lanes, dword 4l + j holding lane l of q[j], which the permute puts back.
       const __m512i bytes = _mm512_packs_epi16(_mm512_packs_epi32(q[0], q[1]), _mm512_packs_epi32(q[2], q[3]));
       const __m512i order = _mm512_setr_epi32(0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15);
-      _mm512_storeu_si512(cp, _mm512_permutexvar_epi32(order, bytes));
+      _mm512_storeu_si512(cp, _mm512_permutexvar_epi32(order, _mm512_max_epi8(bytes, qmin)));
       return;
     }
-    for (int j = 0; j < kVecs; ++j) _mm_mask_storeu_epi8(cp + 16 * j, mask[j], _mm512_cvtsepi32_epi8(q[j]));
+    for (int j = 0; j < kVecs; ++j) {
+      const __m128i bytes = _mm_max_epi8(_mm512_cvtsepi32_epi8(q[j]), _mm512_castsi512_si128(qmin));
+      _mm_mask_storeu_epi8(cp + 16 * j, mask[j], bytes);
+    }
   }
 };
 
@@ -225,14 +243,14 @@ struct EpiS32 {
 };
 
 // One R x 64 micro-tile starting at row m.
-template <int R, class Epi>
+template <int R, bool kUnsignedA, class Epi>
 void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr)[R], const uint8_t* panel, int m,
           int n, int lo, int hi, Epi& epi, bool stream_weights) {
   __m512i acc[R][kVecs];
   if (stream_weights) {
-    accumulate<R, true>(g, m, panel, h.kp / kKR, corr, acc);
+    accumulate<R, true, kUnsignedA>(g, m, panel, h.kp / kKR, corr, acc);
   } else {
-    accumulate<R, false>(g, m, panel, h.kp / kKR, corr, acc);
+    accumulate<R, false, kUnsignedA>(g, m, panel, h.kp / kKR, corr, acc);
   }
   if (g.a_row_zero_point != nullptr) {
     // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
@@ -248,12 +266,12 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
 }
 
-// The rows [m, m + R) against panels [pb, pe): the row sums once, then every panel.
-template <int R, class Epi>
+// The rows [m, m + R) against panels [pb, pe): the row sums once (signed A), then every panel.
+template <int R, bool kUnsignedA, class Epi>
 void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int pb, int pe, int n0,
               int n1, Epi& epi, uint32_t& paths) {
-  int32_t corr[R];
-  row_corrections<R>(g, m, corr);
+  int32_t corr[R] = {};
+  if constexpr (!kUnsignedA) row_corrections<R>(g, m, corr);
   // One small panel stays in L1 from row tile to row tile; several, or a large one, come from L2
   // (or L3 on an inference's first sweep) at 256 bytes per 12 cycles on a core with two vpdpbusd
   // ports, faster than the hardware prefetchers bring them: those are prefetched (row_block's caller
@@ -261,20 +279,31 @@ void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* p
   const bool stream_weights = pe - pb > 1 || h.panel_bytes > kL1PanelBytes;
   if (stream_weights) paths |= kPathStreamedWeights;
   for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
-    tile<R>(g, h, corr, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi, stream_weights);
+    tile<R, kUnsignedA>(g, h, corr, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi, stream_weights);
   });
+}
+
+template <bool kUnsignedA, class Epi>
+void row_block_of(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
+                  int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
+  switch (rows) {
+    case 6: row_tile<6, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 5: row_tile<5, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 4: row_tile<4, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 3: row_tile<3, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    case 2: row_tile<2, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+    default: row_tile<1, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+  }
 }
 
 template <class Epi>
 void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
                int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  switch (rows) {
-    case 6: row_tile<6>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 5: row_tile<5>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 4: row_tile<4>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 3: row_tile<3>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 2: row_tile<2>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    default: row_tile<1>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
+  if (h.layout == kLayoutU8A) {
+    paths |= kPathUnsignedA;
+    row_block_of<true>(g, h, panels, m, rows, pb, pe, n0, n1, epi, paths);
+  } else {
+    row_block_of<false>(g, h, panels, m, rows, pb, pe, n0, n1, epi, paths);
   }
 }
 
@@ -315,6 +344,8 @@ const GemmS8Kernels* gemm_s8_table_avx512vnni() {
       gemm_s8s8_s8out_6x64c4_avx512vnni,
       gemm_s8s8_f32out_6x64c4_avx512vnni,
       gemm_s8s8_s32out_6x64c4_avx512vnni,
+      "pack_w_s8_64x4_goi_u8a",
+      pack_w_s8_64x4_goi_u8a,
   };
   return &kTable;
 }

@@ -32,6 +32,7 @@ constexpr int kNR = 16;
 constexpr int kKR = 4;
 constexpr Isa kIsa = Isa::kNeonDot;
 constexpr GemmS8Layout kLayout = GemmS8Layout::kNeon16x4;
+constexpr bool own_layout(GemmS8Layout l) { return l == kLayout; }
 constexpr size_t kPanelBlockBytes = size_t{256} << 10;  // half the A76's 512 KB L2
 
 #include "kernels/gemm_s8/gemm_s8_driver.inc"

@@ -42,6 +42,9 @@ void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int
 /// nr=16, kr=4.
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed);
+/// VNNI for unsigned activations (GemmS8Kernels::pack_u8a): 64 columns x 4 bytes, W as it is.
+void pack_w_s8_64x4_goi_u8a(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed);
 /// The same four packers reading W^T: `wt` is [k x n] (row stride ldw >= n), W[j][i] = wt[i * ldw + j];
 /// each writes the bytes its pack_w_ twin writes for W. Attention packs its values this way, straight
 /// from their token-major int8 copy.
@@ -81,7 +84,8 @@ void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS32& out
 
 // ---- AVX-512 VNNI (gemm_s8_avx512vnni.cc, x86-64 only; -mavx512f/bw/vl/vnni) ----------------
 // 6x64c4: vpdpbusd on (W + 128) as u8 x A as s8; each row tile subtracts 128 * rowsum(A).
-// Packed by pack_w_s8_64x4_goi_x80. Needs cpu_supports(Isa::kAvx512Vnni).
+// Packed by pack_w_s8_64x4_goi_x80; or by pack_w_s8_64x4_goi_u8a for A stored unsigned, which the
+// same kernels multiply as u8 x W as s8, without row sums. Needs cpu_supports(Isa::kAvx512Vnni).
 
 const GemmS8Kernels* gemm_s8_table_avx512vnni();
 #if defined(__x86_64__)

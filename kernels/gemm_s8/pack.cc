@@ -23,6 +23,7 @@ constexpr LayoutDesc kLayouts[] = {
     {GemmS8Layout::kAvx2_8x8, 8, 8, true, false},
     {GemmS8Layout::kVnni64x4, 64, 4, false, true},
     {GemmS8Layout::kNeon16x4, 16, 4, false, false},
+    {GemmS8Layout::kVnni64x4U8A, 64, 4, false, false},
 };
 
 const LayoutDesc& desc_of(GemmS8Layout layout) {
@@ -197,6 +198,11 @@ void pack_w_s8_8x8_goi_pair4(int n, int k, const int8_t* w, size_t ldw, const in
 void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                             void* packed) {
   pack_generic<4>(desc_of(GemmS8Layout::kVnni64x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_w_s8_64x4_goi_u8a(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed) {
+  pack_generic<4>(desc_of(GemmS8Layout::kVnni64x4U8A), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,

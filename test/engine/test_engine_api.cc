@@ -558,6 +558,19 @@ TEST_F(EngineApiTest, Int8IntermediatesAreDequantized) {
   ASSERT_TRUE((*int8)->infer(as_float, int8_actions_from_float).ok());
   EXPECT_EQ(int8_actions_from_float, int8_actions);
 
+  // Every ISA's kernels give the int8 backbone the same bits, the image's codes stored signed
+  // (AVX2, NEON) or unsigned (AVX-512 VNNI's stem reads them without row sums).
+  const auto layer4 = (*int8)->intermediate("cam0.backbone.layer4");
+  ASSERT_TRUE(layer4.ok()) << layer4.status().to_string();
+  for (kernels::Isa isa : kernels::cpu_isas()) {
+    auto at_isa = Engine::open(int8_blob, {.threads = 2, .keep_intermediates = true, .isa = kernels::isa_name(isa)});
+    ASSERT_TRUE(at_isa.ok()) << at_isa.status().to_string();
+    auto actions = chunk();
+    ASSERT_TRUE((*at_isa)->infer(observation(), actions).ok());
+    EXPECT_EQ((*at_isa)->intermediate("cam0.image").value(), image_codes.value()) << kernels::isa_name(isa);
+    EXPECT_EQ((*at_isa)->intermediate("cam0.backbone.layer4").value(), layer4.value()) << kernels::isa_name(isa);
+  }
+
   // Dynamic INT8 quantizes at run time and keeps no scale: such a value cannot be read as floats.
   const std::string dynamic_blob = scratch_ + "/dynamic.actb";
   write_int8_blob(model, QuantConfig{}, dynamic_blob);

@@ -27,12 +27,19 @@ struct AlignedFree {
 };
 using Packed = std::unique_ptr<uint8_t, AlignedFree>;
 
-Packed pack_with(const GemmS8Kernels& v, int n, int k, const int8_t* w, const int32_t* bias, int32_t za) {
+Packed pack_with(GemmS8PackFn pack, const GemmS8Kernels& v, int n, int k, const int8_t* w, const int32_t* bias,
+                 int32_t za) {
   const size_t bytes = v.packed_size(n, k);
   EXPECT_EQ(bytes % kGemmS8PackedAlign, 0u);
   Packed p(static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)));
-  v.pack(n, k, w, static_cast<size_t>(k), bias, za, p.get());
+  pack(n, k, w, static_cast<size_t>(k), bias, za, p.get());
   return p;
+}
+
+std::vector<int8_t> sign_flipped(const int8_t* x, size_t n) {
+  std::vector<int8_t> out(x, x + n);
+  for (int8_t& b : out) b = static_cast<int8_t>(b ^ 0x80);
+  return out;
 }
 
 template <typename T>
@@ -118,6 +125,7 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
                                     << " zo=" << zo_ << " q=[" << qmin_ << "," << qmax_ << "] res=" << residual_
                                     << " relu=" << relu_ << " seed=" << seed_);
   ASSERT_TRUE(segment_k_ == 0 || (segment_k_ % kGemmS8SegmentAlign == 0 && k_ % segment_k_ == 0)) << "bad test";
+  ASSERT_TRUE(!unsigned_a_ || (v.pack_u8a != nullptr && !per_row_)) << "bad test: no unsigned activations here";
   const GemmS8Kernels* ref = gemm_s8_table_ref();
   std::mt19937 rng(seed_);
   auto uniform = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
@@ -208,18 +216,30 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
     }
   }
 
-  const Packed ref_w = pack_with(*ref, n_, k_, w.data(), int_bias ? bias_i32.data() : nullptr, za_);
-  const Packed var_w = pack_with(v, n_, k_, w.data(), int_bias ? bias_i32.data() : nullptr, za_);
+  const Packed ref_w = pack_with(ref->pack, *ref, n_, k_, w.data(), int_bias ? bias_i32.data() : nullptr, za_);
+  const Packed var_w = unsigned_a_ ? pack_with(v.pack_u8a, v, n_, k_, w.data(), int_bias ? bias_i32.data() : nullptr, za_ + 128)
+                                   : pack_with(v.pack, v, n_, k_, w.data(), int_bias ? bias_i32.data() : nullptr, za_);
+  // The variant's A: the same codes, or their unsigned bytes (segments too, each its own copy).
+  const std::vector<int8_t> a_unsigned = sign_flipped(a.data(), a.size());
+  std::vector<std::vector<int8_t>> segment_pool_unsigned;
+  std::vector<const int8_t*> a_segments_unsigned;
+  for (const auto& seg : segment_pool) segment_pool_unsigned.push_back(sign_flipped(seg.get(), static_cast<size_t>(segment_k_)));
+  for (const int8_t* seg : a_segments) {
+    for (size_t p = 0; p < segment_pool.size(); ++p) {
+      if (segment_pool[p].get() == seg) a_segments_unsigned.push_back(segment_pool_unsigned[p].data());
+    }
+  }
   auto args_for = [&](const Packed& p, CoveredPaths* covered) {
+    const bool stored_unsigned = unsigned_a_ && &p == &var_w;
     GemmS8Args g;
     g.m = m_;
     g.n = n_;
     g.k = k_;
     if (segment_k_ > 0) {
-      g.a_segments = a_segments.data();
+      g.a_segments = stored_unsigned ? a_segments_unsigned.data() : a_segments.data();
       g.segment_k = segment_k_;
     } else {
-      g.a = a.data();
+      g.a = stored_unsigned ? a_unsigned.data() : a.data();
       g.lda = lda;
     }
     g.packed_w = p.get();
@@ -271,6 +291,7 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
       EXPECT_NE(paths & kPathRowZeroPoint, 0u) << "per-row zero points were not applied";
     }
     EXPECT_EQ((paths & kPathSegmentedA) != 0, segment_k_ > 0) << "A was not read the way it was given";
+    EXPECT_EQ((paths & kPathUnsignedA) != 0, unsigned_a_) << "A was not read as signed or unsigned as it was stored";
     if (m_ % v.mr != 0) {
       EXPECT_NE(paths & kPathRowTail, 0u) << "row tail kernel did not run";
     }

@@ -53,6 +53,9 @@ class GemmS8Tester {
   GemmS8Tester& segments(int segment_k) { segment_k_ = segment_k; return *this; }
   /// Where C and the residual are the same buffer (s8 out only).
   GemmS8Tester& residual_in_place(bool v) { in_place_ = v; return *this; }
+  /// The variant reads A stored unsigned (every byte XOR 0x80, zero point + 128) through weights
+  /// packed by its pack_u8a; the reference and the definition read the signed codes.
+  GemmS8Tester& unsigned_a(bool v) { unsigned_a_ = v; return *this; }
 
   /// Runs the checks for `variant` (which must be available on this CPU); reports with gtest.
   void test(const GemmS8Kernels& variant) const;
@@ -69,6 +72,7 @@ class GemmS8Tester {
   GemmFill a_fill_ = GemmFill::kRandom, w_fill_ = GemmFill::kRandom;
   int tile_m_ = 0, tile_n_ = 0;
   int segment_k_ = 0;
+  bool unsigned_a_ = false;
   uint32_t seed_ = 1;
 };
 

@@ -105,18 +105,25 @@ Problem make_problem(const ConvCase& c, int zp, std::mt19937& rng) {
 }
 
 // Runs conv_s8_s8out tile by tile (tiles of `tile` pixels, or the conv's own tile size when 0), and
-// in blocks of `channel_block` output channels (all at once when 0).
+// in blocks of `channel_block` output channels (all at once when 0); with unsigned_input, on the
+// input stored unsigned (XOR 0x80) through weights packed by pack_u8a, as the INT8 stem runs.
 std::vector<int8_t> run_s8(const GemmS8Kernels& v, const Problem& p, const GemmS8OutS8& out_template, int tile,
-                           int channel_block = 0) {
+                           int channel_block = 0, bool unsigned_input = false) {
   const Conv2dShape& s = p.s;
   std::unique_ptr<uint8_t, FreeDeleter> packed(
       static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, v.packed_size(s.out_c, s.patch_size()))));
-  v.pack(s.out_c, s.patch_size(), p.w.data(), static_cast<size_t>(s.patch_size()), p.bias.data(), p.zp, packed.get());
+  const GemmS8PackFn pack = unsigned_input ? v.pack_u8a : v.pack;
+  pack(s.out_c, s.patch_size(), p.w.data(), static_cast<size_t>(s.patch_size()), p.bias.data(),
+       p.zp + (unsigned_input ? 128 : 0), packed.get());
+  std::vector<int8_t> x = p.x;
+  if (unsigned_input) {
+    for (int8_t& b : x) b = static_cast<int8_t>(b ^ 0x80);
+  }
   ConvS8 conv;
   conv.shape = s;
   conv.kernels = &v;
   conv.packed_w = packed.get();
-  conv.input_zero_point = static_cast<int8_t>(p.zp);
+  conv.input_zero_point = static_cast<int8_t>(unsigned_input ? p.zp ^ 0x80 : p.zp);
   const int pixels = s.out_h * s.out_w;
   if (tile == 0) tile = conv_s8_tile_pixels(s);
   std::vector<int8_t> scratch(conv_s8_scratch_bytes(s, tile) + 1);
@@ -127,7 +134,7 @@ std::vector<int8_t> run_s8(const GemmS8Kernels& v, const Problem& p, const GemmS
   const int block = channel_block == 0 ? s.out_c : channel_block;
   for (int p0 = 0; p0 < pixels; p0 += tile) {
     for (int c0 = 0; c0 < s.out_c; c0 += block) {
-      conv_s8_s8out(conv, p.x.data(), out, p0, std::min(tile, pixels - p0), scratch.data(),
+      conv_s8_s8out(conv, x.data(), out, p0, std::min(tile, pixels - p0), scratch.data(),
                     ConvChannels{c0, std::min(s.out_c, c0 + block)});
     }
   }
@@ -169,12 +176,16 @@ TEST(ConvS8, EqualsDirectIntegerConvolutionForEveryVariant) {
           const GemmS8Kernels& v = test::table_of(isa, &IsaTables::gemm_s8);
           // The conv's own tiles, and ragged ones (1 pixel; 7 = not a multiple of any MR).
           // Channel blocks of 16 (ragged against 64-wide panels) and 64, as threads split deep layers.
-          for (const auto& [tile, block] : {std::pair{0, 0}, {1, 0}, {7, 0}, {0, 16}, {7, 64}}) {
-            const std::vector<int8_t> y = run_s8(v, p, o, tile, block);
-            for (size_t i = 0; i < y.size(); ++i) {
-              ASSERT_EQ(y[i], want[i]) << c.name << " zp=" << zp << " residual=" << residual << " " << isa_name(isa)
-                                       << " tile=" << tile << " channel block=" << block << " pixel " << i / out_c
-                                       << " channel " << i % out_c;
+          // The input stored unsigned too, where the variant reads it so.
+          for (bool unsigned_input : {false, true}) {
+            if (unsigned_input && v.pack_u8a == nullptr) continue;
+            for (const auto& [tile, block] : {std::pair{0, 0}, {1, 0}, {7, 0}, {0, 16}, {7, 64}}) {
+              const std::vector<int8_t> y = run_s8(v, p, o, tile, block, unsigned_input);
+              for (size_t i = 0; i < y.size(); ++i) {
+                ASSERT_EQ(y[i], want[i]) << c.name << " zp=" << zp << " residual=" << residual << " " << isa_name(isa)
+                                         << " unsigned input=" << unsigned_input << " tile=" << tile
+                                         << " channel block=" << block << " pixel " << i / out_c << " channel " << i % out_c;
+              }
             }
           }
         }

@@ -113,6 +113,41 @@ TEST_P(GemmS8Variant, SegmentedA) {
       .w_fill(GemmFill::kMax).seed(seed++).test(variant());
 }
 
+// A stored unsigned (pack_u8a, the static INT8 stem's image): the same results as the signed codes
+// through the reference, on ragged shapes, K, segments, every zero point (0 and 255 stored), clamps
+// and all-extreme operands. Only ISAs with an unsigned x signed product have it.
+TEST_P(GemmS8Variant, UnsignedActivations) {
+  if (variant().pack_u8a == nullptr) {
+    EXPECT_NE(GetParam(), Isa::kAvx512Vnni) << "the VNNI variant reads unsigned activations";
+    return;
+  }
+  uint32_t seed = 1000;
+  for (int m : m_sizes()) {
+    for (int n : {1, nr() - 1, nr() + 1, 2 * nr() + 3}) {
+      for (int k : {1, kr() + 1, 2 * kblock() + 3, 147}) {
+        for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
+          const int za = static_cast<int>(seed % 11) - 5;
+          GemmS8Tester().m(m).n(n).k(k).out(out).a_zero_point(za).unsigned_a(true).seed(seed++).test(variant());
+        }
+      }
+    }
+  }
+  for (int za : {-128, -1, 0, 127}) {
+    GemmS8Tester().m(mr() + 1).n(nr() + 1).k(3 * kblock() + 1).a_zero_point(za).out_zero_point(-128).qmin(-128)
+        .out(GemmOut::kS8).unsigned_a(true).seed(seed++).test(variant());
+  }
+  for (int segment_k : {8, 24}) {
+    GemmS8Tester().m(2 * mr() + 3).n(nr() + 5).k(3 * segment_k).segments(segment_k).residual(true).out(GemmOut::kS8)
+        .qmin(3).out_zero_point(3).unsigned_a(true).seed(seed++).test(variant());
+  }
+  GemmS8Tester().m(2 * mr() + 1).n(nr() + 3).k(2 * kblock() + 5).a_stride_pad(13).c_stride_pad(5).out(GemmOut::kS8)
+      .unsigned_a(true).seed(seed++).test(variant());
+  GemmS8Tester().m(37).n(2 * nr() + 1).k(1153).a_fill(GemmFill::kMax).w_fill(GemmFill::kMin).a_zero_point(-128)
+      .out(GemmOut::kS32).unsigned_a(true).seed(seed++).test(variant());
+  GemmS8Tester().m(37).n(2 * nr() + 1).k(1153).a_fill(GemmFill::kMin).w_fill(GemmFill::kMax).a_zero_point(127)
+      .out(GemmOut::kS32).unsigned_a(true).seed(seed++).test(variant());
+}
+
 TEST_P(GemmS8Variant, StridedAAndC) {
   uint32_t seed = 200;
   for (GemmOut out : {GemmOut::kS32, GemmOut::kS8, GemmOut::kF32}) {
@@ -494,7 +529,7 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
   const int8_t w[n * k] = {1, 2, 3, 4, 5, -1, -1, -1, -1, -1, 127, -127, 0, 0, 127};
   const int32_t bias[n] = {10, 20, 30};
   for (GemmS8Layout layout : {GemmS8Layout::kRef1x1, GemmS8Layout::kAvx2_8x8, GemmS8Layout::kVnni64x4,
-                              GemmS8Layout::kNeon16x4}) {
+                              GemmS8Layout::kNeon16x4, GemmS8Layout::kVnni64x4U8A}) {
     const size_t bytes = gemm_s8_packed_size(layout, n, k);
     std::unique_ptr<uint8_t, decltype(&std::free)> p(
         static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
@@ -504,6 +539,7 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
       case GemmS8Layout::kAvx2_8x8: pack_w_s8_8x8_goi_pair4(n, k, w, k, bias, za, p.get()); break;
       case GemmS8Layout::kVnni64x4: pack_w_s8_64x4_goi_x80(n, k, w, k, bias, za, p.get()); break;
       case GemmS8Layout::kNeon16x4: pack_w_s8_16x4_goi(n, k, w, k, bias, za, p.get()); break;
+      case GemmS8Layout::kVnni64x4U8A: pack_w_s8_64x4_goi_u8a(n, k, w, k, bias, za, p.get()); break;
     }
     GemmS8PackedHeader h;
     std::memcpy(&h, p.get(), sizeof h);
@@ -524,12 +560,14 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
       EXPECT_EQ(kbias, bias[c] - (za + h.a_shift) * sums[c]);
     }
     EXPECT_EQ(h.a_shift, 0);
-    // Weight bytes: W itself, or W XOR 0x80 (W + 128 as u8) for the VNNI layout; k-padding 0.
-    if (layout == GemmS8Layout::kVnni64x4) {
+    // Weight bytes: W XOR 0x80 (W + 128 as u8) for the signed-activation VNNI layout, W itself for
+    // the unsigned one; k-padding 0.
+    if (layout == GemmS8Layout::kVnni64x4 || layout == GemmS8Layout::kVnni64x4U8A) {
+      const int flip = layout == GemmS8Layout::kVnni64x4 ? 0x80 : 0;
       const int8_t* wp = reinterpret_cast<const int8_t*>(p.get() + sizeof h + 8 * h.nr);
       for (int c = 0; c < n; ++c) {
         for (int kk = 0; kk < h.kp; ++kk) {
-          const int8_t want = kk < k ? static_cast<int8_t>(w[c * k + kk] ^ 0x80) : int8_t{0};
+          const int8_t want = kk < k ? static_cast<int8_t>(w[c * k + kk] ^ flip) : int8_t{0};
           EXPECT_EQ(wp[(kk / 4 * h.nr + c) * 4 + kk % 4], want) << "column " << c << " k " << kk;
         }
       }

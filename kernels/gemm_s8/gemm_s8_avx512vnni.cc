@@ -162,31 +162,49 @@ struct EpiS8 {
     }
   }
   void row(int m, int n, const __m512i (&acc)[kVecs]) const {
+    // The options read once, before this row's store: an int8 store may alias anything, so a test
+    // of o's fields after one would load them again, per vector.
+    const float* row_scale = o.a_row_scale;
+    const int8_t* residual = o.residual;
+    const bool has_bias = o.bias != nullptr;
     const __m512 zo = _mm512_set1_ps(static_cast<float>(o.out_zero_point));
-    const __m512i qmin = _mm512_set1_epi8(static_cast<char>(o.qmin));
     const __m512 qmax = _mm512_set1_ps(static_cast<float>(o.qmax));
-    int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
     __m512i q[kVecs];
-    for (int j = 0; j < kVecs; ++j) {
-      const __m512 s = o.a_row_scale != nullptr ? _mm512_mul_ps(_mm512_set1_ps(o.a_row_scale[m]), scale[j]) : scale[j];
-      __m512 v = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), s);
-      if (o.bias != nullptr) v = _mm512_add_ps(v, bias[j]);
-      if (o.residual != nullptr) {
-        const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n + 16 * j;
-        const __m512i r = _mm512_sub_epi32(_mm512_cvtepi8_epi32(_mm_maskz_loadu_epi8(mask[j], rp)),
-                                           _mm512_set1_epi32(o.residual_zero_point));
-        v = _mm512_add_ps(v, _mm512_mul_ps(_mm512_cvtepi32_ps(r), _mm512_set1_ps(o.residual_scale)));
+    if (row_scale == nullptr && residual == nullptr && !has_bias) {
+      // Per-tensor requantization, no residual (the stem, most convs, the FFN hidden layers).
+      for (int j = 0; j < kVecs; ++j) q[j] = finish(_mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), scale[j]), zo, qmax);
+    } else {
+      const __m512 residual_scale = _mm512_set1_ps(o.residual_scale);
+      const __m512i residual_zero_point = _mm512_set1_epi32(o.residual_zero_point);
+      const int8_t* rp = residual != nullptr ? residual + static_cast<size_t>(m) * o.ldr + n : nullptr;
+      for (int j = 0; j < kVecs; ++j) {
+        const __m512 s = row_scale != nullptr ? _mm512_mul_ps(_mm512_set1_ps(row_scale[m]), scale[j]) : scale[j];
+        __m512 v = _mm512_mul_ps(_mm512_cvtepi32_ps(acc[j]), s);
+        if (has_bias) v = _mm512_add_ps(v, bias[j]);
+        if (rp != nullptr) {
+          const __m512i r = _mm512_sub_epi32(_mm512_cvtepi8_epi32(_mm_maskz_loadu_epi8(mask[j], rp + 16 * j)),
+                                             residual_zero_point);
+          v = _mm512_add_ps(v, _mm512_mul_ps(_mm512_cvtepi32_ps(r), residual_scale));
+        }
+        q[j] = finish(v, zo, qmax);
       }
-      v = _mm512_add_ps(v, zo);
-      // v < qmax ? v : qmax, a NaN kept (minps returns its second operand on NaN); rounded half to
-      // even (MXCSR default). The low clamp comes after narrowing, on the bytes: rounding is monotone
-      // and qmin an integer, so max(round(v), qmin) = round(max(v, qmin)), and a NaN or anything
-      // below -2^31 converts to INT32_MIN, which the saturating narrowing takes to -128 and the max
-      // to qmin, as requant_ref.h's float clamp does.
-      q[j] = _mm512_cvtps_epi32(_mm512_min_ps(qmax, v));
     }
+    store(o.c + static_cast<size_t>(m) * o.ldc + n, q);
+  }
+
+  // + z_out, then v < qmax ? v : qmax, a NaN kept (minps returns its second operand on NaN),
+  // rounded half to even (MXCSR default). The low clamp comes after narrowing, on the bytes
+  // (store): rounding is monotone and qmin an integer, so max(round(v), qmin) = round(max(v, qmin)),
+  // and a NaN or anything below -2^31 converts to INT32_MIN, which the saturating narrowing takes to
+  // -128 and the max to qmin, as requant_ref.h's float clamp does.
+  static __m512i finish(__m512 v, __m512 zo, __m512 qmax) {
+    return _mm512_cvtps_epi32(_mm512_min_ps(qmax, _mm512_add_ps(v, zo)));
+  }
+
+  void store(int8_t* cp, const __m512i (&q)[kVecs]) const {
+    const __m512i qmin = _mm512_set1_epi8(static_cast<char>(o.qmin));
     if (full_panel) {
-      // 64 columns narrowed by two saturating packs into one store (then the low clamp); the packs
+      // 64 columns narrowed by two saturating packs into one store (after the low clamp); the packs
       // interleave 128-bit lanes, dword 4l + j holding lane l of q[j], which the permute puts back.
       const __m512i bytes = _mm512_packs_epi16(_mm512_packs_epi32(q[0], q[1]), _mm512_packs_epi32(q[2], q[3]));
       const __m512i order = _mm512_setr_epi32(0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15);
@@ -263,6 +281,7 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr
     }
   }
   epi.begin_panel(n, lo, hi);
+#pragma GCC unroll 6
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
 }
 

@@ -151,9 +151,10 @@ struct GemmS8Kernels {
   GemmS8S8OutFn s8out;
   GemmS8F32OutFn f32out;
   GemmS8S32OutFn s32out;
-  /// Packs W for activations stored unsigned: A's bytes are read as uint8 with a per-tensor zero
-  /// point in [0, 255] (no per-row zero points), and the same kernels take them. Null where the ISA
-  /// has no unsigned x signed product (AVX2 and NEON SDOT: their kernels' A is signed).
+  /// Packs W (into packed_size(n, k) bytes, as pack) for activations stored unsigned: A's bytes are
+  /// read as uint8 with a per-tensor zero point in [0, 255] (no per-row zero points), and the same
+  /// kernels take them. Null where the ISA has no unsigned x signed product (AVX2 and NEON SDOT:
+  /// their kernels' A is signed).
   const char* pack_u8a_name = nullptr;
   GemmS8PackFn pack_u8a = nullptr;
 };

@@ -319,6 +319,7 @@ template <class Epi>
 void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
                int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
   if (h.layout == kLayoutU8A) {
+    ACT_DCHECK(g.a_row_zero_point == nullptr, "unsigned activations have one zero point, in the packed weights");
     paths |= kPathUnsignedA;
     row_block_of<true>(g, h, panels, m, rows, pb, pe, n0, n1, epi, paths);
   } else {

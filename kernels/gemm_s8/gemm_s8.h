@@ -99,7 +99,7 @@ struct GemmS8OutS8 {
   const float* bias = nullptr;
   int32_t out_zero_point = 0;        ///< in [-128, 127]
   int32_t qmin = -128, qmax = 127;   ///< -128 <= qmin <= qmax <= 127
-  const int8_t* residual = nullptr;  ///< optional [m x n] int8, row stride ldr
+  const int8_t* residual = nullptr;  ///< optional [m x n] int8, row stride ldr (0: one row for all)
   size_t ldr = 0;
   int32_t residual_zero_point = 0;
   float residual_scale = 0.0f;       ///< s_residual / s_out; finite
@@ -113,7 +113,7 @@ struct GemmS8OutF32 {
   float a_scale = 1.0f;                ///< per-tensor activation scale, used when a_row_scale is null
   const float* a_row_scale = nullptr;  ///< optional [m] per-row activation scales
   const float* bias = nullptr;         ///< optional [n]
-  const float* residual = nullptr;     ///< optional [m x n], row stride ldr
+  const float* residual = nullptr;     ///< optional [m x n], row stride ldr (0: one row for all)
   size_t ldr = 0;
   bool relu = false;
 };

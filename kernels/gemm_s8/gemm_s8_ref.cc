@@ -63,7 +63,7 @@ void record(const GemmS8Args& g) {
 
 void gemm_s8s8_s8out_1x1c1_ref(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
   check_args(g, o.ldc, m0, m1, n0, n1);
-  ACT_DCHECK(o.residual == nullptr || o.ldr >= static_cast<size_t>(g.n), "ldr < n");
+  ACT_DCHECK(o.residual == nullptr || o.ldr == 0 || o.ldr >= static_cast<size_t>(g.n), "0 < ldr < n");
   ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
   for (int m = m0; m < m1; ++m) {
     for (int n = n0; n < n1; ++n) {
@@ -91,7 +91,7 @@ void gemm_s8s8_s8out_1x1c1_ref(const GemmS8Args& g, const GemmS8OutS8& o, int m0
 
 void gemm_s8s8_f32out_1x1c1_ref(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0, int n1) {
   check_args(g, o.ldc, m0, m1, n0, n1);
-  ACT_DCHECK(o.residual == nullptr || o.ldr >= static_cast<size_t>(g.n), "ldr < n");
+  ACT_DCHECK(o.residual == nullptr || o.ldr == 0 || o.ldr >= static_cast<size_t>(g.n), "0 < ldr < n");
   for (int m = m0; m < m1; ++m) {
     const float a_scale = o.a_row_scale != nullptr ? o.a_row_scale[m] : o.a_scale;
     for (int n = n0; n < n1; ++n) {

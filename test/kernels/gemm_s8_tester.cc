@@ -126,6 +126,7 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
                                     << " relu=" << relu_ << " seed=" << seed_);
   ASSERT_TRUE(segment_k_ == 0 || (segment_k_ % kGemmS8SegmentAlign == 0 && k_ % segment_k_ == 0)) << "bad test";
   ASSERT_TRUE(!unsigned_a_ || (v.pack_u8a != nullptr && !per_row_)) << "bad test: no unsigned activations here";
+  ASSERT_TRUE(!residual_row_ || (residual_ && !in_place_)) << "bad test: a residual row needs a residual, not in place";
   const GemmS8Kernels* ref = gemm_s8_table_ref();
   std::mt19937 rng(seed_);
   auto uniform = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
@@ -136,7 +137,7 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
 
   const size_t lda = static_cast<size_t>(k_) + lda_pad_;
   const size_t ldc = static_cast<size_t>(n_) + ldc_pad_;
-  const size_t ldr = ldc;
+  const size_t ldr = residual_row_ ? 0 : ldc;
 
   // A: garbage everywhere (row gaps and the read slack too: their values must not matter), then rows.
   std::vector<int8_t> a((static_cast<size_t>(m_) - 1) * lda + static_cast<size_t>(k_) + kGemmS8ReadSlack);
@@ -198,8 +199,9 @@ void GemmS8Tester::test(const GemmS8Kernels& v) const {
   const float a_scale = 0.02f;
   const int32_t rzp = uniform(-128, 127);
   const float rscale = log_uniform(0.05f, 2.0f);
-  std::vector<int8_t> res_s8(static_cast<size_t>(m_) * ldr);
-  std::vector<float> res_f32(static_cast<size_t>(m_) * ldr);
+  const size_t residual_elements = residual_row_ ? static_cast<size_t>(n_) : static_cast<size_t>(m_) * ldr;
+  std::vector<int8_t> res_s8(residual_elements);
+  std::vector<float> res_f32(residual_elements);
   for (auto& x : res_s8) x = static_cast<int8_t>(uniform(-128, 127));
   for (auto& x : res_f32) x = std::uniform_real_distribution<float>(-50.0f, 50.0f)(rng);
 

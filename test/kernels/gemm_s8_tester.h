@@ -38,6 +38,8 @@ class GemmS8Tester {
   GemmS8Tester& qmin(int v) { qmin_ = v; return *this; }
   GemmS8Tester& qmax(int v) { qmax_ = v; return *this; }
   GemmS8Tester& residual(bool v) { residual_ = v; return *this; }
+  /// One residual row for every row of C (ldr 0: the decoder's first layer adds a constant row).
+  GemmS8Tester& residual_row(bool v) { residual_row_ = v; return *this; }
   GemmS8Tester& relu(bool v) { relu_ = v; return *this; }
   GemmS8Tester& bias(bool v) { bias_ = v; return *this; }
   /// Per-channel scales drawn log-uniformly from [lo, hi]; lo == hi gives that exact value.
@@ -67,7 +69,7 @@ class GemmS8Tester {
   bool per_row_ = false;
   GemmOut out_ = GemmOut::kS32;
   int zo_ = 0, qmin_ = -128, qmax_ = 127;
-  bool residual_ = false, relu_ = false, bias_ = true, in_place_ = false;
+  bool residual_ = false, residual_row_ = false, relu_ = false, bias_ = true, in_place_ = false;
   float scale_lo_ = 1e-4f, scale_hi_ = 1e-2f;
   GemmFill a_fill_ = GemmFill::kRandom, w_fill_ = GemmFill::kRandom;
   int tile_m_ = 0, tile_n_ = 0;

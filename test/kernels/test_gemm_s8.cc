@@ -258,6 +258,17 @@ TEST_P(GemmS8Variant, ClampsResidualAndRelu) {
   }
 }
 
+// One residual row added to every row (ldr 0), both epilogues, ragged shapes and sub-rectangles.
+TEST_P(GemmS8Variant, OneResidualRowForAllRows) {
+  uint32_t seed = 1100;
+  for (int m : {1, mr() + 1, 2 * mr() + 3}) {
+    for (GemmOut out : {GemmOut::kS8, GemmOut::kF32}) {
+      GemmS8Tester().m(m).n(nr() + 5).k(kblock() + 3).residual(true).residual_row(true).out(out).seed(seed++)
+          .test(variant());
+    }
+  }
+}
+
 TEST_P(GemmS8Variant, ResidualInPlace) {
   GemmS8Tester().m(2 * mr() + 1).n(2 * nr() + 3).k(50).c_stride_pad(3).residual(true).residual_in_place(true)
       .out(GemmOut::kS8).seed(800).test(variant());

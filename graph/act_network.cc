@@ -85,9 +85,7 @@ bool ActNetwork::camera_input_unsigned(size_t camera) const {
 }
 
 kernels::QuantS8 ActNetwork::camera_input_quant(size_t camera) const {
-  const Value& v = graph_.value(camera_inputs_.at(camera));
-  const kernels::QuantS8 q = v.quant.value_or(kernels::QuantS8{});
-  return v.dtype == DataType::kU8 ? kernels::QuantS8{q.scale, q.zero_point - 128} : q;
+  return graph_.value(camera_inputs_.at(camera)).quant.value_or(kernels::QuantS8{});
 }
 
 ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
@@ -307,7 +305,7 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
     const bool stored_unsigned = kernels_.gemm_s8.pack_u8a != nullptr;
     image = Tensor{graph_.add_input(p + "image", image_shape, stored_unsigned ? DataType::kU8 : DataType::kS8), true, q,
                    kNoValue};
-    graph_.value(image.id).quant = kernels::QuantS8{q.scale, q.zero_point + (stored_unsigned ? 128 : 0)};
+    graph_.value(image.id).quant = q;
   } else {
     image = Tensor{graph_.add_input(p + "image", image_shape), false, {}, kNoValue};
     calibration_point(CalibrationRole::kCameraImage, image.id);

@@ -72,7 +72,7 @@ std::vector<float> Graph::read_f32(ValueId id) {
     std::vector<int8_t> codes(data_s8(id), data_s8(id) + v.elements);
     for (int8_t& c : codes) c = static_cast<int8_t>(c ^ 0x80);
     out.resize(v.elements);
-    kernels::quant_s8_table_ref()->dequantize(v.elements, codes.data(), v.quant->scale, v.quant->zero_point - 128, out.data());
+    kernels::quant_s8_table_ref()->dequantize(v.elements, codes.data(), v.quant->scale, v.quant->zero_point, out.data());
   }
   return out;
 }

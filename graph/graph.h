@@ -25,7 +25,7 @@ namespace act::graph {
 using ValueId = int;
 inline constexpr ValueId kNoValue = -1;
 
-/// kU8 holds int8 codes stored unsigned (code + 128, zero point + 128) for kernels whose
+/// kU8 holds int8 codes stored unsigned (each code XOR 0x80 = code + 128) for kernels whose
 /// activations are unsigned (kernels::GemmS8Kernels::pack_u8a): the static INT8 stem's image.
 enum class DataType { kF32, kS8, kU8, kS32 };
 
@@ -34,7 +34,7 @@ struct Value {
   std::vector<int64_t> shape;
   DataType dtype = DataType::kF32;
   /// int8 values with static quantization: their scale and zero point (for dequantizing them in
-  /// reports and tests; the ops hold their own copies). A kU8 value's zero point is its uint8 one.
+  /// reports and tests; the ops hold their own copies). A kU8 value's are those of its codes.
   std::optional<kernels::QuantS8> quant;
   size_t elements = 0;
   size_t offset = 0;   ///< in floats (4-byte units), into the arena (valid after plan())

@@ -9,6 +9,7 @@ namespace act::kernels {
 
 const PeakProbe kPeakProbes[] = {
     {"vpdpbusd_zmm", Isa::kAvx512Vnni, PeakKind::kInt8, peak_vpdpbusd_zmm, true},
+    {"vpdpbusd_zmm_6x64_loop", Isa::kAvx512Vnni, PeakKind::kInt8, peak_vpdpbusd_zmm_6x64_loop, false},
     {"vpmaddwd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_ymm, true},
     {"vpmaddwd+vpaddd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_vpaddd_ymm, false},
     {"sdot", Isa::kNeonDot, PeakKind::kInt8, peak_sdot, true},

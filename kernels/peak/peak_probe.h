@@ -12,6 +12,9 @@ namespace act::kernels {
 
 /// 16 independent vpdpbusd zmm chains per iteration (64 int8 MACs each). AVX-512 VNNI.
 uint64_t peak_vpdpbusd_zmm(uint64_t iterations);
+/// The 6x64c4 kernel's inner loop with its operands in L1 (4 weight loads, 6 broadcasts, 24
+/// vpdpbusd per k-group): the ceiling of its instruction mix, below which the data's arrival lies.
+uint64_t peak_vpdpbusd_zmm_6x64_loop(uint64_t iterations);
 /// 12 independent vpmaddwd ymm chains per iteration (16 int16 MACs each). AVX2.
 uint64_t peak_vpmaddwd_ymm(uint64_t iterations);
 /// 8 vpmaddwd + vpaddd accumulate pairs per iteration: the AVX2 kernel's actual idiom.

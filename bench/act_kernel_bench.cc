@@ -204,7 +204,8 @@ void bm_gemm(benchmark::State& state, const GemmS8Kernels* v, Shape s, double pe
     o8.scale = scale.data();
     o8.qmin = 0;  // ReLU, as most ResNet convolutions
   }
-  const graph::GemmTiling t = graph::gemm_tiling(s.m, s.n, v->mr, v->nr, threads);
+  const graph::GemmTiling t =
+      graph::gemm_tiling(s.m, s.n, v->mr, v->nr, threads, false, static_cast<size_t>(s.k) * static_cast<size_t>(s.n));
   ThreadPool& tp = pool(threads);
   run_timed(state, key, threads, static_cast<double>(s.macs()), peak_gmacs, [&] {
     tp.parallel_for(t.count(), [&](size_t task, int) {

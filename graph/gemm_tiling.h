@@ -67,9 +67,14 @@ struct GemmTiling {
 /// f32 output rows a one-thread task of `whole_rows` tiling holds: about half of a 1 MB L2.
 inline constexpr int kRowStripBytes = 512 * 1024;
 
+/// Weights larger than this do not stay in a core's L2 (1 MB on Zen 4 and 5) from task to task.
+inline constexpr size_t kL2WeightBytes = size_t{1} << 20;
+
 /// With `whole_rows` (the caller quantizes each task's rows right after it, while they are still in
 /// cache), one thread runs strips of whole rows too, of at most kRowStripBytes of output each.
-inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool whole_rows = false) {
+/// `weight_bytes` (K x N int8): past kL2WeightBytes, many rows split in columns too (below).
+inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool whole_rows = false,
+                              size_t weight_bytes = 0) {
   const EvenSplit all_cols{n, nr, 1};
   if (threads <= 1) {
     if (!whole_rows) return {{m, mr, 1}, all_cols};
@@ -82,7 +87,14 @@ inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool wh
   // one streams all the weights for 6-12 rows; columns give each task a share of the weights.
   // Tasks that finish their rows keep rows down to one tile each: a pass of its own to finish them
   // cost more than the uneven tiles (the decoder's cross_out, 0.076 -> 0.083 ms on two threads).
-  if (m >= (whole_rows ? 1 : 2) * want * mr) return {{m, mr, want}, all_cols};
+  if (m >= (whole_rows ? 1 : 2) * want * mr) {
+    // Weights past L2 (the FFN hidden layers' 1.6 MB), when the tasks need not finish rows: a row
+    // band per thread cut in 5 column blocks, each task streaming a fifth of the weights, where 5
+    // row tasks per thread streamed all of them 5 times per thread (encoder 0.78 -> 0.74 ms on two
+    // threads). Two row tasks per thread for the row-finishing FFN outputs measured the same.
+    if (whole_rows || weight_bytes <= kL2WeightBytes) return {{m, mr, want}, all_cols};
+    return {{m, mr, threads}, {n, nr, std::min(col_units, 5)}};
+  }
   return {{m, mr, m >= 2 * mr * 8 ? 2 : 1}, {n, nr, std::max(1, std::min(col_units, want))}};
 }
 

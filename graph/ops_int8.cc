@@ -413,7 +413,8 @@ void LinearS8Op::run(const RunContext& ctx) const {
     }
   }
   const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
-  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), finishes_rows());
+  const GemmTiling tiling =
+      gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), finishes_rows(), weight_bytes());
   // Tasks of whole rows normalize and quantize their rows while they are still in cache; else a
   // pass of its own. When nothing reads the float output (its readers take the codes or the
   // norm's output), those rows go to the task's scratch only, never to memory.
@@ -483,7 +484,7 @@ void LinearS8Op::run_requantized(const RunContext& ctx, const kernels::GemmS8Arg
   o.out_zero_point = y_codes_.fixed->zero_point;
   o.qmin = epilogue_ == Epilogue::kRelu ? o.out_zero_point : -128;
   const kernels::GemmS8Kernels& gemm = ctx.kernels().gemm_s8;
-  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads());
+  const GemmTiling tiling = gemm_tiling(rows_, out_, gemm.mr, gemm.nr, ctx.pool().threads(), false, weight_bytes());
   ctx.pool().parallel_for(tiling.count(), [&](size_t task, int) {
     int r0, r1, c0, c1;
     tiling.rect(task, r0, r1, c0, c1);

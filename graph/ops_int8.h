@@ -184,6 +184,8 @@ class LinearS8Op : public Op, public RowCodesWriter {
   size_t scratch_per_thread() const override;
   double macs() const override;
   LinearParams params() const { return {rows_, in_, out_, x_, bias_, residual_, epilogue_}; }
+  /// The int8 weights' bytes (in x out): past L2, the GEMM's tasks split columns too (gemm_tiling).
+  size_t weight_bytes() const { return static_cast<size_t>(in_) * static_cast<size_t>(out_); }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
   const float* w_scale() const { return w_scale_; }
   /// The per-tensor parameters of the input codes and of the output codes, when they are.

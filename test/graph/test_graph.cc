@@ -81,34 +81,46 @@ TEST(ThreadPool, RecordsEachThreadsSpanOfASection) {
 
 // A chain a -> b -> c -> d of LayerNorms: the planner may reuse a's memory for c, never for b.
 // Every output element in exactly one task; row bands start on multiples of MR and are at most
-// tile_m rows; with enough rows, at least 5 bands per thread's worth of rows.
+// tile_m rows; with enough rows 5 row bands per thread (or, for weights past L2 and tasks that need
+// not finish rows, a band per thread in 5 column blocks); with few, column blocks for every thread.
+void expect_tiling_covers_once(int m, int n, int mr, int threads, bool whole_rows, size_t weight_bytes) {
+  SCOPED_TRACE(testing::Message() << "m " << m << " n " << n << " mr " << mr << " threads " << threads << " whole_rows "
+                                  << whole_rows << " weight_bytes " << weight_bytes);
+  const GemmTiling t = gemm_tiling(m, n, mr, 16, threads, whole_rows, weight_bytes);
+  std::vector<int> hits(static_cast<size_t>(m) * static_cast<size_t>(n), 0);
+  for (size_t task = 0; task < t.count(); ++task) {
+    int m0, m1, n0, n1;
+    t.rect(task, m0, m1, n0, n1);
+    ASSERT_EQ(m0 % mr, 0);
+    ASSERT_TRUE(0 <= m0 && m0 < m1 && m1 <= m && 0 <= n0 && n0 < n1 && n1 <= n);
+    ASSERT_LE(m1 - m0, t.rows.max_size());
+    for (int r = m0; r < m1; ++r) {
+      for (int c = n0; c < n1; ++c) hits[static_cast<size_t>(r) * static_cast<size_t>(n) + static_cast<size_t>(c)]++;
+    }
+  }
+  for (int h : hits) ASSERT_EQ(h, 1);
+  if (threads <= 1) return;
+  const bool many_rows = m >= (whole_rows ? 1 : 2) * 5 * threads * mr;
+  if (many_rows && (whole_rows || weight_bytes <= kL2WeightBytes)) {
+    EXPECT_EQ(t.rows.parts, 5 * threads);
+    EXPECT_EQ(t.cols.parts, 1);
+  } else if (many_rows) {  // weights past L2: a row band per thread, in 5 column blocks
+    EXPECT_EQ(t.rows.parts, threads);
+    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, 5));
+  } else {  // few rows: every thread gets columns
+    EXPECT_LE(t.rows.parts, 2);
+    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, 5 * threads));
+  }
+}
+
 TEST(GemmTiling, CoversEachOutputOnceInBandsOfWholeGroups) {
   for (int mr : {1, 4, 6}) {
     for (int m : {1, 5, 6, 7, 59, 100, 302, 1200}) {
       for (int n : {16, 64, 512, 1536, 3200}) {
         for (int threads : {1, 2, 3, 4}) {
           for (bool whole_rows : {false, true}) {
-            const GemmTiling t = gemm_tiling(m, n, mr, 16, threads, whole_rows);
-            std::vector<int> hits(static_cast<size_t>(m) * static_cast<size_t>(n), 0);
-            for (size_t task = 0; task < t.count(); ++task) {
-              int m0, m1, n0, n1;
-              t.rect(task, m0, m1, n0, n1);
-              ASSERT_EQ(m0 % mr, 0);
-              ASSERT_TRUE(0 <= m0 && m0 < m1 && m1 <= m && 0 <= n0 && n0 < n1 && n1 <= n);
-              ASSERT_LE(m1 - m0, t.rows.max_size());
-              for (int r = m0; r < m1; ++r) {
-                for (int c = n0; c < n1; ++c) hits[static_cast<size_t>(r) * static_cast<size_t>(n) + static_cast<size_t>(c)]++;
-              }
-            }
-            for (int h : hits) {
-              ASSERT_EQ(h, 1) << "m " << m << " n " << n << " mr " << mr << " threads " << threads;
-            }
-            if (threads > 1 && m >= (whole_rows ? 1 : 2) * 5 * threads * mr) {
-              EXPECT_EQ(t.rows.parts, 5 * threads);
-              EXPECT_EQ(t.cols.parts, 1);
-            } else if (threads > 1) {  // few rows: every thread gets columns
-              EXPECT_LE(t.rows.parts, 2);
-              EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, 5 * threads));
+            for (size_t weight_bytes : {size_t{0}, size_t{2} << 20}) {
+              expect_tiling_covers_once(m, n, mr, threads, whole_rows, weight_bytes);
             }
           }
         }

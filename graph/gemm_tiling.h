@@ -1,8 +1,9 @@
 // How a GEMM's output [m x n] is split into thread-pool tasks. Whole rows of output, in multiples of
 // the kernel's MR, when there are enough of them for 5 tasks of two MR or more per thread: each
 // task's A strip stays in L1 while the packed weights stream past it once, and the many small tasks
-// even out a worker that starts late. Else columns in multiples of NR (and rows in two when there
-// are many). The int8 linears and act_kernel_bench's GEMM rows split this way; the convolutions
+// even out a worker that starts late (weights past L2: a row band per thread in 5 column blocks, so
+// that they are not streamed once per task). Else columns in multiples of NR (and rows in two when
+// there are many). The int8 linears and act_kernel_bench's GEMM rows split this way; the convolutions
 // split their output pixels, and the float linears their columns, with the same EvenSplit.
 #pragma once
 

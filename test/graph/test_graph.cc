@@ -79,7 +79,6 @@ TEST(ThreadPool, RecordsEachThreadsSpanOfASection) {
   EXPECT_EQ(spans.by_thread[0].size() + spans.by_thread[1].size(), 4u);
 }
 
-// A chain a -> b -> c -> d of LayerNorms: the planner may reuse a's memory for c, never for b.
 // Every output element in exactly one task; row bands start on multiples of MR and are at most
 // tile_m rows; with enough rows 5 row bands per thread (or, for weights past L2 and tasks that need
 // not finish rows, a band per thread in 5 column blocks); with few, column blocks for every thread.
@@ -195,6 +194,7 @@ TEST(ParallelRanges, EveryItemOnceInBoundedRangesOnThePoolsThreads) {
   }
 }
 
+// A chain a -> b -> c -> d of LayerNorms: the planner may reuse a's memory for c, never for b.
 TEST(GraphPlanner, ReusesDeadBuffersAndKeepsLiveOnesApart) {
   Graph g;
   const int rows = 4, cols = 64;

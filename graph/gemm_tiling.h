@@ -68,6 +68,9 @@ struct GemmTiling {
 /// f32 output rows a one-thread task of `whole_rows` tiling holds: about half of a 1 MB L2.
 inline constexpr int kRowStripBytes = 512 * 1024;
 
+/// Tasks per thread of a GEMM split over several threads (the balance of a worker that starts late).
+inline constexpr int kGemmTasksPerThread = 5;
+
 /// Weights larger than this do not stay in a core's L2 (1 MB on Zen 4 and 5) from task to task.
 inline constexpr size_t kL2WeightBytes = size_t{1} << 20;
 
@@ -81,7 +84,7 @@ inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool wh
     if (!whole_rows) return {{m, mr, 1}, all_cols};
     return {split_evenly(m, mr, std::max(mr, kRowStripBytes / (4 * n) / mr * mr), 1), all_cols};
   }
-  const int want = 5 * threads;
+  const int want = kGemmTasksPerThread * threads;
   const int col_units = (n + nr - 1) / nr;
   // Rows while every task gets at least two row tiles. With fewer (the decoder's 100 rows: 17
   // tiles of 6 in 10 tasks, 7 of two tiles and 3 of one), the tasks are uneven by half and each
@@ -94,7 +97,7 @@ inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool wh
     // row tasks per thread streamed all of them 5 times per thread (encoder 0.78 -> 0.74 ms on two
     // threads). Two row tasks per thread for the row-finishing FFN outputs measured the same.
     if (whole_rows || weight_bytes <= kL2WeightBytes) return {{m, mr, want}, all_cols};
-    return {{m, mr, threads}, {n, nr, std::min(col_units, 5)}};
+    return {{m, mr, threads}, {n, nr, std::min(col_units, kGemmTasksPerThread)}};
   }
   return {{m, mr, m >= 2 * mr * 8 ? 2 : 1}, {n, nr, std::max(1, std::min(col_units, want))}};
 }

@@ -99,16 +99,17 @@ void expect_tiling_covers_once(int m, int n, int mr, int threads, bool whole_row
   }
   for (int h : hits) ASSERT_EQ(h, 1);
   if (threads <= 1) return;
-  const bool many_rows = m >= (whole_rows ? 1 : 2) * 5 * threads * mr;
+  const int tasks = kGemmTasksPerThread;
+  const bool many_rows = m >= (whole_rows ? 1 : 2) * tasks * threads * mr;
   if (many_rows && (whole_rows || weight_bytes <= kL2WeightBytes)) {
-    EXPECT_EQ(t.rows.parts, 5 * threads);
+    EXPECT_EQ(t.rows.parts, tasks * threads);
     EXPECT_EQ(t.cols.parts, 1);
   } else if (many_rows) {  // weights past L2: a row band per thread, in 5 column blocks
     EXPECT_EQ(t.rows.parts, threads);
-    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, 5));
+    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, tasks));
   } else {  // few rows: every thread gets columns
     EXPECT_LE(t.rows.parts, 2);
-    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, 5 * threads));
+    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, tasks * threads));
   }
 }
 

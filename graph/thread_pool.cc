@@ -1,6 +1,7 @@
 #include "graph/thread_pool.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
@@ -26,8 +27,8 @@ constexpr unsigned kPureSpins = 64;
 
 int ThreadPool::hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
 
-ThreadPool::ThreadPool(int threads) {
-  const int total = threads <= 0 ? hardware_threads() : threads;
+ThreadPool::ThreadPool(int threads) : ranges_(static_cast<size_t>(threads <= 0 ? hardware_threads() : threads)) {
+  const int total = static_cast<int>(ranges_.size());
   workers_.reserve(static_cast<size_t>(total - 1));
   for (int i = 1; i < total; ++i) workers_.emplace_back([this, i] { worker_loop(i); });
 }
@@ -63,15 +64,32 @@ void ThreadPool::record_spans(ThreadSpans* spans) {
   spans_ = spans;
 }
 
+bool ThreadPool::claim(TaskRange& range, bool from_front, size_t& task) {
+  uint64_t bounds = range.front_back.load(std::memory_order_relaxed);
+  for (;;) {
+    const uint64_t front = bounds & 0xffffffffu, back = bounds >> 32;
+    if (front >= back) return false;
+    const uint64_t next = from_front ? (back << 32) | (front + 1) : ((back - 1) << 32) | front;
+    if (range.front_back.compare_exchange_weak(bounds, next, std::memory_order_relaxed)) {
+      task = static_cast<size_t>(from_front ? front : back - 1);
+      return true;
+    }
+  }
+}
+
 void ThreadPool::run_tasks(int thread_index) {
   std::chrono::steady_clock::time_point start;
   bool claimed_any = false;
-  for (;;) {
-    const size_t i = next_task_.fetch_add(1, std::memory_order_relaxed);
-    if (i >= n_tasks_) break;
-    if (spans_ != nullptr && !claimed_any) start = std::chrono::steady_clock::now();
-    claimed_any = true;
-    (*task_)(i, thread_index);
+  const size_t threads = ranges_.size();
+  for (size_t k = 0; k < threads; ++k) {
+    const bool own = k == 0;
+    TaskRange& range = ranges_[(static_cast<size_t>(thread_index) + k) % threads];
+    size_t i;
+    while (claim(range, own, i)) {
+      if (spans_ != nullptr && !claimed_any) start = std::chrono::steady_clock::now();
+      claimed_any = true;
+      (*task_)(i, thread_index);
+    }
   }
   if (spans_ != nullptr && claimed_any) {
     spans_->by_thread[static_cast<size_t>(thread_index)].push_back({spans_->tag, start, std::chrono::steady_clock::now()});
@@ -104,9 +122,13 @@ void ThreadPool::parallel_for(size_t n_tasks, const std::function<void(size_t, i
     if (spans_ != nullptr) spans_->by_thread[0].push_back({spans_->tag, start, std::chrono::steady_clock::now()});
     return;
   }
+  if (n_tasks > UINT32_MAX) throw std::length_error("ThreadPool::parallel_for: more than 2^32 - 1 tasks");
   task_ = &task;
-  n_tasks_ = n_tasks;
-  next_task_.store(0, std::memory_order_relaxed);
+  const size_t threads = ranges_.size();
+  for (size_t t = 0; t < threads; ++t) {
+    const uint64_t front = n_tasks * t / threads, back = n_tasks * (t + 1) / threads;
+    ranges_[t].front_back.store((back << 32) | front, std::memory_order_relaxed);  // published by the generation
+  }
   busy_workers_.store(static_cast<int>(workers_.size()), std::memory_order_relaxed);
   {
     // Under the mutex, so a worker about to sleep sees either the new generation or the notify.

@@ -1,6 +1,9 @@
 // A persistent pool of worker threads for splitting one op into tiles. The calling thread works
-// too, so ThreadPool(1) runs everything inline with no other thread. Tasks are claimed from an atomic
-// counter, so uneven tiles balance themselves. Not reentrant: one parallel_for at a time per pool.
+// too, so ThreadPool(1) runs everything inline with no other thread. Each thread owns a contiguous
+// range of a section's tasks and claims them from its front; when its range is empty it steals from
+// the back of the others', so uneven tiles balance themselves (as pthreadpool does). Owning ranges
+// keeps data on its core: consecutive ops split their rows alike, so a thread mostly reads rows it
+// wrote itself, from its own L2. Not reentrant: one parallel_for at a time per pool.
 //
 // Waking costs next to nothing (as in pthreadpool and ruy): after a parallel section, workers spin on
 // an atomic for up to kSpinMicroseconds before they sleep on a condition variable, and the caller
@@ -13,6 +16,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <mutex>
 #include <thread>
@@ -67,9 +71,16 @@ class ThreadPool {
   std::condition_variable wake_;
   std::condition_variable done_;
   const std::function<void(size_t, int)>* task_ = nullptr;
-  size_t n_tasks_ = 0;
   ThreadSpans* spans_ = nullptr;
-  std::atomic<size_t> next_task_{0};
+  /// A thread's tasks [front, back) of the current section, on a cache line of its own. A thief
+  /// takes from the back, leaving a late owner the front (the rows next to its last op's).
+  struct alignas(64) TaskRange {
+    std::atomic<uint64_t> front_back{0};  // front in the low 32 bits, back (exclusive) in the high
+  };
+  std::vector<TaskRange> ranges_;
+  /// The next task of `range` from its front (owner) or back (thief); false when it is empty.
+  static bool claim(TaskRange& range, bool from_front, size_t& task);
+
   std::atomic<size_t> generation_{0};    // bumped (under mutex_) to start a section
   std::atomic<int> busy_workers_{0};     // workers still in the current section
   std::atomic<bool> stopping_{false};

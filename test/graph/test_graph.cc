@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <cmath>
 #include <set>
 #include <thread>
@@ -28,6 +29,69 @@ TEST(ThreadPool, RunsEveryTaskOnceWithValidThreadIndices) {
       });
       for (size_t i = 0; i < n; ++i) EXPECT_EQ(hits[i].load(), 1);
       EXPECT_FALSE(bad_thread);
+    }
+  }
+}
+
+// Waits (yielding) until `ready` holds, for at most 10 s: false if it never did, so that a pool that
+// fails to share its tasks fails the test instead of hanging it.
+template <class Ready>
+bool wait_until(Ready ready) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!ready()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::yield();
+  }
+  return true;
+}
+
+// Thread t starts with the front of its own range, [t n / T, (t + 1) n / T): each first task waits
+// until every thread has started one, so no thread can empty its range and steal before the others
+// claim their first.
+TEST(ThreadPool, EachThreadStartsWithItsOwnRange) {
+  for (int threads : {2, 4}) {
+    ThreadPool pool(threads);
+    for (size_t n : {size_t{4}, size_t{9}, size_t{64}}) {
+      std::vector<std::atomic<size_t>> first(static_cast<size_t>(threads));
+      for (auto& f : first) f = SIZE_MAX;
+      std::atomic<int> started{0};
+      std::atomic<bool> timed_out{false};
+      pool.parallel_for(n, [&](size_t i, int t) {
+        size_t none = SIZE_MAX;
+        if (first[static_cast<size_t>(t)].compare_exchange_strong(none, i)) {
+          started++;
+          if (!wait_until([&] { return started.load() == threads; })) timed_out = true;
+        }
+      });
+      ASSERT_FALSE(timed_out) << threads << " threads, " << n << " tasks: a thread never started";
+      for (size_t t = 0; t < first.size(); ++t) {
+        EXPECT_EQ(first[t].load(), n * t / static_cast<size_t>(threads)) << threads << " threads, " << n << " tasks";
+      }
+    }
+  }
+}
+
+// A thread stuck in its first task has the rest of its range taken by the others, from the back:
+// its first task waits for all of them, which only thieves can run.
+TEST(ThreadPool, OthersStealTheRestOfAStuckThreadsRange) {
+  ThreadPool pool(2);
+  constexpr size_t kTasks = 16, kSecondHalf = kTasks / 2;
+  std::vector<std::atomic<int>> ran_on(kTasks);
+  for (auto& r : ran_on) r = -1;
+  std::atomic<size_t> done{0};
+  std::atomic<bool> timed_out{false};
+  pool.parallel_for(kTasks, [&](size_t i, int t) {
+    ran_on[i] = t;
+    if (i == kSecondHalf && t == 1 && !wait_until([&] { return done.load() == kTasks - 1; })) timed_out = true;
+    done++;
+  });
+  ASSERT_FALSE(timed_out) << "the stuck thread's range was not stolen";
+  for (size_t i = 0; i < kTasks; ++i) ASSERT_NE(ran_on[i].load(), -1) << "task " << i;
+  if (ran_on[kSecondHalf] == 1) {  // thread 1 got to its range first: thread 0 ran all the rest
+    for (size_t i = 0; i < kTasks; ++i) {
+      if (i != kSecondHalf) {
+        EXPECT_EQ(ran_on[i].load(), 0) << "task " << i;
+      }
     }
   }
 }

@@ -596,12 +596,17 @@ void AttentionS8Op::run(const RunContext& ctx) const {
   // both GEMMs [rows x n] = A [rows x k] times a packed operand.
   // Blocks of whole micro-tiles of rows, as even as they can be (the decoder's 100 queries in blocks
   // of 48 left a 4-row block per head).
+  // Tasks in block-major order when there are two blocks per thread or more (the encoder's 7): the
+  // pool gives each thread a contiguous range of tasks, so a thread reads the query rows and writes
+  // the output rows that it produced and that it reads next (the other core's L2 otherwise; encoder
+  // attention 2-4 % faster on two threads). The decoder's 3 blocks stay head-major (1.005x).
   const EvenSplit blocks = split_evenly(nq_, kc.gemm_s8.mr, kAttentionS8BlockRows, 1);
-  const size_t per_head = static_cast<size_t>(blocks.parts);
-  ctx.pool().parallel_for(static_cast<size_t>(heads_) * per_head, [&](size_t task, int thread) {
-    const size_t head = task / per_head;
+  const size_t heads = static_cast<size_t>(heads_), n_blocks = static_cast<size_t>(blocks.parts);
+  const bool block_major = n_blocks >= 2 * static_cast<size_t>(ctx.pool().threads());
+  ctx.pool().parallel_for(n_blocks * heads, [&](size_t task, int thread) {
+    const size_t head = block_major ? task % heads : task / n_blocks;
     int r0, r1;
-    blocks.range(static_cast<int>(task % per_head), r0, r1);
+    blocks.range(static_cast<int>(block_major ? task / heads : task % n_blocks), r0, r1);
     const int rows = r1 - r0;
     uint8_t* scratch = aligned_scratch(ctx, thread);
     int8_t* q_s8 = reinterpret_cast<int8_t*>(scratch + layout_.q_s8);

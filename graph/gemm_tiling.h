@@ -9,26 +9,35 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 
 namespace act::graph {
 
 /// `total` items cut into `parts` ranges of whole `quantum`s (the last range may end short of one)
-/// whose sizes differ by at most one quantum, the larger ones first: the tasks of a thread pool
-/// even out to within one quantum per thread. (Fixed-size tiles left a remainder: layer3's 1200
-/// pixels in 11 tiles of 108 and one of 12 gave one of two threads a whole tile more.)
+/// whose sizes differ by at most one quantum, the larger ones spread evenly: the thread pool gives
+/// each thread a contiguous share of the parts, and the shares of a split into a multiple of the
+/// thread count differ by at most one quantum too. (Fixed-size tiles left a remainder: layer3's
+/// 1200 pixels in 11 tiles of 108 and one of 12 gave one of two threads a whole tile more; the
+/// larger parts first gave layer4's 25 quanta in 8 parts as 13 to one thread and 12 to the other.)
 struct EvenSplit {
   int total = 0, quantum = 1, parts = 1;
   /// Range i: [begin, end).
   void range(int i, int& begin, int& end) const {
-    const int units = (total + quantum - 1) / quantum;
-    const int base = units / parts, extra = units % parts;
-    begin = quantum * (i * base + std::min(i, extra));
-    end = std::min(total, begin + quantum * (base + (i < extra ? 1 : 0)));
+    begin = std::min(total, quantum * units_before(i));
+    end = std::min(total, quantum * units_before(i + 1));
   }
   /// The size of the largest range.
   int max_size() const {
     const int units = (total + quantum - 1) / quantum;
     return std::min(total, quantum * ((units + parts - 1) / parts));
+  }
+
+ private:
+  /// Quanta in ranges [0, i): i whole shares of units / parts, and the i-th part of the remainder,
+  /// rounded down (each range takes one unit of the remainder where that count steps up).
+  int units_before(int i) const {
+    const int units = (total + quantum - 1) / quantum;
+    return i * (units / parts) + static_cast<int>(static_cast<int64_t>(i) * (units % parts) / parts);
   }
 };
 

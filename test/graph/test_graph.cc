@@ -230,6 +230,20 @@ TEST(EvenSplit, TilesTheRangeInNearEqualPartsSharedByTheThreads) {
           if (split.parts > 1) {
             EXPECT_LE(largest - smallest, quantum);
           }
+          // The pool's per-thread shares (thread t runs parts [t p / T, (t + 1) p / T)) hold
+          // numbers of quanta that differ by at most one.
+          if (split.parts % threads == 0) {
+            int fewest = units, most = 0;
+            for (int t = 0; t < threads; ++t) {
+              int begin, end, unused;
+              split.range(split.parts * t / threads, begin, unused);
+              split.range(split.parts * (t + 1) / threads - 1, unused, end);
+              const int share = (end - begin + quantum - 1) / quantum;
+              fewest = std::min(fewest, share);
+              most = std::max(most, share);
+            }
+            EXPECT_LE(most - fewest, 1);
+          }
         }
       }
     }

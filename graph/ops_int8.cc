@@ -184,7 +184,9 @@ void ConvS8Op::run(const RunContext& ctx) const {
   const kernels::ConvS8 conv{spec_.shape, &ctx.kernels().gemm_s8, packed_.data(), pad};
   const int8_t* x = ctx.data_s8(inputs[0]);
   const size_t n = static_cast<size_t>(spec_.shape.out_c);
-  const EvenSplit pixel_split = split_evenly(spec_.shape.out_h * spec_.shape.out_w, kernels::kConvS8TileQuantum,
+  // Tiles start on whole row tiles of this variant's MR (6 on VNNI), not on the lcm of every MR
+  // (12): layer4's 300 pixels are 50 row tiles, 25 per thread, where 25 quanta of 12 split 12 / 13.
+  const EvenSplit pixel_split = split_evenly(spec_.shape.out_h * spec_.shape.out_w, ctx.kernels().gemm_s8.mr,
                                              tile_pixels_, ctx.pool().threads());
   // Few pixel tiles (the deep layers): split the output channels too, in blocks of 64, so every
   // thread gets work without each one streaming all the weights.

@@ -39,6 +39,12 @@ class FakePwmTree {
     }
     watcher_ = std::thread([this] {
       while (!stop_.load()) {
+        if (pause_.load()) {
+          parked_.store(true);
+          while (pause_.load() && !stop_.load()) std::this_thread::yield();
+          parked_.store(false);
+          continue;
+        }
         scan();
         std::this_thread::sleep_for(std::chrono::microseconds(200));
       }
@@ -50,6 +56,24 @@ class FakePwmTree {
   }
   FakePwmTree(const FakePwmTree&) = delete;
   FakePwmTree& operator=(const FakePwmTree&) = delete;
+
+  /// While alive, the watcher waits between scans (no allocation of its own in flight). A test that
+  /// forks a child which runs C++ before exec (allocating) forks under one: a lock the watcher held
+  /// at the fork would stay held in the child forever (the sanitizers' allocators are not fork-safe;
+  /// the ASan stage hung in PwmWatchdog's child once).
+  class ScanPause {
+   public:
+    explicit ScanPause(const FakePwmTree& tree) : tree_(tree) {
+      tree_.pause_.store(true);
+      while (!tree_.parked_.load()) std::this_thread::yield();
+    }
+    ~ScanPause() { tree_.pause_.store(false); }
+    ScanPause(const ScanPause&) = delete;
+    ScanPause& operator=(const ScanPause&) = delete;
+
+   private:
+    const FakePwmTree& tree_;
+  };
 
   const std::string& root() const { return root_; }
   std::string channel_dir(int channel) const { return chip_ + "/pwm" + std::to_string(channel); }
@@ -127,6 +151,7 @@ class FakePwmTree {
   size_t offset_[2] = {0, 0};
   int64_t last_[2] = {0, 0};
   mutable std::mutex mutex_;
+  mutable std::atomic<bool> pause_{false}, parked_{false};
   std::vector<Sample> samples_;
   std::atomic<bool> stop_{false};
   std::thread watcher_;

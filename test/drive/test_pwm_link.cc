@@ -153,7 +153,11 @@ TEST(PwmLink, UnwritableChannelsNameTheGroupFix) {
   // Root writes read-only files anyway: the check runs as nobody then.
   int pipe_fds[2];
   ASSERT_EQ(::pipe(pipe_fds), 0);
-  const pid_t pid = ::fork();
+  pid_t pid;
+  {
+    const FakePwmTree::ScanPause pause(tree);  // the child allocates before it exits
+    pid = ::fork();
+  }
   ASSERT_GE(pid, 0);
   if (pid == 0) {
     ::close(pipe_fds[0]);
@@ -281,7 +285,11 @@ DrivingProcess start_driving_process(const FakePwmTree& tree) {
   last_beat->store(0);
   int report[2];
   EXPECT_EQ(::pipe(report), 0);
-  const pid_t pid = ::fork();
+  pid_t pid;
+  {
+    const FakePwmTree::ScanPause pause(tree);  // the child allocates (the link, its log) as it drives
+    pid = ::fork();
+  }
   if (pid == 0) {
     ::setpgid(0, 0);
     ::close(report[0]);

@@ -25,7 +25,10 @@ struct ConvS8 {
   bool direct() const { return shape.reads_input_in_place(); }
 };
 
-/// The lcm of every gemm_s8 variant's MR (1, 2, 4, 6): tiles of output pixels start on multiples of it.
+/// The lcm of every gemm_s8 variant's MR (1, 2, 4, 6): the largest tile (conv_s8_tile_pixels) is a
+/// multiple of it, so it holds whole row tiles of any variant. The graph's unpooled convs start their
+/// tiles on the variant's own MR instead (finer, so the threads' shares come out even); the fused
+/// max-pool's bands still start on multiples of this.
 inline constexpr int kConvS8TileQuantum = 12;
 /// Output pixels per tile for this conv at most: a multiple of kConvS8TileQuantum that keeps the
 /// patch buffer near 256 KB (L2-resident while the weights stream past it).

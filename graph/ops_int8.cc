@@ -544,12 +544,12 @@ AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int 
   layout_.packed_v = head.add(kernels.packed_size(static_cast<int>(hd), nk));
   layout_.k_scale = head.add(n_keys * sizeof(float));
   layout_.v_scale = head.add(hd * sizeof(float));
+  layout_.k_s8 = head.add(n_keys * hd);
   layout_.head_bytes = head.end;
   keys_values_ = AlignedBuffer(static_cast<size_t>(heads) * layout_.head_bytes);
-  // A thread's scratch: the packing stage's int8 keys and values, then one query block's buffers;
-  // int8 matrices the GEMM reads as A get the kernels' over-read slack.
+  // A thread's scratch: the packing stage's int8 values, then one query block's buffers; int8
+  // matrices the GEMM reads as A get the kernels' over-read slack.
   RegionLayout packing, block;
-  layout_.k_s8 = packing.add(n_keys * hd);
   layout_.v_s8 = packing.add(n_keys * hd);
   layout_.q_s8 = block.add(rows * hd + kernels::kGemmS8ReadSlack);
   layout_.q_scale = block.add(rows * sizeof(float));
@@ -573,19 +573,34 @@ void AttentionS8Op::run(const RunContext& ctx) const {
   uint8_t* keys_values = keys_values_.data();
   const auto head_at = [&](size_t head, size_t offset) { return static_cast<void*>(keys_values + head * layout_.head_bytes + offset); };
 
-  // Stage 1, a task per head: its keys and values quantized and packed as the GEMM's weight side.
+  // Stage 1a, tasks of key rows (the row bands of the linear that wrote them, so that a thread
+  // reads rows in its own cache; a task per head read every row, half of them from the other
+  // core's: encoder attention 2-5 %, the decoder's cross attention 9 % faster on two threads):
+  // each key quantized per head, one int8 row per token, the 1 / sqrt(d) of the scores folded into
+  // its scale.
+  const EvenSplit key_rows = gemm_tiling(nk_, dim_, kc.gemm_s8.mr, kc.gemm_s8.nr, ctx.pool().threads()).rows;
+  ctx.pool().parallel_for(static_cast<size_t>(key_rows.parts), [&](size_t task, int) {
+    int r0, r1;
+    key_rows.range(static_cast<int>(task), r0, r1);
+    for (size_t head = 0; head < static_cast<size_t>(heads_); ++head) {
+      float* k_scale = static_cast<float*>(head_at(head, layout_.k_scale)) + r0;
+      kc.quant.quantize_rows_symmetric(r1 - r0, hd, k + static_cast<size_t>(r0) * k_.ld + head * head_dim, k_.ld,
+                                       static_cast<int8_t*>(head_at(head, layout_.k_s8)) + static_cast<size_t>(r0) * head_dim,
+                                       head_dim, k_scale);
+      for (int j = 0; j < r1 - r0; ++j) k_scale[j] *= inv_sqrt_hd;
+    }
+  });
+
+  // Stage 1b, a task per head: its int8 keys, and its values quantized, packed as the GEMM's
+  // weight side.
   ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t head, int thread) {
     uint8_t* scratch = aligned_scratch(ctx, thread);
-    int8_t* k_s8 = reinterpret_cast<int8_t*>(scratch + layout_.k_s8);
     int8_t* v_s8 = reinterpret_cast<int8_t*>(scratch + layout_.v_s8);
-    float* k_scale = static_cast<float*>(head_at(head, layout_.k_scale));
     float* v_scale = static_cast<float*>(head_at(head, layout_.v_scale));
     const size_t column = head * head_dim;
 
-    // Keys: one int8 row per token, the 1 / sqrt(d) of the scores folded into their scales.
-    kc.quant.quantize_rows_symmetric(nk_, hd, k + column, k_.ld, k_s8, head_dim, k_scale);
-    for (size_t j = 0; j < n_keys; ++j) k_scale[j] *= inv_sqrt_hd;
-    kc.gemm_s8.pack(nk_, hd, k_s8, head_dim, nullptr, 0, head_at(head, layout_.packed_k));
+    kc.gemm_s8.pack(nk_, hd, static_cast<const int8_t*>(head_at(head, layout_.k_s8)), head_dim, nullptr, 0,
+                    head_at(head, layout_.packed_k));
     // Values: one scale per channel (the output columns of p v), quantized where they lie, one row
     // per token, and packed from that transposed view. The probabilities' zero point is the same for
     // every row: fold it into the packed values.

@@ -219,9 +219,10 @@ class LinearS8Op : public Op, public RowCodesWriter {
 };
 
 /// softmax(q k^T / sqrt(d)) v per head with both matmuls on the int8 GEMM; AttentionOp is its float
-/// twin (same operands, same output layout). Two stages: a task per head quantizes its keys (per
-/// token) and values (per channel) symmetric, the GEMM's weight side, and packs them into the op's
-/// own buffer; then a task per (head, block of query rows) quantizes the queries per row, symmetric
+/// twin (same operands, same output layout). Two stages: tasks of key rows quantize each key per
+/// head (per token, symmetric) into the op's own buffer, then a task per head quantizes its values
+/// (per channel, symmetric) and packs both as the GEMM's weight side; then a task per (head, block
+/// of query rows) quantizes the queries per row, symmetric
 /// too (no zero-point correction in the GEMM; the action chunk moves no more than with asymmetric
 /// rows), and the softmax writes its probabilities straight into int8 (softmax_rows_s8: all 256
 /// codes cover [0, max p] of each row). The op's buffer makes a run of it single-threaded at the
@@ -241,11 +242,12 @@ class AttentionS8Op : public Op {
   AttentionParams params() const { return {nq_, nk_, dim_, heads_, q_, k_, v_}; }
 
  private:
-  /// Byte offsets, each 64-byte aligned: of a head's packed keys and values and their scales in
-  /// keys_values_ (head_bytes apart), and of each task's buffers in its thread's scratch.
+  /// Byte offsets, each 64-byte aligned: of a head's packed keys and values, their scales and its
+  /// keys' codes in keys_values_ (head_bytes apart), and of each task's buffers in its thread's
+  /// scratch.
   struct Layout {
-    size_t packed_k, packed_v, k_scale, v_scale, head_bytes;
-    size_t k_s8, v_s8;                                               // stage 1
+    size_t packed_k, packed_v, k_scale, v_scale, k_s8, head_bytes;  // k_s8: the keys' codes
+    size_t v_s8;                                                      // stage 1
     size_t q_s8, q_scale, scores, p_s8, p_scale;                    // stage 2
     size_t scratch_bytes;
   };

@@ -440,6 +440,28 @@ void bm_quant_rows(benchmark::State& state, const kernels::QuantS8Kernels* k, in
   state.SetLabel(std::string("minmax + ") + k->quantize_name);
 }
 
+// The int8 attention's keys (and, a block at a time, its queries): each 64-value head of every
+// token of a [302 x 1536] qkv output quantized per row, symmetric.
+void bm_quant_heads(benchmark::State& state, const kernels::QuantS8Kernels* k) {
+  constexpr int kTokens = 302;
+  constexpr size_t kLd = 3 * kHeads * kHeadDim;
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<float> u(-3.0f, 5.0f);
+  std::vector<float> x(kTokens * kLd);
+  for (auto& v : x) v = u(rng);
+  std::vector<int8_t> y(static_cast<size_t>(kHeads) * kTokens * kHeadDim);
+  std::vector<float> scale(static_cast<size_t>(kHeads) * kTokens);
+  for (auto _ : state) {
+    for (size_t h = 0; h < size_t{kHeads}; ++h) {
+      k->quantize_rows_symmetric(kTokens, kHeadDim, x.data() + h * kHeadDim, kLd, y.data() + h * kTokens * kHeadDim,
+                                 kHeadDim, scale.data() + h * kTokens);
+    }
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(y.size()) * 5);
+  state.SetLabel(k->rows_symmetric_name);
+}
+
 void bm_dequant(benchmark::State& state, const kernels::QuantS8Kernels* k, size_t n) {
   std::vector<int8_t> q(n, 3);
   std::vector<float> y(n);
@@ -669,6 +691,7 @@ int main(int argc, char** argv) {
       const std::string name = qn + "/rows_dynamic/" + std::to_string(rows) + "x" + std::to_string(cols);
       reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_quant_rows, k, rows, cols));
     }
+    reg(benchmark::RegisterBenchmark((qn + "/rows_symmetric/8x302x64").c_str(), bench::bm_quant_heads, k));
     reg(benchmark::RegisterBenchmark((qn + "/dequantize/154624").c_str(), bench::bm_dequant, k, size_t{302 * 512}));
   }
   for (kernels::Isa isa : isas) {

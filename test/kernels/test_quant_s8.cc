@@ -319,14 +319,16 @@ TEST_P(QuantS8Variant, RowsDynamicIsBitExact) {
   }
 }
 
-// Rows with every kind of content: random, constant, all-negative, huge, tiny, all zero, a NaN, an
-// infinity, all NaN, in that order as far as `rows` goes (rows of `cols` values, row stride ldx).
+// Rows with every kind of content: constant, all-negative, huge, tiny, all zero, a NaN, an
+// infinity, all NaN, then random, in that order every 13 rows (so that every lane of a kernel's
+// group of 16 rows meets them; rows of `cols` values, row stride ldx).
 std::vector<float> symmetric_test_matrix(int rows, int cols, size_t ldx, std::mt19937& rng) {
   std::vector<float> x = random_floats(static_cast<size_t>(rows) * ldx, rng, -6.0f, 4.0f);
-  for (int r = 0; r < std::min(rows, 8); ++r) {
+  for (int r = 0; r < rows; ++r) {
+    if (r % 13 >= 8) continue;
     float* xr = x.data() + static_cast<size_t>(r) * ldx;
     for (int c = 0; c < cols; ++c) {
-      switch (r) {
+      switch (r % 13) {
         case 0: xr[c] = 2.5f; break;
         case 1: xr[c] = -std::fabs(xr[c]); break;
         case 2: xr[c] *= 1e37f; break;
@@ -359,15 +361,16 @@ void rows_symmetric_naive(int rows, int cols, const float* x, size_t ldx, int8_t
 TEST_P(QuantS8Variant, RowsSymmetricMatchesPerRowPath) {
   std::mt19937 rng(35);
   for (int cols : {1, 3, 15, 16, 17, 33, 48, 63, 64, 65, 302, 515}) {
-    const int rows = 11;
-    const size_t ldx = static_cast<size_t>(cols) + 5, ldy = static_cast<size_t>(cols) + 2;
-    const std::vector<float> x = symmetric_test_matrix(rows, cols, ldx, rng);
-    std::vector<int8_t> yw(rows * ldy, 99), y(rows * ldy, 99);
-    std::vector<float> sw(rows), s(rows, -1.0f);
-    rows_symmetric_naive(rows, cols, x.data(), ldx, yw.data(), ldy, sw.data());
-    v().quantize_rows_symmetric(rows, cols, x.data(), ldx, y.data(), ldy, s.data());
-    ASSERT_EQ(y, yw) << v().rows_symmetric_name << " cols=" << cols;  // padding bytes untouched too
-    ASSERT_EQ(0, std::memcmp(s.data(), sw.data(), s.size() * sizeof(float))) << v().rows_symmetric_name;
+    for (int rows : {11, 16, 37, 48}) {  // the AVX-512 variant's groups of 16 rows, and what is left
+      const size_t ldx = static_cast<size_t>(cols) + 5, ldy = static_cast<size_t>(cols) + 2;
+      const std::vector<float> x = symmetric_test_matrix(rows, cols, ldx, rng);
+      std::vector<int8_t> yw(rows * ldy, 99), y(rows * ldy, 99);
+      std::vector<float> sw(rows), s(rows, -1.0f);
+      rows_symmetric_naive(rows, cols, x.data(), ldx, yw.data(), ldy, sw.data());
+      v().quantize_rows_symmetric(rows, cols, x.data(), ldx, y.data(), ldy, s.data());
+      ASSERT_EQ(y, yw) << v().rows_symmetric_name << " rows=" << rows << " cols=" << cols;  // padding untouched too
+      ASSERT_EQ(0, std::memcmp(s.data(), sw.data(), s.size() * sizeof(float))) << v().rows_symmetric_name;
+    }
   }
 }
 

@@ -192,18 +192,34 @@ void ConvS8Op::run(const RunContext& ctx) const {
   // thread gets work without each one streaming all the weights.
   const size_t pixel_tiles = static_cast<size_t>(pixel_split.parts);
   const size_t wanted = 4 * static_cast<size_t>(ctx.pool().threads());
-  const size_t channel_blocks =
-      pixel_tiles >= wanted ? 1 : std::min(ceil_div(wanted, pixel_tiles), ceil_div(n, kChannelBlock));
-  const size_t channels_per_block = ceil_div(ceil_div(n, channel_blocks), kChannelBlock) * kChannelBlock;
+  const size_t weight_bytes = static_cast<size_t>(spec_.shape.patch_size()) * n;
+  // Weights past L2 (layer4's convs, 1.2-2.4 MB): blocks of output channels (64 times a power of
+  // two, as even as the channels allow) whose weights fit half of L2, in channel-major task order,
+  // so that a thread runs all pixel tiles of a block while its weights stay in its L2 (each pixel
+  // tile streamed all of them from L3).
+  const bool channel_major = weight_bytes > kL2WeightBytes;
+  size_t channels_per_block = kChannelBlock;
+  if (channel_major) {
+    const size_t bytes_per_channel = static_cast<size_t>(spec_.shape.patch_size());
+    while (2 * channels_per_block < n && 2 * channels_per_block * bytes_per_channel <= kL2WeightBytes / 2) channels_per_block *= 2;
+  } else if (pixel_tiles < wanted) {
+    const size_t blocks = std::min(ceil_div(wanted, pixel_tiles), ceil_div(n, kChannelBlock));
+    channels_per_block = ceil_div(ceil_div(n, blocks), kChannelBlock) * kChannelBlock;
+  } else {
+    channels_per_block = n;
+  }
+  const size_t channel_blocks = ceil_div(n, channels_per_block);
   const size_t tasks = pixel_tiles * channel_blocks;
   struct Tile {
     int p0, count;
     kernels::ConvChannels channels;
   };
   const auto tile = [&](size_t task) {
+    const size_t pixel_tile = channel_major ? task % pixel_tiles : task / channel_blocks;
+    const size_t channel_block = channel_major ? task / pixel_tiles : task % channel_blocks;
     int p0, p1;
-    pixel_split.range(static_cast<int>(task / channel_blocks), p0, p1);
-    const size_t c0 = (task % channel_blocks) * channels_per_block;
+    pixel_split.range(static_cast<int>(pixel_tile), p0, p1);
+    const size_t c0 = channel_block * channels_per_block;
     const int c1 = static_cast<int>(std::min(n, c0 + channels_per_block));
     return Tile{p0, p1 - p0, {static_cast<int>(std::min(c0, n)), c1}};
   };

@@ -100,13 +100,15 @@ std::vector<float> patch_of(const kernels::Conv2dShape& s, const std::vector<flo
 
 // ConvS8Op (static input quantization, int8 weights) against Conv2dOp with the float weights, with
 // a float (dequantized) output and with an int8 output + ReLU, for the 3x3 and 1x1/2 shapes of a
-// ResNet block.
+// ResNet block, the stem's 7x7/2, and a 3x3 whose weights pass L2 (1.7 MB: blocks of channels in
+// channel-major tasks, six blocks of 64, the last one ragged).
 TEST_P(OpsPerIsa, ConvS8MatchesFloatConvWithinQuantizationError) {
   const kernels::KernelConfig k = config();
   std::mt19937 rng(7);
   for (const auto& s : {kernels::Conv2dShape::square(9, 11, 16, 40, 3, 1, 1),
                         kernels::Conv2dShape::square(10, 7, 24, 70, 1, 2, 0),
-                        kernels::Conv2dShape::square(13, 12, 3, 64, 7, 2, 3)}) {
+                        kernels::Conv2dShape::square(13, 12, 3, 64, 7, 2, 3),
+                        kernels::Conv2dShape::square(5, 4, 512, 360, 3, 1, 1)}) {
     const int pixels = s.out_h * s.out_w, K = s.patch_size();
     const std::vector<float> x = uniform(static_cast<size_t>(s.in_h) * s.in_w * s.in_c, rng, -1.0f, 3.0f);
     const std::vector<float> w = uniform(static_cast<size_t>(s.out_c) * K, rng, -0.5f, 0.5f);

@@ -101,13 +101,11 @@ inline GemmTiling gemm_tiling(int m, int n, int mr, int nr, int threads, bool wh
   // Tasks that finish their rows keep rows down to one tile each: a pass of its own to finish them
   // cost more than the uneven tiles (the decoder's cross_out, 0.076 -> 0.083 ms on two threads).
   if (m >= (whole_rows ? 1 : 2) * want * mr) {
-    // Weights past L2 (the FFN layers' 1.6 MB): a row band per thread, so that each thread streams
-    // them once rather than once per task. Cut in 5 column blocks when the tasks need not finish
-    // rows, each task streaming a fifth of the weights (FFN hidden, encoder 0.78 -> 0.74 ms on two
-    // threads); whole for the row-finishing FFN outputs (5 row tasks per thread streamed all the
-    // weights for every 10 decoder rows; every FFN output 1.1-1.5 % faster on two threads).
-    if (weight_bytes <= kL2WeightBytes) return {{m, mr, want}, all_cols};
-    if (whole_rows) return {{m, mr, threads}, all_cols};
+    // Weights past L2 (the FFN hidden layers' 1.6 MB), when the tasks need not finish rows: a row
+    // band per thread cut in 5 column blocks, each task streaming a fifth of the weights, where 5
+    // row tasks per thread streamed all of them 5 times per thread (encoder 0.78 -> 0.74 ms on two
+    // threads). Two row tasks per thread for the row-finishing FFN outputs measured the same.
+    if (whole_rows || weight_bytes <= kL2WeightBytes) return {{m, mr, want}, all_cols};
     return {{m, mr, threads}, {n, nr, std::min(col_units, kGemmTasksPerThread)}};
   }
   return {{m, mr, m >= 2 * mr * 8 ? 2 : 1}, {n, nr, std::max(1, std::min(col_units, want))}};

@@ -518,7 +518,7 @@ size_t LinearS8Op::scratch_per_thread() const {
   // The largest whole-row task of any thread count: one thread's strips or two threads' tiles
   // (more threads get smaller ones).
   int tile_rows = 0;
-  for (int threads : {1, 2}) tile_rows = std::max(tile_rows, gemm_tiling(rows_, out_, mr_, nr_, threads, true, weight_bytes()).rows.max_size());
+  for (int threads : {1, 2}) tile_rows = std::max(tile_rows, gemm_tiling(rows_, out_, mr_, nr_, threads, true).rows.max_size());
   return static_cast<size_t>(tile_rows) * static_cast<size_t>(out_);
 }
 

@@ -144,9 +144,8 @@ TEST(ThreadPool, RecordsEachThreadsSpanOfASection) {
 }
 
 // Every output element in exactly one task; row bands start on multiples of MR and are at most
-// tile_m rows; with enough rows 5 row bands per thread (or, for weights past L2, a band per thread:
-// whole rows for tasks that finish them, else in 5 column blocks); with few, column blocks for every
-// thread.
+// tile_m rows; with enough rows 5 row bands per thread (or, for weights past L2 and tasks that need
+// not finish rows, a band per thread in 5 column blocks); with few, column blocks for every thread.
 void expect_tiling_covers_once(int m, int n, int mr, int threads, bool whole_rows, size_t weight_bytes) {
   SCOPED_TRACE(testing::Message() << "m " << m << " n " << n << " mr " << mr << " threads " << threads << " whole_rows "
                                   << whole_rows << " weight_bytes " << weight_bytes);
@@ -166,12 +165,12 @@ void expect_tiling_covers_once(int m, int n, int mr, int threads, bool whole_row
   if (threads <= 1) return;
   const int tasks = kGemmTasksPerThread;
   const bool many_rows = m >= (whole_rows ? 1 : 2) * tasks * threads * mr;
-  if (many_rows && weight_bytes <= kL2WeightBytes) {
+  if (many_rows && (whole_rows || weight_bytes <= kL2WeightBytes)) {
     EXPECT_EQ(t.rows.parts, tasks * threads);
     EXPECT_EQ(t.cols.parts, 1);
-  } else if (many_rows) {  // weights past L2: a row band per thread, whole or in 5 column blocks
-    EXPECT_EQ(t.rows.parts, std::min(threads, (m + mr - 1) / mr));
-    EXPECT_EQ(t.cols.parts, whole_rows ? 1 : std::min((n + 15) / 16, tasks));
+  } else if (many_rows) {  // weights past L2: a row band per thread, in 5 column blocks
+    EXPECT_EQ(t.rows.parts, threads);
+    EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, tasks));
   } else {  // few rows: every thread gets columns
     EXPECT_LE(t.rows.parts, 2);
     EXPECT_EQ(t.cols.parts, std::min((n + 15) / 16, tasks * threads));

@@ -222,11 +222,11 @@ class LinearS8Op : public Op, public RowCodesWriter {
 /// twin (same operands, same output layout). Two stages: tasks of key rows quantize each key per
 /// head (per token, symmetric) into the op's own buffer, then a task per head quantizes its values
 /// (per channel, symmetric) and packs both as the GEMM's weight side; then a task per (head, block
-/// of query rows) quantizes the queries per row, symmetric
-/// too (no zero-point correction in the GEMM; the action chunk moves no more than with asymmetric
-/// rows), and the softmax writes its probabilities straight into int8 (softmax_rows_s8: all 256
-/// codes cover [0, max p] of each row). The op's buffer makes a run of it single-threaded at the
-/// graph level, as the graph's own arena already does.
+/// of query rows) quantizes the queries per row, symmetric too (no zero-point correction in the
+/// GEMM; the action chunk moves no more than with asymmetric rows), and the softmax writes its
+/// probabilities straight into int8 (softmax_rows_s8: all 256 codes cover [0, max p] of each
+/// row). The op's buffer makes a run of it single-threaded at the graph level, as the graph's own
+/// arena already does.
 class AttentionS8Op : public Op {
  public:
   AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,

@@ -127,13 +127,17 @@ void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, s
     for (int i = 0; i < kRows; ++i) {
       const float* xr = x + static_cast<size_t>(r + i) * ldx;
       amax[i] = zero;
-      for (int j = 0; j < kVectors; ++j) amax[i] = _mm512_max_ps(_mm512_abs_ps(_mm512_maskz_loadu_ps(m[j], xr + 16 * j)), amax[i]);
+      for (int j = 0; j < kVectors; ++j) {
+        amax[i] = _mm512_max_ps(_mm512_abs_ps(_mm512_maskz_loadu_ps(m[j], xr + 16 * j)), amax[i]);
+      }
     }
     const __m512 row_max = lane_maxima16(amax);
     // symmetric_scale_s8: max |x| if finite (no NaN reaches it), else 0; scale at least FLT_MIN;
     // inverse 1 / scale where max |x| > 0, else 0.
-    const __m512 absmax = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask(row_max, _mm512_set1_ps(std::numeric_limits<float>::max()), _CMP_LE_OQ), row_max);
-    const __m512 scale = _mm512_max_ps(_mm512_div_ps(absmax, _mm512_set1_ps(127.0f)), _mm512_set1_ps(std::numeric_limits<float>::min()));
+    const __m512 float_max = _mm512_set1_ps(std::numeric_limits<float>::max());
+    const __m512 float_min = _mm512_set1_ps(std::numeric_limits<float>::min());
+    const __m512 absmax = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask(row_max, float_max, _CMP_LE_OQ), row_max);
+    const __m512 scale = _mm512_max_ps(_mm512_div_ps(absmax, _mm512_set1_ps(127.0f)), float_min);
     const __m512 inv = _mm512_maskz_div_ps(_mm512_cmp_ps_mask(absmax, zero, _CMP_GT_OQ), _mm512_set1_ps(1.0f), scale);
     _mm512_storeu_ps(row_scale + r, scale);
     alignas(64) float inv_of[kRows];
@@ -143,7 +147,8 @@ void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, s
       int8_t* yr = y + static_cast<size_t>(r + i) * ldy;
       const __m512 inv_v = _mm512_set1_ps(inv_of[i]);
       for (int j = 0; j < kVectors; ++j) {
-        _mm_mask_storeu_epi8(yr + 16 * j, m[j], quantize16(_mm512_maskz_loadu_ps(m[j], xr + 16 * j), inv_v, zero, lo, hi));
+        const __m512 v = _mm512_maskz_loadu_ps(m[j], xr + 16 * j);
+        _mm_mask_storeu_epi8(yr + 16 * j, m[j], quantize16(v, inv_v, zero, lo, hi));
       }
     }
   }

@@ -192,16 +192,17 @@ void ConvS8Op::run(const RunContext& ctx) const {
   // thread gets work without each one streaming all the weights.
   const size_t pixel_tiles = static_cast<size_t>(pixel_split.parts);
   const size_t wanted = 4 * static_cast<size_t>(ctx.pool().threads());
-  const size_t weight_bytes = static_cast<size_t>(spec_.shape.patch_size()) * n;
+  const size_t bytes_per_channel = static_cast<size_t>(spec_.shape.patch_size());  // int8 weights
   // Weights past L2 (layer4's convs, 1.2-2.4 MB): blocks of output channels (64 times a power of
   // two, as even as the channels allow) whose weights fit half of L2, in channel-major task order,
   // so that a thread runs all pixel tiles of a block while its weights stay in its L2 (each pixel
   // tile streamed all of them from L3).
-  const bool channel_major = weight_bytes > kL2WeightBytes;
+  const bool channel_major = bytes_per_channel * n > kL2WeightBytes;
   size_t channels_per_block = kChannelBlock;
   if (channel_major) {
-    const size_t bytes_per_channel = static_cast<size_t>(spec_.shape.patch_size());
-    while (2 * channels_per_block < n && 2 * channels_per_block * bytes_per_channel <= kL2WeightBytes / 2) channels_per_block *= 2;
+    while (2 * channels_per_block < n && 2 * channels_per_block * bytes_per_channel <= kL2WeightBytes / 2) {
+      channels_per_block *= 2;
+    }
   } else if (pixel_tiles < wanted) {
     const size_t blocks = std::min(ceil_div(wanted, pixel_tiles), ceil_div(n, kChannelBlock));
     channels_per_block = ceil_div(ceil_div(n, blocks), kChannelBlock) * kChannelBlock;

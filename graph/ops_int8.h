@@ -247,7 +247,7 @@ class AttentionS8Op : public Op {
   /// scratch.
   struct Layout {
     size_t packed_k, packed_v, k_scale, v_scale, k_s8, head_bytes;  // k_s8: the keys' codes
-    size_t v_s8;                                                      // stage 1
+    size_t v_s8;                                                    // stage 1
     size_t q_s8, q_scale, scores, p_s8, p_scale;                    // stage 2
     size_t scratch_bytes;
   };

@@ -82,6 +82,8 @@ struct Camera::Shared {
   void run();
   // Waits until `deadline` or a stop request; true when stopping.
   bool wait_for_stop(Clock::time_point deadline);
+  // A file played in real time: waits for start_playback(); false when stopped first.
+  bool wait_for_playback();
   void set_problem(State new_state, const std::string& new_problem);
 
   const CameraOptions options;
@@ -94,6 +96,7 @@ struct Camera::Shared {
   std::string problem;
   bool stop_requested = false;
   bool thread_ended = false;
+  bool playing = false;    // start_playback() was called
   uint64_t wanted = 0;     // stepped: the newest frame index advance_to asked for
   double file_fps = 30;    // a file's frame rate (its own, or CameraOptions::fps); set before run()
 };
@@ -172,6 +175,16 @@ void Camera::advance_to(double time_s) const {
   s.changed.wait(lock, [&] { return s.latest->index >= wanted || s.state == State::kEnded || s.thread_ended; });
 }
 
+void Camera::start_playback() const {
+  Shared& s = *shared_;
+  std::lock_guard lock(s.mutex);
+  if (s.playing) return;
+  s.playing = true;
+  // A file's first frame counts as delivered now, when its clock starts.
+  if (is_file_ && s.latest->index == 0) s.latest = std::make_shared<const Frame>(Frame{s.latest->bgr, Clock::now(), 0});
+  s.changed.notify_all();
+}
+
 FrameSource::State Camera::state() const {
   std::lock_guard lock(shared_->mutex);
   return shared_->state;
@@ -193,9 +206,17 @@ bool Camera::Shared::wait_for_stop(Clock::time_point deadline) {
   return changed.wait_until(lock, deadline, [this] { return stop_requested; });
 }
 
+bool Camera::Shared::wait_for_playback() {
+  std::unique_lock lock(mutex);
+  changed.wait(lock, [this] { return playing || stop_requested; });
+  return !stop_requested;
+}
+
 void Camera::Shared::run() {
   const bool is_file = kind == SourceKind::kFile;
-  // A video file plays at its own rate (or --camera-fps), not as fast as it decodes.
+  // A video file plays at its own rate (or --camera-fps), not as fast as it decodes, from the
+  // control loop's start.
+  if (is_file && !options.stepped && !wait_for_playback()) return;
   const auto file_start = Clock::now();
   const auto file_frame_due = [&](uint64_t i) {
     return file_start +

@@ -38,6 +38,9 @@ class FrameSource {
   /// An offline replay: makes the frame for `time_s` (seconds since the first frame) the latest,
   /// waiting for it to be read. Sources that run in real time ignore it.
   virtual void advance_to(double /*time_s*/) const {}
+  /// The control loop's start. A video file played in real time starts its clock here, so that what
+  /// comes before (loading the model) does not use up its first frames. Live sources ignore it.
+  virtual void start_playback() const {}
 };
 
 struct CameraOptions {
@@ -81,6 +84,7 @@ class Camera : public FrameSource {
   State state() const override;
   std::string problem() const override;
   void advance_to(double time_s) const override;
+  void start_playback() const override;
   /// The size frames arrive in (after the driver applied the request).
   int width() const { return width_; }
   int height() const { return height_; }

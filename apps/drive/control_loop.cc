@@ -168,6 +168,7 @@ class ControlRun {
         state_(initial_state_) {}
 
   DriveSummary run(const std::atomic<bool>& stop) {
+    frames_.start_playback();
     start_ = Clock::now();
     last_stats_ = start_;
     link_.send(safe_, start_);  // neutral on start

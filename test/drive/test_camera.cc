@@ -40,6 +40,18 @@ TEST(Camera, OpensAVideoFileAtItsSize) {
   EXPECT_EQ(camera.latest()->bgr.cols, 80);
 }
 
+TEST(Camera, AVideoFilePlaysFromTheStartOfPlayback) {
+  const std::string dir = act::test::scratch_dir();
+  Camera camera(CameraOptions{write_test_video(dir + "/v.avi", 10, 30, 80, 60), 0, 0, 0});
+  const Clock::time_point opened = camera.latest()->captured;
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // six frame intervals
+  EXPECT_EQ(camera.latest()->index, 0u) << "the file played before start_playback()";
+  camera.start_playback();
+  EXPECT_GE(camera.latest()->captured - opened, std::chrono::milliseconds(200));  // its first frame is delivered now
+  ASSERT_TRUE(eventually([&] { return camera.state() == FrameSource::State::kEnded; }));
+  EXPECT_EQ(camera.latest()->index, 9u);
+}
+
 TEST(Camera, OpensAnImageSequenceLikeACamera) {
   const std::string dir = act::test::scratch_dir();
   for (int i = 0; i < 3; ++i) {

@@ -161,6 +161,9 @@ struct EpiS8 {
       if (o.bias != nullptr) bias[j] = _mm512_maskz_loadu_ps(mask[j], o.bias + n + 16 * j);
     }
   }
+  // Nothing to fetch ahead (see EpiF32): an int8 residual is a block's input, written one or two
+  // convs before and still in cache; prefetching it measured the same.
+  void prefetch_rows(int, int, int) const {}
   void row(int m, int n, const __m512i (&acc)[kVecs]) const {
     // The options read once, before this row's store: an int8 store may alias anything, so a test
     // of o's fields after one would load them again, per vector.
@@ -230,6 +233,17 @@ struct EpiF32 {
       bias[j] = o.bias != nullptr ? _mm512_maskz_loadu_ps(mask[j], o.bias + n + 16 * j) : _mm512_setzero_ps();
     }
   }
+  // The residual rows this tile's epilogue reads (4 lines each), fetched while its k loop runs: a
+  // per-token table (the qkv linears' 1.2 MB of position terms) is read once per inference, cold,
+  // 256 bytes per row, which the hardware prefetchers do not hide (the encoder's qkv GEMM took
+  // 0.77 ms with the table cold, 0.68 ms with it read just before).
+  void prefetch_rows(int m, int rows, int n) const {
+    if (o.residual == nullptr) return;
+    for (int r = 0; r < rows; ++r) {
+      const char* line = reinterpret_cast<const char*>(o.residual + static_cast<size_t>(m + r) * o.ldr + n);
+      for (int j = 0; j < kVecs; ++j) _mm_prefetch(line + 64 * j, _MM_HINT_T0);
+    }
+  }
   void row(int m, int n, const __m512i (&acc)[kVecs]) const {
     const __m512 a_scale = _mm512_set1_ps(o.a_row_scale != nullptr ? o.a_row_scale[m] : o.a_scale);
     float* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
@@ -254,6 +268,7 @@ struct EpiS32 {
   void begin_panel(int, int lo, int hi) {
     for (int j = 0; j < kVecs; ++j) mask[j] = vec_mask(j, lo, hi);
   }
+  void prefetch_rows(int, int, int) const {}
   void row(int m, int n, const __m512i (&acc)[kVecs]) const {
     int32_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
     for (int j = 0; j < kVecs; ++j) _mm512_mask_storeu_epi32(cp + 16 * j, mask[j], acc[j]);
@@ -265,6 +280,7 @@ template <int R, bool kUnsignedA, class Epi>
 void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr)[R], const uint8_t* panel, int m,
           int n, int lo, int hi, Epi& epi, bool stream_weights) {
   __m512i acc[R][kVecs];
+  epi.prefetch_rows(m, R, n);
   if (stream_weights) {
     accumulate<R, true, kUnsignedA>(g, m, panel, h.kp / kKR, corr, acc);
   } else {

@@ -180,8 +180,10 @@ void Camera::start_playback() const {
   std::lock_guard lock(s.mutex);
   if (s.playing) return;
   s.playing = true;
-  // A file's first frame counts as delivered now, when its clock starts.
-  if (is_file_ && s.latest->index == 0) s.latest = std::make_shared<const Frame>(Frame{s.latest->bgr, Clock::now(), 0});
+  // A file played in real time: its first frame counts as delivered now, when its clock starts.
+  if (is_file_ && !s.options.stepped && s.latest->index == 0) {
+    s.latest = std::make_shared<const Frame>(Frame{s.latest->bgr, Clock::now(), 0});
+  }
   s.changed.notify_all();
 }
 

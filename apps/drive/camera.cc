@@ -15,13 +15,8 @@
 
 namespace act::drive {
 
-namespace {
-
-bool is_index(const std::string& s) {
-  return !s.empty() && s.size() < 4 && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
-}
-
-// What a --camera string names; each kind opens through one OpenCV backend (open_capture).
+// What a --camera string names; each kind opens through one OpenCV backend (open_capture). Outside
+// the anonymous namespace: Camera::Shared holds one.
 enum class SourceKind {
   kIndex,              // "0"
   kDevice,             // /dev/video0
@@ -32,6 +27,12 @@ enum class SourceKind {
   kImageSequence,      // frames/%06d.png, read like a camera
   kUnknown,            // none of these: a path that does not exist, or a folder
 };
+
+namespace {
+
+bool is_index(const std::string& s) {
+  return !s.empty() && s.size() < 4 && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
+}
 
 SourceKind source_kind(const std::string& s) {
   if (is_index(s)) return SourceKind::kIndex;

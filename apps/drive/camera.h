@@ -15,6 +15,11 @@ namespace act::drive {
 
 using Clock = std::chrono::steady_clock;
 
+/// Milliseconds from `a` to `b`.
+inline double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
 struct Frame {
   cv::Mat bgr;                  ///< as the camera delivered it (OpenCV's BGR order)
   Clock::time_point captured;   ///< when the capture thread received it

@@ -6,7 +6,7 @@ namespace act::drive {
 namespace {
 
 // A stick or key this far from centre is an input (gamepad sticks rest slightly off centre).
-constexpr double kDeadZone = 0.05;
+constexpr double kInputDeadZone = 0.05;
 
 }  // namespace
 
@@ -49,7 +49,7 @@ void Cockpit::manual(double steering, double throttle) {
   steering_ = steering;
   throttle_ = throttle;
   manual_at_ = Clock::now();
-  const bool steers = std::abs(steering) > kDeadZone, moves = steers || std::abs(throttle) > kDeadZone;
+  const bool steers = std::abs(steering) > kInputDeadZone, moves = steers || std::abs(throttle) > kInputDeadZone;
   if ((mode_ == DriveMode::kAi && moves) || (mode_ == DriveMode::kAiSteer && steers)) overridden_ = true;
 }
 

@@ -18,10 +18,6 @@ namespace {
 // Fault episodes kept for the summary (a flapping camera must not grow memory for hours).
 constexpr size_t kMaxFaultEvents = 1000;
 
-double ms_between(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
 // Latency statistics of one stage, in constant memory however long the rover drives: the whole run
 // for the exit summary, and what came since the last periodic report.
 struct StageSamples {

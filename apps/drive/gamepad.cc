@@ -17,13 +17,13 @@ namespace act::drive {
 namespace {
 
 // Sticks rest a little off centre.
-constexpr double kDeadZone = 0.08;
+constexpr double kStickDeadZone = 0.08;
 constexpr int kPostEveryMs = 100;
 
 double position(int32_t value, const GamepadMapping::Axis& axis) {
   if (axis.maximum <= axis.minimum) return 0;
   const double p = 2.0 * (value - axis.minimum) / (axis.maximum - axis.minimum) - 1.0;
-  return std::abs(p) < kDeadZone ? 0.0 : std::clamp(p, -1.0, 1.0);
+  return std::abs(p) < kStickDeadZone ? 0.0 : std::clamp(p, -1.0, 1.0);
 }
 
 GamepadMapping::Axis axis_of(libevdev* device, uint16_t code) {

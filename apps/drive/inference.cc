@@ -12,10 +12,6 @@
 namespace act::drive {
 namespace {
 
-double ms_between(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
 class EngineModel : public ChunkModel {
  public:
   explicit EngineModel(std::unique_ptr<Engine> engine) : engine_(std::move(engine)) {}

@@ -27,6 +27,7 @@
 #include "kernels/config/kernel_config.h"
 #include "kernels/quant/quant_s8.h"
 #include "kernels/quant/quant_s8_variants.h"
+#include "test/kernels/kernel_test_util.h"
 
 namespace act::graph {
 namespace {
@@ -755,9 +756,8 @@ TEST_P(OpsPerIsa, AttentionS8MatchesNaiveSoftmaxAttentionWithinQuantizationError
   }
 }
 
-std::string isa_param_name(const ::testing::TestParamInfo<kernels::Isa>& info) { return kernels::isa_name(info.param); }
-
-INSTANTIATE_TEST_SUITE_P(CpuIsas, OpsPerIsa, ::testing::ValuesIn(kernels::cpu_isas()), isa_param_name);
+INSTANTIATE_TEST_SUITE_P(CpuIsas, OpsPerIsa, ::testing::ValuesIn(kernels::cpu_isas()),
+                         kernels::test::isa_param_name);
 
 }  // namespace
 }  // namespace act::graph

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "kernels/common/isa.h"
 #include "kernels/config/kernel_config.h"
 
@@ -27,6 +29,9 @@ inline int64_t ulp_distance(float a, float b) {
   const int64_t lb = ib < 0 ? -static_cast<int64_t>(ib & 0x7fffffff) : ib;
   return la > lb ? la - lb : lb - la;
 }
+
+/// A test parameterized by ISA is named after it (".../avx512vnni").
+inline std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
 
 /// The variants of a family the tests run, by ISA: every ISA this CPU runs that has its own variant
 /// of the family, or, when ACT_ISA is set, only the variant an Engine at that level runs (none when

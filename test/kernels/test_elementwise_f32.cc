@@ -231,11 +231,9 @@ TEST_P(ElementwiseF32Variant, GeluWithinTolerance) {
   }
 }
 
-std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
-
 INSTANTIATE_TEST_SUITE_P(Available, ElementwiseF32Variant,
                          ::testing::ValuesIn(test::isas_under_test(&IsaTables::elementwise)),
-                         isa_param_name);
+                         test::isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(ElementwiseF32Variant);
 
 // At every level CI requires, an Engine runs a SIMD element-wise variant (its own functions, not

@@ -46,13 +46,13 @@ std::vector<double> conv_naive(const Conv2dShape& s, const std::vector<float>& x
   return y;
 }
 
-struct ConvCase {
+struct ConvF32Case {
   int h, w, cin, cout, kernel, stride, pad, dilation;
 };
 
 TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
   std::mt19937 rng(7);
-  const ConvCase cases[] = {
+  const ConvF32Case cases[] = {
       {13, 17, 3, 8, 7, 2, 3, 1},   // stem, odd sizes
       {9, 11, 5, 7, 3, 1, 1, 1},    // 3x3/1
       {10, 7, 4, 6, 3, 2, 1, 1},    // 3x3/2
@@ -65,7 +65,7 @@ TEST(Fp32Kernels, ConvEqualsDirectConvolution) {
   };
   for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
     const GemmF32Kernels& gemm = test::table_of(isa, &IsaTables::gemm_f32);
-    for (const ConvCase& c : cases) {
+    for (const ConvF32Case& c : cases) {
       const Conv2dShape s = Conv2dShape::square(c.h, c.w, c.cin, c.cout, c.kernel, c.stride, c.pad, c.dilation);
       const auto x = random_vector(static_cast<size_t>(c.h) * c.w * c.cin, rng);
       const auto w = random_vector(static_cast<size_t>(c.cout) * s.patch_size(), rng);

@@ -425,9 +425,7 @@ TEST_P(GemmS8Variant, TablePairsTransposedPacker) {
   EXPECT_EQ(std::memcmp(got.get(), want.get(), bytes), 0) << v.pack_name;
 }
 
-std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
-
-INSTANTIATE_TEST_SUITE_P(Available, GemmS8Variant, ::testing::ValuesIn(test::isas_under_test(&IsaTables::gemm_s8)), isa_param_name);
+INSTANTIATE_TEST_SUITE_P(Available, GemmS8Variant, ::testing::ValuesIn(test::isas_under_test(&IsaTables::gemm_s8)), test::isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(GemmS8Variant);
 
 // ---- dispatch, detection, override, naming -----------------------------------------------------

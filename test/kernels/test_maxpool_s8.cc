@@ -74,11 +74,9 @@ TEST_P(MaxPoolS8Variant, MatchesNaiveDefinition) {
   }
 }
 
-std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
-
 INSTANTIATE_TEST_SUITE_P(Available, MaxPoolS8Variant,
                          ::testing::ValuesIn(test::isas_under_test(&IsaTables::maxpool_s8)),
-                         isa_param_name);
+                         test::isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(MaxPoolS8Variant);
 
 // At every level CI requires, an Engine runs a SIMD channel-max (its own, not the reference's),

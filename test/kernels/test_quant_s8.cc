@@ -403,11 +403,9 @@ TEST_P(QuantS8Variant, ColumnsSymmetricMatchesRowsOfTranspose) {
   }
 }
 
-std::string isa_param_name(const ::testing::TestParamInfo<Isa>& info) { return isa_name(info.param); }
-
 INSTANTIATE_TEST_SUITE_P(Available, QuantS8Variant,
                          ::testing::ValuesIn(test::isas_under_test(&IsaTables::quant)),
-                         isa_param_name);
+                         test::isa_param_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(QuantS8Variant);
 
 // At every level CI requires, an Engine runs a SIMD quant variant (its own functions, not the

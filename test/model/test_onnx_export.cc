@@ -24,7 +24,7 @@ namespace fs = std::filesystem;
 namespace act {
 namespace {
 
-constexpr double kTol = 1e-4;
+constexpr double kOnnxRuntimeTol = 1e-4;
 
 struct Model {
   const char* name;
@@ -149,7 +149,7 @@ TEST_P(OnnxExportTest, FullModelInOnnxRuntimeMatchesTheEngine) {
   const std::vector<float> got = read_floats(scratch_ + "/ort_full/action.bin");
   ASSERT_EQ(got.size(), expected_.size());
   EXPECT_TRUE(test::all_close(std::string(GetParam().name) + " ONNX Runtime vs engine", got.data(), expected_.data(),
-                              got.size(), kTol));
+                              got.size(), kOnnxRuntimeTol));
 }
 
 // --onnx-normalization out: normalised observations in (the engine's own, read back from its
@@ -185,7 +185,7 @@ TEST_P(OnnxExportTest, NormalizationOutsideTakesAndGivesNormalizedValues) {
   const std::vector<float> got = read_floats(scratch_ + "/ort_out/action.bin");
   ASSERT_EQ(got.size(), expected.size());
   EXPECT_TRUE(test::all_close(std::string(GetParam().name) + " normalised ONNX Runtime vs engine", got.data(),
-                              expected.data(), got.size(), kTol));
+                              expected.data(), got.size(), kOnnxRuntimeTol));
 }
 
 TEST_P(OnnxExportTest, OnnxBackboneFeedsTheSplitEngine) {
@@ -211,7 +211,7 @@ TEST_P(OnnxExportTest, OnnxBackboneFeedsTheSplitEngine) {
   std::vector<float> got(expected_.size());
   ASSERT_TRUE((*split)->infer(obs, got).ok());
   EXPECT_TRUE(test::all_close(std::string(GetParam().name) + " ONNX backbone + split engine vs engine", got.data(),
-                              expected_.data(), got.size(), kTol));
+                              expected_.data(), got.size(), kOnnxRuntimeTol));
   // The split engine refuses a camera image, features of the wrong size or not finite; the whole
   // engine refuses features.
   EXPECT_EQ((*split)->infer(observation_, got).code(), StatusCode::kInvalidArgument);

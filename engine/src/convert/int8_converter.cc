@@ -50,12 +50,6 @@ struct Reference {
   std::vector<std::vector<float>> normalized, raw;
 };
 
-std::string fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.3g", v);
-  return buf;
-}
-
 // The held-out frames when none is asked for: one per four calibration frames, 1 to 16.
 size_t default_holdout(size_t calibration_frames) { return std::clamp<size_t>(calibration_frames / 4, 1, 16); }
 
@@ -101,7 +95,7 @@ class Converter {
                                         "inputs are all per token, with no calibrated ranges for per-tensor codes");
     }
     if (!(opt_.percentile >= 50.0 && opt_.percentile <= 100.0)) {
-      fail(ErrorCode::kInvalidArgument, "percentile " + fmt(opt_.percentile) + " is outside [50, 100]");
+      fail(ErrorCode::kInvalidArgument, "percentile " + format_number(opt_.percentile) + " is outside [50, 100]");
     }
     if (opt_.calib_samples == 0) fail(ErrorCode::kInvalidArgument, "calib_samples must be at least 1");
     choose_frames(calibration);
@@ -128,8 +122,8 @@ class Converter {
     Int8Report r = report(quant, *blob, err, std::move(sensitivity), fp32.bytes());
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (opt_.max_mse && !(err.mse <= *opt_.max_mse)) {
-      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses the maximum held-out MSE: " + fmt(err.mse) + " > " +
-           fmt(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
+      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses the maximum held-out MSE: " + format_number(err.mse) + " > " +
+           format_number(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
     }
     blob->commit();
     return r;
@@ -288,7 +282,7 @@ class Converter {
   void choose_float_layers(QuantConfig& quant, std::unique_ptr<ScratchBlob>& blob, ActionError& err,
                            std::vector<LayerSensitivity>& sensitivity) {
     const double target = *opt_.target_mse;
-    progress("all layers int8: held-out MSE " + fmt(err.mse) + " (target " + fmt(target) + ")");
+    progress("all layers int8: held-out MSE " + format_number(err.mse) + " (target " + format_number(target) + ")");
     if (err.mse <= target) return;
     // The layers asked to stay float (Int8Options::keep_float) are already in quant.float_layers.
     std::vector<std::string> layers;
@@ -314,13 +308,13 @@ class Converter {
       QuantConfig q = quant;
       for (size_t i = 0; i < count; ++i) q.float_layers.push_back(sensitivity[i].layer);
       auto [candidate, e] = write_and_evaluate(q);
-      progress(std::to_string(count) + " most sensitive layers in float -> MSE " + fmt(e.mse));
+      progress(std::to_string(count) + " most sensitive layers in float -> MSE " + format_number(e.mse));
       return std::tuple{q, std::move(candidate), e};
     };
     auto [best, best_blob, best_err] = try_prefix(layers.size());
     if (!(best_err.mse <= target)) {
-      fail(ErrorCode::kFailedPrecondition, "the target MSE " + fmt(target) + " cannot be met: even with every layer in "
-           "float the held-out MSE is " + fmt(best_err.mse));
+      fail(ErrorCode::kFailedPrecondition, "the target MSE " + format_number(target) + " cannot be met: even with every layer in "
+           "float the held-out MSE is " + format_number(best_err.mse));
     }
     size_t lo = 1, hi = layers.size();
     while (lo < hi) {
@@ -376,7 +370,7 @@ class Converter {
     const auto try_count = [&](size_t count) {
       auto [candidate, e] = write_and_evaluate(with_first(count));
       progress(std::to_string(count) + " of " + std::to_string(ffns.size()) + " FFNs with per-tensor codes: held-out MSE " +
-               fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (all per token: " + fmt(base.mse) + ", " + fmt(base.max_abs) + ")");
+               format_number(e.mse) + ", max |err| " + format_number(e.max_abs) + " (all per token: " + format_number(base.mse) + ", " + format_number(base.max_abs) + ")");
       return std::pair{std::move(candidate), e};
     };
     size_t chosen = 0;
@@ -423,8 +417,8 @@ class Converter {
     const double allowed = 1.0 + kInt8AttentionErrorBudget;
     const bool within_budget = e.mse <= allowed * err.mse && e.max_abs <= allowed * err.max_abs && meets_mixed_target(e);
     const bool keep = opt_.attention == AttentionPrecision::kInt8 || within_budget;
-    progress(std::string("attention in int8: held-out MSE ") + fmt(e.mse) + ", max |err| " + fmt(e.max_abs) + " (float: " +
-             fmt(err.mse) + ", " + fmt(err.max_abs) + ") -> " + (keep ? "int8" : "float"));
+    progress(std::string("attention in int8: held-out MSE ") + format_number(e.mse) + ", max |err| " + format_number(e.max_abs) + " (float: " +
+             format_number(err.mse) + ", " + format_number(err.max_abs) + ") -> " + (keep ? "int8" : "float"));
     if (keep) {
       quant = std::move(with);
       blob = std::move(candidate);

@@ -15,4 +15,7 @@ namespace act {
 Int8Report convert_to_int8(const ImportedModel& model, const std::string& output, const CalibrationSet& calibration,
                            const Int8Options& options);
 
+/// `v` as printf's `printf_format` writes it: the numbers in the converter's messages and report.
+std::string format_number(double v, const char* printf_format = "%.3g");
+
 }  // namespace act

@@ -77,7 +77,7 @@ packages='^debian_packages$'
 web_pages='^html_report_pages$|^ActDriveLiveView\.'
 
 echo "== Release build of the full-size model tests, the kernel benchmarks and the packaged libraries and apps (-Werror) =="
-cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON \
+cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DACT_WERROR=ON -DCMAKE_UNITY_BUILD=ON \
   -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints" >/dev/null
 cmake --build "$root/build" -j "$jobs" --target act_model_tests act_kernel_bench \
   actengine actengine_convert actengine_vision act_convert act_eval act_bench act_drive act_drive_browser_tests

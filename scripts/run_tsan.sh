@@ -19,7 +19,7 @@ threaded+=":EngineApiTest.ProfilerTimesEveryOpAndTracesEveryThread:ControlLoop.*
 threaded+=":-ControlLoop.RecordWritesFramesObservationsAndTicks"
 
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-  -DACT_WERROR=ON -DACT_SANITIZE=thread -DACT_BUILD_BENCH=OFF >/dev/null
+  -DACT_WERROR=ON -DACT_SANITIZE=thread -DACT_BUILD_BENCH=OFF -DCMAKE_UNITY_BUILD=ON >/dev/null
 cmake --build "$build" -j "$jobs" --target act_thread_tests
 # halt_on_error: the first race fails the stage (a report alone would not change the exit code).
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$root/test/tsan.supp ${TSAN_OPTIONS:-}" \

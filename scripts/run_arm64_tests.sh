@@ -61,8 +61,9 @@ exclude="^($(IFS='|'; echo "${slow_tests[*]}"))( .*)?\$"
 
 echo "== aarch64 cross build (core library + act_tests, -Werror) =="
 "$root/scripts/fetch_arm64_opencv.sh" "$build/opencv-arm64"
+# A unity build, as CI's sanitizer trees (scripts/run_tests.sh says why).
 configure=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_WERROR=ON -DACT_CORE_ONLY=ON -DACT_PACKAGE_APPS=ON
-           -DACT_ARM64_OPENCV_ROOT="$build/opencv-arm64/root")
+           -DCMAKE_UNITY_BUILD=ON -DACT_ARM64_OPENCV_ROOT="$build/opencv-arm64/root")
 if [ -n "${ACT_SHARED_DIR:-}" ]; then configure+=(-DACT_SHARED_DIR="$ACT_SHARED_DIR"); fi
 ACT_BUILD_DIR="$build" "$root/scripts/build.sh" "${configure[@]}" "$@"
 

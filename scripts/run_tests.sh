@@ -7,10 +7,6 @@
 #   2. every other test in a native build under AddressSanitizer + UndefinedBehaviorSanitizer
 #      (build-asan/; -O1 with the kernels at -O2, which builds in much less time than -O2
 #      everywhere while the whole-model tests stay quick);
-# The Release tree builds file by file, as users build; the sanitizer and aarch64 trees are unity
-# builds (-DCMAKE_UNITY_BUILD=ON: each target's files compiled in batches of 8, so the headers they
-# share compile once per batch; the kernels never are, kernels/CMakeLists.txt), which takes 30-40 %
-# less time (README "CI cost"). So both ways of building are compiled here.
 #   3. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
 #      Debian packages (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
 #   4. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
@@ -18,6 +14,10 @@
 #      ACT_SKIP_FUZZ=1 skips it).
 # The Release build users run (scripts/build.sh) compiles the same sources; its speed is measured by
 # act_bench and act_kernel_bench, never asserted by a test.
+# The Release tree builds file by file, as users build; the sanitizer and aarch64 trees are unity
+# builds (-DCMAKE_UNITY_BUILD=ON: each target's files compiled in batches of 8, so the headers they
+# share compile once per batch; the kernels never are, kernels/CMakeLists.txt), which takes 30-40 %
+# less time (README "CI cost"). So both ways of building are compiled here.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"

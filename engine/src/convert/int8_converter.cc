@@ -122,8 +122,8 @@ class Converter {
     Int8Report r = report(quant, *blob, err, std::move(sensitivity), fp32.bytes());
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (opt_.max_mse && !(err.mse <= *opt_.max_mse)) {
-      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses the maximum held-out MSE: " + format_number(err.mse) + " > " +
-           format_number(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
+      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses the maximum held-out MSE: " + format_number(err.mse) +
+           " > " + format_number(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
     }
     blob->commit();
     return r;
@@ -313,8 +313,8 @@ class Converter {
     };
     auto [best, best_blob, best_err] = try_prefix(layers.size());
     if (!(best_err.mse <= target)) {
-      fail(ErrorCode::kFailedPrecondition, "the target MSE " + format_number(target) + " cannot be met: even with every layer in "
-           "float the held-out MSE is " + format_number(best_err.mse));
+      fail(ErrorCode::kFailedPrecondition, "the target MSE " + format_number(target) +
+           " cannot be met: even with every layer in float the held-out MSE is " + format_number(best_err.mse));
     }
     size_t lo = 1, hi = layers.size();
     while (lo < hi) {
@@ -370,7 +370,8 @@ class Converter {
     const auto try_count = [&](size_t count) {
       auto [candidate, e] = write_and_evaluate(with_first(count));
       progress(std::to_string(count) + " of " + std::to_string(ffns.size()) + " FFNs with per-tensor codes: held-out MSE " +
-               format_number(e.mse) + ", max |err| " + format_number(e.max_abs) + " (all per token: " + format_number(base.mse) + ", " + format_number(base.max_abs) + ")");
+               format_number(e.mse) + ", max |err| " + format_number(e.max_abs) + " (all per token: " + format_number(base.mse) +
+               ", " + format_number(base.max_abs) + ")");
       return std::pair{std::move(candidate), e};
     };
     size_t chosen = 0;
@@ -417,8 +418,9 @@ class Converter {
     const double allowed = 1.0 + kInt8AttentionErrorBudget;
     const bool within_budget = e.mse <= allowed * err.mse && e.max_abs <= allowed * err.max_abs && meets_mixed_target(e);
     const bool keep = opt_.attention == AttentionPrecision::kInt8 || within_budget;
-    progress(std::string("attention in int8: held-out MSE ") + format_number(e.mse) + ", max |err| " + format_number(e.max_abs) + " (float: " +
-             format_number(err.mse) + ", " + format_number(err.max_abs) + ") -> " + (keep ? "int8" : "float"));
+    progress(std::string("attention in int8: held-out MSE ") + format_number(e.mse) + ", max |err| " +
+             format_number(e.max_abs) + " (float: " + format_number(err.mse) + ", " + format_number(err.max_abs) + ") -> " +
+             (keep ? "int8" : "float"));
     if (keep) {
       quant = std::move(with);
       blob = std::move(candidate);

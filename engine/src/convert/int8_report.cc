@@ -87,11 +87,11 @@ std::string Int8Report::to_text() const {
   s << ": " << calibration_frames << " calibration frames, " << holdout_frames << " held out\n";
   s << "preprocessing  " << preprocessing << "\n";
   const double fp = static_cast<double>(fp32_bytes), q = static_cast<double>(int8_bytes);
-  s << "size           fp32 " << format_number(fp / 1e6, "%.1f") << " MB -> int8 " << format_number(q / 1e6, "%.1f") << " MB ("
-    << format_number(100.0 * q / fp, "%.1f") << " %)\n";
+  s << "size           fp32 " << format_number(fp / 1e6, "%.1f") << " MB -> int8 " << format_number(q / 1e6, "%.1f")
+    << " MB (" << format_number(100.0 * q / fp, "%.1f") << " %)\n";
   const ActionError& e = action_error;
-  s << "held-out error normalised: MSE " << format_number(e.mse) << ", max |err| " << format_number(e.max_abs) << "; physical: MSE "
-    << format_number(e.mse_physical) << ", max |err| " << format_number(e.max_abs_physical) << "\n";
+  s << "held-out error normalised: MSE " << format_number(e.mse) << ", max |err| " << format_number(e.max_abs)
+    << "; physical: MSE " << format_number(e.mse_physical) << ", max |err| " << format_number(e.max_abs_physical) << "\n";
   s << "per action dim (normalised MSE / max | physical MSE / max):\n";
   for (size_t a = 0; a < e.per_dim_mse.size(); ++a) {
     s << "  [" << a << "] " << format_number(e.per_dim_mse[a]) << " / " << format_number(e.per_dim_max_abs[a]) << " | "
@@ -99,9 +99,9 @@ std::string Int8Report::to_text() const {
   }
   s << "attention      " << (int8_attention ? "int8" : "fp32");
   if (fp32_attention_error && int8_attention_error) {
-    s << " (held-out MSE " << format_number(int8_attention_error->mse) << ", max |err| " << format_number(int8_attention_error->max_abs)
-      << " with int8 attention; " << format_number(fp32_attention_error->mse) << ", " << format_number(fp32_attention_error->max_abs)
-      << " with float)";
+    s << " (held-out MSE " << format_number(int8_attention_error->mse) << ", max |err| "
+      << format_number(int8_attention_error->max_abs) << " with int8 attention; " << format_number(fp32_attention_error->mse)
+      << ", " << format_number(fp32_attention_error->max_abs) << " with float)";
   }
   s << "\n";
   if (!linear_inputs.empty()) {
@@ -110,13 +110,14 @@ std::string Int8Report::to_text() const {
     s << "linear inputs  " << per_tensor << " of " << linear_inputs.size() << " with calibrated per-tensor codes (" << tried
       << " tried: the FFNs' hidden activations), the rest per token";
     if (per_token_inputs_error && chosen_inputs_error) {
-      s << " (held-out MSE " << format_number(chosen_inputs_error->mse) << ", max |err| " << format_number(chosen_inputs_error->max_abs)
-        << "; all per token " << format_number(per_token_inputs_error->mse) << ", " << format_number(per_token_inputs_error->max_abs) << ")";
+      s << " (held-out MSE " << format_number(chosen_inputs_error->mse) << ", max |err| "
+        << format_number(chosen_inputs_error->max_abs) << "; all per token " << format_number(per_token_inputs_error->mse) << ", "
+        << format_number(per_token_inputs_error->max_abs) << ")";
     }
     s << "\n  codes        SQNR dB per tensor / per token (estimated)  value\n";
     for (const auto& l : linear_inputs) {
-      s << "  " << (l.per_tensor ? "per tensor" : "per token ") << "   " << format_number(l.sqnr_per_tensor_db, "%6.1f") << " / "
-        << format_number(l.sqnr_per_token_db, "%6.1f") << "                           " << l.value
+      s << "  " << (l.per_tensor ? "per tensor" : "per token ") << "   " << format_number(l.sqnr_per_tensor_db, "%6.1f")
+        << " / " << format_number(l.sqnr_per_token_db, "%6.1f") << "                           " << l.value
         << (l.ffn >= 0 ? " (FFN " + std::to_string(l.ffn) + ")" : "") << "\n";
     }
   }

@@ -101,19 +101,19 @@ struct TempBlob {
   }
 };
 
-// The built-in model written as FP32 and (when asked) INT8 static blobs. INT8 is calibrated on a few
-// synthetic frames: enough for speed; act_convert with real frames is what gives accuracy.
+// The built-in model written as the FP32 and INT8 static blobs that are asked for. INT8 is calibrated
+// on a few synthetic frames: enough for speed; act_convert with real frames is what gives accuracy.
 struct BuiltinBlobs {
   TempBlob fp32{"fp32"}, int8{"int8"};
   bool has_int8 = false;
   std::string int8_note;
 };
 
-void build_builtin(const Options& opt, bool want_int8, BuiltinBlobs& out) {
+void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBlobs& out) {
   auto imported = act::import_synthetic_model(opt.config, opt.seed);
   act::throw_if_failed(imported.status());
   const act::ImportedCheckpoint& model = **imported;
-  act::throw_if_failed(model.write_fp32(out.fp32.path).status());
+  if (want_fp32) act::throw_if_failed(model.write_fp32(out.fp32.path).status());
   if (!want_int8) return;
   auto frames = model.synthetic_calibration_set(5, opt.seed);
   act::throw_if_failed(frames.status());
@@ -264,7 +264,7 @@ class Benchmark {
     if (blob_path_.empty()) {
       const auto start = Clock::now();
       const bool int8 = opt_.precision == "int8";
-      build_builtin(opt_, int8 || opt_.compare, builtin_);
+      build_builtin(opt_, !int8 || opt_.compare, int8 || opt_.compare, builtin_);
       blob_path_ = int8 ? builtin_.int8.path : builtin_.fp32.path;
       if (opt_.compare) other_path_ = int8 ? builtin_.fp32.path : builtin_.int8.path;
       build_ms_ = ms_since(start);

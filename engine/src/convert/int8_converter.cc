@@ -129,8 +129,8 @@ class Converter {
  private:
   // An Engine over one of this conversion's own scratch blobs: an unnamed file that it has just
   // written and that nothing else can open, so its pages are shared rather than copied and its
-  // checksum is not read back (a mixed search opens dozens of them: act-tiny's 45 MB each took
-  // the search from 12 s to 20 s).
+  // checksum is not read back (a mixed search opens dozens of them: copying and checking act-tiny's
+  // 45 MB each time made its search take 20 s instead of 12).
   EngineOptions scratch_engine_options(bool keep_intermediates) const {
     EngineOptions eo;
     eo.threads = opt_.threads;

@@ -385,36 +385,35 @@ bool is_training_only(const std::string& name) {
 
 using Mat = std::vector<float>;  // row-major
 
+// y[o + j] = sum_i x[i] * w[o + j, i] + b[o + j] for j < N, accumulated in double, i in order: N
+// independent chains of adds (N a constant, so the sums stay in registers).
+template <int N>
+void linear_d_outputs(const double* x, int in, const float* w, const float* b, int o, double* y) {
+  double s[N];
+  const float* wr[N];
+  for (int j = 0; j < N; ++j) {
+    s[j] = b ? b[o + j] : 0.0;
+    wr[j] = w + static_cast<size_t>(o + j) * in;
+  }
+  for (int i = 0; i < in; ++i) {
+    for (int j = 0; j < N; ++j) s[j] += x[i] * wr[j][i];
+  }
+  for (int j = 0; j < N; ++j) y[o + j] = s[j];
+}
+
 // out[r, o] = sum_i x[r, i] * w[o, i] + b[o], accumulated in double, i in order. Eight outputs at a
-// time, each its own sum in the same order as alone (the same bits): eight independent chains of
-// adds where one chain waited for each add before the next (the position tables of a default
-// model's import, about 0.7 GMAC, were a tenth of act_bench's start).
+// time, each its own sum in the same order as alone (the same bits), where one chain of adds waited
+// for each add before the next (the position tables of a default model's import, about 0.7 GMAC,
+// were 6 % of act_bench's start by perf's samples, then 2.6 %).
 std::vector<double> linear_d(const std::vector<double>& x, int rows, int in, const float* w, const float* b, int out) {
   constexpr int kOutputs = 8;
   std::vector<double> y(static_cast<size_t>(rows) * out);
-  const auto weight_row = [&](int o) { return w + static_cast<size_t>(o) * in; };
   for (int r = 0; r < rows; ++r) {
     const double* xr = x.data() + static_cast<size_t>(r) * in;
     double* yr = y.data() + static_cast<size_t>(r) * out;
     int o = 0;
-    for (; o + kOutputs <= out; o += kOutputs) {
-      double s[kOutputs];
-      const float* wr[kOutputs];
-      for (int j = 0; j < kOutputs; ++j) {
-        s[j] = b ? b[o + j] : 0.0;
-        wr[j] = weight_row(o + j);
-      }
-      for (int i = 0; i < in; ++i) {
-        for (int j = 0; j < kOutputs; ++j) s[j] += xr[i] * wr[j][i];
-      }
-      for (int j = 0; j < kOutputs; ++j) yr[o + j] = s[j];
-    }
-    for (; o < out; ++o) {
-      double s = b ? b[o] : 0.0;
-      const float* wo = weight_row(o);
-      for (int i = 0; i < in; ++i) s += xr[i] * wo[i];
-      yr[o] = s;
-    }
+    for (; o + kOutputs <= out; o += kOutputs) linear_d_outputs<kOutputs>(xr, in, w, b, o, yr);
+    for (; o < out; ++o) linear_d_outputs<1>(xr, in, w, b, o, yr);
   }
   return y;
 }

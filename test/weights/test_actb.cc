@@ -521,6 +521,51 @@ TEST(ActbWrite, ReplacesExistingFileAndLeavesNoTemp) {
   EXPECT_EQ(*f.get("only").f32(), 42.0f);
 }
 
+// add_f32 copies the values when called; add_f32_ref reads them when the blob is written. Both write
+// the same bytes, side by side with int8 tensors of their own.
+TEST(ActbWrite, ReferencedTensorsAreWrittenAsCopiedOnesAre) {
+  const std::string dir = test::scratch_dir();
+  std::vector<float> a(1000), b(77);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> dist(-2.0f, 2.0f);
+  for (float& v : a) v = dist(rng);
+  for (float& v : b) v = dist(rng);
+  const std::vector<int8_t> codes = {1, -2, 3, -4, 5, -6};
+  const auto build = [&](bool refer, const std::vector<float>& first, const std::vector<float>& second) {
+    ActbWriter w;
+    w.set_config({{"k", 1}});
+    if (refer) {
+      w.add_f32_ref("a", {10, 100}, first);
+    } else {
+      w.add_f32("a", {10, 100}, first);
+    }
+    w.add_tensor("q", DType::kI8, {2, 3}, codes.data(), codes.size(), {{0.5f, 0.25f}, {0, 0}, 0});
+    if (refer) {
+      w.add_f32_ref("b", {77}, second);
+    } else {
+      w.add_f32("b", {77}, second);
+    }
+    return w;
+  };
+  build(false, a, b).write(dir + "/copied.actb");
+  const ActbWriter referring = build(true, a, b);
+  referring.write(dir + "/referenced.actb");
+  EXPECT_EQ(test::read_file(dir + "/copied.actb"), test::read_file(dir + "/referenced.actb"));
+
+  // A reference is read at each write; a copy keeps the values of its call.
+  std::vector<float> changing = a;
+  ActbWriter copied = build(false, changing, b);
+  const ActbWriter referenced = build(true, changing, b);
+  changing[5] = 123.0f;
+  copied.write(dir + "/copied.actb");
+  referenced.write(dir + "/referenced.actb");
+  EXPECT_EQ(ActbFile::open(dir + "/copied.actb").get("a").f32()[5], a[5]);
+  EXPECT_EQ(ActbFile::open(dir + "/referenced.actb").get("a").f32()[5], 123.0f);
+  const ActbFile f = ActbFile::open(dir + "/referenced.actb");
+  EXPECT_EQ(std::memcmp(f.get("b").f32(), b.data(), b.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(f.get("q").data, codes.data(), codes.size()), 0);
+}
+
 TEST(ActbWrite, MissingFolderFailsCleanly) {
   const std::string dir = test::scratch_dir();
   const std::string path = dir + "/no/such/dir/m.actb";

@@ -130,6 +130,19 @@ const float* ActbTensor::f32() const {
 
 void ActbWriter::add_tensor(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data,
                             size_t nbytes, QuantParams quant) {
+  add(name, dtype, std::move(shape), data, nbytes, std::move(quant), true);
+}
+
+void ActbWriter::add_f32(const std::string& name, std::vector<int64_t> shape, const std::vector<float>& values) {
+  add(name, DType::kF32, std::move(shape), values.data(), values.size() * sizeof(float), {}, true);
+}
+
+void ActbWriter::add_f32_ref(const std::string& name, std::vector<int64_t> shape, const std::vector<float>& values) {
+  add(name, DType::kF32, std::move(shape), values.data(), values.size() * sizeof(float), {}, false);
+}
+
+void ActbWriter::add(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data, size_t nbytes,
+                     QuantParams quant, bool copy) {
   const std::string where = "actb tensor '" + name + "': ";
   if (name.empty()) fail(ErrorCode::kInvalidArgument, "actb tensor with an empty name");
   if (index_.count(name) != 0) fail(ErrorCode::kInvalidArgument, where + "duplicate tensor name");
@@ -148,17 +161,13 @@ void ActbWriter::add_tensor(const std::string& name, DType dtype, std::vector<in
   const std::string quant_error = check_quant(quant, shape);
   if (!quant_error.empty()) fail(ErrorCode::kInvalidArgument, where + quant_error);
 
-  Pending p{name, dtype, std::move(shape), {}, std::move(quant)};
-  if (nbytes != 0) {
-    const auto* bytes = static_cast<const uint8_t*>(data);
-    p.bytes.assign(bytes, bytes + nbytes);
+  Pending p{name, dtype, std::move(shape), {}, static_cast<const uint8_t*>(data), nbytes, std::move(quant)};
+  if (copy && nbytes != 0) {
+    p.copy.assign(p.data, p.data + nbytes);
+    p.data = p.copy.data();  // stays valid when tensors_ grows: moving a vector keeps its buffer
   }
   index_.emplace(name, tensors_.size());
   tensors_.push_back(std::move(p));
-}
-
-void ActbWriter::add_f32(const std::string& name, std::vector<int64_t> shape, const std::vector<float>& values) {
-  add_tensor(name, DType::kF32, std::move(shape), values.data(), values.size() * sizeof(float));
 }
 
 size_t ActbWriter::write(const std::string& path) const {
@@ -189,7 +198,7 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
     e["dtype"] = dtype_name(t.dtype);
     e["shape"] = t.shape;
     e["offset"] = cursor;
-    e["nbytes"] = t.bytes.size();
+    e["nbytes"] = t.nbytes;
     if (!t.quant.empty()) {
       nlohmann::ordered_json q = nlohmann::ordered_json::object();
       q["scales"] = t.quant.scales;
@@ -198,7 +207,7 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
       e["quant"] = std::move(q);
     }
     dir.push_back(std::move(e));
-    cursor += t.bytes.size();
+    cursor += t.nbytes;
   }
   const uint64_t data_size = cursor;
 
@@ -219,8 +228,8 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
   crc = crc_zeros(crc, data_offset - kFixedHeaderSize - text.size());
   for (size_t i = 0; i < tensors_.size(); ++i) {
     const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
-    crc = crc_update(crc, tensors_[i].bytes.data(), tensors_[i].bytes.size());
-    crc = crc_zeros(crc, end - offsets[i] - tensors_[i].bytes.size());
+    crc = crc_update(crc, tensors_[i].data, tensors_[i].nbytes);
+    crc = crc_zeros(crc, end - offsets[i] - tensors_[i].nbytes);
   }
 
   uint8_t fixed[kFixedHeaderSize] = {};
@@ -236,8 +245,8 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
   out.write_zeros(data_offset - kFixedHeaderSize - text.size());
   for (size_t i = 0; i < tensors_.size(); ++i) {
     const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
-    out.write(tensors_[i].bytes.data(), tensors_[i].bytes.size());
-    out.write_zeros(end - offsets[i] - tensors_[i].bytes.size());
+    out.write(tensors_[i].data, tensors_[i].nbytes);
+    out.write_zeros(end - offsets[i] - tensors_[i].nbytes);
   }
 }
 

@@ -66,6 +66,10 @@ class ActbWriter {
   void add_tensor(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data,
                   size_t nbytes, QuantParams quant = {});
   void add_f32(const std::string& name, std::vector<int64_t> shape, const std::vector<float>& values);
+  /// As add_f32, but refers to `values` instead of copying them: they must stay alive and unchanged
+  /// until the writer's last write. For whole models written from their own tensors (fp32_blob,
+  /// int8_blob), where copying every weight was most of a conversion's time.
+  void add_f32_ref(const std::string& name, std::vector<int64_t> shape, const std::vector<float>& values);
   /// Writes atomically: a temporary file next to `path`, fsync, rename. On any failure the temporary
   /// file is removed and no file appears at `path`. Returns the number of bytes written.
   size_t write(const std::string& path) const;
@@ -78,9 +82,13 @@ class ActbWriter {
     std::string name;
     DType dtype;
     std::vector<int64_t> shape;
-    std::vector<uint8_t> bytes;
+    std::vector<uint8_t> copy;  // the bytes when the writer holds them; empty for a reference
+    const uint8_t* data;        // copy.data(), or the referenced bytes
+    size_t nbytes;
     QuantParams quant;
   };
+  void add(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data, size_t nbytes,
+           QuantParams quant, bool copy);
   std::string producer_ = "actengine";
   nlohmann::json config_ = nlohmann::json::object();
   std::vector<Pending> tensors_;

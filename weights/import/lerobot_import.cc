@@ -909,7 +909,7 @@ ActbWriter fp32_blob(const ImportedModel& model) {
   ActbWriter writer;
   writer.set_producer(std::string("act_convert (actengine) from a ") + model.layout + "-layout LeRobot checkpoint");
   writer.set_config(model.config.to_json());
-  for (const auto& t : model.tensors) writer.add_f32(t.name, t.shape, t.values);
+  for (const auto& t : model.tensors) writer.add_f32_ref(t.name, t.shape, t.values);
   return writer;
 }
 

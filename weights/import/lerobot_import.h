@@ -73,7 +73,8 @@ struct ProcessorStep {
 ProcessorStep parse_processor_step(const nlohmann::ordered_json& pipeline, const std::string& registry_name,
                                    const std::string& where);
 
-/// The imported model as an FP32 .actb blob, ready to write.
+/// The imported model as an FP32 .actb blob, ready to write. The writer refers to the model's tensors
+/// (no copy): write it while `model` lives, unchanged.
 ActbWriter fp32_blob(const ImportedModel& model);
 /// Writes fp32_blob(model) (atomically). Returns the file size in bytes.
 size_t write_fp32_blob(const ImportedModel& model, const std::string& path);

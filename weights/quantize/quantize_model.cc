@@ -75,7 +75,7 @@ ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant) {
   for (const auto& t : model.tensors) {
     if (rebuilt_tables.count(t.name)) continue;
     if (!quantize.count(t.name) || keep_float.count(t.name)) {
-      writer.add_f32(t.name, t.shape, t.values);
+      writer.add_f32_ref(t.name, t.shape, t.values);
       continue;
     }
     const size_t rows = static_cast<size_t>(t.shape[0]);

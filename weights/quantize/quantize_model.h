@@ -23,7 +23,8 @@ void quantize_weight_per_row(const std::vector<float>& w, size_t rows, size_t co
                              std::vector<float>& scales);
 
 /// The INT8 blob: quantizable layers not in quant.float_layers as int8, the rest float32, and
-/// `quant` in the config. Throws kInvalidArgument for a float layer that is not quantizable.
+/// `quant` in the config. Throws kInvalidArgument for a float layer that is not quantizable. The
+/// writer refers to the model's float tensors (no copy): write it while `model` lives, unchanged.
 ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant);
 /// Writes int8_blob(model, quant), atomically like every blob write. Returns the bytes written.
 size_t write_int8_blob(const ImportedModel& model, const QuantConfig& quant, const std::string& path);

@@ -117,6 +117,18 @@ TEST(ConvertApi, DeploymentOptionsReplaceTheFoldersAndReachTheBlob) {
   const auto refused = import_checkpoint(fixture, {}, {.n_action_steps = std::nullopt, .temporal_ensemble_coeff = 0.01});
   EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(refused.status().message().find("needs n_action_steps == 1"), std::string::npos) << refused.status().message();
+
+  // A bad override is refused from config.json alone, before the weights are read: here there are
+  // none to read, and the override is still what the error names.
+  const std::string no_weights = test::scratch_dir() + "/no-weights";
+  fs::create_directories(no_weights);
+  fs::copy_file(fixture + "/config.json", no_weights + "/config.json");
+  const auto early = import_checkpoint(no_weights, {}, {.n_action_steps = 11, .temporal_ensemble_coeff = std::nullopt});
+  EXPECT_EQ(early.status().code(), StatusCode::kInvalidArgument) << early.status().to_string();
+  EXPECT_NE(early.status().message().find("n_action_steps 11 must be in [1, chunk_size 10]"), std::string::npos)
+      << early.status().message();
+  const auto good = import_checkpoint(no_weights, {}, {.n_action_steps = 5, .temporal_ensemble_coeff = std::nullopt});
+  EXPECT_EQ(good.status().code(), StatusCode::kNotFound) << good.status().to_string();
 }
 
 TEST(ConvertApi, PthOptionsOnAFolderAreRefused) {

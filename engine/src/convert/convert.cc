@@ -8,6 +8,7 @@
 #include "engine/src/convert/int8_converter.h"
 #include "engine/src/engine_impl.h"
 #include "weights/blob/file_kind.h"
+#include "weights/blob/file_util.h"
 #include "weights/import/synthetic_model.h"
 
 namespace act {
@@ -185,9 +186,15 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_checkpoint(const std::strin
   }
   std::unique_ptr<ImportedCheckpoint> out;
   const Status s = guarded([&] {
+    const std::string config_path = path + "/config.json";
+    if (deployment.n_action_steps || deployment.temporal_ensemble_coeff) {
+      // Checked against config.json before the weights are read, so that a bad override fails at once.
+      ModelConfig described = lerobot_model_config(detail::read_json_file(config_path), config_path);
+      apply_deployment(described, deployment, config_path);
+    }
     auto impl = std::make_unique<ImportedCheckpoint::Impl>();
     impl->model = import_lerobot_checkpoint(path);
-    apply_deployment(impl->model.config, deployment, path + "/config.json");
+    apply_deployment(impl->model.config, deployment, config_path);
     out.reset(new ImportedCheckpoint(std::move(impl)));
     out->summary_ = import_summary(out->impl_->model, out->impl_->model.layout + " LeRobot layout");
   });

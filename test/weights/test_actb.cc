@@ -19,6 +19,7 @@
 #include "support/test_paths.h"
 #include "weights/blob/blob_tensors.h"
 #include "weights/blob/error.h"
+#include "weights/blob/file_util.h"
 #include "weights/blob/quant_config.h"
 #include "weights/import/safetensors.h"
 
@@ -564,6 +565,31 @@ TEST(ActbWrite, ReferencedTensorsAreWrittenAsCopiedOnesAre) {
   const ActbFile f = ActbFile::open(dir + "/referenced.actb");
   EXPECT_EQ(std::memcmp(f.get("b").f32(), b.data(), b.size() * sizeof(float)), 0);
   EXPECT_EQ(std::memcmp(f.get("q").data, codes.data(), codes.size()), 0);
+}
+
+// A blob written with its checksum left for later fails verification until it is sealed, and is then
+// byte for byte the blob written with its checksum at once.
+TEST(ActbWrite, ChecksumLeftForLaterIsSealedBeforeCommit) {
+  const std::string dir = test::scratch_dir();
+  const ActbWriter w = small_writer();
+  w.write(dir + "/now.actb");
+  {
+    detail::AtomicFileWriter file(dir + "/later.actb");
+    w.write_to(file, ActbWriter::Checksum::kLater);
+    EXPECT_TRUE(throws_error([&] { ActbFile::open(file.readable_path()); }, ErrorCode::kDataLoss, {"checksum mismatch"}));
+    EXPECT_NO_THROW(ActbFile::open(file.readable_path(), /*verify_checksum=*/false));
+    seal_actb_checksum(file);
+    file.commit();
+  }
+  EXPECT_EQ(test::read_file(dir + "/later.actb"), test::read_file(dir + "/now.actb"));
+  EXPECT_NO_THROW(ActbFile::open(dir + "/later.actb"));
+
+  // Nothing written: nothing to seal, and no file appears.
+  {
+    detail::AtomicFileWriter empty(dir + "/empty.actb");
+    EXPECT_TRUE(throws_error([&] { seal_actb_checksum(empty); }, ErrorCode::kInvalidArgument, {"no .actb blob"}));
+  }
+  EXPECT_FALSE(fs::exists(dir + "/empty.actb"));
 }
 
 TEST(ActbWrite, MissingFolderFailsCleanly) {

@@ -20,6 +20,7 @@ namespace {
 
 constexpr char kMagic[8] = {'A', 'C', 'T', 'B', 'L', 'O', 'B', '\0'};
 constexpr size_t kFixedHeaderSize = 64;
+constexpr size_t kChecksumOffset = 40;  // in the fixed header
 using detail::fail_corrupt;
 using detail::put_le64;
 using detail::read_le64;
@@ -178,7 +179,7 @@ size_t ActbWriter::write(const std::string& path) const {
   return total;
 }
 
-void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
+void ActbWriter::write_to(detail::AtomicFileWriter& out, Checksum checksum) const {
   const std::string& path = out.path();
   // The reader insists on an object; refuse to produce a file it would reject.
   if (!config_.is_object()) {
@@ -223,13 +224,16 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
   const uint64_t data_offset = align_up(kFixedHeaderSize + text.size());
 
   // The checksum covers everything after the fixed header, including the zero padding.
-  uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
-  crc = crc_update(crc, reinterpret_cast<const uint8_t*>(text.data()), text.size());
-  crc = crc_zeros(crc, data_offset - kFixedHeaderSize - text.size());
-  for (size_t i = 0; i < tensors_.size(); ++i) {
-    const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
-    crc = crc_update(crc, tensors_[i].data, tensors_[i].nbytes);
-    crc = crc_zeros(crc, end - offsets[i] - tensors_[i].nbytes);
+  uint32_t crc = 0;
+  if (checksum == Checksum::kNow) {
+    crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
+    crc = crc_update(crc, reinterpret_cast<const uint8_t*>(text.data()), text.size());
+    crc = crc_zeros(crc, data_offset - kFixedHeaderSize - text.size());
+    for (size_t i = 0; i < tensors_.size(); ++i) {
+      const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
+      crc = crc_update(crc, tensors_[i].data, tensors_[i].nbytes);
+      crc = crc_zeros(crc, end - offsets[i] - tensors_[i].nbytes);
+    }
   }
 
   uint8_t fixed[kFixedHeaderSize] = {};
@@ -238,7 +242,7 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out) const {
   put_le64(text.size(), fixed + 16);
   put_le64(data_offset, fixed + 24);
   put_le64(data_size, fixed + 32);
-  put_le64(crc, fixed + 40);
+  put_le64(crc, fixed + kChecksumOffset);
 
   out.write(fixed, sizeof fixed);
   out.write(text.data(), text.size());
@@ -280,7 +284,7 @@ FixedHeader read_fixed_header(const std::string& path, const uint8_t* base, uint
   h.header_size = read_le64(base + 16);
   h.data_offset = read_le64(base + 24);
   h.data_size = read_le64(base + 32);
-  h.checksum = read_le64(base + 40);
+  h.checksum = read_le64(base + kChecksumOffset);
   bool reserved_zero = reserved0 == 0;
   for (size_t i = 48; i < kFixedHeaderSize; ++i) reserved_zero = reserved_zero && base[i] == 0;
   if (!reserved_zero) fail_corrupt(path, "reserved fixed-header bytes are not zero");
@@ -316,9 +320,13 @@ FixedHeader read_fixed_header(const std::string& path, const uint8_t* base, uint
 }
 
 // CRC-32 of everything after the fixed header.
+uint32_t checksum_of(const uint8_t* base, uint64_t size) {
+  const auto crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
+  return crc_update(crc, base + kFixedHeaderSize, static_cast<size_t>(size - kFixedHeaderSize));
+}
+
 void verify_checksum_of(const std::string& path, const uint8_t* base, uint64_t size, uint64_t checksum) {
-  uint32_t crc = static_cast<uint32_t>(::crc32(0L, Z_NULL, 0));
-  crc = crc_update(crc, base + kFixedHeaderSize, static_cast<size_t>(size - kFixedHeaderSize));
+  const uint32_t crc = checksum_of(base, size);
   if (crc != checksum) {
     fail_corrupt(path, "checksum mismatch (stored " + hex32(static_cast<uint32_t>(checksum)) + ", computed " +
                       hex32(crc) + "): the file is corrupt");
@@ -423,6 +431,16 @@ void check_no_overlap(const std::string& path, const std::vector<ActbTensor>& te
 }
 
 }  // namespace
+
+void seal_actb_checksum(detail::AtomicFileWriter& file) {
+  const FileMapping written = FileMapping::open(file.readable_path());
+  if (written.size() < kFixedHeaderSize) {
+    fail(ErrorCode::kInvalidArgument, "'" + file.path() + "': no .actb blob was written to seal");
+  }
+  uint8_t field[8];
+  put_le64(checksum_of(written.data(), written.size()), field);
+  file.write_at(kChecksumOffset, field, sizeof field);
+}
 
 ActbFile ActbFile::open(const std::string& path, bool verify_checksum, FileMapping::Mode mode) {
   ActbFile f;

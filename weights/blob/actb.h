@@ -75,7 +75,10 @@ class ActbWriter {
   size_t write(const std::string& path) const;
   /// Writes the whole blob into `file` without committing it (the caller decides whether it gets
   /// its name; the converter opens uncommitted blobs through AtomicFileWriter::readable_path).
-  void write_to(detail::AtomicFileWriter& file) const;
+  /// Checksum::kLater leaves the checksum field 0, for a blob that may never be kept: whoever keeps
+  /// it calls seal_actb_checksum() before committing.
+  enum class Checksum { kNow, kLater };
+  void write_to(detail::AtomicFileWriter& file, Checksum checksum = Checksum::kNow) const;
 
  private:
   struct Pending {
@@ -94,6 +97,10 @@ class ActbWriter {
   std::vector<Pending> tensors_;
   std::map<std::string, size_t> index_;
 };
+
+/// Computes the checksum of the blob written so far into `file` (by write_to(file, Checksum::kLater))
+/// and writes it into the fixed header. Throws act::Error(kIoError) naming the file.
+void seal_actb_checksum(detail::AtomicFileWriter& file);
 
 class ActbFile {
  public:

@@ -94,6 +94,27 @@ void AtomicFileWriter::write(const void* data, size_t size) {
   written_ += size;
 }
 
+void AtomicFileWriter::write_at(size_t offset, const void* data, size_t size) {
+  if (offset + size > written_) {
+    fail(ErrorCode::kInvalidArgument, "cannot overwrite bytes " + std::to_string(offset) + " to " +
+                                          std::to_string(offset + size) + " of " + describe_target() + ": " +
+                                          std::to_string(written_) + " bytes are written");
+  }
+  const auto* p = static_cast<const uint8_t*>(data);
+  while (size > 0) {
+    const ssize_t n = ::pwrite(fd_, p, size, static_cast<off_t>(offset));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": " + errno_text(err));
+    }
+    if (n == 0) fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": pwrite returned 0");
+    p += n;
+    offset += static_cast<size_t>(n);
+    size -= static_cast<size_t>(n);
+  }
+}
+
 void AtomicFileWriter::write_zeros(size_t size) {
   static constexpr uint8_t kZeros[256] = {};
   while (size > 0) {

@@ -27,6 +27,8 @@ class AtomicFileWriter {
   void write(const void* data, size_t size);
   void write(const std::string& text) { write(text.data(), text.size()); }
   void write_zeros(size_t size);
+  /// Overwrites bytes already written, at `offset` from the start (the file position stays at the end).
+  void write_at(size_t offset, const void* data, size_t size);
   /// fsync, close, rename into place, then (best effort) fsync the folder so the rename is durable.
   void commit();
 

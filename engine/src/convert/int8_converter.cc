@@ -27,10 +27,17 @@ namespace {
 // it leaves nothing, even when the process is killed.
 class ScratchBlob {
  public:
-  ScratchBlob(const ActbWriter& blob, const std::string& output) : file_(output) { blob.write_to(file_); }
+  // Written without its checksum (its Engine does not read it back, scratch_engine_options): most
+  // trials' blobs are dropped, and the one that is kept gets it at commit().
+  ScratchBlob(const ActbWriter& blob, const std::string& output) : file_(output) {
+    blob.write_to(file_, ActbWriter::Checksum::kLater);
+  }
   std::string path() const { return file_.readable_path(); }
   uint64_t bytes() const { return file_.bytes_written(); }
-  void commit() { file_.commit(); }
+  void commit() {
+    seal_actb_checksum(file_);
+    file_.commit();
+  }
 
  private:
   detail::AtomicFileWriter file_;

@@ -76,21 +76,7 @@ std::string AtomicFileWriter::readable_path() const {
 }
 
 void AtomicFileWriter::write(const void* data, size_t size) {
-  const auto* p = static_cast<const uint8_t*>(data);
-  size_t left = size;
-  while (left > 0) {
-    // Linux writes at most ~2 GiB per call; loop on partial writes and EINTR.
-    const size_t chunk = std::min<size_t>(left, size_t{1} << 30);
-    const ssize_t n = ::write(fd_, p, chunk);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      const int err = errno;
-      fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": " + errno_text(err));
-    }
-    if (n == 0) fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": write returned 0");
-    p += n;
-    left -= static_cast<size_t>(n);
-  }
+  write_all(data, size, -1);
   written_ += size;
 }
 
@@ -100,18 +86,24 @@ void AtomicFileWriter::write_at(size_t offset, const void* data, size_t size) {
                                           std::to_string(offset + size) + " of " + describe_target() + ": " +
                                           std::to_string(written_) + " bytes are written");
   }
+  write_all(data, size, static_cast<off_t>(offset));
+}
+
+void AtomicFileWriter::write_all(const void* data, size_t size, off_t offset) {
   const auto* p = static_cast<const uint8_t*>(data);
   while (size > 0) {
-    const ssize_t n = ::pwrite(fd_, p, size, static_cast<off_t>(offset));
+    // Linux writes at most ~2 GiB per call; loop on partial writes and EINTR.
+    const size_t chunk = std::min<size_t>(size, size_t{1} << 30);
+    const ssize_t n = offset < 0 ? ::write(fd_, p, chunk) : ::pwrite(fd_, p, chunk, offset);
     if (n < 0) {
       if (errno == EINTR) continue;
       const int err = errno;
       fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": " + errno_text(err));
     }
-    if (n == 0) fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": pwrite returned 0");
+    if (n == 0) fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": write returned 0");
     p += n;
-    offset += static_cast<size_t>(n);
     size -= static_cast<size_t>(n);
+    if (offset >= 0) offset += n;
   }
 }
 

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include <sys/types.h>  // off_t
+
 #include <nlohmann/json.hpp>
 
 namespace act::detail {
@@ -40,6 +42,8 @@ class AtomicFileWriter {
   std::string readable_path() const;
 
  private:
+  // All `size` bytes at `offset`, or at the file position when offset < 0.
+  void write_all(const void* data, size_t size, off_t offset);
   void name_unnamed_file();
   std::string describe_target() const;
 

@@ -552,6 +552,12 @@ TEST(ActbWrite, ReferencedTensorsAreWrittenAsCopiedOnesAre) {
   const ActbWriter referring = build(true, a, b);
   referring.write(dir + "/referenced.actb");
   EXPECT_EQ(test::read_file(dir + "/copied.actb"), test::read_file(dir + "/referenced.actb"));
+  // A copy of a writer holds copies of its own: it writes the same blob once the original is gone.
+  std::optional<ActbWriter> original(build(false, a, b));
+  const ActbWriter duplicate = *original;
+  original.reset();
+  duplicate.write(dir + "/duplicate.actb");
+  EXPECT_EQ(test::read_file(dir + "/duplicate.actb"), test::read_file(dir + "/copied.actb"));
 
   // A reference is read at each write; a copy keeps the values of its call.
   std::vector<float> changing = a;

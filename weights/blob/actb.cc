@@ -162,11 +162,9 @@ void ActbWriter::add(const std::string& name, DType dtype, std::vector<int64_t> 
   const std::string quant_error = check_quant(quant, shape);
   if (!quant_error.empty()) fail(ErrorCode::kInvalidArgument, where + quant_error);
 
-  Pending p{name, dtype, std::move(shape), {}, static_cast<const uint8_t*>(data), nbytes, std::move(quant)};
-  if (copy && nbytes != 0) {
-    p.copy.assign(p.data, p.data + nbytes);
-    p.data = p.copy.data();  // stays valid when tensors_ grows: moving a vector keeps its buffer
-  }
+  const auto* bytes = static_cast<const uint8_t*>(data);
+  Pending p{name, dtype, std::move(shape), {}, copy ? nullptr : bytes, nbytes, std::move(quant)};
+  if (copy && nbytes != 0) p.copy.assign(bytes, bytes + nbytes);
   index_.emplace(name, tensors_.size());
   tensors_.push_back(std::move(p));
 }
@@ -231,7 +229,7 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out, Checksum checksum) cons
     crc = crc_zeros(crc, data_offset - kFixedHeaderSize - text.size());
     for (size_t i = 0; i < tensors_.size(); ++i) {
       const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
-      crc = crc_update(crc, tensors_[i].data, tensors_[i].nbytes);
+      crc = crc_update(crc, tensors_[i].data(), tensors_[i].nbytes);
       crc = crc_zeros(crc, end - offsets[i] - tensors_[i].nbytes);
     }
   }
@@ -249,7 +247,7 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out, Checksum checksum) cons
   out.write_zeros(data_offset - kFixedHeaderSize - text.size());
   for (size_t i = 0; i < tensors_.size(); ++i) {
     const uint64_t end = i + 1 < tensors_.size() ? offsets[i + 1] : data_size;
-    out.write(tensors_[i].data, tensors_[i].nbytes);
+    out.write(tensors_[i].data(), tensors_[i].nbytes);
     out.write_zeros(end - offsets[i] - tensors_[i].nbytes);
   }
 }

@@ -85,10 +85,11 @@ class ActbWriter {
     std::string name;
     DType dtype;
     std::vector<int64_t> shape;
-    std::vector<uint8_t> copy;  // the bytes when the writer holds them; empty for a reference
-    const uint8_t* data;        // copy.data(), or the referenced bytes
+    std::vector<uint8_t> copy;    // the bytes when the writer holds them
+    const uint8_t* referenced;    // else the caller's (add_f32_ref)
     size_t nbytes;
     QuantParams quant;
+    const uint8_t* data() const { return referenced != nullptr ? referenced : copy.data(); }
   };
   void add(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data, size_t nbytes,
            QuantParams quant, bool copy);
@@ -99,7 +100,8 @@ class ActbWriter {
 };
 
 /// Computes the checksum of the blob written so far into `file` (by write_to(file, Checksum::kLater))
-/// and writes it into the fixed header. Throws act::Error(kIoError) naming the file.
+/// and writes it into the fixed header. Throws act::Error naming the file: kInvalidArgument when no
+/// blob was written, kIoError when the file cannot be read back or written.
 void seal_actb_checksum(detail::AtomicFileWriter& file);
 
 class ActbFile {

@@ -111,6 +111,16 @@ TEST(ActConvertDeployment, OverridesApplyToEveryInputKind) {
       EXPECT_FALSE(fs::exists(dir + "/m.actb"));
     }
   }
+  // Refused from config.json alone, before the weights are read: a folder without them still gets
+  // the override's error, not the missing weights'.
+  const std::string no_weights = dir + "/no-weights";
+  fs::create_directories(no_weights);
+  fs::copy_file(fixture + "/config.json", no_weights + "/config.json");
+  const CommandResult early = run_command(std::string(ACT_CONVERT_BIN) + " " + q(no_weights) + " --n-action-steps 11 -o " +
+                                          q(dir + "/m.actb"));
+  EXPECT_EQ(early.exit_code, 1) << early.output;
+  EXPECT_NE(early.output.find("n_action_steps 11 must be in [1, chunk_size 10]"), std::string::npos) << early.output;
+  EXPECT_FALSE(fs::exists(dir + "/m.actb"));
 }
 
 }  // namespace

@@ -180,7 +180,16 @@ std::shared_ptr<const PackedF32Weights> ActNetwork::packed_weight(const std::str
   if (packed == nullptr) {
     const int n = static_cast<int>(shape[0]);
     const int k = static_cast<int>(shape_elements(shape) / static_cast<uint64_t>(n));
-    packed = std::make_shared<const PackedF32Weights>(kernels_.gemm_f32, n, k, weight(name, shape));
+    const float* w = weight(name, shape);  // checks the blob's tensor either way
+    if (packed_weights_from_ != nullptr) {
+      const auto& theirs = packed_weights_from_->packed_weights_;
+      const auto it = theirs.find(name);
+      if (it != theirs.end() && it->second->rows() == n && it->second->cols() == k &&
+          it->second->panel_width() == kernels_.gemm_f32.nr) {
+        packed = it->second;
+      }
+    }
+    if (packed == nullptr) packed = std::make_shared<const PackedF32Weights>(kernels_.gemm_f32, n, k, w);
     tensors_.release(name);  // the panels are the only copy from here on
   }
   return packed;
@@ -491,8 +500,8 @@ ValueId ActNetwork::external_features(size_t camera) {
 }
 
 ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels,
-                       bool external_backbone)
-    : config_(config), tensors_(tensors), kernels_(kernels) {
+                       bool external_backbone, const ActNetwork* packed_weights_from)
+    : config_(config), tensors_(tensors), kernels_(kernels), packed_weights_from_(packed_weights_from) {
   // blob_model_config checked that an int8 blob has its quantization section.
   if (config_.precision == Precision::kInt8) quant_ = QuantConfig::from_json(tensors_.blob().config().at("quantization"));
   const int D = config_.dim_model, N = config_.n_tokens(), T = config_.chunk_size;
@@ -564,6 +573,7 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
            "\", which is no value of the network");
     }
   }
+  packed_weights_from_ = nullptr;  // it need not outlive the build
 }
 
 }  // namespace act::graph

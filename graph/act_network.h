@@ -68,8 +68,14 @@ class ActNetwork {
   /// With `external_backbone` the cameras' backbones are not built: each camera's input is its
   /// backbone output, [feature_height * feature_width, dim_model] (camera_input), and the blob's
   /// backbone and image projection weights are left unused.
+  /// With `packed_weights_from` (a network that need only live while this one is built), the float
+  /// weights it packed under a name are shared, not packed again, where this blob's tensor of that
+  /// name has their shape and this network's gemm_f32 reads their panels. The caller vouches that
+  /// both blobs hold the same values under that name: the INT8 converter's trial engines, whose
+  /// scratch blobs are all written from one imported model as its FP32 engine's blob is (a mixed
+  /// search opens one per layer, each of which packed every float layer again).
   ActNetwork(const ModelConfig& config, BlobTensors& tensors, const kernels::KernelConfig& kernels,
-             bool external_backbone = false);
+             bool external_backbone = false, const ActNetwork* packed_weights_from = nullptr);
 
   void plan(int threads, bool keep_all_values) { graph_.plan(threads, keep_all_values); }
   void run(ThreadPool& pool, RunProfile* profile = nullptr) { graph_.run(pool, kernels_, profile); }
@@ -95,6 +101,8 @@ class ActNetwork {
   const std::vector<CalibrationPoint>& calibration_points() const { return calibration_points_; }
   /// The conv and linear layers (and the int8 max pool), in graph order.
   const std::vector<NetworkLayer>& layers() const { return layers_; }
+  /// The float weights this network packed or shared, by blob tensor name.
+  const std::map<std::string, std::shared_ptr<const PackedF32Weights>>& packed_weights() const { return packed_weights_; }
 
  private:
   /// A backbone value as the builder tracks it: float, or int8 with static or run-time parameters.
@@ -108,7 +116,7 @@ class ActNetwork {
   /// The tensor, checked against the shape, when it is int8 (per-channel scales along axis 0); else null.
   const ActbTensor* int8_weight(const std::string& name, const std::vector<int64_t>& shape);
   /// The float tensor `name` (of `shape`, [n, ...]) packed as an [n x rest] GEMM operand, once per
-  /// network; its pages in the blob are released then.
+  /// network (or shared from packed_weights_from); its pages in the blob are released then.
   std::shared_ptr<const PackedF32Weights> packed_weight(const std::string& name, const std::vector<int64_t>& shape);
   /// A per-token bias table: from the blob, or rebuilt from its bias vector (blob_names.h).
   const float* bias_table(const std::string& table, int rows, int width, const std::string& weight_name, int pos_cols);
@@ -164,6 +172,7 @@ class ActNetwork {
   std::map<ValueId, RowCodes> row_codes_;                 // row codes already asked for, by value
   std::vector<AlignedBuffer> owned_tables_;  // the bias tables the ops read
   std::map<std::string, std::shared_ptr<const PackedF32Weights>> packed_weights_;  // by blob tensor name
+  const ActNetwork* packed_weights_from_ = nullptr;  // while the constructor runs
   Graph graph_;
   ValueId encoder_tokens_ = kNoValue;  // the encoder's input [N, D]: latent, state rows, image features
   std::vector<ValueId> camera_inputs_;

@@ -46,6 +46,8 @@ class PackedF32Weights {
                     float* y, size_t ldy) const;
   int rows() const { return n_; }
   int cols() const { return k_; }
+  /// The columns of one panel (the gemm_f32 variant's nr).
+  int panel_width() const { return nr_; }
 
  private:
   int nr_, n_, k_;

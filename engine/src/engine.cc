@@ -97,7 +97,7 @@ ModelInfo model_info_of(const ModelConfig& config) {
   return info;
 }
 
-Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
+Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, const Impl* packed_weights_from)
     : blob_(ActbFile::open(blob_path, options.verify_checksum,
                            options.share_blob_pages ? FileMapping::Mode::kMap : FileMapping::Mode::kPrivateCopy)),
       blob_tensors_(blob_),
@@ -107,7 +107,8 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options)
       profile_(options.profile),
       keep_intermediates_(options.keep_intermediates),
       external_backbone_(options.external_backbone) {
-  network_ = std::make_unique<graph::ActNetwork>(config_, blob_tensors_, kernels_, external_backbone_);
+  network_ = std::make_unique<graph::ActNetwork>(config_, blob_tensors_, kernels_, external_backbone_,
+                                                 packed_weights_from ? packed_weights_from->network_.get() : nullptr);
 
   for (const auto& cam : config_.cameras) camera_norm_.push_back(input_norm(cam.key, 3));
   if (config_.state_dim > 0) state_norm_ = input_norm(config_.state_key, static_cast<size_t>(config_.state_dim));

@@ -26,12 +26,15 @@ class Engine::Impl {
  public:
   /// Opens the blob and plans the network (EngineOptions::keep_intermediates gives every graph value
   /// its own memory, so it can be read after a run). Throws act::Error.
-  Impl(const std::string& blob_path, const EngineOptions& options);
+  /// `packed_weights_from`: another Engine's float weights to share (graph::ActNetwork's
+  /// packed_weights_from, whose contract the caller keeps).
+  Impl(const std::string& blob_path, const EngineOptions& options, const Impl* packed_weights_from = nullptr);
 
   const ModelInfo& info() const { return info_; }
   const ModelConfig& config() const { return config_; }
   int threads() const { return pool_.threads(); }
   graph::ActNetwork& network() { return *network_; }
+  const graph::ActNetwork& network() const { return *network_; }
 
   /// Validates and normalises the observation into the network's inputs, runs it, and copies the
   /// normalised chunk out. Throws act::Error(kInvalidArgument) on a bad observation.

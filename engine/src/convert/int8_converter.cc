@@ -137,7 +137,8 @@ class Converter {
   // An Engine over one of this conversion's own scratch blobs: an unnamed file that it has just
   // written and that nothing else can open, so its pages are shared rather than copied and its
   // checksum is not read back (a mixed search opens dozens of them: copying and checking act-tiny's
-  // 45 MB each time made its search take 20 s instead of 12).
+  // 45 MB each time made its search take 20 s instead of 12). The int8 ones share the FP32 engine's
+  // packed float weights: every blob here is written from model_, a float tensor under its own name.
   EngineOptions scratch_engine_options(bool keep_intermediates) const {
     EngineOptions eo;
     eo.threads = opt_.threads;
@@ -253,7 +254,7 @@ class Converter {
   }
 
   ActionError evaluate(const std::string& blob_path) {
-    Engine::Impl int8(blob_path, scratch_engine_options(false));
+    Engine::Impl int8(blob_path, scratch_engine_options(false), fp32_.get());
     const size_t T = static_cast<size_t>(fp32_->config().chunk_size), A = static_cast<size_t>(fp32_->config().action_dim);
     ActionError e;
     e.per_dim_mse.assign(A, 0.0);
@@ -476,7 +477,7 @@ class Converter {
   // value of the same name (both networks are built from one config, so a layer's output has one
   // name in both), over (up to 4) held-out frames.
   std::vector<LayerSqnr> layer_sqnr(const std::string& blob, const std::vector<std::string>& float_layers) {
-    Engine::Impl int8(blob, scratch_engine_options(true));
+    Engine::Impl int8(blob, scratch_engine_options(true), fp32_.get());
     graph::Graph& gq = int8.network().graph();
     graph::Graph& gf = fp32_->network().graph();
     struct Acc {

@@ -1,0 +1,94 @@
+// The INT8 converter's trial engines share its FP32 engine's packed float weights (Engine::Impl's
+// packed_weights_from, graph::ActNetwork): the same actions, bit for bit, as packing them again,
+// and nothing shared where the panels are another gemm_f32 variant's.
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "actengine/convert.h"
+#include "engine/src/engine_impl.h"
+#include "support/act_test_util.h"
+#include "support/test_paths.h"
+
+namespace act {
+namespace {
+
+class SharedPackedWeights : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string fixture = test::fixture_dir("act-tiny");
+    ACT_REQUIRE_PATH(fixture);
+    const std::string scratch = test::scratch_dir();
+    fp32_blob_ = test::convert_checkpoint(fixture, scratch);
+    // Dynamic INT8 (no calibration) with the first backbone conv kept in float beside the layers
+    // that always are (the state projection, the action head).
+    fp32_ = std::make_unique<Engine::Impl>(fp32_blob_, options_);
+    for (const auto& [name, packed] : fp32_->network().packed_weights()) {
+      if (kept_float_.empty() && name.find("conv1.weight") != std::string::npos) kept_float_ = name;
+    }
+    ASSERT_FALSE(kept_float_.empty()) << "act-tiny has no float conv1 weights";
+    auto model = import_checkpoint(fixture);
+    ASSERT_TRUE(model.ok()) << model.status().to_string();
+    Int8Options o;
+    o.mode = Int8Mode::kDynamic;
+    o.holdout = 1;
+    o.keep_float = {kept_float_};
+    int8_blob_ = scratch + "/dynamic.actb";
+    const auto report = (*model)->write_int8(int8_blob_, CalibrationSet{}, o);
+    ASSERT_TRUE(report.ok()) << report.status().to_string();
+
+    const CameraInfo& cam = fp32_->info().cameras[0];
+    image_.resize(static_cast<size_t>(cam.height) * cam.width * 3);
+    for (size_t i = 0; i < image_.size(); ++i) image_[i] = static_cast<uint8_t>((i * 37) % 251);
+    state_.assign(static_cast<size_t>(fp32_->info().state_dim), 0.25f);
+  }
+
+  std::vector<float> actions(Engine::Impl& engine) {
+    const CameraInfo& cam = engine.info().cameras[0];
+    Observation obs;
+    obs.images = {ImageView::rgb_u8(image_.data(), cam.height, cam.width)};
+    obs.state = state_;
+    std::vector<float> out(engine.info().chunk_values());
+    engine.run(obs, out);
+    return out;
+  }
+
+  EngineOptions options_{.threads = 2};
+  std::string fp32_blob_, int8_blob_, kept_float_;
+  std::unique_ptr<Engine::Impl> fp32_;
+  std::vector<uint8_t> image_;
+  std::vector<float> state_;
+};
+
+TEST_F(SharedPackedWeights, Int8EngineTakesTheFp32EnginesPanelsAndRunsAsIfItPackedThem) {
+  Engine::Impl shared(int8_blob_, options_, fp32_.get());
+  Engine::Impl own(int8_blob_, options_);
+  const auto& theirs = fp32_->network().packed_weights();
+  const auto& packed = shared.network().packed_weights();
+  ASSERT_TRUE(packed.count(kept_float_)) << kept_float_ << " was not packed as a float layer";
+  EXPECT_GT(theirs.size(), packed.size()) << "the int8 engine should pack fewer float layers than the FP32 one";
+  for (const auto& [name, panels] : packed) {
+    ASSERT_TRUE(theirs.count(name)) << name;
+    EXPECT_EQ(panels.get(), theirs.at(name).get()) << name << " was packed again";
+    EXPECT_NE(own.network().packed_weights().at(name).get(), panels.get()) << name;
+  }
+  EXPECT_EQ(actions(shared), actions(own));
+}
+
+TEST_F(SharedPackedWeights, PanelsOfAnotherGemmVariantAreNotShared) {
+  // The reference gemm_f32's panels are 8 columns wide; every SIMD variant's are wider.
+  EngineOptions ref = options_;
+  ref.isa = "ref";
+  Engine::Impl ref_fp32(fp32_blob_, ref);
+  Engine::Impl engine(int8_blob_, options_, &ref_fp32);
+  Engine::Impl own(int8_blob_, options_);
+  if (engine.info().isa == "ref") GTEST_SKIP() << "this CPU runs only the reference kernels";
+  for (const auto& [name, panels] : engine.network().packed_weights()) {
+    EXPECT_NE(panels.get(), ref_fp32.network().packed_weights().at(name).get()) << name;
+  }
+  EXPECT_EQ(actions(engine), actions(own));
+}
+
+}  // namespace
+}  // namespace act

@@ -6,37 +6,36 @@
 #include <string>
 #include <vector>
 
-#include "actengine/convert.h"
 #include "engine/src/engine_impl.h"
-#include "support/act_test_util.h"
 #include "support/test_paths.h"
+#include "weights/import/lerobot_import.h"
+#include "weights/quantize/quantize_model.h"
 
 namespace act {
 namespace {
 
 class SharedPackedWeights : public ::testing::Test {
  protected:
+  // An FP32 blob and a dynamic INT8 one written from one imported model, as the converter writes
+  // its scratch blobs, the INT8 one with its first quantizable conv1 kept in float beside the
+  // layers that always are (the state projection, the action head).
   void SetUp() override {
     const std::string fixture = test::fixture_dir("act-tiny");
     ACT_REQUIRE_PATH(fixture);
     const std::string scratch = test::scratch_dir();
-    fp32_blob_ = test::convert_checkpoint(fixture, scratch);
-    // Dynamic INT8 (no calibration) with the first backbone conv kept in float beside the layers
-    // that always are (the state projection, the action head).
-    fp32_ = std::make_unique<Engine::Impl>(fp32_blob_, options_);
-    for (const auto& [name, packed] : fp32_->network().packed_weights()) {
-      if (kept_float_.empty() && name.find("conv1.weight") != std::string::npos) kept_float_ = name;
+    const ImportedModel model = import_lerobot_checkpoint(fixture);
+    for (const std::string& layer : quantizable_layers(model)) {
+      if (kept_float_.empty() && layer.find("conv1.weight") != std::string::npos) kept_float_ = layer;
     }
-    ASSERT_FALSE(kept_float_.empty()) << "act-tiny has no float conv1 weights";
-    auto model = import_checkpoint(fixture);
-    ASSERT_TRUE(model.ok()) << model.status().to_string();
-    Int8Options o;
-    o.mode = Int8Mode::kDynamic;
-    o.holdout = 1;
-    o.keep_float = {kept_float_};
+    ASSERT_FALSE(kept_float_.empty()) << "act-tiny has no conv1 to keep in float";
+    fp32_blob_ = scratch + "/fp32.actb";
     int8_blob_ = scratch + "/dynamic.actb";
-    const auto report = (*model)->write_int8(int8_blob_, CalibrationSet{}, o);
-    ASSERT_TRUE(report.ok()) << report.status().to_string();
+    write_fp32_blob(model, fp32_blob_);
+    QuantConfig quant;
+    quant.mode = QuantMode::kDynamic;
+    quant.float_layers = {kept_float_};
+    write_int8_blob(model, quant, int8_blob_);
+    fp32_ = std::make_unique<Engine::Impl>(fp32_blob_, options_);
 
     const CameraInfo& cam = fp32_->info().cameras[0];
     image_.resize(static_cast<size_t>(cam.height) * cam.width * 3);

@@ -34,7 +34,6 @@ class Engine::Impl {
   const ModelConfig& config() const { return config_; }
   int threads() const { return pool_.threads(); }
   graph::ActNetwork& network() { return *network_; }
-  const graph::ActNetwork& network() const { return *network_; }
 
   /// Validates and normalises the observation into the network's inputs, runs it, and copies the
   /// normalised chunk out. Throws act::Error(kInvalidArgument) on a bad observation.

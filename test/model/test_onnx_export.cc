@@ -51,8 +51,8 @@ std::string checkpoint_dir(const Model& m) {
   return m.fixture ? test::fixture_dir(m.name) : test::generated_checkpoint_dir(m.name);
 }
 
-void write_floats(const std::string& path, const float* data, size_t n) {
-  std::ofstream out(path, std::ios::binary);
+void write_floats(const std::string& path, const float* data, size_t n, bool append = false) {
+  std::ofstream out(path, append ? std::ios::binary | std::ios::app : std::ios::binary);
   out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(n * sizeof(float)));
   ASSERT_TRUE(out.good()) << path;
 }
@@ -71,9 +71,12 @@ struct OrtInput {
   std::vector<int64_t> shape;
 };
 
-// Runs the model in ONNX Runtime; its outputs land in `out_dir` as <name>.bin.
-::testing::AssertionResult run_ort(const std::string& model, const std::string& out_dir, const std::vector<OrtInput>& inputs) {
-  std::string cmd = "node " + test::q(ACT_ONNX_RUNNER) + " " + test::q(model) + " " + test::q(out_dir);
+// Runs the model in ONNX Runtime on `samples` inputs (each input file holds that many, one after
+// another); its outputs land in `out_dir` as <name>.bin, the samples' one after another.
+::testing::AssertionResult run_ort(const std::string& model, const std::string& out_dir, const std::vector<OrtInput>& inputs,
+                                   size_t samples = 1) {
+  std::string cmd = "node " + test::q(ACT_ONNX_RUNNER) + " " + test::q(model) + " " + test::q(out_dir) + " --samples " +
+                    std::to_string(samples);
   for (const auto& in : inputs) {
     std::string dims;
     for (int64_t d : in.shape) {
@@ -108,22 +111,24 @@ class OnnxExportTest : public ::testing::TestWithParam<Model> {
     ASSERT_TRUE(engine_->infer(observation_, expected_).ok());
   }
 
-  // The observation's images (NCHW float, [0, 1]) and states as ONNX Runtime inputs.
-  std::vector<OrtInput> inputs(bool states) {
+  // The observation's images (NCHW float, [0, 1]) and states as ONNX Runtime inputs; with `append`,
+  // after those already in the files (run_ort's samples).
+  std::vector<OrtInput> inputs(bool states, bool append = false) {
     const ModelInfo& info = engine_->model_info();
     std::vector<OrtInput> list;
     for (size_t c = 0; c < info.cameras.size(); ++c) {
       const CameraInfo& cam = info.cameras[c];
       const std::string file = scratch_ + "/image" + std::to_string(c) + ".bin";
-      write_floats(file, static_cast<const float*>(observation_.images[c].data), 3 * static_cast<size_t>(cam.height) * cam.width);
+      write_floats(file, static_cast<const float*>(observation_.images[c].data), 3 * static_cast<size_t>(cam.height) * cam.width,
+                   append);
       list.push_back({cam.key, file, {1, 3, cam.height, cam.width}});
     }
     if (states && info.state_dim > 0) {
-      write_floats(scratch_ + "/state.bin", observation_.state.data(), observation_.state.size());
+      write_floats(scratch_ + "/state.bin", observation_.state.data(), observation_.state.size(), append);
       list.push_back({"observation.state", scratch_ + "/state.bin", {1, info.state_dim}});
     }
     if (states && info.env_state_dim > 0) {
-      write_floats(scratch_ + "/env.bin", observation_.env_state.data(), observation_.env_state.size());
+      write_floats(scratch_ + "/env.bin", observation_.env_state.data(), observation_.env_state.size(), append);
       list.push_back({info.env_state_key, scratch_ + "/env.bin", {1, info.env_state_dim}});
     }
     return list;
@@ -266,26 +271,44 @@ TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
   auto split = Engine::open(int8_blob, {.threads = 2, .external_backbone = true});
   ASSERT_TRUE(split.ok()) << split.status().to_string();
   const ModelInfo& info = engine_->model_info();
+  // Every sample through each ONNX model in one ONNX Runtime process (a process and a model load
+  // per sample took most of this test's time).
+  const size_t samples = batch_->size();
+  std::vector<OrtInput> all_inputs, image_inputs;
+  for (size_t i = 0; i < samples; ++i) {
+    observation_ = batch_->at(i);
+    all_inputs = inputs(true, i > 0);
+  }
+  for (const OrtInput& in : all_inputs) {
+    if (in.shape.size() == 4) image_inputs.push_back(in);
+  }
+  const std::string out = scratch_ + "/ort_qdq";
+  ASSERT_TRUE(run_ort(onnx, out, all_inputs, samples));
+  const std::vector<float> all_actions = read_floats(out + "/action.bin");
+  ASSERT_EQ(all_actions.size(), samples * info.chunk_values());
+  ASSERT_TRUE(run_ort(backbone, out, image_inputs, samples));
+  std::vector<std::vector<float>> all_features;
+  for (const CameraInfo& cam : info.cameras) {
+    all_features.push_back(read_floats(out + "/" + cam.key + ".features.bin"));
+    ASSERT_EQ(all_features.back().size(), samples * info.dim_model * cam.feature_height * cam.feature_width);
+  }
   double ours = 0, ort = 0, split_error = 0;
-  for (size_t i = 0; i < batch_->size(); ++i) {
+  for (size_t i = 0; i < samples; ++i) {
     observation_ = batch_->at(i);
     std::vector<float> fp32(info.chunk_values()), int8(info.chunk_values());
     ASSERT_TRUE(engine_->infer(observation_, fp32).ok());
     ASSERT_TRUE((*int8_engine)->infer(observation_, int8).ok());
-    const std::string out = scratch_ + "/ort_qdq" + std::to_string(i);
-    ASSERT_TRUE(run_ort(onnx, out, inputs(true)));
-    const std::vector<float> got = read_floats(out + "/action.bin");
-    ASSERT_EQ(got.size(), fp32.size());
+    const auto sample_actions = all_actions.begin() + static_cast<std::ptrdiff_t>(i * fp32.size());
+    const std::vector<float> got(sample_actions, sample_actions + static_cast<std::ptrdiff_t>(fp32.size()));
     ours += mse(normalized(info, int8), normalized(info, fp32));
     ort += mse(normalized(info, got), normalized(info, fp32));
 
-    ASSERT_TRUE(run_ort(backbone, out, inputs(false)));
-    std::vector<std::vector<float>> features;
     Observation obs = observation_;
     for (size_t c = 0; c < info.cameras.size(); ++c) {
       const CameraInfo& cam = info.cameras[c];
-      features.push_back(read_floats(out + "/" + cam.key + ".features.bin"));
-      obs.images[c] = ImageView::backbone_features(features.back().data(), cam.feature_height, cam.feature_width);
+      const size_t per_sample = all_features[c].size() / samples;
+      obs.images[c] = ImageView::backbone_features(all_features[c].data() + i * per_sample, cam.feature_height,
+                                                   cam.feature_width);
     }
     std::vector<float> split_actions(info.chunk_values());
     ASSERT_TRUE((*split)->infer(obs, split_actions).ok());

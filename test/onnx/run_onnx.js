@@ -1,17 +1,20 @@
 #!/usr/bin/env node
 // Runs an ONNX model in ONNX Runtime (npm's onnxruntime-node, CPU) for actengine's export tests and
 // the README's comparison:
-//   node run_onnx.js MODEL.onnx OUT_DIR [--threads N] [--repeat N] NAME=FILE.bin:D0xD1x... ...
+//   node run_onnx.js MODEL.onnx OUT_DIR [--threads N] [--repeat N] [--samples N] NAME=FILE.bin:D0xD1x... ...
 // Each input is raw little-endian float32 with its shape; each output is written to
 // OUT_DIR/<output name>.bin (raw float32). Prints one JSON line: the outputs' shapes and, over
 // --repeat runs after one warm-up, the median and minimum run time in milliseconds.
+// --samples N: each input file holds N inputs of its shape one after another, the model runs on
+// each, and each output file holds the N outputs in that order (one process and one model load for
+// a batch of observations: the load is most of a run's time).
 'use strict';
 const fs = require('fs');
 const path = require('path');
 const ort = require('onnxruntime-node');
 
 function usage(message) {
-  process.stderr.write(`run_onnx.js: ${message}\nusage: node run_onnx.js MODEL.onnx OUT_DIR [--threads N] [--repeat N] NAME=FILE.bin:D0xD1x...\n`);
+  process.stderr.write(`run_onnx.js: ${message}\nusage: node run_onnx.js MODEL.onnx OUT_DIR [--threads N] [--repeat N] [--samples N] NAME=FILE.bin:D0xD1x...\n`);
   process.exit(2);
 }
 
@@ -21,39 +24,52 @@ async function main() {
   const [model, outDir] = args;
   let threads = 1;
   let repeat = 0;
-  const feeds = {};
+  let samples = 1;
+  const inputs = {};
   for (let i = 2; i < args.length; ++i) {
-    if (args[i] === '--threads' || args[i] === '--repeat') {
+    if (args[i] === '--threads' || args[i] === '--repeat' || args[i] === '--samples') {
       const n = Number(args[++i]);
       if (!Number.isInteger(n) || n < 0) usage(`${args[i - 1]} needs a whole number`);
-      if (args[i - 1] === '--threads') threads = n; else repeat = n;
+      if (args[i - 1] === '--threads') threads = n; else if (args[i - 1] === '--repeat') repeat = n; else samples = n;
       continue;
     }
     const m = /^(.+)=(.+):([0-9x]+)$/.exec(args[i]);
     if (!m) usage(`bad input "${args[i]}"`);
     const shape = m[3].split('x').map(Number);
-    const bytes = fs.readFileSync(m[2]);
-    const count = shape.reduce((a, b) => a * b, 1);
-    if (bytes.length !== count * 4) usage(`${m[2]} holds ${bytes.length} bytes, shape ${m[3]} needs ${count * 4}`);
-    const data = new Float32Array(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.length));
-    feeds[m[1]] = new ort.Tensor('float32', data, shape);
+    inputs[m[1]] = { file: m[2], dims: m[3], shape };
+  }
+  if (samples < 1) usage('--samples needs at least 1');
+  // The feeds of each sample: its slice of every input file.
+  const feeds = Array.from({ length: samples }, () => ({}));
+  for (const [name, input] of Object.entries(inputs)) {
+    const bytes = fs.readFileSync(input.file);
+    const count = input.shape.reduce((a, b) => a * b, 1);
+    if (bytes.length !== samples * count * 4) {
+      usage(`${input.file} holds ${bytes.length} bytes, ${samples} of shape ${input.dims} need ${samples * count * 4}`);
+    }
+    const all = new Float32Array(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.length));
+    for (let s = 0; s < samples; ++s) {
+      feeds[s][name] = new ort.Tensor('float32', all.slice(s * count, (s + 1) * count), input.shape);
+    }
   }
   const session = await ort.InferenceSession.create(model, {
     intraOpNumThreads: threads, interOpNumThreads: 1, executionMode: 'sequential', graphOptimizationLevel: 'all',
   });
-  let results = await session.run(feeds);
+  const results = [];
+  for (const sampleFeeds of feeds) results.push(await session.run(sampleFeeds));
   const times = [];
   for (let r = 0; r < repeat; ++r) {
     const start = process.hrtime.bigint();
-    results = await session.run(feeds);
+    await session.run(feeds[0]);
     times.push(Number(process.hrtime.bigint() - start) / 1e6);
   }
   fs.mkdirSync(outDir, { recursive: true });
   const outputs = {};
   for (const name of session.outputNames) {
-    const t = results[name];
-    fs.writeFileSync(path.join(outDir, `${name}.bin`), Buffer.from(t.data.buffer, t.data.byteOffset, t.data.byteLength));
-    outputs[name] = t.dims;
+    const file = path.join(outDir, `${name}.bin`);
+    fs.writeFileSync(file, Buffer.alloc(0));
+    for (const r of results) fs.appendFileSync(file, Buffer.from(r[name].data.buffer, r[name].data.byteOffset, r[name].data.byteLength));
+    outputs[name] = results[0][name].dims;
   }
   times.sort((a, b) => a - b);
   const report = { outputs, threads, runs: repeat };

@@ -288,9 +288,11 @@ TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
   ASSERT_EQ(all_actions.size(), samples * info.chunk_values());
   ASSERT_TRUE(run_ort(backbone, out, image_inputs, samples));
   std::vector<std::vector<float>> all_features;
+  std::vector<size_t> features_per_sample;
   for (const CameraInfo& cam : info.cameras) {
     all_features.push_back(read_floats(out + "/" + cam.key + ".features.bin"));
-    ASSERT_EQ(all_features.back().size(), samples * info.dim_model * cam.feature_height * cam.feature_width);
+    features_per_sample.push_back(static_cast<size_t>(info.dim_model) * cam.feature_height * cam.feature_width);
+    ASSERT_EQ(all_features.back().size(), samples * features_per_sample.back());
   }
   double ours = 0, ort = 0, split_error = 0;
   for (size_t i = 0; i < samples; ++i) {
@@ -306,8 +308,7 @@ TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
     Observation obs = observation_;
     for (size_t c = 0; c < info.cameras.size(); ++c) {
       const CameraInfo& cam = info.cameras[c];
-      const size_t per_sample = all_features[c].size() / samples;
-      obs.images[c] = ImageView::backbone_features(all_features[c].data() + i * per_sample, cam.feature_height,
+      obs.images[c] = ImageView::backbone_features(all_features[c].data() + i * features_per_sample[c], cam.feature_height,
                                                    cam.feature_width);
     }
     std::vector<float> split_actions(info.chunk_values());

@@ -66,9 +66,8 @@ async function main() {
   fs.mkdirSync(outDir, { recursive: true });
   const outputs = {};
   for (const name of session.outputNames) {
-    const file = path.join(outDir, `${name}.bin`);
-    fs.writeFileSync(file, Buffer.alloc(0));
-    for (const r of results) fs.appendFileSync(file, Buffer.from(r[name].data.buffer, r[name].data.byteOffset, r[name].data.byteLength));
+    const samplesOut = results.map((r) => Buffer.from(r[name].data.buffer, r[name].data.byteOffset, r[name].data.byteLength));
+    fs.writeFileSync(path.join(outDir, `${name}.bin`), Buffer.concat(samplesOut));
     outputs[name] = results[0][name].dims;
   }
   times.sort((a, b) => a - b);

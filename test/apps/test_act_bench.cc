@@ -86,6 +86,26 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
                             j["peak"]["gmac_per_s_per_core"].get<double>();
     EXPECT_NEAR(j["peak"]["percent_of_peak_p50"].get<double>(), want_p50, 1e-6 * want_p50);
     EXPECT_EQ(j["peak"]["kind"], "fp32");
+    // Per stage the same at its median run, over the MACs it runs: the camera projections with the
+    // backbone, the action head with the decoder; the stages' MACs are the model's.
+    const auto& gmac = j["model"]["gmac"];
+    const std::pair<const char*, double> stage_gmac[] = {
+        {"backbone", gmac["backbone"].get<double>() + gmac["projections"].get<double>()},
+        {"encoder", gmac["encoder"].get<double>()},
+        {"decoder", gmac["decoder"].get<double>() + gmac["head"].get<double>()},
+        {"total", expected_gmac}};
+    double stage_sum = 0;
+    for (const auto& [stage, want_gmac] : stage_gmac) {
+      EXPECT_NEAR(lat[stage]["gmac"].get<double>(), want_gmac, 1e-9 * want_gmac) << stage;
+      if (std::string(stage) != "total") stage_sum += lat[stage]["gmac"].get<double>();
+      const double want_pct = 100.0 * want_gmac / (lat[stage]["p50"].get<double>() / 1e3) /
+                              j["peak"]["gmac_per_s_per_core"].get<double>();
+      EXPECT_NEAR(lat[stage]["percent_of_peak_p50"].get<double>(), want_pct, 1e-6 * want_pct) << stage;
+    }
+    EXPECT_NEAR(stage_sum, expected_gmac, 1e-9 * expected_gmac) << "every MAC in one stage";
+    EXPECT_NEAR(lat["total"]["percent_of_peak_p50"].get<double>(), want_p50, 1e-6 * want_p50);
+    for (const char* stage : {"preprocess", "other"}) EXPECT_FALSE(lat[stage].contains("percent_of_peak_p50")) << stage;
+    EXPECT_NE(r.output.find("peak@p50"), std::string::npos) << r.output;
   }
   EXPECT_FALSE(j["machine"]["cpu_model"].get<std::string>().empty());
   EXPECT_GE(j["machine"]["online_cores"].get<int>(), 1);

@@ -12,7 +12,6 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
-#include <map>
 #include <memory>
 #include <optional>
 #include <random>
@@ -161,7 +160,6 @@ std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   return std::move(*engine_or);
 }
 
-// Latency per stage, in the order of the report; the last is the whole inference.
 // The model's MACs each timed stage runs: the cameras' feature projections with the backbone they
 // follow, the action head with the decoder whose last op computes it; preprocess and other none.
 double stage_macs(const std::string& stage, const act::ModelConfig::Macs& macs) {
@@ -172,6 +170,7 @@ double stage_macs(const std::string& stage, const act::ModelConfig::Macs& macs) 
   return 0.0;
 }
 
+// Latency per stage, in the order of the report; the last is the whole inference.
 const std::pair<const char*, double act::InferenceTimings::*> kStages[] = {
     {"preprocess", &act::InferenceTimings::preprocess_ms}, {"backbone", &act::InferenceTimings::backbone_ms},
     {"encoder", &act::InferenceTimings::encoder_ms},       {"decoder", &act::InferenceTimings::decoder_ms},
@@ -385,8 +384,7 @@ class Benchmark {
       const double gmac = stage_macs(name, macs_) / 1e9;
       if (gmac <= 0) continue;
       stage["gmac"] = gmac;
-      if (peak_gmacs > 0 && s.p50 > 0) stage_pct_peak_p50_[name] = 100.0 * gmac / (s.p50 / 1e3) / peak_gmacs;
-      if (stage_pct_peak_p50_.count(name) != 0) stage["percent_of_peak_p50"] = stage_pct_peak_p50_.at(name);
+      if (peak_gmacs > 0 && s.p50 > 0) stage["percent_of_peak_p50"] = 100.0 * gmac / (s.p50 / 1e3) / peak_gmacs;
     }
     rss_ = act::peak_rss_bytes();
     huge_page_bytes_ = act::graph::AlignedBuffer::huge_page_bytes();
@@ -418,9 +416,11 @@ class Benchmark {
     std::printf("%-11s %9s %9s %9s %9s %9s %9s %9s %9s %9s\n", "stage (ms)", "mean", "std", "min", "p50", "p90", "p95", "p99",
                 "max", "peak@p50");
     for (const auto& [name, s] : stages_) {
-      const auto pct = stage_pct_peak_p50_.find(name);
+      const nlohmann::ordered_json& stage = stage_json_.at(name);
       char peak[32] = "";
-      if (pct != stage_pct_peak_p50_.end()) std::snprintf(peak, sizeof peak, "%.1f %%", pct->second);
+      if (stage.contains("percent_of_peak_p50")) {
+        std::snprintf(peak, sizeof peak, "%.1f %%", stage["percent_of_peak_p50"].get<double>());
+      }
       std::printf("%-11s %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f %9s\n", name.c_str(), s.mean, s.stddev, s.min, s.p50,
                   s.p90, s.p95, s.p99, s.max, peak);
     }
@@ -524,7 +524,6 @@ class Benchmark {
   // The measurements and what they add up to.
   TimedRuns timed_;
   std::vector<std::pair<std::string, act::LatencySummary>> stages_;  // kStages order
-  std::map<std::string, double> stage_pct_peak_p50_;                  // the stages that run MACs, with a peak
   nlohmann::ordered_json stage_json_;
   act::ModelConfig::Macs macs_;
   double gmac_ = 0, gmacs_per_s_ = 0;

@@ -756,6 +756,70 @@ TEST_P(OpsPerIsa, AttentionS8MatchesNaiveSoftmaxAttentionWithinQuantizationError
   }
 }
 
+// AttentionS8Op reading the query and key codes that the qkv linear writes (write_head_codes) gives
+// the same bits as quantizing the linear's float q and k itself, on one thread and two: with the
+// codes' columns in the linear's scratch only (the output not kept), and written out too (kept,
+// then the linear's floats are the same bits as well); with the keys' codes alone (the queries'
+// floats must then reach memory).
+TEST_P(OpsPerIsa, AttentionS8OnTheLinearsHeadCodesMatchesItsOwnQuantizationBitForBit) {
+  const kernels::KernelConfig k = config();
+  std::mt19937 rng(12);
+  const int in = 96, dim = 128, heads = 2, hd = dim / heads;
+  ThreadPool one_thread{1};
+  for (ThreadPool* pool : {&one_thread, &pool_}) {
+    for (int rows : {37, 130}) {
+      const std::vector<float> x = uniform(static_cast<size_t>(rows) * in, rng, -2.0f, 2.0f);
+      const std::vector<float> bias = uniform(static_cast<size_t>(3 * dim), rng, -1.0f, 1.0f);
+      const QuantizedWeights qw = quantize_weights(uniform(static_cast<size_t>(3 * dim) * in, rng, -0.3f, 0.3f), 3 * dim, in);
+      struct Run {
+        std::vector<float> attention, qkv;
+      };
+      const auto run = [&](bool query_codes, bool key_codes, bool keep_qkv) {
+        Graph g;
+        const ValueId xv = g.add_input("x", {rows, in});
+        const ValueId qkv = g.add_value("qkv", {rows, 3 * dim}), out = g.add_value("out", {rows, dim});
+        auto linear = std::make_unique<LinearS8Op>(k.gemm_s8, rows, in, 3 * dim, MatrixRef::of(xv, in), row_codes(g, "x", rows, in),
+                                                   LinearS8Op::InputCodes::kQuantizedHere, qw.q.data(), qw.scale.data(),
+                                                   MatrixRef::of_constant(bias.data(), 0), MatrixRef{}, Epilogue::kNone, qkv);
+        AttentionS8Op::ProducerCodes codes;
+        for (const bool keys : {false, true}) {
+          if (!(keys ? key_codes : query_codes)) continue;
+          HeadCodes c;
+          c.codes = g.add_value(keys ? "k_s8" : "q_s8", {rows, dim}, DataType::kS8);
+          c.scale = g.add_value(keys ? "k_scale" : "q_scale", {heads, rows});
+          c.rows = rows;
+          c.heads = heads;
+          c.head_dim = hd;
+          c.col_offset = keys ? dim : 0;
+          c.scale_factor = keys ? 1.0f / std::sqrt(static_cast<float>(hd)) : 1.0f;
+          linear->write_head_codes(c);
+          (keys ? codes.keys : codes.queries) = c;
+        }
+        g.add_op(std::move(linear));
+        g.add_op(std::make_unique<AttentionS8Op>(k.gemm_s8, rows, rows, dim, heads, MatrixRef::of(qkv, 3 * dim, 0),
+                                                 MatrixRef::of(qkv, 3 * dim, dim), MatrixRef::of(qkv, 3 * dim, 2 * dim), out, codes));
+        g.mark_output(out);
+        if (keep_qkv) g.mark_output(qkv);
+        g.plan(pool->threads(), false);
+        std::copy(x.begin(), x.end(), g.data(xv));
+        g.run(*pool, k);
+        Run r{{g.data(out), g.data(out) + static_cast<size_t>(rows) * dim}, {}};
+        if (keep_qkv) r.qkv.assign(g.data(qkv), g.data(qkv) + static_cast<size_t>(rows) * 3 * dim);
+        return r;
+      };
+      const Run own = run(false, false, true);
+      for (const auto& [query_codes, keep_qkv] : {std::pair{true, false}, std::pair{true, true}, std::pair{false, false}}) {
+        const Run coded = run(query_codes, true, keep_qkv);
+        const std::string where = std::string(kernels::isa_name(GetParam())) + " threads " + std::to_string(pool->threads()) +
+                                  " rows " + std::to_string(rows) + (query_codes ? " q+k codes" : " k codes") +
+                                  (keep_qkv ? ", qkv kept" : "");
+        ASSERT_EQ(0, std::memcmp(own.attention.data(), coded.attention.data(), own.attention.size() * sizeof(float))) << where;
+        if (keep_qkv) ASSERT_EQ(0, std::memcmp(own.qkv.data(), coded.qkv.data(), own.qkv.size() * sizeof(float))) << where;
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(CpuIsas, OpsPerIsa, ::testing::ValuesIn(kernels::cpu_isas()),
                          kernels::test::isa_param_name);
 

@@ -1,7 +1,6 @@
 #include "graph/act_network.h"
 
 #include <algorithm>
-#include <cmath>
 #include <numeric>
 
 #include "weights/blob/blob_names.h"
@@ -287,32 +286,11 @@ RowCodes ActNetwork::producer_row_codes(const MatrixRef& x, int rows, int cols) 
   return row_codes_[x.value] = codes;
 }
 
-std::optional<HeadCodes> ActNetwork::producer_head_codes(const std::string& name, const MatrixRef& x, int rows,
-                                                         float scale_factor) {
-  const auto writer = row_codes_writers_.find(x.value);
-  auto* linear = writer == row_codes_writers_.end() ? nullptr : dynamic_cast<LinearS8Op*>(writer->second);
-  if (linear == nullptr || linear->outputs[0] != x.value) return std::nullopt;
-  HeadCodes codes;
-  codes.heads = config_.n_heads;
-  codes.head_dim = config_.dim_model / config_.n_heads;
-  codes.rows = rows;
-  codes.codes = graph_.add_value(name + "_s8", {rows, config_.dim_model}, DataType::kS8);
-  codes.scale = graph_.add_value(name + "_scale", {codes.heads, rows});
-  codes.col_offset = x.col_offset;
-  codes.scale_factor = scale_factor;
-  linear->write_head_codes(codes);
-  return codes;
-}
-
 ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v) {
   const int D = config_.dim_model;
   const ValueId y = graph_.add_value(out_name, {nq, D});
   if (config_.precision == Precision::kInt8 && quant_.int8_attention) {
-    // The scores' 1 / sqrt(d) rides in the keys' scales, as the op folds it into its own.
-    const float inv_sqrt_hd = 1.0f / std::sqrt(static_cast<float>(D / config_.n_heads));
-    const AttentionS8Op::ProducerCodes codes{producer_head_codes(out_name + ".q", q, nq, 1.0f),
-                                             producer_head_codes(out_name + ".k", k, nk, inv_sqrt_hd)};
-    add(std::make_unique<AttentionS8Op>(kernels_.gemm_s8, nq, nk, D, config_.n_heads, q, k, v, y, codes), out_name);
+    add(std::make_unique<AttentionS8Op>(kernels_.gemm_s8, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
   } else {
     add(std::make_unique<AttentionOp>(kernels_.gemm_f32, nq, nk, D, config_.n_heads, q, k, v, y), out_name);
   }

@@ -161,9 +161,6 @@ class ActNetwork {
   /// The row codes of x written by the op that produces it (asked of it on first use), when x is a
   /// whole [rows, cols] value of such an op; else none.
   RowCodes producer_row_codes(const MatrixRef& x, int rows, int cols);
-  /// The per-head codes of x's columns (named `name`_s8, _scale), asked of the int8 linear that
-  /// writes x; none when another kind of op (or none: a constant) writes it.
-  std::optional<HeadCodes> producer_head_codes(const std::string& name, const MatrixRef& x, int rows, float scale_factor);
   ValueId attention(const std::string& out_name, int nq, int nk, MatrixRef q, MatrixRef k, MatrixRef v);
 
   ModelConfig config_;

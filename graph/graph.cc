@@ -89,16 +89,6 @@ void RowCodes::write(const RunContext& ctx, const float* x, size_t ldx, int r0, 
   kernels::quantize_rows_dynamic_f32_s8(quant, rows, cols, x, ldx, y, ldy, ctx.data(scale) + row, ctx.data_s32(zero_point) + row);
 }
 
-void HeadCodes::write(const RunContext& ctx, const float* x, size_t ldx, int r0, int n) const {
-  const size_t ldy = static_cast<size_t>(cols()), hd = static_cast<size_t>(head_dim);
-  int8_t* y = ctx.data_s8(codes) + static_cast<size_t>(r0) * ldy;
-  for (size_t head = 0; head < static_cast<size_t>(heads); ++head) {
-    float* head_scale = ctx.data(scale) + head * static_cast<size_t>(rows) + static_cast<size_t>(r0);
-    ctx.kernels().quant.quantize_rows_symmetric(n, head_dim, x + col_offset + head * hd, ldx, y + head * hd, ldy, head_scale);
-    for (int r = 0; r < n; ++r) head_scale[r] *= scale_factor;
-  }
-}
-
 double Graph::total_macs() const {
   double total = 0;
   for (const auto& op : ops_) total += op->macs();
@@ -134,7 +124,6 @@ void Graph::plan(int threads, bool keep_all_values) {
   }
   for (Value& v : values_) {
     if (v.view_of != kNoValue) v.read = v.read || values_[static_cast<size_t>(v.view_of)].read;
-    v.kept = v.pinned || keep_all_values || (v.view_of != kNoValue && values_[static_cast<size_t>(v.view_of)].pinned);
   }
   const int end = static_cast<int>(ops_.size());
   // Greedy placement, largest values first, each at the lowest offset that does not overlap a value

@@ -44,8 +44,6 @@ struct Value {
   /// False when no op reads it and it is neither pinned nor kept (plan()): its producer may leave it
   /// unwritten (an int8 linear whose consumers read only its row codes).
   bool read = true;
-  /// Pinned, or every value kept (plan()): read after the run, all of it.
-  bool kept = true;
   /// A row view (Graph::add_row_view): no memory of its own, its rows those of view_of from
   /// view_offset floats on.
   ValueId view_of = kNoValue;
@@ -64,7 +62,6 @@ class RunContext {
   int8_t* data_s8(ValueId id) const { return reinterpret_cast<int8_t*>(data(id)); }
   int32_t* data_s32(ValueId id) const { return reinterpret_cast<int32_t*>(data(id)); }
   bool read(ValueId id) const { return values_[static_cast<size_t>(id)].read; }
-  bool kept(ValueId id) const { return values_[static_cast<size_t>(id)].kept; }
   ThreadPool& pool() const { return pool_; }
   const kernels::KernelConfig& kernels() const { return kernels_; }
   float* scratch(int thread) const { return scratch_ + static_cast<size_t>(thread) * scratch_per_thread_; }
@@ -112,23 +109,6 @@ struct RowCodes {
     return per_tensor() ? std::vector<ValueId>{codes} : std::vector<ValueId>{codes, scale, zero_point};
   }
   /// Quantizes `rows` rows of x (leading dimension ldx) into their rows r0, r0 + 1, ...
-  void write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const;
-};
-
-/// The int8 codes of column slices of a float matrix, quantized per row and head (each head_dim
-/// columns symmetric, as AttentionS8Op quantizes its queries and keys), written by the int8 linear
-/// that produces the matrix while its rows are in cache: the attention reads the codes and skips a
-/// pass over 1.2 MB of floats that have left the cache by then. `codes` [rows, heads * head_dim];
-/// `scale` [heads, rows] head-major (a head's keys' scales are its scores' per-column scales), each
-/// times `scale_factor` (the scores' 1 / sqrt(head_dim), folded into the keys').
-struct HeadCodes {
-  ValueId codes = kNoValue;
-  ValueId scale = kNoValue;
-  int rows = 0, heads = 0, head_dim = 0;
-  size_t col_offset = 0;  ///< of the slice in the producer's rows
-  float scale_factor = 1.0f;
-  int cols() const { return heads * head_dim; }
-  /// Quantizes `rows` rows of the producer's output x (row r0 first, leading dimension ldx).
   void write(const RunContext& ctx, const float* x, size_t ldx, int r0, int rows) const;
 };
 

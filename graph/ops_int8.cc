@@ -346,7 +346,6 @@ std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
   if (x_codes_from_ == InputCodes::kQuantizedHere) variant = std::string(k.quant.quantize_name) + " + " + variant;
   if (!norms_.empty()) variant += std::string(" + ") + k.elementwise.layernorm_name;
   if (y_codes_.present() && !requantizes()) variant += std::string(" + ") + k.quant.quantize_name;
-  if (!head_codes_.empty()) variant += std::string(" + ") + k.quant.rows_symmetric_name;
   if (head_) variant += std::string(" + ") + k.gemm_f32.name;
   return variant;
 }
@@ -364,7 +363,7 @@ void LinearS8Op::write_row_codes(const RowCodes& codes) {
   if (!norms_.empty()) return;  // the codes of the last norm's output: never requantized by the GEMM
   const bool constant_bias_vector = bias_.value == kNoValue && bias_.ld == 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
-  if (!y_codes_.per_tensor() || !head_codes_.empty() || !constant_bias_vector || has_residual ||
+  if (!y_codes_.per_tensor() || !constant_bias_vector || has_residual ||
       (epilogue_ != Epilogue::kNone && epilogue_ != Epilogue::kRelu)) {
     return;
   }
@@ -383,28 +382,6 @@ void LinearS8Op::write_row_codes(const RowCodes& codes) {
     requant_bias_.resize(static_cast<size_t>(out_));
     for (size_t n = 0; n < requant_bias_.size(); ++n) requant_bias_[n] = bias[n] / s_y;
   }
-}
-
-void LinearS8Op::write_head_codes(const HeadCodes& codes) {
-  check(!requantizes() && codes.rows == rows_ && codes.col_offset + static_cast<size_t>(codes.cols()) <= static_cast<size_t>(out_),
-        ErrorCode::kInternal, "LinearS8Op: head codes of a requantizing GEMM, or outside its output");
-  head_codes_.push_back(codes);
-  outputs.push_back(codes.codes);
-  outputs.push_back(codes.scale);
-}
-
-int LinearS8Op::head_coded_cols() const {
-  if (head_codes_.empty() || y_codes_.present() || !norms_.empty() || head_ || epilogue_ == Epilogue::kGelu) return 0;
-  // The codes' column ranges, joined from column 0 on; they must end on a micro-tile's edge.
-  std::vector<std::pair<size_t, size_t>> ranges;
-  for (const HeadCodes& c : head_codes_) ranges.emplace_back(c.col_offset, c.col_offset + static_cast<size_t>(c.cols()));
-  std::sort(ranges.begin(), ranges.end());
-  size_t end = 0;
-  for (const auto& [begin, stop] : ranges) {
-    if (begin > end) break;
-    end = std::max(end, stop);
-  }
-  return end % static_cast<size_t>(nr_) == 0 ? static_cast<int>(end) : 0;
 }
 
 namespace {
@@ -461,10 +438,7 @@ void LinearS8Op::run(const RunContext& ctx) const {
   // pass of its own. When nothing reads the float output (its readers take the codes or the
   // norm's output), those rows go to the task's scratch only, never to memory.
   const bool finish_per_task = finishes_rows() && tiling.cols.parts == 1;
-  // Columns [0, scratch_cols) go to the task's scratch (its rows, the output's layout), the rest
-  // to the output.
-  int scratch_cols = 0;
-  if (finish_per_task) scratch_cols = !ctx.read(outputs[0]) ? out_ : ctx.kept(outputs[0]) ? 0 : head_coded_cols();
+  const bool f32_in_scratch = finish_per_task && !ctx.read(outputs[0]);
   // Likewise the input: tasks of whole rows quantize the rows they read first (no pass, no
   // dispatch of its own; the codes still in cache for the GEMM).
   const bool quantize_per_task = quantize_here && tiling.cols.parts == 1;
@@ -481,28 +455,17 @@ void LinearS8Op::run(const RunContext& ctx) const {
     a.a += row * a.lda;
     if (a.a_row_zero_point != nullptr) a.a_row_zero_point += row;
     kernels::GemmS8OutF32 to = o, shared = shared_bias_columns;
+    to.c = shared.c = f32_in_scratch ? ctx.scratch(thread) : o.c + row * o.ldc;
     if (to.a_row_scale != nullptr) to.a_row_scale += row;
     shared.a_row_scale = to.a_row_scale;
     if (to.residual != nullptr) to.residual += row * to.ldr;
-    float* const in_scratch = ctx.scratch(thread);
-    float* const in_output = o.c + row * o.ldc;
-    // Column ranges cut where the destination changes and where the bias table's columns end.
-    int cuts[] = {c0, std::clamp(scratch_cols, c0, c1), std::clamp(table_cols_, c0, c1), c1};
-    std::sort(cuts + 1, cuts + 3);
-    for (int i = 0; i < 3; ++i) {
-      if (cuts[i] == cuts[i + 1]) continue;
-      kernels::GemmS8OutF32 part = cuts[i] < table_cols_ ? to : shared;
-      part.c = cuts[i] < scratch_cols ? in_scratch : in_output;
-      gemm.f32out(a, part, 0, a.m, cuts[i], cuts[i + 1]);
-      if (epilogue_ == Epilogue::kGelu) {
-        for (int r = 0; r < a.m; ++r) {
-          ctx.kernels().elementwise.gelu(static_cast<size_t>(cuts[i + 1] - cuts[i]), part.c + static_cast<size_t>(r) * o.ldc + cuts[i]);
-        }
-      }
+    const int split = std::clamp(table_cols_, c0, c1);
+    if (c0 < split) gemm.f32out(a, to, 0, a.m, c0, split);
+    if (split < c1) gemm.f32out(a, shared, 0, a.m, split, c1);
+    if (epilogue_ == Epilogue::kGelu) {
+      for (int r = 0; r < a.m; ++r) ctx.kernels().elementwise.gelu(static_cast<size_t>(c1 - c0), to.c + static_cast<size_t>(r) * to.ldc + c0);
     }
-    // Whatever finishes rows reads the scratch when any of it is there (all of it, or only the
-    // head codes' columns when they are all there is to finish).
-    if (finish_per_task) finish_rows(ctx, scratch_cols > 0 ? in_scratch : in_output, o.ldc, r0, a.m);
+    if (finish_per_task) finish_rows(ctx, to.c, to.ldc, r0, a.m);
   });
   if (finishes_rows() && !finish_per_task) {
     parallel_ranges(ctx.pool(), rows_, 1, kQuantizeTileRows, [&](int r0, int r1, int) {
@@ -513,7 +476,6 @@ void LinearS8Op::run(const RunContext& ctx) const {
 
 void LinearS8Op::finish_rows(const RunContext& ctx, const float* y, size_t ldy, int r0, int rows) const {
   const size_t ld = static_cast<size_t>(out_);
-  for (const HeadCodes& codes : head_codes_) codes.write(ctx, y, ldy, r0, rows);
   for (const FusedLayerNorm& norm : norms_) {
     float* normed = ctx.data(norm.output) + static_cast<size_t>(r0) * ld;
     ctx.kernels().elementwise.layernorm_rows(rows, out_, y, ldy, norm.gamma, norm.beta, kLayerNormEps, normed, ld);
@@ -585,34 +547,21 @@ uint8_t* aligned_scratch(const RunContext& ctx, int thread) {
 }  // namespace
 
 AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q,
-                             MatrixRef k, MatrixRef v, ValueId output, const ProducerCodes& codes)
-    : nq_(nq), nk_(nk), dim_(dim), heads_(heads), q_(q), k_(k), v_(v), codes_(codes) {
-  const size_t hd = static_cast<size_t>(dim / heads), n_keys = static_cast<size_t>(nk);
-  const auto fits = [&](const std::optional<HeadCodes>& c, int rows) {
-    return !c || (c->rows == rows && c->heads == heads && static_cast<size_t>(c->head_dim) == hd);
-  };
-  check(fits(codes_.queries, nq) && fits(codes_.keys, nk), ErrorCode::kInternal, "AttentionS8Op: head codes of another shape");
-  const auto read = [&](const MatrixRef& ref, const std::optional<HeadCodes>& from_producer) {
-    if (from_producer) {
-      inputs.push_back(from_producer->codes);
-      inputs.push_back(from_producer->scale);
-    } else if (ref.value != kNoValue) {
-      inputs.push_back(ref.value);
-    }
-  };
-  read(q_, codes_.queries);
-  read(k_, codes_.keys);
-  read(v_, std::nullopt);
+                             MatrixRef k, MatrixRef v, ValueId output)
+    : nq_(nq), nk_(nk), dim_(dim), heads_(heads), q_(q), k_(k), v_(v) {
+  for (const MatrixRef* r : {&q_, &k_, &v_}) {
+    if (r->value != kNoValue) inputs.push_back(r->value);
+  }
   outputs = {output};
-  const size_t keys_here = codes_.keys ? 0 : 1;  // the op's own keys' codes and scales
+  const size_t hd = static_cast<size_t>(dim / heads), n_keys = static_cast<size_t>(nk);
   const size_t rows = kAttentionS8BlockRows;
   // Each head's packed keys and values, shared by the tasks of its query blocks.
   RegionLayout head;
   layout_.packed_k = head.add(kernels.packed_size(nk, static_cast<int>(hd)));
   layout_.packed_v = head.add(kernels.packed_size(static_cast<int>(hd), nk));
-  layout_.k_scale = head.add(keys_here * n_keys * sizeof(float));
+  layout_.k_scale = head.add(n_keys * sizeof(float));
   layout_.v_scale = head.add(hd * sizeof(float));
-  layout_.k_s8 = head.add(keys_here * n_keys * hd);
+  layout_.k_s8 = head.add(n_keys * hd);
   layout_.head_bytes = head.end;
   keys_values_ = AlignedBuffer(static_cast<size_t>(heads) * layout_.head_bytes);
   // A thread's scratch: the packing stage's int8 values, then one query block's buffers; int8
@@ -630,6 +579,8 @@ AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int 
 size_t AttentionS8Op::scratch_per_thread() const { return ceil_div(layout_.scratch_bytes, sizeof(float)); }
 
 void AttentionS8Op::run(const RunContext& ctx) const {
+  const float* q = q_.resolve(ctx);
+  const float* k = k_.resolve(ctx);
   const float* v = v_.resolve(ctx);
   float* out = ctx.data(outputs[0]);
   const kernels::KernelConfig& kc = ctx.kernels();
@@ -639,36 +590,23 @@ void AttentionS8Op::run(const RunContext& ctx) const {
   uint8_t* keys_values = keys_values_.data();
   const auto head_at = [&](size_t head, size_t offset) { return static_cast<void*>(keys_values + head * layout_.head_bytes + offset); };
 
-  // The keys' codes and (scaled) scales per head: the producer's, or the op's own from stage 1a.
-  const auto key_codes = [&](size_t head) {
-    if (codes_.keys) return ctx.data_s8(codes_.keys->codes) + head * head_dim;
-    return static_cast<int8_t*>(head_at(head, layout_.k_s8));
-  };
-  const size_t ld_key_codes = codes_.keys ? static_cast<size_t>(codes_.keys->cols()) : head_dim;
-  const auto key_scales = [&](size_t head) {
-    if (codes_.keys) return ctx.data(codes_.keys->scale) + head * n_keys;
-    return static_cast<float*>(head_at(head, layout_.k_scale));
-  };
-
   // Stage 1a, tasks of key rows (the row bands of the linear that wrote them, so that a thread
   // reads rows in its own cache; a task per head read every row, half of them from the other
   // core's: encoder attention 2-5 %, the decoder's cross attention 9 % faster on two threads):
   // each key quantized per head, one int8 row per token, the 1 / sqrt(d) of the scores folded into
   // its scale.
-  if (!codes_.keys) {
-    const float* k = k_.resolve(ctx);
-    const EvenSplit key_rows = gemm_tiling(nk_, dim_, kc.gemm_s8.mr, kc.gemm_s8.nr, ctx.pool().threads()).rows;
-    ctx.pool().parallel_for(static_cast<size_t>(key_rows.parts), [&](size_t task, int) {
-      int r0, r1;
-      key_rows.range(static_cast<int>(task), r0, r1);
-      for (size_t head = 0; head < static_cast<size_t>(heads_); ++head) {
-        float* k_scale = key_scales(head) + r0;
-        kc.quant.quantize_rows_symmetric(r1 - r0, hd, k + static_cast<size_t>(r0) * k_.ld + head * head_dim, k_.ld,
-                                         key_codes(head) + static_cast<size_t>(r0) * head_dim, head_dim, k_scale);
-        for (int j = 0; j < r1 - r0; ++j) k_scale[j] *= inv_sqrt_hd;
-      }
-    });
-  }
+  const EvenSplit key_rows = gemm_tiling(nk_, dim_, kc.gemm_s8.mr, kc.gemm_s8.nr, ctx.pool().threads()).rows;
+  ctx.pool().parallel_for(static_cast<size_t>(key_rows.parts), [&](size_t task, int) {
+    int r0, r1;
+    key_rows.range(static_cast<int>(task), r0, r1);
+    for (size_t head = 0; head < static_cast<size_t>(heads_); ++head) {
+      float* k_scale = static_cast<float*>(head_at(head, layout_.k_scale)) + r0;
+      kc.quant.quantize_rows_symmetric(r1 - r0, hd, k + static_cast<size_t>(r0) * k_.ld + head * head_dim, k_.ld,
+                                       static_cast<int8_t*>(head_at(head, layout_.k_s8)) + static_cast<size_t>(r0) * head_dim,
+                                       head_dim, k_scale);
+      for (int j = 0; j < r1 - r0; ++j) k_scale[j] *= inv_sqrt_hd;
+    }
+  });
 
   // Stage 1b, a task per head: its int8 keys, and its values quantized, packed as the GEMM's
   // weight side.
@@ -678,7 +616,8 @@ void AttentionS8Op::run(const RunContext& ctx) const {
     float* v_scale = static_cast<float*>(head_at(head, layout_.v_scale));
     const size_t column = head * head_dim;
 
-    kc.gemm_s8.pack(nk_, hd, key_codes(head), ld_key_codes, nullptr, 0, head_at(head, layout_.packed_k));
+    kc.gemm_s8.pack(nk_, hd, static_cast<const int8_t*>(head_at(head, layout_.k_s8)), head_dim, nullptr, 0,
+                    head_at(head, layout_.packed_k));
     // Values: one scale per channel (the output columns of p v), quantized where they lie, one row
     // per token, and packed from that transposed view. The probabilities' zero point is the same for
     // every row: fold it into the packed values.
@@ -717,17 +656,10 @@ void AttentionS8Op::run(const RunContext& ctx) const {
       const kernels::GemmS8OutF32 o{.c = c, .ldc = ldc, .w_scale = w_scale, .a_row_scale = a_scale};
       kc.gemm_s8.f32out(args, o, 0, rows, 0, n);
     };
-    if (codes_.queries) {
-      const size_t ld = static_cast<size_t>(codes_.queries->cols());
-      gemm(nk_, hd, ctx.data_s8(codes_.queries->codes) + static_cast<size_t>(r0) * ld + column, ld,
-           head_at(head, layout_.packed_k), ctx.data(codes_.queries->scale) + head * static_cast<size_t>(nq_) + r0,
-           key_scales(head), scores, n_keys);
-    } else {
-      const float* q = q_.resolve(ctx);
-      kc.quant.quantize_rows_symmetric(rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8, head_dim,
-                                       q_scale);
-      gemm(nk_, hd, q_s8, head_dim, head_at(head, layout_.packed_k), q_scale, key_scales(head), scores, n_keys);
-    }
+    kc.quant.quantize_rows_symmetric(rows, hd, q + static_cast<size_t>(r0) * q_.ld + column, q_.ld, q_s8, head_dim,
+                                     q_scale);
+    gemm(nk_, hd, q_s8, head_dim, head_at(head, layout_.packed_k), q_scale,
+         static_cast<const float*>(head_at(head, layout_.k_scale)), scores, n_keys);
     kc.elementwise.softmax_rows_s8(rows, nk_, scores, n_keys, p_s8, n_keys, p_scale);
     gemm(hd, nk_, p_s8, n_keys, head_at(head, layout_.packed_v), p_scale,
          static_cast<const float*>(head_at(head, layout_.v_scale)),

@@ -168,12 +168,6 @@ class LinearS8Op : public Op, public RowCodesWriter {
   /// norm's output (the decoder's last layer, then decoder.norm). Same bits as LayerNormOp.
   void fuse_layernorm(const float* gamma, const float* beta, ValueId normed);
   const std::vector<FusedLayerNorm>& fused_layernorms() const { return norms_; }
-  /// From now on every run also writes `codes` of its own output's columns (before any fused
-  /// norm), each task quantizing the rows it has just computed. No op reads those columns' floats
-  /// (the attention reads its codes, and the values' columns as floats): when the codes' columns
-  /// are the first ones and the op has nothing else to finish, they go to the task's scratch only
-  /// and never to memory (unless the output is kept).
-  void write_head_codes(const HeadCodes& codes);
   /// The output whose rows the op finishes last: the last fused norm's, else its own.
   ValueId row_output() const { return norms_.empty() ? outputs[0] : norms_.back().output; }
   /// A float linear of row_output()'s rows, `output` = rows W^T + bias (W [n, out] packed), run by
@@ -202,9 +196,7 @@ class LinearS8Op : public Op, public RowCodesWriter {
   /// True when the GEMM writes the output codes itself (requantizing, see above).
   bool requantizes() const { return !requant_scale_.empty(); }
   /// True when the float output rows have more to go through: LayerNorms, quantization, a head.
-  bool finishes_rows() const {
-    return y_codes_.present() || !head_codes_.empty() || !norms_.empty() || head_.has_value();
-  }
+  bool finishes_rows() const { return y_codes_.present() || !norms_.empty() || head_.has_value(); }
   void run_requantized(const RunContext& ctx, const kernels::GemmS8Args& args) const;
   /// The fused LayerNorms, the output codes and the fused head of `rows` float output rows from row r0.
   void finish_rows(const RunContext& ctx, const float* y, size_t ldy, int r0, int rows) const;
@@ -222,9 +214,6 @@ class LinearS8Op : public Op, public RowCodesWriter {
   PackedWeights packed_;
   std::vector<float> requant_scale_;  // requantizing: s_x * s_w[n] / s_y (per-token x: s_w[n] / s_y)
   std::vector<float> requant_bias_;   // requantizing a per-token x: bias[n] / s_y (else in the packed weights)
-  /// Columns [0, n) that only the head codes read (write_head_codes), or 0.
-  int head_coded_cols() const;
-  std::vector<HeadCodes> head_codes_;
   std::vector<FusedLayerNorm> norms_;
   std::optional<FusedHead> head_;
 };
@@ -237,16 +226,11 @@ class LinearS8Op : public Op, public RowCodesWriter {
 /// GEMM; the action chunk moves no more than with asymmetric rows), and the softmax writes its
 /// probabilities straight into int8 (softmax_rows_s8: all 256 codes cover [0, max p] of each
 /// row). The op's buffer makes a run of it single-threaded at the graph level, as the graph's own
-/// arena already does. The queries' and keys' codes can come from the linear that wrote q and k
-/// (ProducerCodes: the same codes and scales, the keys' with the 1 / sqrt(d) in them); the op then
-/// reads no float q or k at all.
+/// arena already does.
 class AttentionS8Op : public Op {
  public:
-  struct ProducerCodes {
-    std::optional<HeadCodes> queries, keys;
-  };
   AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int nk, int dim, int heads, MatrixRef q, MatrixRef k,
-                MatrixRef v, ValueId output, const ProducerCodes& codes = {});
+                MatrixRef v, ValueId output);
   const char* type() const override { return "attention_s8"; }
   std::string kernel(const kernels::KernelConfig& k) const override {
     return std::string(k.quant.rows_symmetric_name) + " + " + k.gemm_s8.f32out_name + " + " +
@@ -269,7 +253,6 @@ class AttentionS8Op : public Op {
   };
   int nq_, nk_, dim_, heads_;
   MatrixRef q_, k_, v_;
-  ProducerCodes codes_;
   Layout layout_;
   AlignedBuffer keys_values_;
 };

@@ -11,6 +11,8 @@
 #include <immintrin.h>
 #pragma GCC diagnostic pop
 
+#include <algorithm>
+
 // The same GCC 12 header idiom (`__m512 __Y = __Y;` as the pass-through of unmasked min/max,
 // extract, reduce) is also reported at the call sites it is inlined into, as -Wuninitialized.
 #pragma GCC diagnostic ignored "-Wuninitialized"
@@ -110,7 +112,8 @@ __m512 lane_maxima16(__m512 (&v)[16]) {
 // the 16 vectors reduced together (lane_maxima16), the one rule's scales for 16 rows at once (the
 // same as symmetric_scale_s8 from [-max, max]: max(-lo, hi) is max |x|, a non-finite max gives 0,
 // both divisions exact), then each row quantized with its inverse scale. A row at a time (a
-// shuffle tree and the scalar rule per row) took about 50 cycles per 64-value row.
+// shuffle tree and the scalar rule per row) took about 50 cycles per 64-value row, so the last
+// rows are a block of 16 too (a linear's task of 30 rows left 14 to that path).
 void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
                                            float* row_scale) {
   constexpr int kVectors = 4, kRows = 16;
@@ -121,12 +124,14 @@ void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, s
   const __m512 zero = _mm512_setzero_ps(), lo = _mm512_set1_ps(-128.0f), hi = _mm512_set1_ps(127.0f);
   __mmask16 m[kVectors];
   for (int j = 0; j < kVectors; ++j) m[j] = tail_mask(cols > 16 * j ? static_cast<size_t>(cols - 16 * j) : 0);
-  int r = 0;
-  for (; r + kRows <= rows; r += kRows) {
+  // The last block may have fewer rows: its missing rows' maxima are 0 and nothing of them is stored.
+  for (int r = 0; r < rows; r += kRows) {
+    const int n = std::min(kRows, rows - r);
     __m512 amax[kRows];
     for (int i = 0; i < kRows; ++i) {
-      const float* xr = x + static_cast<size_t>(r + i) * ldx;
       amax[i] = zero;
+      if (i >= n) continue;
+      const float* xr = x + static_cast<size_t>(r + i) * ldx;
       for (int j = 0; j < kVectors; ++j) {
         amax[i] = _mm512_max_ps(_mm512_abs_ps(_mm512_maskz_loadu_ps(m[j], xr + 16 * j)), amax[i]);
       }
@@ -139,10 +144,10 @@ void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, s
     const __m512 absmax = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask(row_max, float_max, _CMP_LE_OQ), row_max);
     const __m512 scale = _mm512_max_ps(_mm512_div_ps(absmax, _mm512_set1_ps(127.0f)), float_min);
     const __m512 inv = _mm512_maskz_div_ps(_mm512_cmp_ps_mask(absmax, zero, _CMP_GT_OQ), _mm512_set1_ps(1.0f), scale);
-    _mm512_storeu_ps(row_scale + r, scale);
+    _mm512_mask_storeu_ps(row_scale + r, tail_mask(static_cast<size_t>(n)), scale);
     alignas(64) float inv_of[kRows];
     _mm512_store_ps(inv_of, inv);
-    for (int i = 0; i < kRows; ++i) {
+    for (int i = 0; i < n; ++i) {
       const float* xr = x + static_cast<size_t>(r + i) * ldx;
       int8_t* yr = y + static_cast<size_t>(r + i) * ldy;
       const __m512 inv_v = _mm512_set1_ps(inv_of[i]);
@@ -151,20 +156,6 @@ void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, s
         _mm_mask_storeu_epi8(yr + 16 * j, m[j], quantize16(v, inv_v, zero, lo, hi));
       }
     }
-  }
-  for (; r < rows; ++r) {
-    const float* xr = x + static_cast<size_t>(r) * ldx;
-    __m512 v[kVectors], amax = zero;
-    for (int j = 0; j < kVectors; ++j) {
-      v[j] = _mm512_maskz_loadu_ps(m[j], xr + 16 * j);
-      amax = _mm512_max_ps(_mm512_abs_ps(v[j]), amax);
-    }
-    const float row_max = _mm512_reduce_max_ps(amax);
-    float inv;
-    row_scale[r] = symmetric_scale_s8(-row_max, row_max, &inv);
-    const __m512 inv_v = _mm512_set1_ps(inv);
-    int8_t* yr = y + static_cast<size_t>(r) * ldy;
-    for (int j = 0; j < kVectors; ++j) _mm_mask_storeu_epi8(yr + 16 * j, m[j], quantize16(v[j], inv_v, zero, lo, hi));
   }
 }
 

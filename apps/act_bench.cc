@@ -376,15 +376,16 @@ class Benchmark {
     peak_ = measure_peak(engine_->model_info());
     // Also at the median run: one slow run of a shared host moves the mean, not the median.
     const double peak_gmacs = peak_.gmacs_per_core * engine_->threads();
+    const auto percent_of_peak = [&](double gmac, double ms) { return 100.0 * gmac / (ms / 1e3) / peak_gmacs; };
     pct_peak_ = peak_gmacs > 0 ? 100.0 * gmacs_per_s_ / peak_gmacs : 0.0;
-    pct_peak_p50_ = peak_gmacs > 0 ? 100.0 * gmac_ / (total().p50 / 1e3) / peak_gmacs : 0.0;
+    pct_peak_p50_ = peak_gmacs > 0 ? percent_of_peak(gmac_, total().p50) : 0.0;
     // Each stage's rate at its median run against the same peak (the per-stage targets).
     for (const auto& [name, s] : stages_) {
       nlohmann::ordered_json& stage = stage_json_[name] = s.to_json();
       const double gmac = stage_macs(name, macs_) / 1e9;
       if (gmac <= 0) continue;
       stage["gmac"] = gmac;
-      if (peak_gmacs > 0 && s.p50 > 0) stage["percent_of_peak_p50"] = 100.0 * gmac / (s.p50 / 1e3) / peak_gmacs;
+      if (peak_gmacs > 0 && s.p50 > 0) stage["percent_of_peak_p50"] = percent_of_peak(gmac, s.p50);
     }
     rss_ = act::peak_rss_bytes();
     huge_page_bytes_ = act::graph::AlignedBuffer::huge_page_bytes();

@@ -113,7 +113,7 @@ __m512 lane_maxima16(__m512 (&v)[16]) {
 // same as symmetric_scale_s8 from [-max, max]: max(-lo, hi) is max |x|, a non-finite max gives 0,
 // both divisions exact), then each row quantized with its inverse scale. A row at a time (a
 // shuffle tree and the scalar rule per row) took about 50 cycles per 64-value row, so the last
-// rows are a block of 16 too (a linear's task of 30 rows left 14 to that path).
+// rows are a block of 16 too (the attention's key-row tasks of about 30 rows left 14 to that path).
 void quantize_rows_symmetric_f32_s8_avx512(int rows, int cols, const float* x, size_t ldx, int8_t* y, size_t ldy,
                                            float* row_scale) {
   constexpr int kVectors = 4, kRows = 16;

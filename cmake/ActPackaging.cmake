@@ -3,7 +3,8 @@
 #
 #   libactengine0     the shared libraries, in /usr/lib/<multiarch triplet>
 #   libactengine-dev  headers, static libraries, .so links, the CMake package, actengine.pc
-#   actengine-tools   act_convert, act_eval, act_bench, act_drive (and act_pwm_watchdog, which it starts)
+#   actengine-tools   act_convert, act_eval, act_bench, act_drive (and act_pwm_watchdog, which it starts;
+#                     libact_media_io.so, their image and video module, in /usr/lib/<triplet>/actengine)
 #
 #   cpack -G DEB (in a build tree)  -> <name>_<version>_<arch>.deb for each
 #
@@ -69,7 +70,8 @@ set(CPACK_DEBIAN_TOOLS_DESCRIPTION "LeRobot ACT policy inference engine: command
  serial to an Arduino.")
 
 if(CMAKE_CROSSCOMPILING AND ACT_OPENCV_DEB_DEPENDS)
-  # The tools link the four OpenCV libraries of depends.txt, libactengine_vision only core and imgproc.
+  # The tools (with their image and video module) link the four OpenCV libraries of depends.txt,
+  # libactengine_vision only core and imgproc.
   set(CPACK_DEBIAN_TOOLS_PACKAGE_DEPENDS "${ACT_OPENCV_DEB_DEPENDS}")
   string(REGEX MATCHALL "libopencv-(core|imgproc)[0-9]+ \\([^)]*\\)" act_vision_depends "${ACT_OPENCV_DEB_DEPENDS}")
   list(JOIN act_vision_depends ", " act_vision_depends)

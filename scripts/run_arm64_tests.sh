@@ -8,9 +8,10 @@
 #
 # Then the arm64 Debian packages from the same tree (the apps are built too, not their tests; act_convert
 # and act_drive against the arm64 OpenCV of scripts/fetch_arm64_opencv.sh): built with CPack,
-# unpacked, the library checked to be in /usr/lib/aarch64-linux-gnu, every app to be a stripped
-# aarch64 program whose OpenCV libraries actengine-tools depends on, and its act_bench run under qemu
-# (`--help`, then one run that must say it is emulated), so the packages CI ships start. (act_drive itself
+# unpacked, the library checked to be in /usr/lib/aarch64-linux-gnu, every app (and the image and
+# video module, apps/media) to be a stripped aarch64 program whose OpenCV libraries actengine-tools
+# depends on, and its act_bench run under qemu (`--help`, then one run that must say it is emulated),
+# so the packages CI ships start. (act_drive itself
 # cannot start under qemu here: OpenCV's own arm64 dependencies, FFmpeg and more, are not installed.)
 #
 # Which tests: all of act_tests except the few end-to-end tests listed below, which repeat
@@ -109,8 +110,14 @@ if [ ! -f "$unpacked/usr/lib/aarch64-linux-gnu/libactengine.so.0" ]; then
 fi
 depends="$(dpkg-deb -f "$(ls "$build"/actengine-tools_*_arm64.deb)" Depends)"
 unstripped=' \.(symtab|debug_info) '
-for app in act_bench act_eval act_convert act_drive act_pwm_watchdog; do
-  program="$unpacked/usr/bin/$app"
+# The apps, and the image and video module act_convert, act_eval and act_drive load on first use.
+for program in "$unpacked"/usr/bin/{act_bench,act_eval,act_convert,act_drive,act_pwm_watchdog} \
+               "$unpacked/usr/lib/aarch64-linux-gnu/actengine/libact_media_io.so"; do
+  app="$(basename "$program")"
+  if [ ! -f "$program" ]; then
+    echo "run_arm64_tests: the arm64 packages have no $program" >&2
+    exit 1
+  fi
   # Outputs read whole before they are matched (under pipefail, `readelf | grep -q` fails when grep
   # stops early and readelf dies of SIGPIPE).
   header="$(readelf -h "$program" 2>/dev/null || true)"

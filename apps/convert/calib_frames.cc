@@ -4,14 +4,14 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <set>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "actengine/vision.h"
+#include "apps/media/media_io.h"
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
 #include "weights/blob/error.h"
@@ -111,7 +111,7 @@ class Loader {
   void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
     if (files.empty()) fail(ErrorCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
     for (size_t i : spread(files.size(), max_frames)) {
-      const cv::Mat image = cv::imread(files[i].string(), cv::IMREAD_COLOR);
+      const cv::Mat image = media::read_image(files[i].string());
       if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + files[i].string());
       add_frame_all_cameras(image);
     }
@@ -122,20 +122,20 @@ class Loader {
   }
 
   // Opens a video; throws naming it when OpenCV cannot.
-  static cv::VideoCapture open_video(const fs::path& p) {
+  static std::unique_ptr<media::VideoReader> open_video(const fs::path& p) {
     // FFmpeg only, as act_drive reads video files: the same decoder gives the same frames.
-    cv::VideoCapture cap(p.string(), cv::CAP_FFMPEG);
-    if (!cap.isOpened()) fail(ErrorCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
-    return cap;
+    std::unique_ptr<media::VideoReader> video = media::open_video(p.string(), cv::CAP_FFMPEG);
+    if (!video) fail(ErrorCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
+    return video;
   }
 
   // Decodes frames at the given indices (ascending) of one video.
   static std::vector<cv::Mat> video_frames(const fs::path& p, const std::vector<size_t>& wanted) {
-    cv::VideoCapture cap = open_video(p);
+    const std::unique_ptr<media::VideoReader> video = open_video(p);
     std::vector<cv::Mat> out;
     size_t index = 0, next = 0;
     cv::Mat frame;
-    while (next < wanted.size() && cap.read(frame)) {
+    while (next < wanted.size() && video->read(frame)) {
       if (index == wanted[next]) {
         out.push_back(frame.clone());
         ++next;
@@ -146,12 +146,12 @@ class Loader {
   }
 
   static size_t video_length(const fs::path& p) {
-    cv::VideoCapture cap = open_video(p);
-    const double n = cap.get(cv::CAP_PROP_FRAME_COUNT);
+    const std::unique_ptr<media::VideoReader> video = open_video(p);
+    const double n = video->get(cv::CAP_PROP_FRAME_COUNT);
     if (n >= 1) return static_cast<size_t>(n);
     size_t count = 0;  // the container does not say: count by decoding
     cv::Mat frame;
-    while (cap.read(frame)) ++count;
+    while (video->read(frame)) ++count;
     return count;
   }
 
@@ -244,7 +244,7 @@ class Loader {
     }
     if (entries.empty()) return add_image_folder(dir, max_frames);
     for (size_t i : spread(entries.size(), max_frames)) {
-      const cv::Mat image = cv::imread(entries[i].first.string(), cv::IMREAD_COLOR);
+      const cv::Mat image = media::read_image(entries[i].first.string());
       if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
       add_frame_all_cameras(image, &entries[i].second);
     }

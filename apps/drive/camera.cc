@@ -9,8 +9,7 @@
 #include <mutex>
 #include <vector>
 
-#include <opencv2/videoio.hpp>
-
+#include "apps/media/media_io.h"
 #include "weights/blob/error.h"
 
 namespace act::drive {
@@ -49,26 +48,30 @@ SourceKind source_kind(const std::string& s) {
 // FFmpeg opens get the timeouts, so a stalled stream fails its read instead of blocking the capture
 // thread for OpenCV's default 30 s. The other backends of OpenCV 4.6 do not take them; stop() does
 // not wait for those either.
-void open_capture(cv::VideoCapture& video, const CameraOptions& options, SourceKind kind) {
+// Null when the source does not open.
+std::unique_ptr<media::VideoReader> open_capture(const CameraOptions& options, SourceKind kind) {
   const std::vector<int> ffmpeg_timeouts{cv::CAP_PROP_OPEN_TIMEOUT_MSEC, static_cast<int>(options.open_timeout.count()),
                                          cv::CAP_PROP_READ_TIMEOUT_MSEC, static_cast<int>(options.read_timeout.count())};
+  std::unique_ptr<media::VideoReader> video;
   switch (kind) {
-    case SourceKind::kIndex: video.open(std::stoi(options.source), cv::CAP_ANY); break;
-    case SourceKind::kDevice: video.open(options.source, cv::CAP_V4L2); break;
-    case SourceKind::kFile: video.open(options.source, cv::CAP_FFMPEG, ffmpeg_timeouts); break;
-    case SourceKind::kGstreamerPipeline: video.open(options.source, cv::CAP_GSTREAMER); break;
+    case SourceKind::kIndex: video = media::open_camera(std::stoi(options.source), cv::CAP_ANY); break;
+    case SourceKind::kDevice: video = media::open_video(options.source, cv::CAP_V4L2); break;
+    case SourceKind::kFile: video = media::open_video(options.source, cv::CAP_FFMPEG, ffmpeg_timeouts); break;
+    case SourceKind::kGstreamerPipeline: video = media::open_video(options.source, cv::CAP_GSTREAMER); break;
     case SourceKind::kUrl:  // FFmpeg first, then GStreamer (CAP_ANY would try FFmpeg again, without the timeouts)
-      if (!video.open(options.source, cv::CAP_FFMPEG, ffmpeg_timeouts)) video.open(options.source, cv::CAP_GSTREAMER);
+      video = media::open_video(options.source, cv::CAP_FFMPEG, ffmpeg_timeouts);
+      if (!video) video = media::open_video(options.source, cv::CAP_GSTREAMER);
       break;
-    case SourceKind::kImageSequence: video.open(options.source, cv::CAP_IMAGES); break;
+    case SourceKind::kImageSequence: video = media::open_video(options.source, cv::CAP_IMAGES); break;
     case SourceKind::kUnknown: break;
   }
-  if (!video.isOpened() || kind == SourceKind::kFile) return;
+  if (!video || kind == SourceKind::kFile) return video;
   // Only the newest frame matters: keep the driver's queue short where it has one.
-  video.set(cv::CAP_PROP_BUFFERSIZE, 1);
-  if (options.width > 0) video.set(cv::CAP_PROP_FRAME_WIDTH, options.width);
-  if (options.height > 0) video.set(cv::CAP_PROP_FRAME_HEIGHT, options.height);
-  if (options.fps > 0) video.set(cv::CAP_PROP_FPS, options.fps);
+  video->set(cv::CAP_PROP_BUFFERSIZE, 1);
+  if (options.width > 0) video->set(cv::CAP_PROP_FRAME_WIDTH, options.width);
+  if (options.height > 0) video->set(cv::CAP_PROP_FRAME_HEIGHT, options.height);
+  if (options.fps > 0) video->set(cv::CAP_PROP_FPS, options.fps);
+  return video;
 }
 
 // Set once a capture thread is left behind (Camera::stop); read when the process ends.
@@ -89,7 +92,7 @@ struct Camera::Shared {
 
   const CameraOptions options;
   const SourceKind kind;
-  cv::VideoCapture video;  // the constructor's, then the capture thread's alone
+  std::unique_ptr<media::VideoReader> video;  // the constructor's, then the capture thread's alone; null while closed
   std::mutex mutex;
   std::condition_variable changed;      // a stop request, or the end of the thread
   std::shared_ptr<const Frame> latest;  // guarded by mutex, as are the members below
@@ -106,21 +109,21 @@ Camera::Camera(CameraOptions options) {
   const SourceKind kind = source_kind(options.source);
   shared_ = std::make_shared<Shared>(std::move(options), kind);
   const std::string& source = shared_->options.source;
-  cv::VideoCapture& video = shared_->video;
   is_file_ = kind == SourceKind::kFile;
   if (shared_->options.stepped && kind != SourceKind::kFile) {
     fail(ErrorCode::kInvalidArgument, "--realtime off replays a video file or an image sequence; '" + source +
                                           "' is a live source");
   }
-  open_capture(video, shared_->options, kind);
-  if (!video.isOpened()) {
+  std::unique_ptr<media::VideoReader>& video = shared_->video;
+  video = open_capture(shared_->options, kind);
+  if (!video) {
     const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) && !std::filesystem::exists(source);
     fail(ErrorCode::kNotFound, "cannot open camera '" + source + "'" + (missing ? ": no such file" : "") +
                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
                                     "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
   }
   cv::Mat first;
-  if (!video.read(first) || first.empty()) {
+  if (!video->read(first) || first.empty()) {
     fail(ErrorCode::kIoError, "camera '" + source + "' opened but delivered no frame");
   }
   if (first.type() != CV_8UC3) {
@@ -130,7 +133,7 @@ Camera::Camera(CameraOptions options) {
   width_ = first.cols;
   height_ = first.rows;
   shared_->latest = std::make_shared<const Frame>(Frame{first, Clock::now(), 0});
-  const double fps = shared_->options.fps > 0 ? shared_->options.fps : video.get(cv::CAP_PROP_FPS);
+  const double fps = shared_->options.fps > 0 ? shared_->options.fps : video->get(cv::CAP_PROP_FPS);
   if (fps > 0 && fps < 1000) shared_->file_fps = fps;
   thread_ = std::thread([shared = shared_] {
     shared->run();
@@ -236,7 +239,7 @@ void Camera::Shared::run() {
   while (options.stepped ? frame_wanted(index) : !wait_for_stop(is_file ? file_frame_due(index) : Clock::time_point{})) {
     cv::Mat image;
     const auto read_start = Clock::now();
-    const bool ok = video.read(image) && !image.empty();
+    const bool ok = video && video->read(image) && !image.empty();
     if (ok) {
       auto frame = std::make_shared<const Frame>(Frame{std::move(image), Clock::now(), index++});
       {
@@ -258,9 +261,9 @@ void Camera::Shared::run() {
     const auto waited = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - read_start);
     if (waited >= options.read_timeout) what += " (stalled: no frame for " + std::to_string(waited.count()) + " ms)";
     set_problem(State::kReconnecting, what + "; reopening");
-    video.release();
+    video.reset();
     if (wait_for_stop(Clock::now() + std::chrono::seconds(1))) return;
-    open_capture(video, options, kind);
+    video = open_capture(options, kind);
   }
 }
 

@@ -8,10 +8,10 @@
 #include <thread>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "actengine/vision.h"
+#include "apps/media/media_io.h"
 #include "weights/blob/error.h"
 
 namespace act::drive {
@@ -102,7 +102,7 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     if (!frame || !frame_to_model_rgb(frame->bgr, options_.image_height, options_.image_width, rgb).ok()) return jpeg;
     cv::Mat bgr;
     cv::cvtColor(cv::Mat(options_.image_height, options_.image_width, CV_8UC3, rgb.data()), bgr, cv::COLOR_RGB2BGR);
-    cv::imencode(".jpg", bgr, jpeg);
+    media::encode_image(".jpg", bgr, jpeg);
     return jpeg;
   };
 

@@ -44,8 +44,8 @@ void ahead(cv::Mat& image, cv::Rect area, const std::vector<float>& values, cons
 OverlayVideo::OverlayVideo(const std::string& path, double fps, int image_height, int image_width, int scale)
     : image_height_(image_height), image_width_(image_width), scale_(scale) {
   const cv::Size size(image_width * scale, image_height * scale + kBandHeight);
-  writer_.open(path, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps, size);
-  if (!writer_.isOpened()) {
+  writer_ = media::create_video(path, "mp4v", fps, size);
+  if (!writer_) {
     fail(ErrorCode::kIoError, "--overlay-video: OpenCV cannot write " + path + " (use an .mp4 or .avi file in an existing folder)");
   }
   thread_ = std::thread([this] { run(); });
@@ -73,7 +73,7 @@ void OverlayVideo::close() {
   }
   wake_.notify_one();
   if (thread_.joinable()) thread_.join();
-  writer_.release();
+  writer_.reset();
 }
 
 uint64_t OverlayVideo::frames_written() const {
@@ -96,7 +96,7 @@ void OverlayVideo::run() {
       tick = std::move(queue_.front());
       queue_.pop_front();
     }
-    writer_.write(draw(tick.first, tick.second.get()));
+    writer_->write(draw(tick.first, tick.second.get()));
     std::lock_guard lock(mutex_);
     ++written_;
   }

@@ -13,10 +13,9 @@
 #include <thread>
 #include <utility>
 
-#include <opencv2/videoio.hpp>
-
 #include "apps/drive/camera.h"
 #include "apps/drive/cockpit.h"
+#include "apps/media/media_io.h"
 
 namespace act::drive {
 
@@ -41,7 +40,7 @@ class OverlayVideo {
   cv::Mat draw(const LiveStatus& status, const Frame* frame) const;
 
   int image_height_, image_width_, scale_;
-  cv::VideoWriter writer_;
+  std::unique_ptr<media::VideoWriter> writer_;  // null once closed
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   std::deque<std::pair<LiveStatus, std::shared_ptr<const Frame>>> queue_;  // guarded by mutex_

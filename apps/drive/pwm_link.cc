@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "apps/drive/emergency_neutral.h"
+#include "apps/executable_dir.h"
 #include "weights/blob/error.h"
 
 namespace act::drive {
@@ -275,12 +276,7 @@ std::string PwmSysfsLink::summary() const {
          (watchdog_lost_ ? ", watchdog lost" : "");
 }
 
-std::string default_watchdog_path() {
-  std::error_code error;
-  const fs::path self = fs::read_symlink("/proc/self/exe", error);
-  check(!error, ErrorCode::kIoError, "cannot find act_drive's own directory (/proc/self/exe): " + error.message());
-  return (self.parent_path() / "act_pwm_watchdog").string();
-}
+std::string default_watchdog_path() { return (executable_dir() / "act_pwm_watchdog").string(); }
 
 void list_pwm_channels(const std::string& root, std::ostream& out) {
   std::vector<fs::path> chips;

@@ -5,10 +5,10 @@
 #include <filesystem>
 #include <fstream>
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "actengine/vision.h"
+#include "apps/media/media_io.h"
 #include "weights/blob/error.h"
 
 namespace fs = std::filesystem;
@@ -43,7 +43,7 @@ void write_png(const fs::path& path, const std::vector<uint8_t>& rgb, int height
   cv::Mat bgr;
   cv::cvtColor(image, bgr, cv::COLOR_RGB2BGR);  // imwrite takes BGR; the PNG holds the RGB image
   std::error_code ec;
-  if (cv::imwrite(temp_path.string(), bgr)) fs::rename(temp_path, path, ec);
+  if (media::write_image(temp_path.string(), bgr)) fs::rename(temp_path, path, ec);
 }
 
 }  // namespace

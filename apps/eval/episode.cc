@@ -10,7 +10,6 @@
 #include <optional>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "apps/convert/calib_frames.h"
 #include "weights/blob/error.h"
@@ -391,20 +390,20 @@ Episode read_episode(const EpisodeSources& sources, const ModelInfo& model) {
 EpisodeImages::EpisodeImages(const Episode& episode) : episode_(episode) {
   if (episode.video.empty()) return;
   // FFmpeg only, as act_convert and act_drive read video files: the same decoder gives the same frames.
-  video_.open(episode.video, cv::CAP_FFMPEG);
-  if (!video_.isOpened()) fail(ErrorCode::kDataLoss, "cannot open video " + episode.video + " (OpenCV/FFmpeg)");
+  video_ = media::open_video(episode.video, cv::CAP_FFMPEG);
+  if (!video_) fail(ErrorCode::kDataLoss, "cannot open video " + episode.video + " (OpenCV/FFmpeg)");
 }
 
 cv::Mat EpisodeImages::image(size_t i) {
   const EpisodeFrame& frame = episode_.frames.at(i);
   if (!frame.image_path.empty()) {
-    cv::Mat image = cv::imread(frame.image_path, cv::IMREAD_COLOR);
+    cv::Mat image = media::read_image(frame.image_path);
     if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + frame.image_path);
     return image;
   }
   cv::Mat image;
   while (next_video_index_ <= frame.video_index) {
-    if (!video_.read(image)) {
+    if (!video_ || !video_->read(image)) {
       fail(ErrorCode::kDataLoss, episode_.video + " has only " + std::to_string(next_video_index_) +
            " frames; the actions CSV names frame " + std::to_string(frame.video_index));
     }

@@ -12,13 +12,14 @@
 #pragma once
 
 #include <cstddef>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <opencv2/core.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "actengine/engine.h"
+#include "apps/media/media_io.h"
 
 namespace act::eval {
 
@@ -58,7 +59,7 @@ class EpisodeImages {
 
  private:
   const Episode& episode_;
-  cv::VideoCapture video_;
+  std::unique_ptr<media::VideoReader> video_;  // null without a video
   size_t next_video_index_ = 0;
 };
 

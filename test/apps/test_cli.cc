@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include "support/act_test_util.h"
 #include "support/command.h"
@@ -36,6 +38,35 @@ TEST(ActConvertCli, MissingCheckpointNamesThePath) {
   const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(dir + "/nope") + " -o " + q(dir + "/m.actb"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find(dir + "/nope"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/m.actb"));
+}
+
+// OpenCV's image and video I/O pulls in about 250 libraries: the apps load it from their module
+// (apps/media/media_io.h) when they first read an image, never at start.
+TEST(ActConvertCli, ImagesAndVideoComeFromAModuleLoadedOnFirstUse) {
+  std::vector<std::string> apps{ACT_CONVERT_BIN, ACT_EVAL_BIN};
+#ifdef ACT_DRIVE_BIN
+  apps.push_back(ACT_DRIVE_BIN);
+#endif
+  for (const std::string& app : apps) {
+    const CommandResult r = run_command("readelf -d " + q(app));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("libopencv_core"), std::string::npos) << app << r.output;  // the readelf output is the right one
+    EXPECT_EQ(r.output.find("libopencv_imgcodecs"), std::string::npos) << app << r.output;
+    EXPECT_EQ(r.output.find("libopencv_videoio"), std::string::npos) << app << r.output;
+  }
+  // A copy away from the module starts, and says what is missing when it needs an image.
+  const std::string src = act::test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  const std::string dir = act::test::scratch_dir();
+  fs::create_directories(dir + "/bin");
+  fs::copy_file(ACT_CONVERT_BIN, dir + "/bin/act_convert");
+  EXPECT_EQ(run_command(q(dir + "/bin/act_convert") + " --help").exit_code, 0);
+  const CommandResult r = run_command(q(dir + "/bin/act_convert") + " " + q(src) + " -o " + q(dir + "/m.actb") +
+                                      " --precision int8 --calib " + q(src));  // its folder holds sample images
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot load the image and video support"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("libact_media_io.so"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir + "/m.actb"));
 }
 

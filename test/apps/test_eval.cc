@@ -9,13 +9,12 @@
 #include <fstream>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "actengine/engine.h"
 #include "actengine/vision.h"
 #include "apps/eval/episode.h"
 #include "apps/eval/metrics.h"
+#include "apps/media/media_io.h"
 #include "support/act_test_util.h"
 #include "support/command.h"
 #include "support/file_test_util.h"
@@ -71,7 +70,7 @@ std::vector<std::vector<float>> chunks_in_process(const std::string& blob) {
   std::vector<std::vector<float>> out;
   for (int i = 0; i < 4; ++i) {
     std::vector<uint8_t> rgb;
-    EXPECT_TRUE(act::frame_to_model_rgb(cv::imread(fixture_image(i), cv::IMREAD_COLOR), info.cameras[0].height,
+    EXPECT_TRUE(act::frame_to_model_rgb(act::media::read_image(fixture_image(i)), info.cameras[0].height,
                                         info.cameras[0].width, rgb).ok());
     act::Observation obs;
     obs.images = {act::ImageView::rgb_u8(rgb.data(), info.cameras[0].height, info.cameras[0].width)};
@@ -334,9 +333,9 @@ TEST(EvalEpisode, VideoFramesByIndex) {
   const std::string dir = act::test::scratch_dir();
   const std::string video = dir + "/clip.avi";
   {
-    cv::VideoWriter writer(video, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10, cv::Size(128, 96));
-    ASSERT_TRUE(writer.isOpened());
-    for (int i = 0; i < 6; ++i) writer.write(cv::Mat(96, 128, CV_8UC3, cv::Scalar(40 * i, 100, 200 - 30 * i)));
+    const std::unique_ptr<act::media::VideoWriter> writer = act::media::create_video(video, "MJPG", 10, cv::Size(128, 96));
+    ASSERT_TRUE(writer);
+    for (int i = 0; i < 6; ++i) writer->write(cv::Mat(96, 128, CV_8UC3, cv::Scalar(40 * i, 100, 200 - 30 * i)));
   }
   write_text(dir + "/states.csv", "frame_index,a,b\n1,0,0\n3,0.5,0.5\n5,1,1\n");
   write_text(dir + "/actions.csv", "frame_index,x,y\n1,1,2\n3,3,4\n5,5,6\n");
@@ -363,8 +362,8 @@ TEST(EvalEpisode, VideoFramesByIndex) {
 TEST(EvalEpisode, MalformedInputsNameFileLineAndColumn) {
   const std::string dir = act::test::scratch_dir();
   fs::create_directories(dir + "/frames");
-  cv::imwrite(dir + "/frames/a.png", cv::Mat(96, 128, CV_8UC3, cv::Scalar(1, 2, 3)));
-  cv::imwrite(dir + "/frames/b.png", cv::Mat(96, 128, CV_8UC3, cv::Scalar(1, 2, 3)));
+  act::media::write_image(dir + "/frames/a.png", cv::Mat(96, 128, CV_8UC3, cv::Scalar(1, 2, 3)));
+  act::media::write_image(dir + "/frames/b.png", cv::Mat(96, 128, CV_8UC3, cv::Scalar(1, 2, 3)));
   const std::string states = dir + "/states.csv", actions = dir + "/actions.csv";
   write_text(states, "frame,s0,s1\na.png,0,0\nb.png,0,0\n");
   const auto expect = [&](const std::string& actions_text, const std::vector<std::string>& fragments,

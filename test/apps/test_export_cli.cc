@@ -2,13 +2,13 @@
 // decoded here) and --export-onnx from a checkpoint and from a blob, with its bad inputs.
 #include <gtest/gtest.h>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 
+#include "apps/media/media_io.h"
 #include "support/command.h"
 #include "support/test_paths.h"
 
@@ -54,7 +54,7 @@ TEST(ActConvertExportCli, ExportCalibWritesTheFramesAsNumpyNhwc) {
   ASSERT_EQ(bytes.size(), 10 + header_len + 4u * 96 * 128 * 3 * sizeof(float));
   // Frame i is sample i's PNG (the folder's images in path order), RGB / 255.
   for (int i = 0; i < 4; ++i) {
-    const cv::Mat bgr = cv::imread(src + "/sample" + std::to_string(i) + ".observation.images.front.png", cv::IMREAD_COLOR);
+    const cv::Mat bgr = act::media::read_image(src + "/sample" + std::to_string(i) + ".observation.images.front.png");
     ASSERT_EQ(bgr.rows, 96);
     ASSERT_EQ(bgr.cols, 128);
     const char* frame = bytes.data() + 10 + header_len + static_cast<size_t>(i) * 96 * 128 * 3 * sizeof(float);

@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <string>
 
-#include <opencv2/imgcodecs.hpp>
 
+#include "apps/media/media_io.h"
 #include "apps/progress.h"
 #include "support/command.h"
 #include "support/test_paths.h"
@@ -119,8 +119,8 @@ TEST_F(CalibrationMessages, FewerFramesThanAskedSaysHowManyAndWhy) {
 TEST_F(CalibrationMessages, FramesOfAnotherAspectRatioAreAWarning) {
   // 360x640 (16:9) frames for the model's 96x128 (4:3) camera (height x width).
   fs::create_directories(dir_ + "/wide");
-  cv::imwrite(dir_ + "/wide/f0.png", cv::Mat(360, 640, CV_8UC3, cv::Scalar(40, 90, 160)));
-  cv::imwrite(dir_ + "/wide/f1.png", cv::Mat(360, 640, CV_8UC3, cv::Scalar(200, 30, 60)));
+  act::media::write_image(dir_ + "/wide/f0.png", cv::Mat(360, 640, CV_8UC3, cv::Scalar(40, 90, 160)));
+  act::media::write_image(dir_ + "/wide/f1.png", cv::Mat(360, 640, CV_8UC3, cv::Scalar(200, 30, 60)));
   const CommandResult r = run_command(convert(dir_ + "/wide"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::string warning = "warning: calibration frames of 360x640 are stretched to the model's 96x128 (height x width";

@@ -4,7 +4,8 @@
 # apps must be built), unpacked with dpkg -x into a scratch root, then
 #  - exactly libactengine0, libactengine-dev and actengine-tools, with computed dependencies;
 #  - every program and shared library stripped, and none needing a library ldd cannot find;
-#  - each tool's --help runs from the unpacked files;
+#  - each tool's --help runs from the unpacked files, and act_convert reads CHECKPOINT's images through
+#    the image and video module (libact_media_io.so, found from /usr/bin in /usr/lib/<multiarch>/actengine);
 #  - test/consumer builds against the unpacked -dev package with CMake (CMAKE_PREFIX_PATH) and its
 #    main.cc with pkg-config (actengine.pc), and both run BLOB (the CMake one also converts CHECKPOINT).
 set -euo pipefail
@@ -44,7 +45,8 @@ export LD_LIBRARY_PATH="$libdir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 # stops at its match and ldd, still writing, dies of SIGPIPE (the pkg-config check below failed that
 # way one full ctest run in two here, and the checks in this loop could pass without looking).
 unstripped=' \.(symtab|debug_info) '
-for binary in "$work"/root/usr/bin/* "$libdir"/lib*.so.*.*; do
+[ -f "$libdir/actengine/libact_media_io.so" ] || fail "libact_media_io.so is not in /usr/lib/$multiarch/actengine"
+for binary in "$work"/root/usr/bin/* "$libdir"/lib*.so.*.* "$libdir/actengine/libact_media_io.so"; do
   sections="$(readelf -S "$binary")"
   libraries="$(ldd "$binary")"
   if [[ "$sections" =~ $unstripped ]]; then fail "$binary is not stripped"; fi
@@ -54,6 +56,9 @@ for tool in act_convert act_eval act_bench act_drive; do
   "$work/root/usr/bin/$tool" --help >"$work/$tool.help" || fail "$tool --help failed"
   head -n 1 "$work/$tool.help"
 done
+# CHECKPOINT's folder holds its sample images: INT8 calibrated on them.
+"$work/root/usr/bin/act_convert" "$checkpoint" -o "$work/calibrated.actb" --precision int8 --calib "$checkpoint" \
+  >"$work/calibrated.log" 2>&1 || { cat "$work/calibrated.log"; fail "the packaged act_convert could not calibrate on images"; }
 
 # The consumer project against the unpacked package, with CMake...
 cmake -S "$source/test/consumer" -B "$work/consumer" -DCMAKE_PREFIX_PATH="$work/root/usr" -DCMAKE_BUILD_TYPE=Release \

@@ -16,11 +16,11 @@
 #include <thread>
 
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/inference.h"
+#include "apps/media/media_io.h"
 
 namespace act::drive::test {
 
@@ -130,14 +130,14 @@ class ManualFrameSource : public FrameSource {
 
 /// Writes an MJPG .avi of `frames` frames (a moving gradient) at `fps`.
 inline std::string write_test_video(const std::string& path, int frames, double fps, int width = 64, int height = 48) {
-  cv::VideoWriter writer(path, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), fps, cv::Size(width, height));
-  if (!writer.isOpened()) throw std::runtime_error("cannot write test video " + path);
+  const std::unique_ptr<act::media::VideoWriter> writer = act::media::create_video(path, "MJPG", fps, cv::Size(width, height));
+  if (!writer) throw std::runtime_error("cannot write test video " + path);
   for (int i = 0; i < frames; ++i) {
     cv::Mat image(height, width, CV_8UC3);
     for (int y = 0; y < height; ++y) {
       for (int x = 0; x < width; ++x) image.at<cv::Vec3b>(y, x) = cv::Vec3b(static_cast<uint8_t>(x * 4 + i), static_cast<uint8_t>(y * 5), 128);
     }
-    writer.write(image);
+    writer->write(image);
   }
   return path;
 }

@@ -16,11 +16,10 @@
 #include <thread>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
+#include "apps/media/media_io.h"
 #include "drive/drive_cli_util.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
@@ -163,10 +162,10 @@ TEST(ActDriveCli, OverlayVideoDrawsEveryTick) {
     ASSERT_EQ(rover_parse(line.c_str(), line.size(), &m), ROVER_OK) << line;
     sent.push_back(m);
   }
-  cv::VideoCapture overlay(dir + "/overlay.mp4");
-  ASSERT_TRUE(overlay.isOpened());
+  const std::unique_ptr<act::media::VideoReader> overlay = act::media::open_video(dir + "/overlay.mp4", cv::CAP_ANY);
+  ASSERT_TRUE(overlay);
   std::vector<cv::Mat> frames;
-  for (cv::Mat frame; overlay.read(frame);) frames.push_back(frame.clone());
+  for (cv::Mat frame; overlay->read(frame);) frames.push_back(frame.clone());
   EXPECT_NE(log.find("overlay video " + dir + "/overlay.mp4: " + std::to_string(frames.size()) + " ticks"), std::string::npos) << log;
   EXPECT_NE(log.find(" s: " + std::to_string(frames.size()) + " ticks ("), std::string::npos) << log;  // every tick
   ASSERT_GT(sent.size(), frames.size());
@@ -267,7 +266,7 @@ TEST(ActDriveCli, DryRunDrivesTheRealModelUntilTheVideoEnds) {
   ASSERT_EQ(rover_parse(last.c_str(), last.size(), &m), ROVER_OK);
   EXPECT_EQ(m.fields[1], 1500);
   EXPECT_EQ(m.fields[2], 1500);
-  const cv::Mat frame = cv::imread(dir + "/rec/frames/000000.png");
+  const cv::Mat frame = act::media::read_image(dir + "/rec/frames/000000.png");
   EXPECT_EQ(frame.cols, 128);
   EXPECT_EQ(frame.rows, 96);
   EXPECT_NE(read_text(dir + "/rec/meta.json").find("\"image_width\": 128"), std::string::npos);

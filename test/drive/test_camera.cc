@@ -9,9 +9,9 @@
 #include <string>
 #include <thread>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include "apps/drive/camera.h"
+#include "apps/media/media_io.h"
 #include "drive/drive_test_util.h"
 #include "drive/stalling_stream.h"
 #include "support/test_paths.h"
@@ -55,7 +55,7 @@ TEST(Camera, AVideoFilePlaysFromTheStartOfPlayback) {
 TEST(Camera, OpensAnImageSequenceLikeACamera) {
   const std::string dir = act::test::scratch_dir();
   for (int i = 0; i < 3; ++i) {
-    cv::imwrite(dir + "/frame_00" + std::to_string(i) + ".png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(10 * i, 20, 30)));
+    act::media::write_image(dir + "/frame_00" + std::to_string(i) + ".png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(10 * i, 20, 30)));
   }
   Camera camera(CameraOptions{dir + "/frame_%03d.png", 0, 0, 0});
   EXPECT_FALSE(camera.is_file());

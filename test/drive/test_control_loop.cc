@@ -8,9 +8,9 @@
 #include <fstream>
 #include <sstream>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include "apps/drive/control_loop.h"
+#include "apps/media/media_io.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 #include "support/test_paths.h"
@@ -325,7 +325,7 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   EXPECT_EQ(first_line["frame"], "frames/000000.png");
   EXPECT_EQ(first_line["state"].size(), 2u);
   for (const char* key : {"tick", "time_s", "frame_index", "frame_age_ms"}) EXPECT_TRUE(first_line.contains(key)) << key;
-  const cv::Mat first = cv::imread(rig.recording + "/frames/000000.png");
+  const cv::Mat first = act::media::read_image(rig.recording + "/frames/000000.png");
   EXPECT_EQ(first.cols, 64);
   EXPECT_EQ(first.rows, 48);
   std::string driving_row;
@@ -337,7 +337,7 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
   // max_forward 0.5 is 1650 us, +0.5.
   EXPECT_EQ(driving_row.substr(driving_row.size() - 8), ",0.5,0.5") << driving_row;
   const std::string frame = driving_row.substr(driving_row.find("tick_frames/"), 24);
-  const cv::Mat tick_frame = cv::imread(rig.recording + "/" + frame);
+  const cv::Mat tick_frame = act::media::read_image(rig.recording + "/" + frame);
   EXPECT_EQ(tick_frame.cols, 64) << frame;
   EXPECT_EQ(tick_frame.rows, 48) << frame;
 }

@@ -1,0 +1,12 @@
+// The running program's own folder, where act_drive finds act_pwm_watchdog and the apps find their
+// media module (media/media_io.h).
+#pragma once
+
+#include <filesystem>
+
+namespace act {
+
+/// The folder of /proc/self/exe. Throws act::Error (kIoError) when it cannot be read.
+std::filesystem::path executable_dir();
+
+}  // namespace act

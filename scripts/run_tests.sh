@@ -6,7 +6,8 @@
 #      Debian packages (unpacked, run, built against) and a smoke run of act_kernel_bench;
 #   2. every other test in a native build under AddressSanitizer + UndefinedBehaviorSanitizer
 #      (build-asan/; -O1 with the kernels at -O2, which builds in much less time than -O2
-#      everywhere while the whole-model tests stay quick);
+#      everywhere while the whole-model tests stay quick; act_tests in 4 processes, not one per
+#      test: ACT_TEST_SHARDS in test/CMakeLists.txt);
 #   3. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
 #      Debian packages (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
 #   4. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
@@ -107,7 +108,7 @@ echo "== ASan + UBSan build (-Werror) =="
 # -g1 (line tables) is all the sanitizer reports need, and builds much faster than -g.
 ACT_BUILD_DIR="$root/build-asan" "$root/scripts/build.sh" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DACT_SANITIZE=ON -DACT_WERROR=ON -DACT_BUILD_BENCH=OFF \
-  -DCMAKE_UNITY_BUILD=ON -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
+  -DCMAKE_UNITY_BUILD=ON -DACT_TEST_SHARDS=4 -DACT_GENERATED_CHECKPOINTS_DIR="$checkpoints"
 stage_done asan-build
 echo "== ASan + UBSan: every other test =="
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \

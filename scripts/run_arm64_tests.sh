@@ -11,8 +11,8 @@
 # unpacked, the library checked to be in /usr/lib/aarch64-linux-gnu, every app (and the image and
 # video module, apps/media) to be a stripped aarch64 program whose OpenCV libraries actengine-tools
 # depends on, and its act_bench run under qemu (`--help`, then one run that must say it is emulated),
-# so the packages CI ships start. (act_drive itself
-# cannot start under qemu here: OpenCV's own arm64 dependencies, FFmpeg and more, are not installed.)
+# so the packages CI ships start. (act_drive itself cannot start under qemu here: the arm64
+# dependencies of OpenCV's core, TBB, BLAS, LAPACK and GLX among them, are not installed.)
 #
 # Which tests: all of act_tests except the few end-to-end tests listed below, which repeat
 # whole-model inference many times or run the full-size model: under emulation each takes 15 s or more,
@@ -30,34 +30,34 @@ jobs="${ACT_JOBS:-$(nproc)}"
 # repeat whole-model inference (thread hand-offs, select_action over many steps, several seeds). The
 # native stages run them; here every fixture still runs end to end once (EveryIntermediateMatchesLeRobot).
 slow_tests=(
-  'Fixtures/FixtureTest\.ActionChunksMatchLeRobotForEverySampleAndImageFormat/.*'
-  'Fixtures/FixtureTest\.TemporalEnsemblingMatchesLeRobot/.*'
-  'Fixtures/FixtureTest\.SelectActionQueueMatchesLeRobot/.*'
-  'EngineApiTest\.TwoEnginesRunSideBySide'
-  'EngineApiTest\.SameResultForAnyThreadCountAndMemoryPlan'
-  'EngineApiTest\.OneEngineHandedFromThreadToThread'
-  'EngineApiTest\.EnginesOpenAndRunConcurrently'
-  'EngineApiTest\.ProfilingReportsEveryStage'
-  'EngineApiTest\.RowStrideIsHonoured'
-  'SyntheticModel\.ActivationsStayWellScaled'  # one inference of the full-size rover model
-  'SyntheticModel\.DeterministicForASeed'
-  'SplitEngine\.Int8StaticBlobRunsTheRestExactlyAsTheWholeEngine'  # an INT8 calibration, then two engines
+  'Fixtures/FixtureTest.ActionChunksMatchLeRobotForEverySampleAndImageFormat/*'
+  'Fixtures/FixtureTest.TemporalEnsemblingMatchesLeRobot/*'
+  'Fixtures/FixtureTest.SelectActionQueueMatchesLeRobot/*'
+  'EngineApiTest.TwoEnginesRunSideBySide'
+  'EngineApiTest.SameResultForAnyThreadCountAndMemoryPlan'
+  'EngineApiTest.OneEngineHandedFromThreadToThread'
+  'EngineApiTest.EnginesOpenAndRunConcurrently'
+  'EngineApiTest.ProfilingReportsEveryStage'
+  'EngineApiTest.RowStrideIsHonoured'
+  'SyntheticModel.ActivationsStayWellScaled'  # one inference of the full-size rover model
+  'SyntheticModel.DeterministicForASeed'
+  'SplitEngine.Int8StaticBlobRunsTheRestExactlyAsTheWholeEngine'  # an INT8 calibration, then two engines
   # INT8 conversions (each evaluates its held-out frames with and without int8 attention): 12-140 s
   # here; the int8 attention's NEON path runs in OpsPerIsa.AttentionS8* within a second.
-  'ConvertApi\.AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen'
-  'ConvertApi\.LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen'
-  'ConvertApi\.ReportStructMatchesItsJson'
-  'ConvertApi\.MissedMaxMseWritesNothing'
-  'SharedPackedWeights\..*'  # three or four engines of act-tiny's 45 MB each; the sharing does not depend on the ISA
-  'Modes/SchedulerVsPolicy\.ZeroLatencyOnRawChunksMatchesPolicySelectAction/TemporalEnsembling'  # 83 s
-  'Modes/SchedulerVsPolicy\.ZeroLatencyOnRawChunksMatchesPolicySelectAction/Queue'  # 29 s
+  'ConvertApi.AttentionPrecisionIsChosenByHeldOutErrorAndRunsAsChosen'
+  'ConvertApi.LinearInputCodesAreChosenByHeldOutErrorAndRunAsChosen'
+  'ConvertApi.ReportStructMatchesItsJson'
+  'ConvertApi.MissedMaxMseWritesNothing'
+  'SharedPackedWeights.*'  # three or four engines of act-tiny's 45 MB each; the sharing does not depend on the ISA
+  'Modes/SchedulerVsPolicy.ZeroLatencyOnRawChunksMatchesPolicySelectAction/TemporalEnsembling'  # 83 s
+  'Modes/SchedulerVsPolicy.ZeroLatencyOnRawChunksMatchesPolicySelectAction/Queue'  # 29 s
   # Whole-model inference repeated for the profiler and the blob's mapping (18-21 s each here): no
   # kernel of their own; the NEON variants run in EveryIsaThisCpuRunsGivesTheSameActions.
-  'EngineApiTest\.ProfilerTimesEveryOpAndTracesEveryThread'
-  'EngineApiTest\.TheRunningModelCannotChangeUnderIt'
+  'EngineApiTest.ProfilerTimesEveryOpAndTracesEveryThread'
+  'EngineApiTest.TheRunningModelCannotChangeUnderIt'
 )
-# A parameterized test's ctest name ends in "  # GetParam() = ...": the names above match up to it.
-exclude="^($(IFS='|'; echo "${slow_tests[*]}"))( .*)?\$"
+# gtest filter patterns (* any text): ACT_TEST_SHARDS below runs act_tests in 4 processes, and
+# GTEST_FILTER leaves these out of them.
 
 "$root/scripts/install_cross_deps.sh"
 
@@ -65,15 +65,15 @@ echo "== aarch64 cross build (core library + act_tests, -Werror) =="
 "$root/scripts/fetch_arm64_opencv.sh" "$build/opencv-arm64"
 # A unity build, as CI's sanitizer trees (scripts/run_tests.sh says why).
 configure=(--toolchain "$root/cmake/toolchains/aarch64-linux-gnu.cmake" -DACT_WERROR=ON -DACT_CORE_ONLY=ON -DACT_PACKAGE_APPS=ON
-           -DCMAKE_UNITY_BUILD=ON -DACT_ARM64_OPENCV_ROOT="$build/opencv-arm64/root")
+           -DCMAKE_UNITY_BUILD=ON -DACT_TEST_SHARDS=4 -DACT_ARM64_OPENCV_ROOT="$build/opencv-arm64/root")
 if [ -n "${ACT_SHARED_DIR:-}" ]; then configure+=(-DACT_SHARED_DIR="$ACT_SHARED_DIR"); fi
 ACT_BUILD_DIR="$build" "$root/scripts/build.sh" "${configure[@]}" "$@"
 
-# The emulator command as ctest runs it (gtest_discover_tests writes it at build time).
-emulator="$(grep -o -m1 '[^ ]*qemu-aarch64[^ ]* -cpu [^ ]*' "$build"/test/act_tests*_tests.cmake \
-  || true)"
+# The emulator command as ctest runs it (CMAKE_CROSSCOMPILING_EMULATOR, in each shard's command).
+emulator="$(sed -n 's/^add_test(\[=\[act_tests_shard_0_of_[0-9]*\]=\] "\([^"]*qemu-aarch64\)" "-cpu" "\([^"]*\)".*/\1 -cpu \2/p' \
+  "$build/test/CTestTestfile.cmake")"
 if [ -z "$emulator" ]; then
-  echo "run_arm64_tests: act_tests in $build is not set up to run under qemu-aarch64" >&2
+  echo "run_arm64_tests: act_tests in $build is not set up to run under qemu-aarch64 in shards" >&2
   exit 1
 fi
 # The emulated CPU's SIMD variants must really run (the host's requirement does not apply here).
@@ -82,17 +82,24 @@ case "$emulator" in
   *) export ACT_TEST_REQUIRE_ISAS=neon,neondot ;;
 esac
 echo "kernel variants required under emulation: ${ACT_TEST_REQUIRE_ISAS:-none}"
-count() { ctest --test-dir "$build" -N "$@" | sed -n 's/^Total Tests: //p'; }
-ctest_args=(--test-dir "$build" --output-on-failure --no-tests=error -j "$jobs" --timeout 600)
+read -r -a qemu <<<"$emulator"
+# The tests a gtest filter selects, one per line.
+list_tests() {
+  "${qemu[@]}" "$build/test/act_tests" --gtest_list_tests --gtest_filter="$1" |
+    awk '/^[^ ]/ {suite = $1} /^  / {print suite $1}'
+}
 if [ "${ACT_ARM64_TESTS:-quick}" = "all" ]; then
-  echo "== aarch64 tests under $emulator: all $(count) =="
+  export GTEST_FILTER='*'
+  echo "== aarch64 tests under $emulator: all $(list_tests '*' | wc -l) =="
 else
-  echo "== aarch64 tests under $emulator: $(count -E "$exclude") of $(count) =="
+  export GTEST_FILTER="-$(IFS=':'; echo "${slow_tests[*]}")"
+  echo "== aarch64 tests under $emulator: $(list_tests "$GTEST_FILTER" | wc -l) of $(list_tests '*' | wc -l) =="
   echo "not run under emulation (slow; the native stages run them; ACT_ARM64_TESTS=all runs them):"
-  ctest --test-dir "$build" -N -R "$exclude" | sed -n 's/^ *Test *#[0-9]*: \([^ ]*\).*/  \1/p'
-  ctest_args+=(-E "$exclude")
+  list_tests "$(IFS=':'; echo "${slow_tests[*]}")" | sed 's/^/  /'
 fi
-ctest "${ctest_args[@]}"
+# act_tests in 4 processes (ACT_TEST_SHARDS): a process per test spent most of its time starting
+# the emulator and the program (117 s for 352 tests on two cores; the 4 shards ran them in about 90).
+ctest --test-dir "$build" --output-on-failure --no-tests=error -j "$jobs"
 
 echo "== arm64 Debian packages =="
 rm -f "$build"/*.deb
@@ -140,7 +147,6 @@ for program in "$unpacked"/usr/bin/{act_bench,act_eval,act_convert,act_drive,act
   done
 done
 # The dynamic loader and libraries come from the multiarch arm64 runtime, as for the tests.
-read -r -a qemu <<<"$emulator"
 help="$("${qemu[@]}" "$unpacked/usr/bin/act_bench" --help)"
 echo "${help%%$'\n'*}"
 # A run under qemu says that its timings are the emulator's, in the text and the JSON.

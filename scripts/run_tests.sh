@@ -8,8 +8,8 @@
 #      (build-asan/; -O1 with the kernels at -O2, which builds in much less time than -O2
 #      everywhere while the whole-model tests stay quick; act_tests in 4 processes, not one per
 #      test: ACT_TEST_SHARDS in test/CMakeLists.txt);
-#   3. the core library's tests cross-compiled for aarch64 and run under qemu-user, and the arm64
-#      Debian packages (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
+#   3. the core library's tests cross-compiled for aarch64 and run under qemu-user (in 4 shards too),
+#      and the arm64 Debian packages (scripts/run_arm64_tests.sh; ACT_SKIP_ARM64=1 skips it);
 #   4. the threaded tests under ThreadSanitizer (scripts/run_tsan.sh; ACT_SKIP_TSAN=1 skips it);
 #   5. each parser's libFuzzer target for ACT_FUZZ_SECONDS (default 30; scripts/run_fuzz.sh;
 #      ACT_SKIP_FUZZ=1 skips it).

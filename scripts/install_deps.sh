@@ -20,6 +20,7 @@ if [ "$mode" != "--packaging" ]; then
     git libgtest-dev libgmock-dev libbenchmark-dev
     gcc-avr avr-libc arduino-core-avr
     python3 python3-numpy python3-torch
+    libopenblas0-serial       # their BLAS: the test checkpoints' float64 references 3x faster than netlib's
     python3-pil               # act_drive's recording_to_lerobot.py and its test
     python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (engine/python) and its tests
     clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh

@@ -1,9 +1,15 @@
 #include "support/act_test_util.h"
 
+#include <unistd.h>
+
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <system_error>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -23,9 +29,60 @@ Int8Options quick_int8_options(Int8Mode mode) {
   return options;
 }
 
+namespace {
+
+std::string hex_hash(const std::string& text) {
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016zx", std::hash<std::string>{}(text));
+  return hex;
+}
+
+// What a conversion of `checkpoint_dir` by `exe` depends on: the names, sizes and modification
+// times of the checkpoint's files and of the binary (a rebuild may convert differently).
+std::string conversion_key(const fs::path& checkpoint_dir, const fs::path& exe) {
+  std::vector<fs::path> files{exe};
+  for (const auto& entry : fs::recursive_directory_iterator(checkpoint_dir)) {
+    if (entry.is_regular_file()) files.push_back(entry.path());
+  }
+  std::sort(files.begin() + 1, files.end());
+  std::ostringstream id;
+  for (const fs::path& f : files) {
+    id << f.string() << ' ' << fs::file_size(f) << ' ' << fs::last_write_time(f).time_since_epoch().count() << '\n';
+  }
+  return hex_hash(id.str());
+}
+
+}  // namespace
+
 std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem) {
   const std::string path = (fs::path(scratch) / (stem + ".actb")).string();
-  write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);
+  // Many tests convert the same checkpoint (a second each under ASan, more for the full-size
+  // ones): the first conversion by this test binary is kept beside it, one per checkpoint, and the
+  // later ones, in any process, copy it.
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  const fs::path cache_dir = exe.parent_path() / "converted_checkpoints";
+  if (!ec) fs::create_directories(cache_dir, ec);
+  if (ec || !fs::is_directory(checkpoint_dir)) {
+    write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);
+    return path;
+  }
+  const std::string prefix = exe.filename().string() + "." + hex_hash(fs::canonical(checkpoint_dir).string()) + ".";
+  const fs::path cached = cache_dir / (prefix + conversion_key(checkpoint_dir, exe) + ".actb");
+  if (!fs::exists(cached)) {
+    // Written under a name of its own and renamed, so a test running beside this one never copies
+    // half a blob; an older conversion of the same checkpoint goes.
+    const fs::path partial = cached.string() + "." + std::to_string(::getpid());
+    write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), partial.string());
+    for (const auto& entry : fs::directory_iterator(cache_dir)) {
+      const std::string name = entry.path().filename().string();
+      if (name.rfind(prefix, 0) == 0 && name.find(".actb.") == std::string::npos) fs::remove(entry.path(), ec);
+    }
+    fs::rename(partial, cached);
+  }
+  if (!fs::copy_file(cached, path, fs::copy_options::overwrite_existing, ec)) {
+    write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);  // evicted meanwhile by a rebuilt binary
+  }
   return path;
 }
 

@@ -12,6 +12,8 @@
 namespace act::test {
 
 /// act_convert in-process: imports `checkpoint_dir` and writes `<scratch>/<stem>.actb`; returns its path.
+/// The first conversion of a checkpoint by a test binary is kept in `converted_checkpoints/` beside
+/// the binary; later calls (any process) copy it while neither the checkpoint's files nor the binary change.
 std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem = "model");
 
 /// INT8 options for a quick conversion in a test: 8 calibration frames and 3 held out, 2 threads, no

@@ -1,7 +1,5 @@
 #include "support/act_test_util.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -56,6 +54,7 @@ std::string conversion_key(const fs::path& checkpoint_dir, const fs::path& exe) 
 
 std::string convert_checkpoint(const std::string& checkpoint_dir, const std::string& scratch, const std::string& stem) {
   const std::string path = (fs::path(scratch) / (stem + ".actb")).string();
+  const auto convert_to = [&](const std::string& blob) { write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), blob); };
   // Many tests convert the same checkpoint (a second each under ASan, more for the full-size
   // ones): the first conversion by this test binary is kept beside it, one per checkpoint, and the
   // later ones, in any process, copy it.
@@ -64,24 +63,21 @@ std::string convert_checkpoint(const std::string& checkpoint_dir, const std::str
   const fs::path cache_dir = exe.parent_path() / "converted_checkpoints";
   if (!ec) fs::create_directories(cache_dir, ec);
   if (ec || !fs::is_directory(checkpoint_dir)) {
-    write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);
+    convert_to(path);
     return path;
   }
   const std::string prefix = exe.filename().string() + "." + hex_hash(fs::canonical(checkpoint_dir).string()) + ".";
   const fs::path cached = cache_dir / (prefix + conversion_key(checkpoint_dir, exe) + ".actb");
   if (!fs::exists(cached)) {
-    // Written under a name of its own and renamed, so a test running beside this one never copies
-    // half a blob; an older conversion of the same checkpoint goes.
-    const fs::path partial = cached.string() + "." + std::to_string(::getpid());
-    write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), partial.string());
+    // An older conversion of the same checkpoint goes (not a blob being written: "<name>.actb.tmp.<pid>").
     for (const auto& entry : fs::directory_iterator(cache_dir)) {
       const std::string name = entry.path().filename().string();
       if (name.rfind(prefix, 0) == 0 && name.find(".actb.") == std::string::npos) fs::remove(entry.path(), ec);
     }
-    fs::rename(partial, cached);
+    convert_to(cached.string());  // the blob writer's file gets its name only once complete
   }
   if (!fs::copy_file(cached, path, fs::copy_options::overwrite_existing, ec)) {
-    write_fp32_blob(import_lerobot_checkpoint(checkpoint_dir), path);  // evicted meanwhile by a rebuilt binary
+    convert_to(path);  // evicted meanwhile by a rebuilt binary
   }
   return path;
 }

@@ -35,6 +35,11 @@ run_ctest() {
   shift
   if ctest --test-dir "$dir" --output-on-failure -j "$jobs" "$@"; then return 0; fi
   local failed failed_names=()
+  if [ ! -f "$dir/Testing/Temporary/LastTestsFailed.log" ]; then  # ctest itself could not finish
+    echo "ctest wrote no list of failed tests in $dir; the disk:"
+    df -h "$root" /tmp
+    exit 1
+  fi
   while IFS=: read -r _ failed; do failed_names+=("$failed"); done < "$dir/Testing/Temporary/LastTestsFailed.log"
   test_log() {
     awk -v name="$1" '{ p = index($0, " Testing: ") } p && substr($0, p + 10) == name {on = 1}
@@ -48,8 +53,14 @@ run_ctest() {
   echo "== output of the failed tests in $dir =="
   for failed in "${failed_names[@]}"; do test_log "$failed" | tail -n 80; done
   echo "stage times: ${timings[*]} (failed in $dir after $SECONDS s)"
+  echo "disk: $(free_disk) free"
   exit 1
 }
+
+# The build trees, generated checkpoints and converted blobs of a run take about 6 GB (each test's
+# scratch folder goes when it passes: support/test_paths.h); "No space left on device" is the host's.
+free_disk() { df -h --output=avail "$root" | tail -n 1 | tr -d ' '; }
+echo "disk: $(free_disk) free on the checkout's filesystem"
 
 "$root/scripts/install_deps.sh"
 stage_done install
@@ -132,4 +143,5 @@ if [ "${ACT_SKIP_FUZZ:-0}" != "1" ]; then
   stage_done fuzz-build+runs
 fi
 echo "stage times: ${timings[*]} (total $SECONDS s)"
+echo "disk: the build trees take $(du -sch "$root"/build* | tail -n 1 | cut -f1), $(free_disk) free"
 echo "all tests passed"

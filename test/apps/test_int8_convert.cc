@@ -191,9 +191,10 @@ TEST(ActConvertInt8, InterruptedConversionLeavesNothing) {
                                 " --precision int8 --mode mixed --target-mse 1e-12 --calib " + q(src);
     const std::string log = q(dir + "/convert.log");
     // env --default-signal: a script's background job would otherwise ignore SIGINT.
-    const CommandResult r = run_command("env --default-signal=INT " + convert + " 2>" + log + " & pid=$!; while kill -0 $pid 2>/dev/null && ! grep -q 'sensitivity search' " +
-                                        log + "; do sleep 0.02; done; kill -" + signal + " $pid; wait $pid; code=$?; cat " + log +
-                                        "; rm " + log + "; exit $code");
+    const CommandResult r = run_command(
+        "env --default-signal=INT " + convert + " 2>" + log + " & pid=$!; " +
+        "while kill -0 $pid 2>/dev/null && ! grep -q 'sensitivity search' " + log + "; do sleep 0.02; done; " +
+        "kill -" + signal + " $pid; wait $pid; code=$?; cat " + log + "; rm " + log + "; exit $code");
     EXPECT_EQ(r.exit_code, 128 + number) << signal << ": " << r.output;  // killed by the signal while running
     EXPECT_EQ(r.output.find("wrote"), std::string::npos) << signal << ": " << r.output;
     EXPECT_FALSE(fs::exists(dir + "/k.actb")) << signal;

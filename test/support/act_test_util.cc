@@ -11,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "support/test_paths.h"
 #include "weights/import/lerobot_import.h"
 
 namespace fs = std::filesystem;
@@ -59,10 +60,10 @@ std::string convert_checkpoint(const std::string& checkpoint_dir, const std::str
   // ones): the first conversion by this test binary is kept beside it, one per checkpoint, and the
   // later ones, in any process, copy it.
   std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  const fs::path exe = this_executable();
   const fs::path cache_dir = exe.parent_path() / "converted_checkpoints";
-  if (!ec) fs::create_directories(cache_dir, ec);
-  if (ec || !fs::is_directory(checkpoint_dir)) {
+  if (!exe.empty()) fs::create_directories(cache_dir, ec);
+  if (exe.empty() || ec || !fs::is_directory(checkpoint_dir)) {
     convert_to(path);
     return path;
   }

@@ -9,9 +9,21 @@ namespace fs = std::filesystem;
 
 namespace act::test {
 
-bool running_in_ci() {
-  const char* ci = std::getenv("CI");
-  return ci != nullptr && std::string(ci) == "true";
+namespace {
+
+bool env_equals(const char* name, const std::string& value) {
+  const char* set = std::getenv(name);
+  return set != nullptr && set == value;
+}
+
+}  // namespace
+
+bool running_in_ci() { return env_equals("CI", "true"); }
+
+std::filesystem::path this_executable() {
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::path() : exe;
 }
 
 std::string fixture_dir(const std::string& name) {
@@ -32,17 +44,13 @@ class RemoveScratchOfPassedTests : public testing::EmptyTestEventListener {
   void OnTestEnd(const testing::TestInfo& info) override {
     if (current_.empty()) return;
     const fs::path dir = std::exchange(current_, {});
-    if (info.result()->Failed() || keep_all()) return;
+    if (info.result()->Failed() || env_equals("ACT_KEEP_SCRATCH", "1")) return;
     std::error_code ec;  // best effort: a folder the test left busy only costs disk
     fs::remove_all(dir, ec);
   }
   void set_current(const fs::path& dir) { current_ = dir; }
 
  private:
-  static bool keep_all() {
-    const char* keep = std::getenv("ACT_KEEP_SCRATCH");
-    return keep != nullptr && std::string(keep) == "1";
-  }
   fs::path current_;
 };
 

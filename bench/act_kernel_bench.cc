@@ -14,7 +14,8 @@
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
 //     LayerNorm, softmax, softmax into int8 (bytes/s).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
-// sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time),
+// sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time,
+// times T: the peak of T cores),
 // at T = 1 also GMAC/s_cpu and pct_peak_cpu (by the thread's CPU time: what to read on a shared,
 // loaded machine, where wall time includes time spent descheduled) and, for T > 1, speedup_vs_1t
 // (the same benchmark's best single-thread time / this one's). Threads split the output into tiles
@@ -142,7 +143,8 @@ void run_timed(benchmark::State& state, const std::string& key, int threads, dou
   if (macs > 0) {
     state.counters["GMAC/s"] = benchmark::Counter(macs * 1e-9, benchmark::Counter::kIsRate);
     if (peak_gmacs > 0) {
-      state.counters["pct_peak"] = benchmark::Counter(macs * 1e-9 / peak_gmacs * 100.0, benchmark::Counter::kIsRate);
+      state.counters["pct_peak"] =
+          benchmark::Counter(macs * 1e-9 / (peak_gmacs * threads) * 100.0, benchmark::Counter::kIsRate);
     }
     // Single thread on a shared machine: the rate by this thread's CPU time, robust to being
     // descheduled (the probe is measured the same way).

@@ -670,9 +670,12 @@ class BlobSemanticsTest : public EngineApiTest {
                                                                       << " (expected: " << needle << ")";
     }
   }
+  // act-tiny in dynamic INT8, written once per test (5-7 s under qemu).
   std::string int8_blob() {
     const std::string path = scratch_ + "/dynamic.actb";
-    write_int8_blob(import_lerobot_checkpoint(test::fixture_dir("act-tiny")), QuantConfig{}, path);
+    if (!fs::exists(path)) {
+      write_int8_blob(import_lerobot_checkpoint(test::fixture_dir("act-tiny")), QuantConfig{}, path);
+    }
     return path;
   }
   static nlohmann::json* input_norm_entry(nlohmann::json& config, const std::string& key) {

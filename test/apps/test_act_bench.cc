@@ -2,6 +2,7 @@
 // the model (never asserted against wall-clock limits).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 #include <set>
 
@@ -77,8 +78,14 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   EXPECT_EQ(huge % (uint64_t{2} << 20), 0u) << huge;
   EXPECT_LE(static_cast<double>(huge), j["peak_rss_bytes"].get<double>());
   EXPECT_NE(r.output.find("in huge pages"), std::string::npos) << r.output;
-  // % of peak is the achieved rate over the probe's per-core peak times the threads.
+  // % of peak is the achieved rate over the probe's per-core peak times the threads; the peak is
+  // the higher of the probe's readings before and after the timed runs.
   if (j["peak"]["gmac_per_s_per_core"].get<double>() > 0) {
+    const double before = j["peak"]["gmac_per_s_per_core_before_runs"], after = j["peak"]["gmac_per_s_per_core_after_runs"];
+    EXPECT_GT(before, 0.0);
+    EXPECT_GT(after, 0.0);
+    EXPECT_EQ(j["peak"]["gmac_per_s_per_core"].get<double>(), std::max(before, after));
+    EXPECT_NE(r.output.find("the probe read"), std::string::npos) << r.output;
     const double want = 100.0 * j["achieved_gmac_per_s"].get<double>() / (j["peak"]["gmac_per_s_per_core"].get<double>() * 1);
     EXPECT_NEAR(j["peak"]["percent_of_peak"].get<double>(), want, 1e-6 * want);
     // ... and at the median run: the GMAC over the total's p50.

@@ -213,22 +213,20 @@ struct Peak {
   bool int8 = false;
   act::kernels::Isa isa{};
   const act::kernels::PeakProbe* probe = nullptr;
-  double before_runs = 0, after_runs = 0;  ///< GMAC/s per core
-  double gmacs_per_core = 0;               ///< the higher of the two
+  double before_runs = 0, after_runs = 0;  ///< the probe's readings, GMAC/s per core
+
+  double gmacs_per_core() const { return std::max(before_runs, after_runs); }
+  /// One reading of the probe now (0 without one).
+  double read() const { return probe ? act::kernels::measure_peak_gmacs(*probe) : 0.0; }
 };
 
-Peak probe_peak(const act::ModelInfo& info) {
+// The probe for the engine's precision and kernel level, not yet read.
+Peak peak_probe_for(const act::ModelInfo& info) {
   Peak peak;
   peak.int8 = info.precision.rfind("int8", 0) == 0;
   peak.isa = act::kernels::parse_isa(info.isa).value_or(act::kernels::Isa::kRef);
   peak.probe = act::kernels::isa_peak_probe(peak.isa, peak.int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
-  peak.before_runs = peak.probe ? act::kernels::measure_peak_gmacs(*peak.probe) : 0.0;
   return peak;
-}
-
-void probe_peak_again(Peak& peak) {
-  peak.after_runs = peak.probe ? act::kernels::measure_peak_gmacs(*peak.probe) : 0.0;
-  peak.gmacs_per_core = std::max(peak.before_runs, peak.after_runs);
 }
 
 // --compare: the other precision's latency, and how far its actions are from ours.
@@ -323,7 +321,8 @@ class Benchmark {
       if (other_) infer(*other_, i, other_chunk);
     }
     engine_->reset_op_profile();  // the op profile averages the timed runs only
-    peak_ = probe_peak(engine_->model_info());
+    peak_ = peak_probe_for(engine_->model_info());
+    peak_.before_runs = peak_.read();
 
     act::ProgressLine progress(stderr, "act_bench", act::ProgressLine::stderr_is_terminal());
     const size_t runs = static_cast<size_t>(opt_.num_runs);
@@ -384,9 +383,9 @@ class Benchmark {
     }
     machine_ = act::read_machine_info();
     // The achieved rate is compared with the per-core peak times the threads.
-    probe_peak_again(peak_);
+    peak_.after_runs = peak_.read();
     // Also at the median run: one slow run of a shared host moves the mean, not the median.
-    const double peak_gmacs = peak_.gmacs_per_core * engine_->threads();
+    const double peak_gmacs = peak_.gmacs_per_core() * engine_->threads();
     const auto percent_of_peak = [&](double gmac, double ms) { return 100.0 * gmac / (ms / 1e3) / peak_gmacs; };
     pct_peak_ = peak_gmacs > 0 ? 100.0 * gmacs_per_s_ / peak_gmacs : 0.0;
     pct_peak_p50_ = peak_gmacs > 0 ? percent_of_peak(gmac_, total().p50) : 0.0;
@@ -402,7 +401,7 @@ class Benchmark {
     huge_page_bytes_ = act::graph::AlignedBuffer::huge_page_bytes();
     if (opt_.op_profiling) {
       const std::vector<act::OpProfile> profile = engine_->op_profile();
-      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core * engine_->threads(), timed_.op_ms);
+      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core() * engine_->threads(), timed_.op_ms);
     }
   }
 
@@ -437,9 +436,9 @@ class Benchmark {
                   s.p90, s.p95, s.p99, s.max, peak);
     }
     std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total().mean, gmacs_per_s_);
-    if (peak_.probe != nullptr && peak_.gmacs_per_core > 0) {
+    if (peak_.probe != nullptr && peak_.gmacs_per_core() > 0) {
       std::printf("peak         %.1f %% of this CPU's %s peak at the mean run, %.1f %% at the median: %.1f GMAC/s per core (%s probe) x %d threads%s\n",
-                  pct_peak_, peak_.int8 ? "INT8" : "FP32", pct_peak_p50_, peak_.gmacs_per_core, peak_.probe->name, engine_->threads(),
+                  pct_peak_, peak_.int8 ? "INT8" : "FP32", pct_peak_p50_, peak_.gmacs_per_core(), peak_.probe->name, engine_->threads(),
                   machine_.emulation.empty() ? "" : " (both emulated: says nothing of a real CPU)");
       std::printf("             the probe read %.1f GMAC/s before the timed runs and %.1f after: the higher is the peak\n",
                   peak_.before_runs, peak_.after_runs);
@@ -492,7 +491,7 @@ class Benchmark {
     j["achieved_gmac_per_s"] = gmacs_per_s_;
     j["peak"] = {{"kind", peak_.int8 ? "int8" : "fp32"},
                  {"probe", peak_.probe ? peak_.probe->name : ""},
-                 {"gmac_per_s_per_core", peak_.gmacs_per_core},
+                 {"gmac_per_s_per_core", peak_.gmacs_per_core()},
                  {"gmac_per_s_per_core_before_runs", peak_.before_runs},
                  {"gmac_per_s_per_core_after_runs", peak_.after_runs},
                  {"percent_of_peak", pct_peak_},

@@ -57,5 +57,5 @@ compile_b=$!
 wait "$compile_a" || die "compiling A ($rev) failed"
 wait "$compile_b" || die "compiling B (the working tree) failed"
 g++ -O2 -std=c++20 -I"$root" -DACT_AB_TABLE_A="${table}_ab_A" -DACT_AB_TABLE_B="${table}_ab_B" \
-  "$root/bench/tools/gemm_s8_ab_main.cc" "$work/a.o" "$work/b.o" "$lib" -lpthread -o "$work/gemm_s8_ab"
+  "$root/bench/tools/gemm_s8_ab_main.cc" "$work/a.o" "$work/b.o" "$lib" -lcpuinfo -lpthread -o "$work/gemm_s8_ab"
 "$work/gemm_s8_ab" "$@"

@@ -11,8 +11,6 @@
 // Per shape: the median time of A and of B (each round's best of 3 calls) and the median and
 // 10th-90th percentiles of the rounds' B/A ratios. +zp gives A per-row zero points (the dynamic
 // per-token linears); f32 output takes per-row scales and a bias, as the transformer's linears do.
-#include <time.h>
-
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
@@ -26,6 +24,7 @@
 
 #include "kernels/conv_s8/conv_s8.h"
 #include "kernels/gemm_s8/gemm_s8.h"
+#include "kernels/peak/peak_probe.h"
 
 namespace act::kernels {
 const GemmS8Kernels* ACT_AB_TABLE_A();
@@ -35,6 +34,7 @@ const GemmS8Kernels* ACT_AB_TABLE_B();
 namespace {
 
 using act::kernels::GemmS8Kernels;
+using act::kernels::thread_cpu_seconds;
 
 enum class Out { kS8, kF32, kS32 };
 
@@ -84,12 +84,6 @@ bool parse_shape(std::string text, Shape& s) {
     }
   }
   return false;
-}
-
-double thread_cpu_seconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
 double percentile(std::vector<double> v, double p) {
@@ -147,24 +141,23 @@ void compare(const GemmS8Kernels& a, const GemmS8Kernels& b, const Shape& s, int
   // A conv's input codes have zero point -3 (as packed); its output pixels go in the network's tiles.
   const int tile = s.conv ? act::kernels::conv_s8_tile_pixels(s.conv_shape) : 0;
   std::vector<int8_t> conv_scratch(s.conv ? act::kernels::conv_s8_scratch_bytes(s.conv_shape, tile) : 0);
-  const auto run_conv = [&](const GemmS8Kernels& v) {
-    const act::kernels::ConvS8 conv{s.conv_shape, &v, packed.get(), -3};
-    for (int p = 0; p < s.m; p += tile) act::kernels::conv_s8_s8out(conv, x.data(), o8, p, std::min(tile, s.m - p), conv_scratch.data());
+  const auto run_once = [&](const GemmS8Kernels& v) {
+    if (s.conv) {
+      const act::kernels::ConvS8 conv{s.conv_shape, &v, packed.get(), -3};
+      for (int p = 0; p < s.m; p += tile) act::kernels::conv_s8_s8out(conv, x.data(), o8, p, std::min(tile, s.m - p), conv_scratch.data());
+      return;
+    }
+    switch (s.out) {
+      case Out::kS8: v.s8out(g, o8, 0, s.m, 0, s.n); break;
+      case Out::kF32: v.f32out(g, of, 0, s.m, 0, s.n); break;
+      case Out::kS32: v.s32out(g, o32, 0, s.m, 0, s.n); break;
+    }
   };
   const auto best_of_3 = [&](const GemmS8Kernels& v) {
     double best = 1e30;
     for (int i = 0; i < 3; ++i) {
       const double t0 = thread_cpu_seconds();
-      if (s.conv) {
-        run_conv(v);
-        best = std::min(best, thread_cpu_seconds() - t0);
-        continue;
-      }
-      switch (s.out) {
-        case Out::kS8: v.s8out(g, o8, 0, s.m, 0, s.n); break;
-        case Out::kF32: v.f32out(g, of, 0, s.m, 0, s.n); break;
-        case Out::kS32: v.s32out(g, o32, 0, s.m, 0, s.n); break;
-      }
+      run_once(v);
       best = std::min(best, thread_cpu_seconds() - t0);
     }
     return best;
@@ -178,15 +171,16 @@ void compare(const GemmS8Kernels& a, const GemmS8Kernels& b, const Shape& s, int
     tb.push_back(a_first ? second : first);
     ratio.push_back(tb.back() / ta.back());
   }
-  const char* kinds[] = {"s8", "f32", "s32"};
+  char label[96];
   if (s.conv) {
-    std::printf("conv:%dx%dx%d:%d:%d:%d (M %d K %d)  A %.4f ms  B %.4f ms  B/A %.3f (10-90 %%: %.3f-%.3f)\n", cs.in_h,
-                cs.in_w, cs.in_c, cs.out_c, cs.kernel_h, cs.stride, s.m, s.k, 1e3 * percentile(ta, 0.5), 1e3 * percentile(tb, 0.5),
-                percentile(ratio, 0.5), percentile(ratio, 0.1), percentile(ratio, 0.9));
-    return;
+    std::snprintf(label, sizeof label, "conv:%dx%dx%d:%d:%d:%d (M %d K %d)", cs.in_h, cs.in_w, cs.in_c, cs.out_c,
+                  cs.kernel_h, cs.stride, s.m, s.k);
+  } else {
+    const char* kinds[] = {"s8", "f32", "s32"};
+    std::snprintf(label, sizeof label, "%dx%dx%d:%s%s", s.m, s.n, s.k, kinds[static_cast<int>(s.out)],
+                  s.row_zero_points ? "+zp" : "");
   }
-  std::printf("%dx%dx%d:%s%s  A %.4f ms  B %.4f ms  B/A %.3f (10-90 %%: %.3f-%.3f)\n", s.m, s.n, s.k,
-              kinds[static_cast<int>(s.out)], s.row_zero_points ? "+zp" : "", 1e3 * percentile(ta, 0.5),
+  std::printf("%s  A %.4f ms  B %.4f ms  B/A %.3f (10-90 %%: %.3f-%.3f)\n", label, 1e3 * percentile(ta, 0.5),
               1e3 * percentile(tb, 0.5), percentile(ratio, 0.5), percentile(ratio, 0.1), percentile(ratio, 0.9));
 }
 

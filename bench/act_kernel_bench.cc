@@ -12,7 +12,9 @@
 //   - attention_f32/<isa>/<tokens>/threads:T: the float attention op, 8 heads of QK^T, softmax,
 //     PV on the packed gemm_f32, head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
-//     LayerNorm, softmax, softmax into int8 (bytes/s).
+//     LayerNorm, softmax, softmax into int8 (bytes/s);
+//   - thread_pool/dispatch/threads:T (an empty parallel section) and thread_pool/cache_line_round_trip
+//     (a cache line from one thread to another and back: what each cross-core step costs).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
 // sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time,
 // times T: the peak of T cores),
@@ -38,6 +40,7 @@
 #include <memory>
 #include <random>
 #include <sstream>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -486,6 +489,32 @@ void bm_dispatch(benchmark::State& state, int threads) {
   benchmark::DoNotOptimize(tasks_run.load());
 }
 
+// A cache line handed from one thread to another and back (an atomic counter each bumps in turn):
+// the floor under every cross-thread step of an inference (a section's start and end, a row read
+// from the other core). About 50-100 ns where two cores share an L3; 470 ns on a 2-vCPU EPYC guest
+// whose vCPUs sit on different dies (session 35), where two threads scale worse than the kernels.
+void bm_cache_line_round_trip(benchmark::State& state) {
+  alignas(64) std::atomic<uint64_t> turn{0};
+  std::atomic<bool> stop{false};
+  std::thread partner([&] {
+    for (uint64_t seen = 1; !stop.load(std::memory_order_relaxed); seen += 2) {
+      while (turn.load(std::memory_order_acquire) != seen) {
+        if (stop.load(std::memory_order_relaxed)) return;
+      }
+      turn.store(seen + 1, std::memory_order_release);
+    }
+  });
+  uint64_t mine = 0;
+  for (auto _ : state) {
+    turn.store(mine + 1, std::memory_order_release);
+    while (turn.load(std::memory_order_acquire) != mine + 2) {
+    }
+    mine += 2;
+  }
+  stop.store(true, std::memory_order_relaxed);
+  partner.join();
+}
+
 void bm_maxpool(benchmark::State& state, const kernels::MaxPoolS8Kernels* k, int h, int w) {
   const int c = 64, oh = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1), ow = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
   std::vector<int8_t> x(static_cast<size_t>(h) * w * c, 1), y(static_cast<size_t>(oh) * ow * c);
@@ -705,6 +734,11 @@ int main(int argc, char** argv) {
   for (int t = 1; t <= max_threads; ++t) {
     benchmark::RegisterBenchmark(("thread_pool/dispatch/threads:" + std::to_string(t)).c_str(), bench::bm_dispatch, t)
         ->Unit(benchmark::kMicrosecond)
+        ->UseRealTime();
+  }
+  if (max_threads > 1) {
+    benchmark::RegisterBenchmark("thread_pool/cache_line_round_trip", bench::bm_cache_line_round_trip)
+        ->Unit(benchmark::kNanosecond)
         ->UseRealTime();
   }
   benchmark::AddCustomContext("cpu_model", bench::cpu_model());

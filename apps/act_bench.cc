@@ -27,6 +27,8 @@
 #include "apps/progress.h"
 #include "apps/status_error.h"
 #include "graph/aligned_buffer.h"
+#include "graph/peak_together.h"
+#include "graph/thread_pool.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
@@ -204,25 +206,30 @@ struct TimedRuns {
   act::DiffStats action_diff;  ///< ours against the other precision's
 };
 
-// This core's peak for the engine's main kernels (int8 dot products, or float FMAs), measured by
-// the same register-only probe as act_kernel_bench, right before the timed runs and right after:
-// the higher of the two is the peak. A shared host's speed moves within seconds (one probe read
-// 369 GMAC/s and the next 434, minutes apart), and a probe that caught a slow moment would put the
-// runs above their real share of the machine.
+// The peak of the engine's threads for its main kernels (int8 dot products, or float FMAs): the
+// same register-only probe as act_kernel_bench, run on as many threads at once as the engine runs
+// (graph/peak_together.h: one core's reading times T overstates T cores where they differ or share
+// a clock budget), right before the timed runs and right after: the higher of the two is the peak. A
+// shared host's speed moves within seconds (one probe read 369 GMAC/s and the next 434, minutes
+// apart), and a probe that caught a slow moment would put the runs above their real share of the
+// machine.
 struct Peak {
   bool int8 = false;
   act::kernels::Isa isa{};
   const act::kernels::PeakProbe* probe = nullptr;
-  double before_runs = 0, after_runs = 0;  ///< the probe's readings, GMAC/s per core
+  int threads = 1;  ///< the threads the probe runs on at once: the engine's, at most one per core
+  double before_runs = 0, after_runs = 0;  ///< the probe's readings, GMAC/s of all `threads`
 
-  double gmacs_per_core() const { return std::max(before_runs, after_runs); }
+  double gmacs() const { return std::max(before_runs, after_runs); }
+  double gmacs_per_core() const { return gmacs() / threads; }
   /// One reading of the probe now (0 without one).
-  double read() const { return probe ? act::kernels::measure_peak_gmacs(*probe) : 0.0; }
+  double read() const { return probe ? act::graph::measure_peak_gmacs_together(*probe, threads) : 0.0; }
 };
 
 // The probe for the engine's precision and kernel level, not yet read.
-Peak peak_probe_for(const act::ModelInfo& info) {
+Peak peak_probe_for(const act::ModelInfo& info, int engine_threads) {
   Peak peak;
+  peak.threads = std::clamp(engine_threads, 1, act::ThreadPool::hardware_threads());
   peak.int8 = info.precision.rfind("int8", 0) == 0;
   peak.isa = act::kernels::parse_isa(info.isa).value_or(act::kernels::Isa::kRef);
   peak.probe = act::kernels::isa_peak_probe(peak.isa, peak.int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
@@ -321,7 +328,7 @@ class Benchmark {
       if (other_) infer(*other_, i, other_chunk);
     }
     engine_->reset_op_profile();  // the op profile averages the timed runs only
-    peak_ = peak_probe_for(engine_->model_info());
+    peak_ = peak_probe_for(engine_->model_info(), engine_->threads());
     peak_.before_runs = peak_.read();
 
     act::ProgressLine progress(stderr, "act_bench", act::ProgressLine::stderr_is_terminal());
@@ -382,10 +389,10 @@ class Benchmark {
       comparison_ = c;
     }
     machine_ = act::read_machine_info();
-    // The achieved rate is compared with the per-core peak times the threads.
+    // The achieved rate is compared with the peak of the engine's threads.
     peak_.after_runs = peak_.read();
     // Also at the median run: one slow run of a shared host moves the mean, not the median.
-    const double peak_gmacs = peak_.gmacs_per_core() * engine_->threads();
+    const double peak_gmacs = peak_.gmacs();
     const auto percent_of_peak = [&](double gmac, double ms) { return 100.0 * gmac / (ms / 1e3) / peak_gmacs; };
     pct_peak_ = peak_gmacs > 0 ? 100.0 * gmacs_per_s_ / peak_gmacs : 0.0;
     pct_peak_p50_ = peak_gmacs > 0 ? percent_of_peak(gmac_, total().p50) : 0.0;
@@ -401,7 +408,7 @@ class Benchmark {
     huge_page_bytes_ = act::graph::AlignedBuffer::huge_page_bytes();
     if (opt_.op_profiling) {
       const std::vector<act::OpProfile> profile = engine_->op_profile();
-      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs_per_core() * engine_->threads(), timed_.op_ms);
+      op_table_ = act::OpProfileTable::make(profile, peak_.gmacs(), timed_.op_ms);
     }
   }
 
@@ -437,8 +444,15 @@ class Benchmark {
     }
     std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total().mean, gmacs_per_s_);
     if (peak_.probe != nullptr && peak_.gmacs_per_core() > 0) {
-      std::printf("peak         %.1f %% of this CPU's %s peak at the mean run, %.1f %% at the median: %.1f GMAC/s per core (%s probe) x %d threads%s\n",
-                  pct_peak_, peak_.int8 ? "INT8" : "FP32", pct_peak_p50_, peak_.gmacs_per_core(), peak_.probe->name, engine_->threads(),
+      char on_threads[96];
+      if (peak_.threads == 1) {
+        std::snprintf(on_threads, sizeof on_threads, "on 1 thread (%s probe)", peak_.probe->name);
+      } else {
+        std::snprintf(on_threads, sizeof on_threads, "on %d threads (%s probe on each at once, %.1f per core)", peak_.threads,
+                      peak_.probe->name, peak_.gmacs_per_core());
+      }
+      std::printf("peak         %.1f %% of this CPU's %s peak at the mean run, %.1f %% at the median: %.1f GMAC/s %s%s\n",
+                  pct_peak_, peak_.int8 ? "INT8" : "FP32", pct_peak_p50_, peak_.gmacs(), on_threads,
                   machine_.emulation.empty() ? "" : " (both emulated: says nothing of a real CPU)");
       std::printf("             the probe read %.1f GMAC/s before the timed runs and %.1f after: the higher is the peak\n",
                   peak_.before_runs, peak_.after_runs);
@@ -491,9 +505,11 @@ class Benchmark {
     j["achieved_gmac_per_s"] = gmacs_per_s_;
     j["peak"] = {{"kind", peak_.int8 ? "int8" : "fp32"},
                  {"probe", peak_.probe ? peak_.probe->name : ""},
+                 {"threads", peak_.threads},
+                 {"gmac_per_s", peak_.gmacs()},
                  {"gmac_per_s_per_core", peak_.gmacs_per_core()},
-                 {"gmac_per_s_per_core_before_runs", peak_.before_runs},
-                 {"gmac_per_s_per_core_after_runs", peak_.after_runs},
+                 {"gmac_per_s_before_runs", peak_.before_runs},
+                 {"gmac_per_s_after_runs", peak_.after_runs},
                  {"percent_of_peak", pct_peak_},
                  {"percent_of_peak_p50", pct_peak_p50_}};
     j["peak_rss_bytes"] = rss_;

@@ -16,8 +16,8 @@
 //   - thread_pool/dispatch/threads:T (an empty parallel section) and thread_pool/cache_line_round_trip
 //     (a cache line from one thread to another and back: what each cross-core step costs).
 // Counters: GMAC/s (M*N*K per second of wall time, 1 MAC = 2 ops), pct_peak (against that ISA's
-// sustained probe rate, int8 or float as the kernel, measured once at start-up by thread CPU time,
-// times T: the peak of T cores),
+// sustained probe rate, int8 or float as the kernel, measured at start-up by thread CPU time on T
+// threads at once: the peak of T cores, graph/peak_together.h),
 // at T = 1 also GMAC/s_cpu and pct_peak_cpu (by the thread's CPU time: what to read on a shared,
 // loaded machine, where wall time includes time spent descheduled) and, for T > 1, speedup_vs_1t
 // (the same benchmark's best single-thread time / this one's). Threads split the output into tiles
@@ -47,6 +47,7 @@
 #include "graph/gemm_tiling.h"
 #include "graph/graph.h"
 #include "graph/ops_int8.h"
+#include "graph/peak_together.h"
 #include "graph/thread_pool.h"
 #include "kernels/peak/peak_probe.h"
 #include "kernels/conv_s8/conv_s8.h"
@@ -127,8 +128,8 @@ std::map<std::string, double>& single_thread_seconds() {
   return m;
 }
 
-// Times the benchmark loop, sets GMAC/s (and pct_peak when peak_gmacs > 0), and records or compares
-// the single-thread time.
+// Times the benchmark loop, sets GMAC/s (and pct_peak when peak_gmacs, the peak of `threads`
+// threads, is > 0), and records or compares the single-thread time.
 template <class Body>
 void run_timed(benchmark::State& state, const std::string& key, int threads, double macs_per_iter, double peak_gmacs,
                Body body) {
@@ -147,7 +148,7 @@ void run_timed(benchmark::State& state, const std::string& key, int threads, dou
     state.counters["GMAC/s"] = benchmark::Counter(macs * 1e-9, benchmark::Counter::kIsRate);
     if (peak_gmacs > 0) {
       state.counters["pct_peak"] =
-          benchmark::Counter(macs * 1e-9 / (peak_gmacs * threads) * 100.0, benchmark::Counter::kIsRate);
+          benchmark::Counter(macs * 1e-9 / peak_gmacs * 100.0, benchmark::Counter::kIsRate);
     }
     // Single thread on a shared machine: the rate by this thread's CPU time, robust to being
     // descheduled (the probe is measured the same way).
@@ -588,7 +589,10 @@ int main(int argc, char** argv) {
   const char* shapes_env = std::getenv("ACT_BENCH_SHAPES");
   const std::vector<bench::Shape> shapes = bench::read_shapes(shapes_env != nullptr ? shapes_env : ACT_BENCH_SHAPES_FILE);
 
-  std::map<kernels::Isa, double> peak, peak_f32;  // by ISA: the int8 and the float FMA probes
+  const int max_threads = std::min(2, ThreadPool::hardware_threads());
+  // By ISA, the int8 and the float FMA probes' peaks of 1..max_threads threads (index T - 1).
+  using Peaks = std::vector<double>;
+  std::map<kernels::Isa, Peaks> peak, peak_f32;
   for (int i = 0; i < kernels::kPeakProbeCount; ++i) {
     const kernels::PeakProbe& p = kernels::kPeakProbes[i];
     if (!kernels::cpu_supports(p.isa) || p.fn(1) == 0) continue;
@@ -597,16 +601,23 @@ int main(int argc, char** argv) {
         ->ComputeStatistics("max", bench::stat_max)
         ->ComputeStatistics("min", bench::stat_min);
     if (p.is_isa_peak) {
-      (p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa] = kernels::measure_peak_gmacs(p);
-      benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps",
-                                  std::to_string((p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa]));
+      Peaks& peaks = (p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa];
+      for (int t = 1; t <= max_threads; ++t) {
+        peaks.push_back(graph::measure_peak_gmacs_together(p, t));
+        benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps" + (t > 1 ? "_threads:" + std::to_string(t) : ""),
+                                    std::to_string(peaks.back()));
+      }
     }
   }
+  // The peak of t threads for kernels of `isa` (0: no probe).
+  const auto peak_of = [&](const std::map<kernels::Isa, Peaks>& peaks, kernels::Isa isa, int t) {
+    const auto it = peaks.find(isa);
+    return it == peaks.end() ? 0.0 : it->second[static_cast<size_t>(t - 1)];
+  };
   const bench::Shape* smallest = shapes.empty() ? nullptr : &shapes[0];
   for (const bench::Shape& s : shapes) {
     if (s.macs() < smallest->macs()) smallest = &s;
   }
-  const int max_threads = std::min(2, ThreadPool::hardware_threads());
   auto reg = [](benchmark::internal::Benchmark* b) {
     return b->Unit(benchmark::kMillisecond)
         ->UseRealTime()
@@ -619,13 +630,12 @@ int main(int argc, char** argv) {
   for (kernels::Isa isa : isas) {
     const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
     if (v == nullptr) continue;
-    const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (const bench::Shape& s : shapes) {
       if (isa == kernels::Isa::kRef && &s != smallest) continue;
       const std::string key = std::string("gemm_s8/") + kernels::isa_name(isa) + "/" + s.name;
       for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : max_threads); ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm, v, s, pk, t, key));
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm, v, s, peak_of(peak, isa, t), t, key));
       }
     }
   }
@@ -637,7 +647,7 @@ int main(int argc, char** argv) {
     const kernels::GemmF32Kernels* g = kernels::isa_tables(isa).gemm_f32;
     if (g == nullptr || isa == kernels::Isa::kRef) continue;
     const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
-    const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
+    const kernels::Isa f32_peak_isa = probe != nullptr ? probe->isa : kernels::Isa::kRef;
     for (const bench::Shape& s : shapes) {
       if (!s.f32_out) continue;
       for (const int tokens : {302, 242}) {
@@ -647,7 +657,7 @@ int main(int argc, char** argv) {
         const std::string key = std::string("gemm_f32/") + kernels::isa_name(isa) + "/" + s.name + "/" + std::to_string(linear.m);
         for (int t = 1; t <= max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, linear, pk, t, key));
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, linear, peak_of(peak_f32, f32_peak_isa, t), t, key));
         }
       }
     }
@@ -657,7 +667,7 @@ int main(int argc, char** argv) {
                                 std::to_string(w) + "/" + cb.name;
         for (int t = 1; t <= max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv_f32, g, cb, pk, t, key));
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv_f32, g, cb, peak_of(peak_f32, f32_peak_isa, t), t, key));
         }
       }
     }
@@ -666,7 +676,6 @@ int main(int argc, char** argv) {
   for (kernels::Isa isa : isas) {
     const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
     if (v == nullptr || isa == kernels::Isa::kRef) continue;
-    const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
       std::vector<bench::ConvBench> convs = bench::resnet18_convs(h, w);
       if (v->pack_u8a != nullptr) {  // the stem as the network runs it where the variant has one
@@ -679,7 +688,7 @@ int main(int argc, char** argv) {
                                 std::to_string(w) + "/" + cb.name;
         for (int t = 1; t <= max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv, v, cb, pk, t, key));
+          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv, v, cb, peak_of(peak, isa, t), t, key));
         }
       }
     }
@@ -689,12 +698,12 @@ int main(int argc, char** argv) {
     if (e == nullptr) continue;
     // The float attention op at the level of this element-wise variant, % of its float FMA probe.
     const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
-    const double pk = probe != nullptr && peak_f32.count(probe->isa) ? peak_f32[probe->isa] : 0.0;
+    const kernels::Isa f32_peak_isa = probe != nullptr ? probe->isa : kernels::Isa::kRef;
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_f32/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
       for (int t = 1; t <= max_threads; ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, isa, tokens, pk, t, key));
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, isa, tokens, peak_of(peak_f32, f32_peak_isa, t), t, key));
       }
     }
     const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);
@@ -705,12 +714,11 @@ int main(int argc, char** argv) {
   // The int8 attention: at each level with a gemm_s8 variant of its own (not the reference).
   for (kernels::Isa isa : isas) {
     if (kernels::isa_tables(isa).gemm_s8 == nullptr || isa == kernels::Isa::kRef) continue;
-    const double pk = peak.count(isa) ? peak[isa] : 0.0;
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_s8/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
       for (int t = 1; t <= max_threads; ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention_s8, isa, tokens, pk, t, key));
+        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention_s8, isa, tokens, peak_of(peak, isa, t), t, key));
       }
     }
   }

@@ -11,7 +11,7 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${ACT_TSAN_BUILD_DIR:-$root/build-tsan}"
 jobs="${ACT_JOBS:-2}"
 # The tests of act_thread_tests that start threads (the rest only come along with their files).
-threaded="ThreadPool.*:EngineApiTest.SameResultForAnyThreadCountAndMemoryPlan:EngineApiTest.TwoEnginesRunSideBySide"
+threaded="ThreadPool.*:PeakTogether.*:EngineApiTest.SameResultForAnyThreadCountAndMemoryPlan:EngineApiTest.TwoEnginesRunSideBySide"
 threaded+=":EngineApiTest.OneEngineHandedFromThreadToThread:EngineApiTest.EnginesOpenAndRunConcurrently"
 threaded+=":EngineApiTest.ProfilerTimesEveryOpAndTracesEveryThread:ControlLoop.*"
 # Left out: it counts the frames recorded in 1.2 s of wall time, which TSan's slowdown can miss (its

@@ -5,12 +5,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <mutex>
 #include <set>
 #include <thread>
 
 #include "graph/gemm_tiling.h"
 #include "graph/graph.h"
 #include "graph/ops_fp32.h"
+#include "graph/peak_together.h"
 #include "graph/thread_pool.h"
 
 namespace act::graph {
@@ -141,6 +143,29 @@ TEST(ThreadPool, RecordsEachThreadsSpanOfASection) {
   pool.record_spans(nullptr);
   pool.parallel_for(4, [](size_t, int) {});
   EXPECT_EQ(spans.by_thread[0].size() + spans.by_thread[1].size(), 4u);
+}
+
+// A probe that notes the threads it runs on: a busy loop of `iterations` steps, 1000 "MACs" each.
+std::mutex probe_threads_mutex;
+std::set<std::thread::id> probe_threads;
+uint64_t thread_noting_probe(uint64_t iterations) {
+  {
+    std::lock_guard<std::mutex> lock(probe_threads_mutex);
+    probe_threads.insert(std::this_thread::get_id());
+  }
+  volatile uint64_t steps = 0;
+  for (uint64_t i = 0; i < iterations; ++i) steps = steps + 1;
+  return iterations * 1000;
+}
+
+TEST(PeakTogether, ReadsTheProbeOnEveryThreadUpToOnePerCore) {
+  const kernels::PeakProbe probe{"thread_noting", kernels::Isa::kRef, kernels::PeakKind::kInt8, thread_noting_probe, false};
+  for (int threads : {1, 2, 64}) {
+    probe_threads.clear();
+    EXPECT_GT(measure_peak_gmacs_together(probe, threads), 0.0) << threads;
+    // 64 threads on a machine of fewer cores are read as its cores.
+    EXPECT_EQ(probe_threads.size(), static_cast<size_t>(std::min(threads, ThreadPool::hardware_threads()))) << threads;
+  }
 }
 
 // Every output element in exactly one task; row bands start on multiples of MR and are at most

@@ -27,6 +27,9 @@ namespace act::kernels {
 /// ceil(n / nr) panels of round_up(8 * nr + round_up(k, kr) * nr, 64) bytes.
 size_t gemm_s8_packed_size(GemmS8Layout layout, int n, int k);
 
+/// The header every packer of `layout` writes first (a SIMD packer of the same bytes uses it too).
+GemmS8PackedHeader gemm_s8_packed_header(GemmS8Layout layout, int n, int k, int32_t a_zero_point);
+
 /// The packers, one per layout. Preconditions: 1 <= n, 1 <= k <= kGemmS8MaxK, ldw >= k, every
 /// W value in [-127, 127], `packed` 64-byte aligned and gemm_s8_packed_size() bytes long. `bias`
 /// (int32 [n], scale s_a * s_w[n]) may be null.

@@ -1,6 +1,8 @@
-// The weight packers of every gemm_s8 variant. One generic routine; each named packer fixes the
-// layout (panel width nr, k-group kr, column order, weight shift). Plain C++ on purpose, on every
-// architecture: it runs once at load for the weights, and at every run for attention's keys and values.
+// The portable weight packers of every gemm_s8 layout, the definition of each layout's bytes. One
+// generic routine; each named packer fixes the layout (panel width nr, k-group kr, column order,
+// weight shift). Plain C++ on every architecture: it runs once at load for the weights. The AVX-512
+// VNNI variant packs with SIMD packers of the same bytes (gemm_s8_avx512vnni.cc), since attention
+// packs its keys and values at every run.
 #include <algorithm>
 #include <cstring>
 
@@ -127,23 +129,12 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
   ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
   ACT_DCHECK(d.kr == KR, "layout and packer disagree on the k-group");
   ACT_DCHECK(d.nr <= kMaxNr, "panel wider than the column sums kept per panel");
-  const int kp = static_cast<int>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
-  const size_t pbytes = panel_bytes(d, k);
+  const GemmS8PackedHeader h = gemm_s8_packed_header(d.layout, n, k, a_zero_point);
+  const size_t pbytes = h.panel_bytes;
   const int panels = (n + d.nr - 1) / d.nr;
 
   auto* base = static_cast<uint8_t*>(packed);
   std::memset(base, 0, sizeof(GemmS8PackedHeader) + static_cast<size_t>(panels) * pbytes);
-  GemmS8PackedHeader h{};
-  h.magic = kGemmS8PackedMagic;
-  h.layout = d.layout;
-  h.n = n;
-  h.k = k;
-  h.nr = d.nr;
-  h.kr = d.kr;
-  h.kp = kp;
-  h.a_zero_point = a_zero_point;
-  h.a_shift = 0;
-  h.panel_bytes = pbytes;
   std::memcpy(base, &h, sizeof h);
 
   for (int p = 0; p < panels; ++p) {
@@ -178,6 +169,22 @@ void pack_generic(const LayoutDesc& d, int n, int k, const int8_t* w, size_t ldw
 }
 
 }  // namespace
+
+GemmS8PackedHeader gemm_s8_packed_header(GemmS8Layout layout, int n, int k, int32_t a_zero_point) {
+  const LayoutDesc& d = desc_of(layout);
+  GemmS8PackedHeader h{};
+  h.magic = kGemmS8PackedMagic;
+  h.layout = d.layout;
+  h.n = n;
+  h.k = k;
+  h.nr = d.nr;
+  h.kr = d.kr;
+  h.kp = static_cast<int32_t>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
+  h.a_zero_point = a_zero_point;
+  h.a_shift = 0;
+  h.panel_bytes = panel_bytes(d, k);
+  return h;
+}
 
 size_t gemm_s8_packed_size(GemmS8Layout layout, int n, int k) {
   const LayoutDesc& d = desc_of(layout);

@@ -361,6 +361,15 @@ TEST_P(GemmS8Variant, EmptyRectangleWritesNothing) {
   for (int32_t x : c) EXPECT_EQ(x, 77);
 }
 
+// A packed-weight buffer filled with `fill`: the packers under test must write every byte, so two
+// buffers filled differently compare equal only where both were written in full.
+using PackedBuffer = std::unique_ptr<uint8_t, decltype(&std::free)>;
+PackedBuffer packed_buffer(size_t bytes, uint8_t fill) {
+  PackedBuffer buffer(static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+  std::memset(buffer.get(), fill, bytes);
+  return buffer;
+}
+
 // The transposed packers write, byte for byte, what their twins write for the explicit transpose:
 // every layout (the packers are portable, so all four run here), ragged n and k around each
 // panel width and k-group, a row stride wider than n, both bias forms and a zero point.
@@ -389,12 +398,7 @@ TEST(GemmS8Pack, TransposedPackerMatchesPackOfTranspose) {
         for (auto& b : bias) b = byte(rng) * 1000;
         const size_t bytes = gemm_s8_packed_size(p.layout, n, k);
         for (const int32_t* b : {static_cast<const int32_t*>(nullptr), static_cast<const int32_t*>(bias.data())}) {
-          std::unique_ptr<uint8_t, decltype(&std::free)> want(
-              static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
-          std::unique_ptr<uint8_t, decltype(&std::free)> got(
-              static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
-          std::memset(got.get(), 0x5a, bytes);  // every byte must be written: unwritten ones differ
-          std::memset(want.get(), 0xa5, bytes);
+          const PackedBuffer want = packed_buffer(bytes, 0xa5), got = packed_buffer(bytes, 0x5a);
           p.pack(n, k, w.data(), static_cast<size_t>(k), b, -13, want.get());
           p.pack_transposed(n, k, wt.data(), ldt, b, -13, got.get());
           ASSERT_EQ(std::memcmp(got.get(), want.get(), bytes), 0)
@@ -416,13 +420,55 @@ TEST_P(GemmS8Variant, TablePairsTransposedPacker) {
     for (int i = 0; i < k; ++i) wt[static_cast<size_t>(i) * n + j] = w[static_cast<size_t>(j) * k + i];
   }
   const size_t bytes = v.packed_size(n, k);
-  std::unique_ptr<uint8_t, decltype(&std::free)> want(
-      static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
-  std::unique_ptr<uint8_t, decltype(&std::free)> got(
-      static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+  const PackedBuffer want = packed_buffer(bytes, 0xa5), got = packed_buffer(bytes, 0x5a);
   v.pack(n, k, w.data(), static_cast<size_t>(k), nullptr, 5, want.get());
   v.pack_transposed(n, k, wt.data(), static_cast<size_t>(n), nullptr, 5, got.get());
   EXPECT_EQ(std::memcmp(got.get(), want.get(), bytes), 0) << v.pack_name;
+}
+
+// Each variant's packers, of W and of W^T, write what the portable packer of its layout writes for
+// W (pack.cc; AVX-512 VNNI has SIMD ones): ragged n and k around the 16-column blocks, the panels,
+// the 64-byte k chunks and the 4-byte k-groups, row strides wider than a row, both bias forms, a
+// zero point, every byte written.
+TEST_P(GemmS8Variant, PackerWritesThePortablePackersBytes) {
+  const GemmS8Kernels& v = variant();
+  GemmS8PackFn portable = nullptr;
+  switch (v.layout) {
+    case GemmS8Layout::kRef1x1: portable = pack_w_s8_1x1_goi; break;
+    case GemmS8Layout::kAvx2_8x8: portable = pack_w_s8_8x8_goi_pair4; break;
+    case GemmS8Layout::kVnni64x4: portable = pack_w_s8_64x4_goi_x80; break;
+    case GemmS8Layout::kNeon16x4: portable = pack_w_s8_16x4_goi; break;
+    case GemmS8Layout::kVnni64x4U8A: portable = pack_w_s8_64x4_goi_u8a; break;
+  }
+  ASSERT_NE(portable, nullptr) << v.pack_name;
+  uint32_t seed = 2000;
+  for (int n : {1, 15, 16, 17, 63, 64, 65, 130, 302}) {
+    for (int k : {1, 3, 4, 5, 63, 64, 65, 127, 128, 129, 302}) {
+      std::mt19937 rng(seed++);
+      std::uniform_int_distribution<int> byte(-127, 127);
+      const size_t ldw = static_cast<size_t>(k) + 5;
+      std::vector<int8_t> w(static_cast<size_t>(n) * ldw);
+      for (auto& b : w) b = static_cast<int8_t>(byte(rng));
+      const size_t ldt = static_cast<size_t>(n) + 3;  // W^T [k x n]
+      std::vector<int8_t> wt(static_cast<size_t>(k) * ldt);
+      for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < k; ++i) wt[static_cast<size_t>(i) * ldt + j] = w[static_cast<size_t>(j) * ldw + i];
+      }
+      std::vector<int32_t> bias(static_cast<size_t>(n));
+      for (auto& b : bias) b = byte(rng) * 100000;
+      const size_t bytes = v.packed_size(n, k);
+      for (const int32_t* b : {static_cast<const int32_t*>(nullptr), static_cast<const int32_t*>(bias.data())}) {
+        const PackedBuffer want = packed_buffer(bytes, 0xa5), got = packed_buffer(bytes, 0x5a);
+        portable(n, k, w.data(), ldw, b, -13, want.get());
+        v.pack(n, k, w.data(), ldw, b, -13, got.get());
+        ASSERT_EQ(std::memcmp(got.get(), want.get(), bytes), 0) << v.pack_name << " n=" << n << " k=" << k << (b ? " with bias" : "");
+        std::memset(got.get(), 0x5a, bytes);
+        v.pack_transposed(n, k, wt.data(), ldt, b, -13, got.get());
+        ASSERT_EQ(std::memcmp(got.get(), want.get(), bytes), 0)
+            << v.pack_name << " transposed, n=" << n << " k=" << k << (b ? " with bias" : "");
+      }
+    }
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Available, GemmS8Variant, ::testing::ValuesIn(test::isas_under_test(&IsaTables::gemm_s8)), test::isa_param_name);

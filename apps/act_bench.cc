@@ -28,7 +28,6 @@
 #include "apps/status_error.h"
 #include "graph/aligned_buffer.h"
 #include "graph/peak_together.h"
-#include "graph/thread_pool.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
@@ -229,7 +228,7 @@ struct Peak {
 // The probe for the engine's precision and kernel level, not yet read.
 Peak peak_probe_for(const act::ModelInfo& info, int engine_threads) {
   Peak peak;
-  peak.threads = std::clamp(engine_threads, 1, act::ThreadPool::hardware_threads());
+  peak.threads = act::graph::peak_probe_threads(engine_threads);
   peak.int8 = info.precision.rfind("int8", 0) == 0;
   peak.isa = act::kernels::parse_isa(info.isa).value_or(act::kernels::Isa::kRef);
   peak.probe = act::kernels::isa_peak_probe(peak.isa, peak.int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);

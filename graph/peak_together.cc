@@ -9,8 +9,10 @@
 
 namespace act::graph {
 
+int peak_probe_threads(int threads) { return std::clamp(threads, 1, ThreadPool::hardware_threads()); }
+
 double measure_peak_gmacs_together(const kernels::PeakProbe& probe, int threads) {
-  const int n = std::clamp(threads, 1, ThreadPool::hardware_threads());
+  const int n = peak_probe_threads(threads);
   if (n == 1) return kernels::measure_peak_gmacs(probe);
   std::vector<double> readings(static_cast<size_t>(n), 0.0);
   std::latch start(n);  // every thread starts its warm-up at once, so that the timed runs overlap

@@ -9,9 +9,13 @@
 
 namespace act::graph {
 
+/// The threads a peak of `threads` is read on: at least one, at most one per online core.
+int peak_probe_threads(int threads);
+
 /// Sustained GMAC/s of `threads` threads running `probe` at once (each read as measure_peak_gmacs
-/// reads one, by its own CPU time), summed. More threads than online cores count as the cores: a
-/// core's peak is not shared out further. 0 when the probe is not built or the CPU lacks it.
+/// reads one, by its own CPU time), summed, on peak_probe_threads(threads): more threads than
+/// online cores count as the cores, a core's peak is not shared out further. 0 when the probe is
+/// not built or the CPU lacks it.
 double measure_peak_gmacs_together(const kernels::PeakProbe& probe, int threads);
 
 }  // namespace act::graph

@@ -370,6 +370,18 @@ PackedBuffer packed_buffer(size_t bytes, uint8_t fill) {
   return buffer;
 }
 
+// The portable packer of W (pack.cc) for each layout: the definition of that layout's bytes.
+GemmS8PackFn portable_packer(GemmS8Layout layout) {
+  switch (layout) {
+    case GemmS8Layout::kRef1x1: return pack_w_s8_1x1_goi;
+    case GemmS8Layout::kAvx2_8x8: return pack_w_s8_8x8_goi_pair4;
+    case GemmS8Layout::kVnni64x4: return pack_w_s8_64x4_goi_x80;
+    case GemmS8Layout::kNeon16x4: return pack_w_s8_16x4_goi;
+    case GemmS8Layout::kVnni64x4U8A: return pack_w_s8_64x4_goi_u8a;
+  }
+  return nullptr;
+}
+
 // The transposed packers write, byte for byte, what their twins write for the explicit transpose:
 // every layout (the packers are portable, so all four run here), ragged n and k around each
 // panel width and k-group, a row stride wider than n, both bias forms and a zero point.
@@ -432,14 +444,7 @@ TEST_P(GemmS8Variant, TablePairsTransposedPacker) {
 // zero point, every byte written.
 TEST_P(GemmS8Variant, PackerWritesThePortablePackersBytes) {
   const GemmS8Kernels& v = variant();
-  GemmS8PackFn portable = nullptr;
-  switch (v.layout) {
-    case GemmS8Layout::kRef1x1: portable = pack_w_s8_1x1_goi; break;
-    case GemmS8Layout::kAvx2_8x8: portable = pack_w_s8_8x8_goi_pair4; break;
-    case GemmS8Layout::kVnni64x4: portable = pack_w_s8_64x4_goi_x80; break;
-    case GemmS8Layout::kNeon16x4: portable = pack_w_s8_16x4_goi; break;
-    case GemmS8Layout::kVnni64x4U8A: portable = pack_w_s8_64x4_goi_u8a; break;
-  }
+  const GemmS8PackFn portable = portable_packer(v.layout);
   ASSERT_NE(portable, nullptr) << v.pack_name;
   uint32_t seed = 2000;
   for (int n : {1, 15, 16, 17, 63, 64, 65, 130, 302}) {
@@ -586,16 +591,9 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
   for (GemmS8Layout layout : {GemmS8Layout::kRef1x1, GemmS8Layout::kAvx2_8x8, GemmS8Layout::kVnni64x4,
                               GemmS8Layout::kNeon16x4, GemmS8Layout::kVnni64x4U8A}) {
     const size_t bytes = gemm_s8_packed_size(layout, n, k);
-    std::unique_ptr<uint8_t, decltype(&std::free)> p(
-        static_cast<uint8_t*>(std::aligned_alloc(kGemmS8PackedAlign, bytes)), &std::free);
+    const PackedBuffer p = packed_buffer(bytes, 0);
     const int za = -3;
-    switch (layout) {
-      case GemmS8Layout::kRef1x1: pack_w_s8_1x1_goi(n, k, w, k, bias, za, p.get()); break;
-      case GemmS8Layout::kAvx2_8x8: pack_w_s8_8x8_goi_pair4(n, k, w, k, bias, za, p.get()); break;
-      case GemmS8Layout::kVnni64x4: pack_w_s8_64x4_goi_x80(n, k, w, k, bias, za, p.get()); break;
-      case GemmS8Layout::kNeon16x4: pack_w_s8_16x4_goi(n, k, w, k, bias, za, p.get()); break;
-      case GemmS8Layout::kVnni64x4U8A: pack_w_s8_64x4_goi_u8a(n, k, w, k, bias, za, p.get()); break;
-    }
+    portable_packer(layout)(n, k, w, k, bias, za, p.get());
     GemmS8PackedHeader h;
     std::memcpy(&h, p.get(), sizeof h);
     EXPECT_EQ(h.magic, kGemmS8PackedMagic);

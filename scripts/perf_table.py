@@ -142,8 +142,15 @@ def kernel_table(reports):
                 name, machine, "%.3f" % ms, "%.0f" % gmacs if gmacs else "-",
                 "%.0f %%" % pct if pct else "-", "%.2fx" % speedup if speedup else "-"))
     lines.append("")
-    lines.append("GMAC/s and % of peak by the thread's CPU time for one-thread rows (wall time otherwise), against")
-    lines.append("the register-only probe of the same run.")
+    lines.append("ms is wall time; GMAC/s and % of peak are by the thread's CPU time for one-thread rows (wall time")
+    lines.append("otherwise), against the register-only probe of the same run.")
+    for report, label in reports:
+        ctx = report["context"]
+        probes = ["`%s` %.0f" % (k[len("peak_"):-len("_GMACps")], float(v)) for k, v in sorted(ctx.items())
+                  if k.startswith("peak_") and k.endswith("_GMACps")]
+        if probes:
+            machine = label or ctx.get("cpu_model", "?")
+            lines.append("Probes on %s, one thread, GMAC/s: %s." % (machine, ", ".join(probes)))
     return "\n".join(lines)
 
 

@@ -71,6 +71,7 @@ class PerfTable(unittest.TestCase):
         self.assertEqual(len(median), 6)
         self.assertNotIn("9.900", out)  # the mean aggregate is left out
         self.assertIn("0.44x", row(out, "| `gemm_s8/avx512vnni/enc_ffn1/threads:2`")[5])
+        self.assertIn("`vpdpbusd_zmm` 383", out)  # the probes of the run, from its context
 
     def test_unknown_json_and_missing_files_fail(self):
         with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:

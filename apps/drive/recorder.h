@@ -8,7 +8,7 @@
 //   DIR/ticks.csv         one row per control tick: the action, where it came from, the PWM sent;
 //                         then who chose it (driver: ai, manual or safe), the tick's camera frame,
 //                         the state and the command actually sent in the model's units (what
-//                         scripts/recording_to_lerobot.py trains on, manual driving included)
+//                         apps/drive/recording_to_lerobot.py trains on, manual driving included)
 //   DIR/tick_frames/NNNNNNNN.png  each camera frame a tick saw (the camera's frame index), at the
 //                         model's input size, preprocessed as the model sees it
 //

@@ -29,8 +29,8 @@
 // when |acc| > 2^24.
 //
 // Why float and not gemmlowp's fixed point: per-channel scales, the residual add and f32 outputs
-// are trivial in float, and it costs the same on NEON and less on x86 (see
-// ../../../shared/design/kernels-and-style.md 3(d), XNNPACK's "fp32" requantization).
+// are trivial in float, and it costs the same on NEON and less on x86 (XNNPACK's "fp32"
+// requantization makes the same choice).
 #pragma once
 
 #include <cmath>

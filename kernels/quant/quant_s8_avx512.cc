@@ -5,7 +5,7 @@
 
 #if defined(__x86_64__)
 
-// GCC 12's _mm512_undefined_*() trip -Wmaybe-uninitialized at -O3 (see gemm_s8_avx512.cc).
+// GCC 12's _mm512_undefined_*() trip -Wmaybe-uninitialized at -O3 (see gemm_s8_avx512vnni.cc).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>

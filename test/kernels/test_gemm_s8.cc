@@ -544,7 +544,7 @@ bool parse_tile(const std::string& s, bool with_kr, int* a, int* b, int* c) {
   return got == (with_kr ? 3 : 2) && used == static_cast<int>(s.size());
 }
 
-// <family>_<dtypes>_<tile>_<isa> (kernels-and-style.md 2.4), with the tile matching the table.
+// <family>_<dtypes>_<tile>_<isa> (kernels/README.md, "Adding a variant"), tile matching the table.
 // (A hand parser: std::regex trips GCC 12's -Wmaybe-uninitialized under ASan.)
 TEST(GemmS8Dispatch, KernelNamesFollowTheGrammar) {
   const std::set<std::string> isa_suffixes = {"ref", "neon", "neondot", "neoni8mm", "avx2", "avxvnni", "avx512", "avx512vnni"};

@@ -28,7 +28,7 @@ struct NamedTensor {
 
 struct ImportedModel {
   ModelConfig config;
-  std::vector<NamedTensor> tensors;  ///< blob tensors (names in weights/blob_names.h)
+  std::vector<NamedTensor> tensors;  ///< blob tensors (names in weights/blob/blob_names.h)
   std::string layout;                ///< "current" (processor files) or "legacy" (buffers in the weights)
   size_t checkpoint_tensors = 0;     ///< tensors in model.safetensors
   uint64_t checkpoint_values = 0;

@@ -3,9 +3,10 @@
 // Both formats torch.save writes: the zip format (torch >= 1.6: <name>/data.pkl + <name>/data/<key>
 // storages) and the legacy one (magic, protocol and sys_info pickles, the object's pickle, the
 // storage key list, then each storage's raw bytes). The pickles go through the safe reader of
-// weights/pickle_reader.h, so a checkpoint can never run code. The state dict may be the saved
-// object itself or one entry of a wrapping dict such as {"model_state_dict": ..., "epoch": ...,
-// "optimizer_state_dict": ...}; only its tensors are read (optimizer state is parsed, not loaded).
+// weights/import/pickle_reader.h, so a checkpoint can never run code. The state dict may be the
+// saved object itself or one entry of a wrapping dict such as {"model_state_dict": ..., "epoch":
+// ..., "optimizer_state_dict": ...}; only its tensors are read (optimizer state is parsed, not
+// loaded).
 #pragma once
 
 #include <string>

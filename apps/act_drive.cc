@@ -1,5 +1,5 @@
 // act_drive: drives the RC rover. Camera -> preprocess -> infer -> action chunking -> PWM over a
-// serial line to the Arduino (apps/arduino/act_rover), at a fixed control rate. See README "act_drive".
+// serial line to the Arduino (apps/arduino/act_rover), at a fixed control rate. See docs/rover.md.
 #include <CLI/CLI.hpp>
 
 #include <csignal>
@@ -447,7 +447,7 @@ int main(int argc, char** argv) {
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
                                              "calibration file to edit), then write --calibration");
-  // The Pi's own PWM pins instead of the Arduino (README "On the Pi's own PWM pins").
+  // The Pi's own PWM pins instead of the Arduino (docs/rover.md, "On the Pi's own PWM pins").
   app.add_option("--pwm", opt.pwm, "drive the servo and ESC from Linux PWM channels CHIP:STEERING,THROTTLE, e.g. "
                                    "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "
                                    "if act_drive dies");

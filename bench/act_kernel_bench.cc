@@ -493,7 +493,7 @@ void bm_dispatch(benchmark::State& state, int threads) {
 // A cache line handed from one thread to another and back (an atomic counter each bumps in turn):
 // the floor under every cross-thread step of an inference (a section's start and end, a row read
 // from the other core). About 50-100 ns where two cores share an L3; 470 ns on a 2-vCPU EPYC guest
-// whose vCPUs sit on different dies (session 35), where two threads scale worse than the kernels.
+// whose vCPUs sit on different dies, where two threads scale worse than the kernels.
 void bm_cache_line_round_trip(benchmark::State& state) {
   alignas(64) std::atomic<uint64_t> turn{0};
   std::atomic<bool> stop{false};

@@ -17,8 +17,8 @@
 # act_bench and act_kernel_bench, never asserted by a test.
 # The Release tree builds file by file, as users build; the sanitizer and aarch64 trees are unity
 # builds (-DCMAKE_UNITY_BUILD=ON: each target's files compiled in batches of 8, so the headers they
-# share compile once per batch; the kernels never are, kernels/CMakeLists.txt): the ASan tree built
-# in 38-41 % less time, the TSan tree in 43 % less (README "CI cost"). So both ways are compiled here.
+# share compile once per batch; the kernels never are, kernels/CMakeLists.txt), which builds in much
+# less time. So both ways are compiled here.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"

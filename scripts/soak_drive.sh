@@ -4,7 +4,7 @@
 # pattern like a live camera, runs out of frames, says so and reopens it, so it loops (and the
 # reopen path is soaked too). Fails if RSS grows after the first 30 s by more than
 # ACT_SOAK_TOLERANCE_KB (default 2048), if a tick was missed, if act_drive fails, or if its last
-# command is not neutral. A benchmark (README "Reliability"), not part of CI. Needs a built tree
+# command is not neutral. A benchmark (docs/reliability.md), not part of CI. Needs a built tree
 # ($ACT_BUILD_DIR, default build/). Arguments after SECONDS go to act_drive, e.g.
 #   scripts/soak_drive.sh 180 --control-priority 50      (SCHED_FIFO control thread, as on the rover)
 set -euo pipefail

@@ -1,5 +1,5 @@
 // Every app given the wrong kind of file says what the file is and which command takes it, for each
-// of its file arguments and each kind a user may mistake for another (issue 20).
+// of its file arguments and each kind a user may mistake for another.
 #include <gtest/gtest.h>
 
 #include <filesystem>

@@ -24,7 +24,7 @@
 
 namespace act::drive::test {
 
-/// Prints how long a fault took to reach neutral on the wire, for the README's fault-timing table
+/// Prints how long a fault took to reach neutral on the wire, for docs/reliability.md's fault-timing table
 /// (scripts/fault_timing.sh collects these lines; the tests themselves assert only the safety bound).
 inline void report_fault_timing(const std::string& fault, double ms, const char* until = "neutral on the wire") {
   std::printf("[fault timing] %s: %.1f ms to %s\n", fault.c_str(), ms, until);

@@ -218,7 +218,7 @@ struct PwmRig {
   }
 };
 
-// Neutral within kFaultDeadline of `fault`, reported for the README's fault-timing table.
+// Neutral within kFaultDeadline of `fault`, reported for docs/reliability.md's fault-timing table.
 void expect_neutral_after(const FakePwmTree& tree, Clock::time_point fault, const std::string& fault_name,
                           Clock::duration deadline = kFaultDeadline) {
   const auto neutral = tree.wait_for(kSafe, fault, milliseconds(1000));

@@ -22,7 +22,7 @@ struct Case {
 };
 
 // The targets (MSE <= 1e-3, max |err| <= 0.05) for LeRobot's default network and its variants. The
-// deeper random-weight backbones lose more per layer (README: "INT8 accuracy"); for them the test
+// deeper random-weight backbones lose more per layer (docs/int8.md, "Accuracy of INT8 against FP32"); for them the test
 // catches breakage, and mixed mode is the answer.
 const Case kCases[] = {
     {"default-480x640", Int8Mode::kStatic, 1e-3, 0.05},

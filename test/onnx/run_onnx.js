@@ -1,6 +1,6 @@
 #!/usr/bin/env node
 // Runs an ONNX model in ONNX Runtime (npm's onnxruntime-node, CPU) for actengine's export tests and
-// the README's comparison:
+// the comparison in docs/onnx-and-hailo.md:
 //   node run_onnx.js MODEL.onnx OUT_DIR [--threads N] [--repeat N] [--samples N] NAME=FILE.bin:D0xD1x... ...
 // Each input is raw little-endian float32 with its shape; each output is written to
 // OUT_DIR/<output name>.bin (raw float32). Prints one JSON line: the outputs' shapes and, over

@@ -1,5 +1,5 @@
 """Times one inference of a LeRobot ACT checkpoint in PyTorch and in actengine (FP32 and INT8), from
-Python, on the checkpoint's reference observations; prints a table (README "Python").
+Python, on the checkpoint's reference observations; prints a table (docs/python-and-lerobot.md).
 
     PYTHONPATH=build/python /usr/bin/python3 engine/python/bench/benchmark_vs_pytorch.py CHECKPOINT \\
         [--threads 2] [--runs 20] [--shared ../shared]

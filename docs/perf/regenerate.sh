@@ -1,11 +1,32 @@
 #!/usr/bin/env bash
 # Prints the numbers table of README.md and docs/performance.md from the act_bench JSON files here
-# (docs/performance.md, "The current table", says how they were measured).
+# (docs/performance.md, "The current table", says how they were measured). With --write, replaces
+# the generated block (between its two marker comments) in both files instead.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
-exec python3 "$here/../../scripts/perf_table.py" \
-  "$here/zen4.json" "$here/zen5.json" \
-  --label "Intel Xeon, 2 vCPU" \
-  --note "A loaded host: 2 vCPUs shared with four other engineers' builds (load average 4-7) during the runs, so these read well below the CPU's speed; \`vpdpbusd\` probe 383 GMAC/s per core, FMA 89." \
-  "$here"/xeon-2vcpu/*.json \
-  "$here/pi5-estimate.json"
+root="$here/../.."
+table() {
+  python3 "$root/scripts/perf_table.py" \
+    "$here/zen4.json" "$here/zen5.json" \
+    --label "Intel Xeon, 2 vCPU" \
+    --note "A loaded host: 2 vCPUs shared with four other engineers' builds (load average 4-7) during the runs, so these read well below the CPU's speed; \`vpdpbusd\` probe 383 GMAC/s per core, FMA 89." \
+    "$here"/xeon-2vcpu/*.json \
+    "$here/pi5-estimate.json"
+}
+if [[ "${1:-}" != "--write" ]]; then
+  table
+  exit 0
+fi
+table > "$here/.table.md"
+python3 - "$here/.table.md" "$root/README.md" "$root/docs/performance.md" <<'PY'
+import re, sys
+table = open(sys.argv[1]).read().rstrip("\n")
+for path in sys.argv[2:]:
+    text = open(path).read()
+    new, n = re.subn(r"(do not edit by hand -->\n).*?(\n<!-- end of generated table -->)",
+                     lambda m: m.group(1) + table + m.group(2), text, flags=re.S)
+    if n != 1:
+        sys.exit("%s: expected one generated block, found %d" % (path, n))
+    open(path, "w").write(new)
+PY
+rm -f "$here/.table.md"

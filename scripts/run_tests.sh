@@ -63,7 +63,7 @@ run_ctest() {
 export GLIBC_TUNABLES="glibc.malloc.hugetlb=1${GLIBC_TUNABLES:+:$GLIBC_TUNABLES}"
 
 # The build trees, generated checkpoints and converted blobs of a run take about 4.5 GB (each test's
-# scratch folder goes when it passes: support/test_paths.h); "No space left on device" is the host's.
+# scratch folder goes when it passes: test/support/test_paths.h); "No space left on device" is the host's.
 free_disk() { df -h --output=avail "$root" | tail -n 1 | tr -d ' '; }
 echo "disk: $(free_disk) free on the checkout's filesystem"
 

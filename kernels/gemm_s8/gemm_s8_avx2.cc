@@ -26,6 +26,7 @@
 #include <immintrin.h>
 
 #include <cstring>
+#include <type_traits>
 
 #include "kernels/common/check.h"
 
@@ -227,40 +228,10 @@ void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* 
 
 }  // namespace
 
-void gemm_s8s8_s8out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
-  ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
-  EpiS8 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_f32out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0, int n1) {
-  EpiF32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutS32& o, int m0, int m1, int n0, int n1) {
-  EpiS32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
 const GemmS8Kernels* gemm_s8_table_avx2() {
-  static constexpr GemmS8Kernels kTable = {
-      kIsa,
-      kLayout,
-      kMR,
-      kNR,
-      kKR,
-      "pack_w_s8_8x8_goi_pair4",
-      "gemm_s8s8_s8out_2x8c8_avx2",
-      "gemm_s8s8_f32out_2x8c8_avx2",
-      "gemm_s8s8_s32out_2x8c8_avx2",
-      [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kAvx2_8x8, n, k); },
-      pack_w_s8_8x8_goi_pair4,
-      pack_wt_s8_8x8_goi_pair4,
-      gemm_s8s8_s8out_2x8c8_avx2,
-      gemm_s8s8_f32out_2x8c8_avx2,
-      gemm_s8s8_s32out_2x8c8_avx2,
-  };
+  static constexpr GemmS8Kernels kTable = variant_table<EpiS8, EpiF32, EpiS32>(
+      {"pack_w_s8_8x8_goi_pair4", "gemm_s8s8_s8out_2x8c8_avx2", "gemm_s8s8_f32out_2x8c8_avx2", "gemm_s8s8_s32out_2x8c8_avx2"},
+      pack_w_s8_8x8_goi_pair4, pack_wt_s8_8x8_goi_pair4);
   return &kTable;
 }
 

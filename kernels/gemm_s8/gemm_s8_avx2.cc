@@ -45,11 +45,15 @@ constexpr size_t kPanelBlockBytes = size_t{512} << 10;
 
 #include "kernels/gemm_s8/gemm_s8_driver.inc"
 
+template <int R>
+using TileAcc = __m256i[R];
+
 // out[r] = the 8 int32 accumulators of row r (natural column order), kbias included, A walked
 // segment by segment. The accumulators are a local array (copied out once) so that GCC keeps them
 // in registers.
 template <int R>
-inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgroups, __m256i (&out)[R]) {
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp, __m256i (&out)[R]) {
+  const int kgroups = kp / kKR;
   const auto* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
   __m256i acc[R][4];
 #pragma GCC unroll 2
@@ -196,35 +200,18 @@ struct EpiS32 {
   }
 };
 
-template <int R, class Epi>
-void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
-          Epi& epi) {
-  __m256i acc[R];
-  accumulate<R>(g, m, panel, h.kp / kKR, acc);
-  if (g.a_row_zero_point != nullptr) {
-    // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
-    const __m256i ksum = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 4 * kNR));
-    for (int r = 0; r < R; ++r) {
-      const __m256i dz = _mm256_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
-      acc[r] = _mm256_sub_epi32(acc[r], _mm256_mullo_epi32(dz, ksum));
-    }
+// acc -= (z_row - z_packed) * ksum (the driver's per-row zero points).
+template <int R>
+void subtract_row_zero_points(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m,
+                              __m256i (&acc)[R]) {
+  const __m256i ksum = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 4 * kNR));
+  for (int r = 0; r < R; ++r) {
+    const __m256i dz = _mm256_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
+    acc[r] = _mm256_sub_epi32(acc[r], _mm256_mullo_epi32(dz, ksum));
   }
-  epi.begin_panel(n, lo, hi);
-  for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
 
-template <class Epi>
-void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
-               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
-    const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-    if (rows == kMR) {
-      tile<kMR>(g, h, panel, m, n, lo, hi, epi);
-    } else {
-      tile<1>(g, h, panel, m, n, lo, hi, epi);
-    }
-  });
-}
+#include "kernels/gemm_s8/gemm_s8_tiles.inc"
 
 }  // namespace
 

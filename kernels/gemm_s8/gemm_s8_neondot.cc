@@ -38,6 +38,9 @@ constexpr size_t kPanelBlockBytes = size_t{256} << 10;  // half the A76's 512 KB
 
 #include "kernels/gemm_s8/gemm_s8_driver.inc"
 
+template <int R>
+using TileAcc = int32x4_t[R][4];
+
 // sdot by element: lane L of a 16-byte (q) or an 8-byte (d) A chunk.
 template <int L>
 int32x4_t dot_lane(int32x4_t acc, int8x16_t w, int8x16_t a) {
@@ -232,35 +235,18 @@ struct EpiS32 {
   }
 };
 
-template <int R, class Epi>
-void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
-          Epi& epi) {
-  int32x4_t acc[R][4];
-  accumulate<R>(g, m, panel, h.kp, acc);
-  if (g.a_row_zero_point != nullptr) {
-    // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
-    const auto* ksum = static_cast<const int32_t*>(static_cast<const void*>(panel + 4 * kNR));
-    for (int r = 0; r < R; ++r) {
-      const int32x4_t dz = vdupq_n_s32(g.a_row_zero_point[m + r] - h.a_zero_point);
-      for (int j = 0; j < 4; ++j) acc[r][j] = vmlsq_s32(acc[r][j], dz, vld1q_s32(ksum + 4 * j));
-    }
+// acc -= (z_row - z_packed) * ksum (the driver's per-row zero points).
+template <int R>
+void subtract_row_zero_points(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m,
+                              int32x4_t (&acc)[R][4]) {
+  const auto* ksum = static_cast<const int32_t*>(static_cast<const void*>(panel + 4 * kNR));
+  for (int r = 0; r < R; ++r) {
+    const int32x4_t dz = vdupq_n_s32(g.a_row_zero_point[m + r] - h.a_zero_point);
+    for (int j = 0; j < 4; ++j) acc[r][j] = vmlsq_s32(acc[r][j], dz, vld1q_s32(ksum + 4 * j));
   }
-  epi.begin_panel(n, lo, hi);
-  for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
 
-template <class Epi>
-void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
-               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
-    const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-    if (rows == kMR) {
-      tile<kMR>(g, h, panel, m, n, lo, hi, epi);
-    } else {
-      for (int r = 0; r < rows; ++r) tile<1>(g, h, panel, m + r, n, lo, hi, epi);  // 1x16c4
-    }
-  });
-}
+#include "kernels/gemm_s8/gemm_s8_tiles.inc"
 
 }  // namespace
 

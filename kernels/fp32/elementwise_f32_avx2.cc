@@ -25,13 +25,9 @@ void store_low_bytes<Arch>(int8_t* p, const xsimd::batch<int32_t, Arch>& v) {
 }  // namespace
 
 const ElementwiseF32Kernels* elementwise_f32_table_avx2() {
-  static constexpr ElementwiseF32Kernels kTable = {
-      Isa::kAvx2,
-      "layernorm_rows_f32_avx2", "softmax_rows_f32_avx2", "softmax_rows_s8_avx2", "relu_f32_avx2", "gelu_f32_avx2", "add_f32_avx2",
-      "max_taps_f32_avx2",
-      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, softmax_rows_s8_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
-      max_taps_xs<Arch>,
-  };
+  static constexpr ElementwiseF32Kernels kTable = table_xs<Arch>(
+      Isa::kAvx2, {"layernorm_rows_f32_avx2", "softmax_rows_f32_avx2", "softmax_rows_s8_avx2", "relu_f32_avx2",
+                   "gelu_f32_avx2", "add_f32_avx2", "max_taps_f32_avx2"});
   return &kTable;
 }
 

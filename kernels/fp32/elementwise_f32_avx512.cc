@@ -57,13 +57,9 @@ void store_low_bytes<Arch>(int8_t* p, const xsimd::batch<int32_t, Arch>& v) {
 }  // namespace
 
 const ElementwiseF32Kernels* elementwise_f32_table_avx512() {
-  static constexpr ElementwiseF32Kernels kTable = {
-      Isa::kAvx512,
-      "layernorm_rows_f32_avx512", "softmax_rows_f32_avx512", "softmax_rows_s8_avx512", "relu_f32_avx512", "gelu_f32_avx512", "add_f32_avx512",
-      "max_taps_f32_avx512",
-      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, softmax_rows_s8_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
-      max_taps_xs<Arch>,
-  };
+  static constexpr ElementwiseF32Kernels kTable = table_xs<Arch>(
+      Isa::kAvx512, {"layernorm_rows_f32_avx512", "softmax_rows_f32_avx512", "softmax_rows_s8_avx512", "relu_f32_avx512",
+                   "gelu_f32_avx512", "add_f32_avx512", "max_taps_f32_avx512"});
   return &kTable;
 }
 

@@ -28,13 +28,9 @@ void store_low_bytes<Arch>(int8_t* p, const xsimd::batch<int32_t, Arch>& v) {
 }  // namespace
 
 const ElementwiseF32Kernels* elementwise_f32_table_neon() {
-  static constexpr ElementwiseF32Kernels kTable = {
-      Isa::kNeon,
-      "layernorm_rows_f32_neon", "softmax_rows_f32_neon", "softmax_rows_s8_neon", "relu_f32_neon", "gelu_f32_neon", "add_f32_neon",
-      "max_taps_f32_neon",
-      layernorm_rows_xs<Arch>, softmax_rows_xs<Arch>, softmax_rows_s8_xs<Arch>, relu_xs<Arch>, gelu_xs<Arch>, add_xs<Arch>,
-      max_taps_xs<Arch>,
-  };
+  static constexpr ElementwiseF32Kernels kTable = table_xs<Arch>(
+      Isa::kNeon, {"layernorm_rows_f32_neon", "softmax_rows_f32_neon", "softmax_rows_s8_neon", "relu_f32_neon",
+                   "gelu_f32_neon", "add_f32_neon", "max_taps_f32_neon"});
   return &kTable;
 }
 

@@ -26,6 +26,7 @@
 #include <immintrin.h>
 
 #include <cstring>
+#include <type_traits>
 
 #include "kernels/common/check.h"
 
@@ -44,11 +45,15 @@ constexpr size_t kPanelBlockBytes = size_t{512} << 10;
 
 #include "kernels/gemm_s8/gemm_s8_driver.inc"
 
+template <int R>
+using TileAcc = __m256i[R];
+
 // out[r] = the 8 int32 accumulators of row r (natural column order), kbias included, A walked
 // segment by segment. The accumulators are a local array (copied out once) so that GCC keeps them
 // in registers.
 template <int R>
-inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgroups, __m256i (&out)[R]) {
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp, __m256i (&out)[R]) {
+  const int kgroups = kp / kKR;
   const auto* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
   __m256i acc[R][4];
 #pragma GCC unroll 2
@@ -195,72 +200,25 @@ struct EpiS32 {
   }
 };
 
-template <int R, class Epi>
-void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
-          Epi& epi) {
-  __m256i acc[R];
-  accumulate<R>(g, m, panel, h.kp / kKR, acc);
-  if (g.a_row_zero_point != nullptr) {
-    // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
-    const __m256i ksum = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 4 * kNR));
-    for (int r = 0; r < R; ++r) {
-      const __m256i dz = _mm256_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
-      acc[r] = _mm256_sub_epi32(acc[r], _mm256_mullo_epi32(dz, ksum));
-    }
+// acc -= (z_row - z_packed) * ksum (the driver's per-row zero points).
+template <int R>
+void subtract_row_zero_points(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m,
+                              __m256i (&acc)[R]) {
+  const __m256i ksum = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 4 * kNR));
+  for (int r = 0; r < R; ++r) {
+    const __m256i dz = _mm256_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
+    acc[r] = _mm256_sub_epi32(acc[r], _mm256_mullo_epi32(dz, ksum));
   }
-  epi.begin_panel(n, lo, hi);
-  for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
 
-template <class Epi>
-void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
-               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
-    const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-    if (rows == kMR) {
-      tile<kMR>(g, h, panel, m, n, lo, hi, epi);
-    } else {
-      tile<1>(g, h, panel, m, n, lo, hi, epi);
-    }
-  });
-}
+#include "kernels/gemm_s8/gemm_s8_tiles.inc"
 
 }  // namespace
 
-void gemm_s8s8_s8out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
-  ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
-  EpiS8 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_f32out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0, int n1) {
-  EpiF32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& g, const GemmS8OutS32& o, int m0, int m1, int n0, int n1) {
-  EpiS32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
 const GemmS8Kernels* gemm_s8_table_avx2() {
-  static constexpr GemmS8Kernels kTable = {
-      kIsa,
-      kLayout,
-      kMR,
-      kNR,
-      kKR,
-      "pack_w_s8_8x8_goi_pair4",
-      "gemm_s8s8_s8out_2x8c8_avx2",
-      "gemm_s8s8_f32out_2x8c8_avx2",
-      "gemm_s8s8_s32out_2x8c8_avx2",
-      [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kAvx2_8x8, n, k); },
-      pack_w_s8_8x8_goi_pair4,
-      pack_wt_s8_8x8_goi_pair4,
-      gemm_s8s8_s8out_2x8c8_avx2,
-      gemm_s8s8_f32out_2x8c8_avx2,
-      gemm_s8s8_s32out_2x8c8_avx2,
-  };
+  static constexpr GemmS8Kernels kTable = variant_table<EpiS8, EpiF32, EpiS32>(
+      {"pack_w_s8_8x8_goi_pair4", "gemm_s8s8_s8out_2x8c8_avx2", "gemm_s8s8_f32out_2x8c8_avx2", "gemm_s8s8_s32out_2x8c8_avx2"},
+      pack_w_s8_8x8_goi_pair4, pack_wt_s8_8x8_goi_pair4);
   return &kTable;
 }
 

@@ -33,6 +33,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <type_traits>
 
 #include "kernels/common/check.h"
 
@@ -480,44 +481,11 @@ void pack_wt_s8_64x4_goi_x80_avx512vnni(int n, int k, const int8_t* wt, size_t l
 
 }  // namespace
 
-void gemm_s8s8_s8out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
-  ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
-  EpiS8 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_f32out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0,
-                                        int n1) {
-  EpiF32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& g, const GemmS8OutS32& o, int m0, int m1, int n0,
-                                        int n1) {
-  EpiS32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
 const GemmS8Kernels* gemm_s8_table_avx512vnni() {
-  static constexpr GemmS8Kernels kTable = {
-      kIsa,
-      kLayout,
-      kMR,
-      kNR,
-      kKR,
-      "pack_w_s8_64x4_goi_x80",
-      "gemm_s8s8_s8out_6x64c4_avx512vnni",
-      "gemm_s8s8_f32out_6x64c4_avx512vnni",
-      "gemm_s8s8_s32out_6x64c4_avx512vnni",
-      [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kVnni64x4, n, k); },
-      pack_w_s8_64x4_goi_x80_avx512vnni,
-      pack_wt_s8_64x4_goi_x80_avx512vnni,
-      gemm_s8s8_s8out_6x64c4_avx512vnni,
-      gemm_s8s8_f32out_6x64c4_avx512vnni,
-      gemm_s8s8_s32out_6x64c4_avx512vnni,
-      "pack_w_s8_64x4_goi_u8a",
-      pack_w_s8_64x4_goi_u8a,
-  };
+  static constexpr GemmS8Kernels kTable = variant_table<EpiS8, EpiF32, EpiS32>(
+      {"pack_w_s8_64x4_goi_x80", "gemm_s8s8_s8out_6x64c4_avx512vnni", "gemm_s8s8_f32out_6x64c4_avx512vnni",
+       "gemm_s8s8_s32out_6x64c4_avx512vnni"},
+      pack_w_s8_64x4_goi_x80_avx512vnni, pack_wt_s8_64x4_goi_x80_avx512vnni, "pack_w_s8_64x4_goi_u8a", pack_w_s8_64x4_goi_u8a);
   return &kTable;
 }
 

@@ -20,6 +20,7 @@
 #include <arm_neon.h>
 
 #include <cstring>
+#include <type_traits>
 
 #include "kernels/common/check.h"
 
@@ -37,27 +38,28 @@ constexpr size_t kPanelBlockBytes = size_t{256} << 10;  // half the A76's 512 KB
 
 #include "kernels/gemm_s8/gemm_s8_driver.inc"
 
-// One k-group (16 columns x 4 bytes) against lane L of each row's 16-byte A chunk.
-template <int R, int L>
-inline void step_q(const int8_t* wg, const int8x16_t (&av)[R], int32x4_t (&acc)[R][4]) {
-  const int8x16_t w0 = vld1q_s8(wg), w1 = vld1q_s8(wg + 16), w2 = vld1q_s8(wg + 32), w3 = vld1q_s8(wg + 48);
-  for (int r = 0; r < R; ++r) {
-    acc[r][0] = vdotq_laneq_s32(acc[r][0], w0, av[r], L);
-    acc[r][1] = vdotq_laneq_s32(acc[r][1], w1, av[r], L);
-    acc[r][2] = vdotq_laneq_s32(acc[r][2], w2, av[r], L);
-    acc[r][3] = vdotq_laneq_s32(acc[r][3], w3, av[r], L);
-  }
+template <int R>
+using TileAcc = int32x4_t[R][4];
+
+// sdot by element: lane L of a 16-byte (q) or an 8-byte (d) A chunk.
+template <int L>
+int32x4_t dot_lane(int32x4_t acc, int8x16_t w, int8x16_t a) {
+  return vdotq_laneq_s32(acc, w, a, L);
+}
+template <int L>
+int32x4_t dot_lane(int32x4_t acc, int8x16_t w, int8x8_t a) {
+  return vdotq_lane_s32(acc, w, a, L);
 }
 
-// The same against lane L of an 8-byte A chunk.
-template <int R, int L>
-inline void step_d(const int8_t* wg, const int8x8_t (&av)[R], int32x4_t (&acc)[R][4]) {
+// One k-group (16 columns x 4 bytes) against lane L of each row's A chunk (int8x16_t or int8x8_t).
+template <int R, int L, class Chunk>
+inline void step(const int8_t* wg, const Chunk (&av)[R], int32x4_t (&acc)[R][4]) {
   const int8x16_t w0 = vld1q_s8(wg), w1 = vld1q_s8(wg + 16), w2 = vld1q_s8(wg + 32), w3 = vld1q_s8(wg + 48);
   for (int r = 0; r < R; ++r) {
-    acc[r][0] = vdotq_lane_s32(acc[r][0], w0, av[r], L);
-    acc[r][1] = vdotq_lane_s32(acc[r][1], w1, av[r], L);
-    acc[r][2] = vdotq_lane_s32(acc[r][2], w2, av[r], L);
-    acc[r][3] = vdotq_lane_s32(acc[r][3], w3, av[r], L);
+    acc[r][0] = dot_lane<L>(acc[r][0], w0, av[r]);
+    acc[r][1] = dot_lane<L>(acc[r][1], w1, av[r]);
+    acc[r][2] = dot_lane<L>(acc[r][2], w2, av[r]);
+    acc[r][3] = dot_lane<L>(acc[r][3], w3, av[r]);
   }
 }
 
@@ -83,17 +85,17 @@ inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp,
       int8x16_t av[R];
       for (int r = 0; r < R; ++r) av[r] = vld1q_s8(rows[r] + k);
       const int8_t* wk = w + static_cast<size_t>(k) * kNR;
-      step_q<R, 0>(wk, av, acc);
-      step_q<R, 1>(wk + 64, av, acc);
-      step_q<R, 2>(wk + 128, av, acc);
-      step_q<R, 3>(wk + 192, av, acc);
+      step<R, 0>(wk, av, acc);
+      step<R, 1>(wk + 64, av, acc);
+      step<R, 2>(wk + 128, av, acc);
+      step<R, 3>(wk + 192, av, acc);
     }
     if (k + 8 <= segment_bytes) {
       int8x8_t av[R];
       for (int r = 0; r < R; ++r) av[r] = vld1_s8(rows[r] + k);
       const int8_t* wk = w + static_cast<size_t>(k) * kNR;
-      step_d<R, 0>(wk, av, acc);
-      step_d<R, 1>(wk + 64, av, acc);
+      step<R, 0>(wk, av, acc);
+      step<R, 1>(wk + 64, av, acc);
       k += 8;
     }
     if (k < segment_bytes) {  // one k-group left
@@ -103,7 +105,7 @@ inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp,
         std::memcpy(&quad, rows[r] + k, 4);
         av[r] = vreinterpret_s8_s32(vdup_n_s32(quad));
       }
-      step_d<R, 0>(w + static_cast<size_t>(k) * kNR, av, acc);
+      step<R, 0>(w + static_cast<size_t>(k) * kNR, av, acc);
     }
   }
   for (int r = 0; r < R; ++r) {
@@ -233,72 +235,26 @@ struct EpiS32 {
   }
 };
 
-template <int R, class Epi>
-void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m, int n, int lo, int hi,
-          Epi& epi) {
-  int32x4_t acc[R][4];
-  accumulate<R>(g, m, panel, h.kp, acc);
-  if (g.a_row_zero_point != nullptr) {
-    // acc -= (z_row - z_packed) * ksum: the packed kbias assumed z_packed.
-    const auto* ksum = static_cast<const int32_t*>(static_cast<const void*>(panel + 4 * kNR));
-    for (int r = 0; r < R; ++r) {
-      const int32x4_t dz = vdupq_n_s32(g.a_row_zero_point[m + r] - h.a_zero_point);
-      for (int j = 0; j < 4; ++j) acc[r][j] = vmlsq_s32(acc[r][j], dz, vld1q_s32(ksum + 4 * j));
-    }
+// acc -= (z_row - z_packed) * ksum (the driver's per-row zero points).
+template <int R>
+void subtract_row_zero_points(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m,
+                              int32x4_t (&acc)[R][4]) {
+  const auto* ksum = static_cast<const int32_t*>(static_cast<const void*>(panel + 4 * kNR));
+  for (int r = 0; r < R; ++r) {
+    const int32x4_t dz = vdupq_n_s32(g.a_row_zero_point[m + r] - h.a_zero_point);
+    for (int j = 0; j < 4; ++j) acc[r][j] = vmlsq_s32(acc[r][j], dz, vld1q_s32(ksum + 4 * j));
   }
-  epi.begin_panel(n, lo, hi);
-  for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
 }
 
-template <class Epi>
-void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
-               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
-    const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
-    if (rows == kMR) {
-      tile<kMR>(g, h, panel, m, n, lo, hi, epi);
-    } else {
-      for (int r = 0; r < rows; ++r) tile<1>(g, h, panel, m + r, n, lo, hi, epi);  // 1x16c4
-    }
-  });
-}
+#include "kernels/gemm_s8/gemm_s8_tiles.inc"
 
 }  // namespace
 
-void gemm_s8s8_s8out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutS8& o, int m0, int m1, int n0, int n1) {
-  ACT_DCHECK(-128 <= o.qmin && o.qmin <= o.qmax && o.qmax <= 127, "bad clamp");
-  EpiS8 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_f32out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutF32& o, int m0, int m1, int n0, int n1) {
-  EpiF32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
-void gemm_s8s8_s32out_4x16c4_neondot(const GemmS8Args& g, const GemmS8OutS32& o, int m0, int m1, int n0, int n1) {
-  EpiS32 epi{o};
-  run(g, o.ldc, epi, m0, m1, n0, n1);
-}
-
 const GemmS8Kernels* gemm_s8_table_neondot() {
-  static constexpr GemmS8Kernels kTable = {
-      kIsa,
-      kLayout,
-      kMR,
-      kNR,
-      kKR,
-      "pack_w_s8_16x4_goi",
-      "gemm_s8s8_s8out_4x16c4_neondot",
-      "gemm_s8s8_f32out_4x16c4_neondot",
-      "gemm_s8s8_s32out_4x16c4_neondot",
-      [](int n, int k) { return gemm_s8_packed_size(GemmS8Layout::kNeon16x4, n, k); },
-      pack_w_s8_16x4_goi,
-      pack_wt_s8_16x4_goi,
-      gemm_s8s8_s8out_4x16c4_neondot,
-      gemm_s8s8_f32out_4x16c4_neondot,
-      gemm_s8s8_s32out_4x16c4_neondot,
-  };
+  static constexpr GemmS8Kernels kTable = variant_table<EpiS8, EpiF32, EpiS32>(
+      {"pack_w_s8_16x4_goi", "gemm_s8s8_s8out_4x16c4_neondot", "gemm_s8s8_f32out_4x16c4_neondot",
+       "gemm_s8s8_s32out_4x16c4_neondot"},
+      pack_w_s8_16x4_goi, pack_wt_s8_16x4_goi);
   return &kTable;
 }
 

@@ -1,7 +1,7 @@
-// Every gemm_s8 variant's kernels and packers by name (<family>_<dtypes>_<tile>_<isa>), and the
-// per-ISA tables (nullptr when that ISA's file compiled to nothing on this target). An Engine runs
-// the table its KernelConfig chose (kernels/config/kernel_config.h); tests and benchmarks use the
-// tables directly.
+// Every gemm_s8 packer and reference kernel by name, and the per-ISA tables (nullptr when that ISA's
+// file compiled to nothing on this target), which hold each SIMD variant's kernels and their names
+// (<family>_<dtypes>_<tile>_<isa>). An Engine runs the table its KernelConfig chose
+// (kernels/config/kernel_config.h); tests and benchmarks use the tables directly.
 //
 // Common preconditions of every kernel below (checked with ACT_DCHECK):
 //   - args.packed_w was written by the packer of the same table for [args.n x args.k];
@@ -76,14 +76,6 @@ const GemmS8Kernels* gemm_s8_table_ref();
 
 /// The AVX2 table, or nullptr when not built.
 const GemmS8Kernels* gemm_s8_table_avx2();
-#if defined(__x86_64__)
-/// AVX2 2x8c8, s8 output.
-void gemm_s8s8_s8out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0, int n1);
-/// AVX2 2x8c8, f32 output.
-void gemm_s8s8_f32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0, int n1);
-/// AVX2 2x8c8, int32 output.
-void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0, int n1);
-#endif
 
 // ---- AVX-512 VNNI (gemm_s8_avx512vnni.cc, x86-64 only; -mavx512f/bw/vl/vnni) ----------------
 // 6x64c4: vpdpbusd on (W + 128) as u8 x A as s8; each row tile subtracts 128 * rowsum(A).
@@ -91,17 +83,6 @@ void gemm_s8s8_s32out_2x8c8_avx2(const GemmS8Args& args, const GemmS8OutS32& out
 // same kernels multiply as u8 x W as s8, without row sums. Needs cpu_supports(Isa::kAvx512Vnni).
 
 const GemmS8Kernels* gemm_s8_table_avx512vnni();
-#if defined(__x86_64__)
-/// AVX-512 VNNI 6x64c4, s8 output.
-void gemm_s8s8_s8out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0,
-                                       int n1);
-/// AVX-512 VNNI 6x64c4, f32 output.
-void gemm_s8s8_f32out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0,
-                                        int n1);
-/// AVX-512 VNNI 6x64c4, int32 output.
-void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0,
-                                        int n1);
-#endif
 
 // ---- NEON dot product (gemm_s8_neondot.cc, AArch64 only; -march=armv8.2-a+dotprod) -----------
 // 4x16c4 SDOT micro-kernel (activations read in place, 4 k-groups per 16-byte load via
@@ -109,15 +90,5 @@ void gemm_s8s8_s32out_6x64c4_avx512vnni(const GemmS8Args& args, const GemmS8OutS
 // Needs cpu_supports(Isa::kNeonDot).
 
 const GemmS8Kernels* gemm_s8_table_neondot();
-#if defined(__aarch64__)
-/// NEON SDOT 4x16c4 (+1x16c4 row tail), s8 output.
-void gemm_s8s8_s8out_4x16c4_neondot(const GemmS8Args& args, const GemmS8OutS8& out, int m0, int m1, int n0, int n1);
-/// NEON SDOT 4x16c4 (+1x16c4 row tail), f32 output.
-void gemm_s8s8_f32out_4x16c4_neondot(const GemmS8Args& args, const GemmS8OutF32& out, int m0, int m1, int n0,
-                                     int n1);
-/// NEON SDOT 4x16c4 (+1x16c4 row tail), int32 output.
-void gemm_s8s8_s32out_4x16c4_neondot(const GemmS8Args& args, const GemmS8OutS32& out, int m0, int m1, int n0,
-                                     int n1);
-#endif
 
 }  // namespace act::kernels

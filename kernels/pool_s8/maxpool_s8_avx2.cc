@@ -10,27 +10,24 @@ namespace act::kernels {
 
 namespace {
 
+#include "kernels/pool_s8/maxpool_s8_taps.inc"
+
 void max_taps_s8_avx2(const int8_t* const* taps_of_first, int ntaps, int pixels, size_t pixel_step, int channels,
                       int8_t* dst) {
-  for (int i = 0; i < pixels; ++i, dst += channels) {
-    const auto taps = [&](int t) { return taps_of_first[t] + static_cast<size_t>(i) * pixel_step; };
+  for_each_pixel(taps_of_first, pixels, pixel_step, channels, dst, [&](const auto& taps, int8_t* out) {
     int c = 0;
     for (; c + 32 <= channels; c += 32) {
       __m256i m = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(taps(0) + c));
       for (int t = 1; t < ntaps; ++t) m = _mm256_max_epi8(m, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(taps(t) + c)));
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(dst + c), m);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + c), m);
     }
     for (; c + 16 <= channels; c += 16) {
       __m128i m = _mm_loadu_si128(reinterpret_cast<const __m128i*>(taps(0) + c));
       for (int t = 1; t < ntaps; ++t) m = _mm_max_epi8(m, _mm_loadu_si128(reinterpret_cast<const __m128i*>(taps(t) + c)));
-      _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + c), m);
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(out + c), m);
     }
-    for (; c < channels; ++c) {
-      int8_t m = taps(0)[c];
-      for (int t = 1; t < ntaps; ++t) m = taps(t)[c] > m ? taps(t)[c] : m;
-      dst[c] = m;
-    }
-  }
+    max_channels_scalar(taps, ntaps, c, channels, out);
+  });
 }
 
 }  // namespace

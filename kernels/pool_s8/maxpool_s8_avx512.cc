@@ -21,23 +21,24 @@ namespace act::kernels {
 
 namespace {
 
+#include "kernels/pool_s8/maxpool_s8_taps.inc"
+
 void max_taps_s8_avx512(const int8_t* const* taps_of_first, int ntaps, int pixels, size_t pixel_step, int channels,
                         int8_t* dst) {
-  for (int i = 0; i < pixels; ++i, dst += channels) {
-    const auto taps = [&](int t) { return taps_of_first[t] + static_cast<size_t>(i) * pixel_step; };
+  for_each_pixel(taps_of_first, pixels, pixel_step, channels, dst, [&](const auto& taps, int8_t* out) {
     int c = 0;
     for (; c + 64 <= channels; c += 64) {
       __m512i m = _mm512_loadu_si512(taps(0) + c);
       for (int t = 1; t < ntaps; ++t) m = _mm512_max_epi8(m, _mm512_loadu_si512(taps(t) + c));
-      _mm512_storeu_si512(dst + c, m);
+      _mm512_storeu_si512(out + c, m);
     }
     if (c < channels) {
       const __mmask64 k = (__mmask64{1} << (channels - c)) - 1;
       __m512i m = _mm512_maskz_loadu_epi8(k, taps(0) + c);
       for (int t = 1; t < ntaps; ++t) m = _mm512_max_epi8(m, _mm512_maskz_loadu_epi8(k, taps(t) + c));
-      _mm512_mask_storeu_epi8(dst + c, k, m);
+      _mm512_mask_storeu_epi8(out + c, k, m);
     }
-  }
+  });
 }
 
 }  // namespace

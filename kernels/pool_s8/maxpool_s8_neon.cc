@@ -11,27 +11,24 @@ namespace act::kernels {
 
 namespace {
 
+#include "kernels/pool_s8/maxpool_s8_taps.inc"
+
 void max_taps_s8_neon(const int8_t* const* taps_of_first, int ntaps, int pixels, size_t pixel_step, int channels,
                       int8_t* dst) {
-  for (int i = 0; i < pixels; ++i, dst += channels) {
-    const auto taps = [&](int t) { return taps_of_first[t] + static_cast<size_t>(i) * pixel_step; };
+  for_each_pixel(taps_of_first, pixels, pixel_step, channels, dst, [&](const auto& taps, int8_t* out) {
     int c = 0;
     for (; c + 16 <= channels; c += 16) {
       int8x16_t m = vld1q_s8(taps(0) + c);
       for (int t = 1; t < ntaps; ++t) m = vmaxq_s8(m, vld1q_s8(taps(t) + c));
-      vst1q_s8(dst + c, m);
+      vst1q_s8(out + c, m);
     }
     for (; c + 8 <= channels; c += 8) {
       int8x8_t m = vld1_s8(taps(0) + c);
       for (int t = 1; t < ntaps; ++t) m = vmax_s8(m, vld1_s8(taps(t) + c));
-      vst1_s8(dst + c, m);
+      vst1_s8(out + c, m);
     }
-    for (; c < channels; ++c) {
-      int8_t m = taps(0)[c];
-      for (int t = 1; t < ntaps; ++t) m = taps(t)[c] > m ? taps(t)[c] : m;
-      dst[c] = m;
-    }
-  }
+    max_channels_scalar(taps, ntaps, c, channels, out);
+  });
 }
 
 }  // namespace

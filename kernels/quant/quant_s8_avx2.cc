@@ -1,5 +1,5 @@
 // quant on AVX2: 32 floats per step (4 ymm), packed to bytes with signed saturation. Ragged tails go
-// through a 32-element stack buffer and the same vector code, so there is one code path per op.
+// through a 32-element stack buffer and the same vector code (quant_s8_tail.inc).
 // Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
 #include "kernels/quant/quant_s8_variants.h"
 
@@ -12,6 +12,8 @@
 namespace act::kernels {
 
 namespace {
+
+#include "kernels/quant/quant_s8_tail.inc"
 
 constexpr size_t kStep = 32;
 
@@ -48,15 +50,7 @@ void quantize32_per_lane(const float* x, const float* inv, __m256 z, __m256 lo, 
 void quantize_f32_s8_avx2(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
   const __m256 inv = _mm256_set1_ps(inv_scale), z = _mm256_set1_ps(static_cast<float>(zero_point));
   const __m256 lo = _mm256_set1_ps(-128.0f), hi = _mm256_set1_ps(127.0f);
-  size_t i = 0;
-  for (; i + kStep <= n; i += kStep) quantize32(x + i, inv, z, lo, hi, y + i);
-  if (i < n) {
-    float xt[kStep] = {};
-    int8_t yt[kStep];
-    std::memcpy(xt, x + i, (n - i) * sizeof(float));
-    quantize32(xt, inv, z, lo, hi, yt);
-    std::memcpy(y + i, yt, n - i);
-  }
+  blocks_zero_padded<kStep>(n, x, y, [&](const float* xb, int8_t* yb) { quantize32(xb, inv, z, lo, hi, yb); });
 }
 
 void dequantize16(const int8_t* q, __m256 z, __m256 scale, float* y) {
@@ -69,15 +63,7 @@ void dequantize16(const int8_t* q, __m256 z, __m256 scale, float* y) {
 
 void dequantize_s8_f32_avx2(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
   const __m256 z = _mm256_set1_ps(static_cast<float>(zero_point)), s = _mm256_set1_ps(scale);
-  size_t i = 0;
-  for (; i + 16 <= n; i += 16) dequantize16(q + i, z, s, y + i);
-  if (i < n) {
-    int8_t qt[16] = {};
-    float yt[16];
-    std::memcpy(qt, q + i, n - i);
-    dequantize16(qt, z, s, yt);
-    std::memcpy(y + i, yt, (n - i) * sizeof(float));
-  }
+  blocks_zero_padded<16>(n, q, y, [&](const int8_t* qb, float* yb) { dequantize16(qb, z, s, yb); });
 }
 
 // minps(x, acc) returns acc when x is NaN, so NaNs are skipped like the reference's compare; the
@@ -85,24 +71,13 @@ void dequantize_s8_f32_avx2(size_t n, const int8_t* q, float scale, int32_t zero
 void minmax_f32_avx2(size_t n, const float* x, float* lo, float* hi) {
   __m256 mn0 = _mm256_set1_ps(__builtin_inff()), mn1 = mn0;
   __m256 mx0 = _mm256_set1_ps(-__builtin_inff()), mx1 = mx0;
-  size_t i = 0;
-  for (; i + 16 <= n; i += 16) {
-    const __m256 a = _mm256_loadu_ps(x + i), b = _mm256_loadu_ps(x + i + 8);
+  blocks_nan_padded<16>(n, x, [&](const float* xb) {
+    const __m256 a = _mm256_loadu_ps(xb), b = _mm256_loadu_ps(xb + 8);
     mn0 = _mm256_min_ps(a, mn0);
     mx0 = _mm256_max_ps(a, mx0);
     mn1 = _mm256_min_ps(b, mn1);
     mx1 = _mm256_max_ps(b, mx1);
-  }
-  if (i < n) {
-    float t[16];
-    for (float& v : t) v = __builtin_nanf("");
-    std::memcpy(t, x + i, (n - i) * sizeof(float));
-    const __m256 a = _mm256_loadu_ps(t), b = _mm256_loadu_ps(t + 8);
-    mn0 = _mm256_min_ps(a, mn0);
-    mx0 = _mm256_max_ps(a, mx0);
-    mn1 = _mm256_min_ps(b, mn1);
-    mx1 = _mm256_max_ps(b, mx1);
-  }
+  });
   __m256 mn = _mm256_min_ps(mn0, mn1), mx = _mm256_max_ps(mx0, mx1);  // no NaN left in accumulators
   __m128 m4 = _mm_min_ps(_mm256_castps256_ps128(mn), _mm256_extractf128_ps(mn, 1));
   __m128 x4 = _mm_max_ps(_mm256_castps256_ps128(mx), _mm256_extractf128_ps(mx, 1));
@@ -168,15 +143,9 @@ void quantize_columns_symmetric_f32_s8_avx2(int rows, int cols, const float* x, 
     for (int r = 0; r < rows; ++r) {
       const float* xr = x + static_cast<size_t>(r) * ldx + c0;
       int8_t* yr = y + static_cast<size_t>(r) * ldy + c0;
-      if (width == kBlock) {
-        quantize32_per_lane(xr, inv_c, zero, lo, hi, yr);
-      } else {
-        float xt[kBlock] = {};
-        int8_t yt[kBlock];
-        std::memcpy(xt, xr, static_cast<size_t>(width) * sizeof(float));
-        quantize32_per_lane(xt, inv_c, zero, lo, hi, yt);
-        std::memcpy(yr, yt, static_cast<size_t>(width));
-      }
+      blocks_zero_padded<kBlock>(static_cast<size_t>(width), xr, yr, [&](const float* xb, int8_t* yb) {
+        quantize32_per_lane(xb, inv_c, zero, lo, hi, yb);
+      });
     }
   }
 }

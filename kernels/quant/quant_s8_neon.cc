@@ -1,6 +1,6 @@
 // quant on AArch64 NEON (the kNeon variant). 16 floats per step:
 // fmaxnm/fminnm clamp (NaN -> -128, like the reference), fcvtns rounds half to even, sqxtn narrows.
-// Ragged tails go through a stack buffer and the same vector code.
+// Ragged tails go through a stack buffer and the same vector code (quant_s8_tail.inc).
 // Rules for ISA files (kernels/gemm_s8/README.md): only intrinsics and internal-linkage code here.
 #include "kernels/quant/quant_s8_variants.h"
 
@@ -13,6 +13,8 @@
 namespace act::kernels {
 
 namespace {
+
+#include "kernels/quant/quant_s8_tail.inc"
 
 int32x4_t quantize4(const float* x, float32x4_t inv, float32x4_t z, float32x4_t lo, float32x4_t hi) {
   float32x4_t v = vmulq_f32(vld1q_f32(x), inv);
@@ -32,15 +34,7 @@ void quantize16(const float* x, float32x4_t inv, float32x4_t z, float32x4_t lo, 
 void quantize_f32_s8_neon(size_t n, const float* x, float inv_scale, int32_t zero_point, int8_t* y) {
   const float32x4_t inv = vdupq_n_f32(inv_scale), z = vdupq_n_f32(static_cast<float>(zero_point));
   const float32x4_t lo = vdupq_n_f32(-128.0f), hi = vdupq_n_f32(127.0f);
-  size_t i = 0;
-  for (; i + 16 <= n; i += 16) quantize16(x + i, inv, z, lo, hi, y + i);
-  if (i < n) {
-    float xt[16] = {};
-    int8_t yt[16];
-    std::memcpy(xt, x + i, (n - i) * sizeof(float));
-    quantize16(xt, inv, z, lo, hi, yt);
-    std::memcpy(y + i, yt, n - i);
-  }
+  blocks_zero_padded<16>(n, x, y, [&](const float* xb, int8_t* yb) { quantize16(xb, inv, z, lo, hi, yb); });
 }
 
 void dequantize16(const int8_t* q, float32x4_t z, float32x4_t s, float* y) {
@@ -53,39 +47,20 @@ void dequantize16(const int8_t* q, float32x4_t z, float32x4_t s, float* y) {
 
 void dequantize_s8_f32_neon(size_t n, const int8_t* q, float scale, int32_t zero_point, float* y) {
   const float32x4_t z = vdupq_n_f32(static_cast<float>(zero_point)), s = vdupq_n_f32(scale);
-  size_t i = 0;
-  for (; i + 16 <= n; i += 16) dequantize16(q + i, z, s, y + i);
-  if (i < n) {
-    int8_t qt[16] = {};
-    float yt[16];
-    std::memcpy(qt, q + i, n - i);
-    dequantize16(qt, z, s, yt);
-    std::memcpy(y + i, yt, (n - i) * sizeof(float));
-  }
+  blocks_zero_padded<16>(n, q, y, [&](const int8_t* qb, float* yb) { dequantize16(qb, z, s, yb); });
 }
 
 // fminnm / fmaxnm ignore a NaN operand, as the reference's compare does; the tail is NaN-padded.
 void minmax_f32_neon(size_t n, const float* x, float* lo, float* hi) {
   float32x4_t mn0 = vdupq_n_f32(__builtin_inff()), mn1 = mn0;
   float32x4_t mx0 = vdupq_n_f32(-__builtin_inff()), mx1 = mx0;
-  size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    const float32x4_t a = vld1q_f32(x + i), b = vld1q_f32(x + i + 4);
+  blocks_nan_padded<8>(n, x, [&](const float* xb) {
+    const float32x4_t a = vld1q_f32(xb), b = vld1q_f32(xb + 4);
     mn0 = vminnmq_f32(mn0, a);
     mx0 = vmaxnmq_f32(mx0, a);
     mn1 = vminnmq_f32(mn1, b);
     mx1 = vmaxnmq_f32(mx1, b);
-  }
-  if (i < n) {
-    float t[8];
-    for (float& v : t) v = __builtin_nanf("");
-    std::memcpy(t, x + i, (n - i) * sizeof(float));
-    const float32x4_t a = vld1q_f32(t), b = vld1q_f32(t + 4);
-    mn0 = vminnmq_f32(mn0, a);
-    mx0 = vmaxnmq_f32(mx0, a);
-    mn1 = vminnmq_f32(mn1, b);
-    mx1 = vmaxnmq_f32(mx1, b);
-  }
+  });
   *lo = vminnmvq_f32(vminnmq_f32(mn0, mn1));
   *hi = vmaxnmvq_f32(vmaxnmq_f32(mx0, mx1));
 }

@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <charconv>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <optional>
@@ -47,6 +49,8 @@ constexpr milliseconds kWriteTimeout{1000};
 constexpr size_t kMaxBody = 4096;
 constexpr size_t kMaxHead = 16384;
 constexpr int kMaxRequestsPerConnection = 1000;
+// A command that moves the car and is older than this when it would act is refused (408).
+constexpr milliseconds kStaleAfter{250};
 
 // Per connection thread: set by ConnectionThreads before the connection is served.
 thread_local bool t_estop_only = false;  // over kConnections: only the e-stop is served
@@ -317,6 +321,7 @@ struct StreamSlot {
 }  // namespace
 
 struct LiveView::Server {
+  Clock::time_point started = Clock::now();  // server_ms in /stats counts from here
   HttpServer http;
   std::thread thread;
   std::atomic<int> streams{0};
@@ -382,6 +387,36 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
       reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
       return false;
     }
+    // A command that is served late never acts: timed from when its first byte reached this server
+    // and, when it says when it was issued (X-Act-Issued, the page: ms on this server's clock as
+    // /stats gives it in server_ms), from then, so a command that waited in the network is late too.
+    const auto now = Clock::now();
+    double age_ms = t_connection ? ms_between(t_connection->received(), now) : 0;
+    std::string since = "reached this server";
+    if (req.has_header("X-Act-Issued")) {
+      const std::string text = req.get_header_value("X-Act-Issued");
+      double issued = 0;
+      const auto [stop, error] = std::from_chars(text.data(), text.data() + text.size(), issued);
+      if (error != std::errc() || stop != text.data() + text.size() || !std::isfinite(issued)) {
+        reply_json(res, 400, {{"error", "X-Act-Issued '" + text + "' is not a time in ms on this server's clock (server_ms in /stats)"}});
+        return false;
+      }
+      const double issued_age = ms_between(server_->started, now) - issued;
+      if (issued_age < -static_cast<double>(kStaleAfter.count())) {
+        reply_json(res, 408, {{"error", "X-Act-Issued is " + std::to_string(std::lround(-issued_age)) + " ms ahead of this server's "
+                                        "clock (a page from before act_drive restarted? reload it): refused"}});
+        return false;
+      }
+      if (issued_age > age_ms) {
+        age_ms = issued_age;
+        since = "was issued";
+      }
+    }
+    if (age_ms > static_cast<double>(kStaleAfter.count())) {
+      reply_json(res, 408, {{"error", "this request " + since + " " + std::to_string(std::lround(age_ms)) + " ms ago (over " +
+                                      std::to_string(kStaleAfter.count()) + " ms): refused, it would move the car late"}});
+      return false;
+    }
     return true;
   };
   // The newest frame as the model sees it (after preprocessing), JPEG-encoded; empty before the first.
@@ -397,8 +432,10 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
   };
 
   http.Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveViewPage, "text/html"); });
-  http.Get("/stats", [&cockpit](const httplib::Request&, httplib::Response& res) {
-    reply_json(res, 200, status_json(cockpit.status()));
+  http.Get("/stats", [this, &cockpit](const httplib::Request&, httplib::Response& res) {
+    nlohmann::ordered_json status = status_json(cockpit.status());
+    status["server_ms"] = std::round(ms_between(server_->started, Clock::now()) * 10) / 10;
+    reply_json(res, 200, status);
   });
   http.Get("/frame.jpg", [model_view_jpeg](const httplib::Request&, httplib::Response& res) {
     const std::vector<uchar> jpeg = model_view_jpeg();

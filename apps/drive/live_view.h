@@ -15,7 +15,9 @@
 // (any body is never read), on its own connection thread, also when other clients hold every
 // ordinary connection (past that, new connections serve only the e-stop). Connections that send
 // nothing for 300 ms are closed, a request's head and body must arrive within 500 ms, bodies are
-// at most 4 kB (413), at most 4 MJPEG streams (503). Every error has a JSON body saying why.
+// at most 4 kB (413), at most 4 MJPEG streams (503). A command that moves the car and is more than
+// 250 ms old, from when it reached the server or when the page issued it (X-Act-Issued), is
+// refused (408). Every error has a JSON body saying why.
 #pragma once
 
 #include <memory>

@@ -1,6 +1,7 @@
 // act_drive --http against real HTTP clients (raw sockets, curl) with the pty fake Arduino: the e-stop
 // reaches neutral on the serial line within the e-stop bound whatever other clients do (MJPEG viewers,
-// slowloris, idle keep-alive, requests without a length, a 4 GB body).
+// slowloris, idle keep-alive, requests without a length, a 4 GB body), and late commands never
+// act.
 #include <gtest/gtest.h>
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -336,6 +337,51 @@ TEST_F(LiveViewHttp, HugeBodyIsNeverBufferedAndTheEstopActsAtOnce) {
                                                "\r\nContent-Length: 100000\r\n\r\n" + std::string(100000, 'x'));
   EXPECT_EQ(status_of(big), 413) << big;
   EXPECT_NE(body_of(big).find("body over"), std::string::npos) << big;
+}
+
+// A command that reaches the server late (its request took 350 ms to arrive) never moves the car.
+TEST_F(LiveViewHttp, LateCommandsAreRefusedAndNeverAct) {
+  const int fd = connect_to(port_);
+  const std::string request = manual_request("1", "1");
+  const size_t split = request.find("Content-Length");
+  send_all(fd, request.substr(0, split));
+  std::this_thread::sleep_for(milliseconds(350));
+  const auto completed = Clock::now();
+  send_all(fd, request.substr(split));
+  const std::string late = read_until_closed(fd);
+  ::close(fd);
+  EXPECT_EQ(status_of(late), 408) << late;
+  EXPECT_NE(body_of(late).find("reached this server"), std::string::npos) << late;
+  std::this_thread::sleep_for(milliseconds(300));
+  for (const auto& c : board_.commands()) {
+    if (c.type == 'C' && c.when > completed) {
+      EXPECT_EQ(c.steering_us, 1500) << "the late command drove";
+    }
+  }
+  // Issued 1 s ago on the server's clock (as the page stamps it: a command that waited in the
+  // network), or ahead of it: refused, and nothing moves.
+  const auto server_ms = [&] {
+    return nlohmann::json::parse(body_of(round_trip(port_, "GET /stats HTTP/1.1\r\nHost: " + host() + "\r\nConnection: close\r\n\r\n")))
+        ["server_ms"].get<double>();
+  };
+  const auto issued_at = [&](double at) { return manual_request("1", "1", "X-Act-Issued: " + std::to_string(at) + "\r\n"); };
+  const std::string old_issue = round_trip(port_, issued_at(server_ms() - 1000));
+  EXPECT_EQ(status_of(old_issue), 408) << old_issue;
+  EXPECT_NE(body_of(old_issue).find("was issued"), std::string::npos) << old_issue;
+  const std::string ahead = round_trip(port_, issued_at(server_ms() + 5000));
+  EXPECT_EQ(status_of(ahead), 408) << ahead;
+  EXPECT_NE(body_of(ahead).find("ahead"), std::string::npos) << ahead;
+  EXPECT_EQ(status_of(round_trip(port_, manual_request("1", "1", "X-Act-Issued: soon\r\n"))), 400);
+  std::this_thread::sleep_for(milliseconds(300));
+  for (const auto& c : board_.commands()) {
+    if (c.type == 'C' && c.when > completed) {
+      EXPECT_EQ(c.steering_us, 1500) << "a late command drove";
+    }
+  }
+  // The same request on time drives, with or without the time it was issued.
+  EXPECT_EQ(status_of(round_trip(port_, issued_at(server_ms()))), 200);
+  EXPECT_TRUE(eventually([&] { return board_.commands().back().steering_us == 1900; }));
+  EXPECT_EQ(status_of(round_trip(port_, request)), 200);
 }
 
 }  // namespace

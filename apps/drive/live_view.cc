@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <condition_variable>
@@ -309,6 +310,35 @@ void reply_json(httplib::Response& res, int status, const nlohmann::ordered_json
   res.set_content(body.dump(), "application/json");
 }
 
+std::string lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
+  return text;
+}
+
+// The host part of a Host header ("name:port", "[v6]:port"), lower case.
+std::string host_name(const std::string& host) {
+  if (!host.empty() && host[0] == '[') return lower(host.substr(0, host.find(']') + 1));
+  const size_t colon = host.find(':');
+  return lower(colon != std::string::npos && host.find(':', colon + 1) == std::string::npos ? host.substr(0, colon) : host);
+}
+
+bool is_ip_literal(const std::string& host) {
+  unsigned char address[sizeof(in6_addr)];
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') {
+    return ::inet_pton(AF_INET6, host.substr(1, host.size() - 2).c_str(), address) == 1;
+  }
+  return ::inet_pton(AF_INET, host.c_str(), address) == 1;
+}
+
+// -1..1, all of the text (no "1,5", no NaN); nullopt otherwise.
+std::optional<double> parse_position(const std::string& text) {
+  double value = 0;
+  const char* end = text.data() + text.size();
+  const auto [stop, error] = std::from_chars(text.data(), end, value);
+  if (text.empty() || error != std::errc() || stop != end || !std::isfinite(value) || value < -1 || value > 1) return std::nullopt;
+  return value;
+}
+
 // A MJPEG stream's place among kMaxStreams, held while the stream lasts.
 struct StreamSlot {
   explicit StreamSlot(std::atomic<int>& open) : open_(open) {}
@@ -346,9 +376,22 @@ void parse_http_address(const std::string& text, LiveViewOptions& options) {
 LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource& frames)
     : options_(std::move(options)), token_(random_token()), server_(std::make_unique<Server>()) {
   HttpServer& http = server_->http;
+  // Names this server answers to besides IP literals and localhost: the configured address and this
+  // machine's name (also as NAME.local). Anything else in Host is a DNS-rebinding page's name.
+  std::vector<std::string> names{lower(options_.address)};
+  char hostname[256] = "";
+  if (::gethostname(hostname, sizeof hostname - 1) == 0 && hostname[0] != '\0') {
+    names.push_back(lower(hostname));
+    names.push_back(lower(hostname) + ".local");
+  }
+  const auto host_allowed = [names](const std::string& host) {
+    return is_ip_literal(host) || host == "localhost" || (host.size() > 10 && host.ends_with(".localhost")) ||
+           std::find(names.begin(), names.end(), host) != names.end();
+  };
+  const std::string known_names = names.size() > 1 ? names[1] + ", " + names[2] : options_.address;
   // The e-stop, refusals and bounds come before routing, so before any body is read: the e-stop acts
   // on its request line and headers alone, from anyone, whatever follows.
-  http.set_pre_routing_handler([&cockpit](const httplib::Request& req, httplib::Response& res) {
+  http.set_pre_routing_handler([&cockpit, host_allowed, known_names](const httplib::Request& req, httplib::Response& res) {
     using Handled = httplib::Server::HandlerResponse;
     const auto refuse = [&res](int status, const std::string& why) {
       reply_json(res, status, {{"error", why}});
@@ -364,6 +407,21 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
       return Handled::Handled;
     }
     if (t_estop_only) return refuse(503, "too many connections open: only POST /estop is served until some close");
+    const std::string host = host_name(req.get_header_value("Host"));
+    if (!host_allowed(host)) {
+      return refuse(403, "Host '" + req.get_header_value("Host") + "' is not this machine's (a page of another site, through DNS "
+                         "rebinding?): open the live view by its IP address, localhost or " + known_names);
+    }
+    if (req.method != "GET" && req.method != "HEAD") {
+      const std::string origin = req.get_header_value("Origin"), site = req.get_header_value("Sec-Fetch-Site");
+      if (req.has_header("Origin") && lower(origin) != "http://" + lower(req.get_header_value("Host"))) {
+        return refuse(403, "cross-origin request refused: Origin '" + origin + "' is not this page's (http://" +
+                               req.get_header_value("Host") + ")");
+      }
+      if (!site.empty() && site != "same-origin" && site != "none") {
+        return refuse(403, "cross-origin request refused (Sec-Fetch-Site: " + site + ")");
+      }
+    }
     return Handled::Unhandled;
   });
   // httplib's own refusals (unknown path, malformed or oversized request) say why, too.
@@ -480,14 +538,14 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
   });
   http.Post("/manual", [&cockpit, authorized](const httplib::Request& req, httplib::Response& res) {
     if (!authorized(req, res)) return;
-    double steering = 0, throttle = 0;
-    try {
-      steering = std::stod(req.get_param_value("steering"));
-      throttle = std::stod(req.get_param_value("throttle"));
-    } catch (const std::exception&) {
-      return reply_json(res, 400, {{"error", "steering and throttle must be numbers in -1..1"}});
+    const std::optional<double> steering = parse_position(req.get_param_value("steering"));
+    const std::optional<double> throttle = parse_position(req.get_param_value("throttle"));
+    if (!steering || !throttle) {
+      return reply_json(res, 400, {{"error", "steering '" + req.get_param_value("steering") + "' and throttle '" +
+                                             req.get_param_value("throttle") + "' must both be numbers in -1..1 (a dot for "
+                                             "decimals: 0.5)"}});
     }
-    cockpit.manual(steering, throttle);
+    cockpit.manual(*steering, *throttle);
     reply_json(res, 200, {{"ok", "manual"}});
   });
 

@@ -17,7 +17,10 @@
 // nothing for 300 ms are closed, a request's head and body must arrive within 500 ms, bodies are
 // at most 4 kB (413), at most 4 MJPEG streams (503). A command that moves the car and is more than
 // 250 ms old, from when it reached the server or when the page issued it (X-Act-Issued), is
-// refused (408). Every error has a JSON body saying why.
+// refused (408). Every request but the e-stop needs a Host of this machine (an IP address,
+// localhost, the --http name or this host's name; else 403: DNS rebinding), and every state change
+// a same-origin Origin when it has one (403: a form on another site). Every error has a JSON body
+// saying why.
 #pragma once
 
 #include <memory>

@@ -1,7 +1,7 @@
 // act_drive --http against real HTTP clients (raw sockets, curl) with the pty fake Arduino: the e-stop
 // reaches neutral on the serial line within the e-stop bound whatever other clients do (MJPEG viewers,
-// slowloris, idle keep-alive, requests without a length, a 4 GB body), and late commands never
-// act.
+// slowloris, idle keep-alive, requests without a length, a 4 GB body), late commands never act, and
+// the Host / Origin checks refuse what a page of another site could send.
 #include <gtest/gtest.h>
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -382,6 +382,48 @@ TEST_F(LiveViewHttp, LateCommandsAreRefusedAndNeverAct) {
   EXPECT_EQ(status_of(round_trip(port_, issued_at(server_ms()))), 200);
   EXPECT_TRUE(eventually([&] { return board_.commands().back().steering_us == 1900; }));
   EXPECT_EQ(status_of(round_trip(port_, request)), 200);
+}
+
+// What a page of another site could send: a cross-origin form POST carrying the token, reads through
+// DNS rebinding (a Host that is not this machine's), and /manual values that are not numbers.
+TEST_F(LiveViewHttp, OriginHostAndStrictManualParsing) {
+  std::string reply;
+  estop_to_neutral(&reply);
+  ASSERT_EQ(status_of(reply), 200) << reply;
+  const std::string h = "Host: " + host() + "\r\n";
+  const std::string form = "token=" + token_;
+  const auto resume_form = [&](const std::string& origin) {
+    return round_trip(port_, "POST /resume HTTP/1.1\r\n" + h + "Origin: " + origin +
+                               "\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: " +
+                               std::to_string(form.size()) + "\r\nConnection: close\r\n\r\n" + form);
+  };
+  const std::string cross = resume_form("http://evil.example");
+  EXPECT_EQ(status_of(cross), 403) << cross;
+  EXPECT_NE(body_of(cross).find("cross-origin"), std::string::npos) << cross;
+  const auto stats = [&](const std::string& host_header) {
+    const std::string r = round_trip(port_, "GET /stats HTTP/1.1\r\nHost: " + host_header + "\r\nConnection: close\r\n\r\n");
+    return std::make_pair(status_of(r), body_of(r));
+  };
+  EXPECT_TRUE(nlohmann::json::parse(stats(host()).second)["estopped"].get<bool>());  // still e-stopped
+  // DNS rebinding: a name that is not this machine's, for /stats and /frame.jpg.
+  const auto rebound = stats("evil.example:" + std::to_string(port_));
+  EXPECT_EQ(rebound.first, 403);
+  EXPECT_NE(rebound.second.find("DNS"), std::string::npos) << rebound.second;
+  const std::string frame = round_trip(port_, "GET /frame.jpg HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n");
+  EXPECT_EQ(status_of(frame), 403) << frame.substr(0, 200);
+  EXPECT_EQ(stats("localhost:" + std::to_string(port_)).first, 200);
+  // The page's own origin resumes.
+  EXPECT_EQ(status_of(resume_form("http://" + host())), 200);
+  EXPECT_TRUE(eventually([&] { return !nlohmann::json::parse(stats(host()).second)["estopped"].get<bool>(); }));  // at the next tick
+  // /manual: all of each value, finite, -1..1.
+  for (const auto& [steering, throttle] : std::vector<std::pair<std::string, std::string>>{
+           {"1,5", "0"}, {"NaN", "0"}, {"0", "nan"}, {"0", "inf"}, {"2", "0"}, {"", "0"}, {"0.5x", "0"}}) {
+    const std::string r = round_trip(port_, manual_request(steering, throttle));
+    EXPECT_EQ(status_of(r), 400) << steering << " " << throttle << ": " << r;
+    EXPECT_NE(body_of(r).find("-1..1"), std::string::npos) << r;
+  }
+  EXPECT_EQ(status_of(round_trip(port_, manual_request("-0.25", "0"))), 200);
+  EXPECT_TRUE(eventually([&] { return board_.commands().back().steering_us == 1400; }));
 }
 
 }  // namespace

@@ -121,11 +121,12 @@ class Connection final : public httplib::Stream {
     deadline_ = received_ + kRequestDeadline;
     head_left_ = kMaxHead;
     body_left_.reset();
-    close_after_ = false;
+    headers_read_ = close_after_ = false;
     return true;
   }
   /// The request's head is in (httplib's setup_request): bound what is read of its body.
   void headers_read(const httplib::Request& req) {
+    headers_read_ = true;
     const bool chunked = req.get_header_value("Transfer-Encoding").find("chunked") != std::string::npos;
     if (chunked) {
       body_left_ = kMaxBody + 1024;  // framing included; beyond it the request fails
@@ -140,7 +141,8 @@ class Connection final : public httplib::Stream {
   }
   Clock::time_point received() const { return received_; }
   void close_after() { close_after_ = true; }
-  bool must_close() const { return close_after_ || broken_; }
+  /// After a request httplib refused before its headers were read (its body, if any, is unread).
+  bool must_close() const { return close_after_ || broken_ || !headers_read_; }
 
   bool is_readable() const override { return pos_ < buffer_.size() || wait(POLLIN, deadline_); }
   bool is_writable() const override { return wait(POLLOUT, Clock::now() + kWriteTimeout); }
@@ -227,7 +229,7 @@ class Connection final : public httplib::Stream {
   Clock::time_point received_{}, deadline_{};
   size_t head_left_ = kMaxHead;
   std::optional<uint64_t> body_left_;  // set once the head is read
-  bool close_after_ = false, broken_ = false;
+  bool headers_read_ = false, close_after_ = false, broken_ = false;
 };
 
 thread_local Connection* t_connection = nullptr;  // the request being served on this thread

@@ -1,10 +1,22 @@
 #include "apps/drive/live_view.h"
 
+#include <arpa/inet.h>
 #include <httplib.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <condition_variable>
 #include <cstdio>
+#include <optional>
 #include <random>
+#include <system_error>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -17,10 +29,250 @@
 namespace act::drive {
 namespace {
 
+using std::chrono::milliseconds;
+
 // The MJPEG stream's rate: enough to watch the road, a small share of a Pi's CPU.
-constexpr std::chrono::milliseconds kStreamPeriod{66};
-// Worker threads: each open MJPEG stream holds one; the rest serve /stats and the buttons.
-constexpr size_t kServerThreads = 6;
+constexpr milliseconds kStreamPeriod{66};
+// Every connection has its own thread, so no client waits for another. Past kConnections open at
+// once, a new connection may only press the e-stop (anything else gets 503); past kConnections +
+// kEstopOnlyConnections it is closed unread.
+constexpr size_t kConnections = 32;
+constexpr size_t kEstopOnlyConnections = 96;
+// Open MJPEG streams (each holds its connection while it lasts); one more gets 503.
+constexpr int kMaxStreams = 4;
+// A connection that sends nothing for this long is closed (before its first request and between
+// keep-alive requests); a request's head and body must arrive within kRequestDeadline of its first
+// byte (slowloris); a client that stops reading for kWriteTimeout is dropped.
+constexpr milliseconds kIdleTimeout{300};
+constexpr milliseconds kRequestDeadline{500};
+constexpr milliseconds kWriteTimeout{1000};
+// Request bodies: nothing here needs one, so a small bound (413 beyond); the head is bounded too.
+constexpr size_t kMaxBody = 4096;
+constexpr size_t kMaxHead = 16384;
+constexpr int kMaxRequestsPerConnection = 1000;
+// A command that moves the car and is older than this when it would act is refused (408).
+constexpr milliseconds kStaleAfter{250};
+
+// Per connection thread: set by ConnectionThreads before the connection is served.
+thread_local bool t_estop_only = false;  // over kConnections: only the e-stop is served
+thread_local bool t_reject = false;      // over every bound: closed unread
+
+// One thread per connection, bounded (above); shutdown() waits for them all.
+class ConnectionThreads final : public httplib::TaskQueue {
+ public:
+  void enqueue(std::function<void()> fn) override {
+    size_t open = 0;
+    {
+      std::lock_guard lock(state_->mutex);
+      open = state_->open;
+      if (open < kConnections + kEstopOnlyConnections) ++state_->open;
+    }
+    if (open >= kConnections + kEstopOnlyConnections) {
+      t_reject = true;  // on the listening thread: the connection is closed at once
+      fn();
+      t_reject = false;
+      return;
+    }
+    const bool estop_only = open >= kConnections;
+    try {
+      std::thread([state = state_, fn, estop_only]() mutable {
+        t_estop_only = estop_only;
+        fn();
+        fn = nullptr;
+        std::lock_guard lock(state->mutex);
+        --state->open;
+        state->closed.notify_all();
+      }).detach();
+    } catch (const std::system_error&) {  // the OS refused a thread: this connection is closed unread
+      {
+        std::lock_guard lock(state_->mutex);
+        --state_->open;
+      }
+      t_reject = true;
+      fn();
+      t_reject = false;
+    }
+  }
+  void shutdown() override {
+    std::unique_lock lock(state_->mutex);
+    state_->closed.wait(lock, [this] { return state_->open == 0; });
+  }
+
+ private:
+  struct State {
+    std::mutex mutex;
+    std::condition_variable closed;
+    size_t open = 0;  // guarded by mutex
+  };
+  std::shared_ptr<State> state_ = std::make_shared<State>();
+};
+
+// A connection's socket as httplib reads and writes it, with the bounds above in milliseconds
+// (httplib 0.11's own keep-alive timeout has whole seconds) and no body for a request that gives
+// no length (httplib 0.11 would read one until the client closes: curl -X POST without -d).
+class Connection final : public httplib::Stream {
+ public:
+  explicit Connection(int fd) : fd_(fd) {}
+
+  /// Waits up to kIdleTimeout for the next request's first byte; then its deadline starts.
+  bool next_request() {
+    if (pos_ == buffer_.size() && !fill(Clock::now() + kIdleTimeout)) return false;
+    received_ = Clock::now();
+    deadline_ = received_ + kRequestDeadline;
+    head_left_ = kMaxHead;
+    body_left_.reset();
+    headers_read_ = close_after_ = false;
+    return true;
+  }
+  /// The request's head is in (httplib's setup_request): bound what is read of its body.
+  void headers_read(const httplib::Request& req) {
+    headers_read_ = true;
+    const bool chunked = req.get_header_value("Transfer-Encoding").find("chunked") != std::string::npos;
+    if (chunked) {
+      body_left_ = kMaxBody + 1024;  // framing included; beyond it the request fails
+      close_after_ = true;
+    } else if (!req.has_header("Content-Length")) {
+      body_left_ = 0;  // RFC 9112 6.3: no length, no body
+    } else {
+      const uint64_t length = req.get_header_value<uint64_t>("Content-Length");
+      body_left_ = length > kMaxBody ? 0 : length;  // httplib answers 413 beyond kMaxBody
+      if (length > kMaxBody) close_after_ = true;
+    }
+  }
+  Clock::time_point received() const { return received_; }
+  void close_after() { close_after_ = true; }
+  /// After a request httplib refused before its headers were read (its body, if any, is unread).
+  bool must_close() const { return close_after_ || broken_ || !headers_read_; }
+
+  bool is_readable() const override { return pos_ < buffer_.size() || wait(POLLIN, deadline_); }
+  bool is_writable() const override { return wait(POLLOUT, Clock::now() + kWriteTimeout); }
+  ssize_t read(char* out, size_t size) override {
+    size_t limit = size;
+    if (body_left_) limit = std::min<uint64_t>(limit, *body_left_);
+    else limit = std::min(limit, head_left_);
+    if (limit == 0) {
+      if (body_left_) return 0;
+      broken_ = true;  // head over kMaxHead
+      return -1;
+    }
+    if (pos_ == buffer_.size() && !fill(deadline_)) return broken_ ? -1 : 0;
+    const size_t n = std::min(limit, buffer_.size() - pos_);
+    std::copy_n(buffer_.data() + pos_, n, out);
+    pos_ += n;
+    if (body_left_) *body_left_ -= n;
+    else head_left_ -= n;
+    return static_cast<ssize_t>(n);
+  }
+  ssize_t write(const char* data, size_t size) override {
+    if (!wait(POLLOUT, Clock::now() + kWriteTimeout)) {
+      broken_ = true;
+      return -1;
+    }
+    const ssize_t n = ::send(fd_, data, size, MSG_NOSIGNAL);
+    if (n < 0) broken_ = true;
+    return n;
+  }
+  void get_remote_ip_and_port(std::string& ip, int& port) const override { address(::getpeername, ip, port); }
+  void get_local_ip_and_port(std::string& ip, int& port) const override { address(::getsockname, ip, port); }
+  int socket() const override { return fd_; }
+
+ private:
+  bool wait(short events, Clock::time_point until) const {
+    for (;;) {
+      const auto left = std::chrono::duration_cast<milliseconds>(until - Clock::now()).count();
+      pollfd p{fd_, events, 0};
+      const int r = ::poll(&p, 1, static_cast<int>(std::max<int64_t>(left, 0)));
+      if (r > 0) return true;
+      if (r == 0 || errno != EINTR) return false;
+    }
+  }
+  // Reads what is there into the buffer; false on timeout (broken), end of stream or error.
+  bool fill(Clock::time_point until) {
+    buffer_.clear();
+    pos_ = 0;
+    if (!wait(POLLIN, until)) {
+      broken_ = true;
+      return false;
+    }
+    char chunk[4096];
+    const ssize_t n = ::recv(fd_, chunk, sizeof chunk, 0);
+    if (n <= 0) {
+      broken_ = true;
+      return false;
+    }
+    buffer_.assign(chunk, static_cast<size_t>(n));
+    return true;
+  }
+  template <typename Get>
+  void address(Get get, std::string& ip, int& port) const {
+    sockaddr_storage a{};
+    socklen_t length = sizeof a;
+    ip.clear();
+    port = 0;
+    if (get(fd_, reinterpret_cast<sockaddr*>(&a), &length) != 0) return;
+    char text[INET6_ADDRSTRLEN] = "";
+    if (a.ss_family == AF_INET) {
+      const auto* v4 = reinterpret_cast<const sockaddr_in*>(&a);
+      ::inet_ntop(AF_INET, &v4->sin_addr, text, sizeof text);
+      port = ntohs(v4->sin_port);
+    } else if (a.ss_family == AF_INET6) {
+      const auto* v6 = reinterpret_cast<const sockaddr_in6*>(&a);
+      ::inet_ntop(AF_INET6, &v6->sin6_addr, text, sizeof text);
+      port = ntohs(v6->sin6_port);
+    }
+    ip = text;
+  }
+
+  int fd_;
+  std::string buffer_;
+  size_t pos_ = 0;
+  Clock::time_point received_{}, deadline_{};
+  size_t head_left_ = kMaxHead;
+  std::optional<uint64_t> body_left_;  // set once the head is read
+  bool headers_read_ = false, close_after_ = false, broken_ = false;
+};
+
+thread_local Connection* t_connection = nullptr;  // the request being served on this thread
+
+// httplib's server with our connection handling (Connection, ConnectionThreads).
+class HttpServer final : public httplib::Server {
+ public:
+  HttpServer() {
+    new_task_queue = [] { return new ConnectionThreads; };
+    set_payload_max_length(kMaxBody);
+  }
+  std::atomic<bool> stopping{false};
+
+ private:
+  bool process_and_close_socket(socket_t sock) override {
+    bool ok = true;
+    if (!t_reject) {
+      Connection connection(sock);
+      t_connection = &connection;
+      for (int served = 0; svr_sock_ != INVALID_SOCKET && !stopping.load() && connection.next_request(); ++served) {
+        const bool last = t_estop_only || served + 1 >= kMaxRequestsPerConnection;
+        bool closed = false;
+        ok = process_request(connection, last, closed, [&connection](httplib::Request& req) { connection.headers_read(req); });
+        if (!ok || closed || last || connection.must_close()) break;
+      }
+      t_connection = nullptr;
+      // Close gently: what the client still sends (a body never read) is drained for a moment, so
+      // that our reply is not lost to a reset.
+      ::shutdown(sock, SHUT_WR);
+      const auto until = Clock::now() + milliseconds(100);
+      char sink[4096];
+      for (size_t drained = 0; drained < (1u << 20) && Clock::now() < until;) {
+        pollfd p{sock, POLLIN, 0};
+        if (::poll(&p, 1, 20) <= 0) continue;
+        const ssize_t n = ::recv(sock, sink, sizeof sink, 0);
+        if (n <= 0) break;
+        drained += static_cast<size_t>(n);
+      }
+    }
+    ::close(sock);
+    return ok;
+  }
+};
 
 std::string random_token() {
   std::random_device device;
@@ -60,12 +312,51 @@ void reply_json(httplib::Response& res, int status, const nlohmann::ordered_json
   res.set_content(body.dump(), "application/json");
 }
 
+std::string lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
+  return text;
+}
+
+// The host part of a Host header ("name:port", "[v6]:port"), lower case.
+std::string host_name(const std::string& host) {
+  if (!host.empty() && host[0] == '[') return lower(host.substr(0, host.find(']') + 1));
+  const size_t colon = host.find(':');
+  return lower(colon != std::string::npos && host.find(':', colon + 1) == std::string::npos ? host.substr(0, colon) : host);
+}
+
+bool is_ip_literal(const std::string& host) {
+  unsigned char address[sizeof(in6_addr)];
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') {
+    return ::inet_pton(AF_INET6, host.substr(1, host.size() - 2).c_str(), address) == 1;
+  }
+  return ::inet_pton(AF_INET, host.c_str(), address) == 1;
+}
+
+// -1..1, all of the text (no "1,5", no NaN); nullopt otherwise.
+std::optional<double> parse_position(const std::string& text) {
+  double value = 0;
+  const char* end = text.data() + text.size();
+  const auto [stop, error] = std::from_chars(text.data(), end, value);
+  if (text.empty() || error != std::errc() || stop != end || !std::isfinite(value) || value < -1 || value > 1) return std::nullopt;
+  return value;
+}
+
+// A MJPEG stream's place among kMaxStreams, held while the stream lasts.
+struct StreamSlot {
+  explicit StreamSlot(std::atomic<int>& open) : open_(open) {}
+  ~StreamSlot() { open_.fetch_sub(1); }
+  StreamSlot(const StreamSlot&) = delete;
+  StreamSlot& operator=(const StreamSlot&) = delete;
+  std::atomic<int>& open_;
+};
+
 }  // namespace
 
 struct LiveView::Server {
-  httplib::Server http;
+  Clock::time_point started = Clock::now();  // server_ms in /stats counts from here
+  HttpServer http;
   std::thread thread;
-  std::atomic<bool> stopping{false};
+  std::atomic<int> streams{0};
 };
 
 void parse_http_address(const std::string& text, LiveViewOptions& options) {
@@ -86,13 +377,107 @@ void parse_http_address(const std::string& text, LiveViewOptions& options) {
 
 LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource& frames)
     : options_(std::move(options)), token_(random_token()), server_(std::make_unique<Server>()) {
-  httplib::Server& http = server_->http;
-  http.new_task_queue = [] { return new httplib::ThreadPool(kServerThreads); };
+  HttpServer& http = server_->http;
+  // Names this server answers to besides IP literals and localhost: the configured address and this
+  // machine's name (also as NAME.local). Anything else in Host is a DNS-rebinding page's name.
+  std::vector<std::string> names{lower(options_.address)};
+  char hostname[256] = "";
+  if (::gethostname(hostname, sizeof hostname - 1) == 0 && hostname[0] != '\0') {
+    names.push_back(lower(hostname));
+    names.push_back(lower(hostname) + ".local");
+  }
+  const auto host_allowed = [names](const std::string& host) {
+    return is_ip_literal(host) || host == "localhost" || (host.size() > 10 && host.ends_with(".localhost")) ||
+           std::find(names.begin(), names.end(), host) != names.end();
+  };
+  const std::string known_names = names.size() > 1 ? names[1] + ", " + names[2] : options_.address;
+  // The e-stop, refusals and bounds come before routing, so before any body is read: the e-stop acts
+  // on its request line and headers alone, from anyone, whatever follows.
+  http.set_pre_routing_handler([&cockpit, host_allowed, known_names](const httplib::Request& req, httplib::Response& res) {
+    using Handled = httplib::Server::HandlerResponse;
+    const auto refuse = [&res](int status, const std::string& why) {
+      reply_json(res, status, {{"error", why}});
+      res.set_header("Connection", "close");
+      if (t_connection) t_connection->close_after();  // the body, if any, is never read
+      return Handled::Handled;
+    };
+    if (req.method == "POST" && req.path == "/estop") {
+      cockpit.estop();
+      reply_json(res, 200, {{"ok", "e-stop: neutral until resumed"}});
+      res.set_header("Connection", "close");
+      if (t_connection) t_connection->close_after();
+      return Handled::Handled;
+    }
+    if (t_estop_only) return refuse(503, "too many connections open: only POST /estop is served until some close");
+    const std::string host = host_name(req.get_header_value("Host"));
+    if (!host_allowed(host)) {
+      return refuse(403, "Host '" + req.get_header_value("Host") + "' is not this machine's (a page of another site, through DNS "
+                         "rebinding?): open the live view by its IP address, localhost or " + known_names);
+    }
+    if (req.method != "GET" && req.method != "HEAD") {
+      const std::string origin = req.get_header_value("Origin"), site = req.get_header_value("Sec-Fetch-Site");
+      if (req.has_header("Origin") && lower(origin) != "http://" + lower(req.get_header_value("Host"))) {
+        return refuse(403, "cross-origin request refused: Origin '" + origin + "' is not this page's (http://" +
+                               req.get_header_value("Host") + ")");
+      }
+      if (!site.empty() && site != "same-origin" && site != "none") {
+        return refuse(403, "cross-origin request refused (Sec-Fetch-Site: " + site + ")");
+      }
+    }
+    return Handled::Unhandled;
+  });
+  // httplib's own refusals (unknown path, malformed or oversized request) say why, too.
+  http.set_error_handler(httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
+    using Handled = httplib::Server::HandlerResponse;
+    if (!res.body.empty()) return Handled::Unhandled;
+    std::string why;
+    switch (res.status) {
+      case 404: why = "no " + req.method + " " + req.path + " here: GET /, /stats, /stream.mjpg, /frame.jpg; POST /estop, /resume, /mode, /manual"; break;
+      case 413: why = "request body over " + std::to_string(kMaxBody) + " bytes (nothing here needs one)"; break;
+      case 414: why = "request line too long"; break;
+      case 400: why = "malformed request, or head and body not in within " + std::to_string(kRequestDeadline.count()) + " ms"; break;
+      default: why = "refused (HTTP " + std::to_string(res.status) + ")"; break;
+    }
+    reply_json(res, res.status, {{"error", why}});
+    return Handled::Handled;
+  }));
   const auto authorized = [this](const httplib::Request& req, httplib::Response& res) {
     const std::string given = req.has_header("X-Act-Token") ? req.get_header_value("X-Act-Token") : req.get_param_value("token");
-    if (given == token_) return true;
-    reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
-    return false;
+    if (given != token_) {
+      reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
+      return false;
+    }
+    // A command that is served late never acts: timed from when its first byte reached this server
+    // and, when it says when it was issued (X-Act-Issued, the page: ms on this server's clock as
+    // /stats gives it in server_ms), from then, so a command that waited in the network is late too.
+    const auto now = Clock::now();
+    double age_ms = t_connection ? ms_between(t_connection->received(), now) : 0;
+    std::string since = "reached this server";
+    if (req.has_header("X-Act-Issued")) {
+      const std::string text = req.get_header_value("X-Act-Issued");
+      double issued = 0;
+      const auto [stop, error] = std::from_chars(text.data(), text.data() + text.size(), issued);
+      if (error != std::errc() || stop != text.data() + text.size() || !std::isfinite(issued)) {
+        reply_json(res, 400, {{"error", "X-Act-Issued '" + text + "' is not a time in ms on this server's clock (server_ms in /stats)"}});
+        return false;
+      }
+      const double issued_age = ms_between(server_->started, now) - issued;
+      if (issued_age < -static_cast<double>(kStaleAfter.count())) {
+        reply_json(res, 408, {{"error", "X-Act-Issued is " + std::to_string(std::lround(-issued_age)) + " ms ahead of this server's "
+                                        "clock (a page from before act_drive restarted? reload it): refused"}});
+        return false;
+      }
+      if (issued_age > age_ms) {
+        age_ms = issued_age;
+        since = "was issued";
+      }
+    }
+    if (age_ms > static_cast<double>(kStaleAfter.count())) {
+      reply_json(res, 408, {{"error", "this request " + since + " " + std::to_string(std::lround(age_ms)) + " ms ago (over " +
+                                      std::to_string(kStaleAfter.count()) + " ms): refused, it would move the car late"}});
+      return false;
+    }
+    return true;
   };
   // The newest frame as the model sees it (after preprocessing), JPEG-encoded; empty before the first.
   const auto model_view_jpeg = [this, &frames] {
@@ -107,8 +492,10 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
   };
 
   http.Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveViewPage, "text/html"); });
-  http.Get("/stats", [&cockpit](const httplib::Request&, httplib::Response& res) {
-    reply_json(res, 200, status_json(cockpit.status()));
+  http.Get("/stats", [this, &cockpit](const httplib::Request&, httplib::Response& res) {
+    nlohmann::ordered_json status = status_json(cockpit.status());
+    status["server_ms"] = std::round(ms_between(server_->started, Clock::now()) * 10) / 10;
+    reply_json(res, 200, status);
   });
   http.Get("/frame.jpg", [model_view_jpeg](const httplib::Request&, httplib::Response& res) {
     const std::vector<uchar> jpeg = model_view_jpeg();
@@ -116,10 +503,16 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     res.set_content(reinterpret_cast<const char*>(jpeg.data()), jpeg.size(), "image/jpeg");
   });
   http.Get("/stream.mjpg", [this, model_view_jpeg](const httplib::Request&, httplib::Response& res) {
+    if (server_->streams.fetch_add(1) >= kMaxStreams) {
+      server_->streams.fetch_sub(1);
+      return reply_json(res, 503, {{"error", std::to_string(kMaxStreams) + " viewers already watch /stream.mjpg: close one, or "
+                                             "poll /frame.jpg"}});
+    }
+    const auto slot = std::make_shared<StreamSlot>(server_->streams);
     res.set_header("Cache-Control", "no-store");
     res.set_chunked_content_provider("multipart/x-mixed-replace; boundary=frame",
-                                     [this, model_view_jpeg](size_t, httplib::DataSink& sink) {
-      if (server_->stopping.load()) return false;
+                                     [this, model_view_jpeg, slot](size_t, httplib::DataSink& sink) {
+      if (server_->http.stopping.load()) return false;
       const std::vector<uchar> jpeg = model_view_jpeg();
       if (!jpeg.empty()) {
         const std::string head = "--frame\r\nContent-Type: image/jpeg\r\nContent-Length: " + std::to_string(jpeg.size()) + "\r\n\r\n";
@@ -132,10 +525,7 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
       return true;
     });
   });
-  http.Post("/estop", [&cockpit](const httplib::Request&, httplib::Response& res) {
-    cockpit.estop();
-    reply_json(res, 200, {{"ok", "e-stop: neutral until resumed"}});
-  });
+  // POST /estop: the pre-routing handler above.
   http.Post("/resume", [&cockpit, authorized](const httplib::Request& req, httplib::Response& res) {
     if (!authorized(req, res)) return;
     cockpit.resume();
@@ -150,14 +540,14 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
   });
   http.Post("/manual", [&cockpit, authorized](const httplib::Request& req, httplib::Response& res) {
     if (!authorized(req, res)) return;
-    double steering = 0, throttle = 0;
-    try {
-      steering = std::stod(req.get_param_value("steering"));
-      throttle = std::stod(req.get_param_value("throttle"));
-    } catch (const std::exception&) {
-      return reply_json(res, 400, {{"error", "steering and throttle must be numbers in -1..1"}});
+    const std::optional<double> steering = parse_position(req.get_param_value("steering"));
+    const std::optional<double> throttle = parse_position(req.get_param_value("throttle"));
+    if (!steering || !throttle) {
+      return reply_json(res, 400, {{"error", "steering '" + req.get_param_value("steering") + "' and throttle '" +
+                                             req.get_param_value("throttle") + "' must both be numbers in -1..1 (a dot for "
+                                             "decimals: 0.5)"}});
     }
-    cockpit.manual(steering, throttle);
+    cockpit.manual(*steering, *throttle);
     reply_json(res, 200, {{"ok", "manual"}});
   });
 
@@ -174,7 +564,7 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
 }
 
 LiveView::~LiveView() {
-  server_->stopping.store(true);
+  server_->http.stopping.store(true);
   server_->http.stop();
   if (server_->thread.joinable()) server_->thread.join();
 }

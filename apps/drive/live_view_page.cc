@@ -45,8 +45,18 @@ button, select, input { font-size: 14px; margin: 2px; }
 <script>
 'use strict';
 const $ = (id) => document.getElementById(id);
+// The server's clock as this page sees it, from the fastest /stats round trip of the last 20: each
+// command carries the time it was issued on that clock, and the server refuses one that arrives late.
+const clockSamples = [];
+function serverNow() {
+  if (clockSamples.length === 0) return null;
+  const best = clockSamples.reduce((a, b) => (b.rtt < a.rtt ? b : a));
+  return performance.now() + best.offset;
+}
 function post(path, withToken) {
   const headers = withToken ? { 'X-Act-Token': $('token').value } : {};
+  const issued = serverNow();
+  if (withToken && issued !== null) headers['X-Act-Issued'] = issued.toFixed(1);
   return fetch(path, { method: 'POST', headers }).then(async (r) => {
     const body = await r.json().catch(() => ({}));
     $('message').textContent = r.ok ? (body.ok || 'ok') : 'refused: ' + (body.error || r.status);
@@ -80,7 +90,12 @@ function drawAhead(s) {
 }
 async function refresh() {
   try {
-    const s = await (await fetch('/stats')).json();
+    const t0 = performance.now();
+    const r = await fetch('/stats');
+    const t1 = performance.now();
+    const s = await r.json();
+    clockSamples.push({ offset: s.server_ms - (t0 + t1) / 2, rtt: t1 - t0 });
+    if (clockSamples.length > 20) clockSamples.shift();
     $('frame-index').textContent = s.frame_index;
     $('mode-now').textContent = s.mode + (s.overridden ? ' (overridden by hand)' : '');
     $('driver').textContent = s.driver;

@@ -27,7 +27,11 @@ async function clickAndWaitForReply(page, selector) {
 }
 
 withPage(async (page, external) => {
-  const result = { external };
+  const result = { external, manual_issued: [] };
+  // The commands that move the car carry the time the page issued them on the server's clock.
+  page.on('request', (r) => {
+    if (r.url().includes('/manual')) result.manual_issued.push(r.headers()['x-act-issued'] || null);
+  });
   await page.goto(url);
   await page.waitForFunction(() => document.getElementById('frame').naturalWidth > 0, null, { timeout: 15000 });
   result.image_width = await page.$eval('#frame', (img) => img.naturalWidth);

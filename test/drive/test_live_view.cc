@@ -87,6 +87,10 @@ TEST(ActDriveLiveView, EstopResumeAndDrivingByHandFromTheBrowser) {
   const nlohmann::json r = nlohmann::json::parse(read_text(out));
 
   EXPECT_TRUE(r["external"].empty()) << r["external"];  // the page needs no network
+  // Every command driving by hand carried the time the page issued it (X-Act-Issued, ms on the
+  // server's clock), and the server took them as fresh (the keys and stick below reach the line).
+  ASSERT_FALSE(r["manual_issued"].empty());
+  for (const auto& issued : r["manual_issued"]) EXPECT_TRUE(issued.is_string() && std::stod(issued.get<std::string>()) > 0) << issued;
   EXPECT_EQ(r["image_width"], 128);                      // the model's input, not the camera's
   EXPECT_TRUE(r["frame_changed"]);
   std::set<double> steering, throttle;

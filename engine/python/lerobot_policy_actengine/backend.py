@@ -47,6 +47,7 @@ def _write_wheel(directory, files):
     files[f"{dist_info}/METADATA"] = _metadata(version).encode()
     files[f"{dist_info}/WHEEL"] = b"Wheel-Version: 1.0\nGenerator: lerobot_policy_actengine backend\nRoot-Is-Purelib: true\nTag: py3-none-any\n"
     files[f"{dist_info}/top_level.txt"] = f"{NAME}\n".encode()
+    files[f"{dist_info}/entry_points.txt"] = f"[console_scripts]\nactengine-package = {NAME}.package:main\n".encode()
     record = [_record_line(name, data) for name, data in files.items()] + [f"{dist_info}/RECORD,,"]
     files[f"{dist_info}/RECORD"] = ("\n".join(record) + "\n").encode()
     wheel_name = f"{NAME}-{version}-py3-none-any.whl"

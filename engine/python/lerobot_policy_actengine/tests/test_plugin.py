@@ -174,3 +174,24 @@ def test_processors_that_normalise_again(lerobot, act_tiny, fp32_package, tmp_pa
         shutil.copy(name, folder / name.name)  # LeRobot ACT's processors: they normalise
     with pytest.raises(ValueError, match="normalised twice"):
         load_like_rollout(lerobot, folder)
+
+
+def test_python_writer_gives_act_converts_files(lerobot, act_tiny, ensembling_checkpoint, fp32_package, ensembling_package,
+                                                tmp_path):
+    """actengine-package (pip only, no act_convert) writes act_convert --package's LeRobot files."""
+    from lerobot_policy_actengine import package
+
+    for name, checkpoint, expected in [("queue", act_tiny, fp32_package), ("ensembling", ensembling_checkpoint, ensembling_package)]:
+        folder = tmp_path / name
+        package.main([str(checkpoint), str(folder), "--precision", "fp32"])
+        for file in ("config.json", "policy_preprocessor.json", "policy_postprocessor.json"):
+            assert json.loads((folder / file).read_text()) == json.loads((expected / file).read_text()), f"{name}: {file}"
+    cfg = lerobot.PreTrainedConfig.from_pretrained(tmp_path / "ensembling")
+    assert (cfg.n_action_steps, cfg.temporal_ensemble_coeff) == (1, 0.01)
+
+
+def test_console_script_is_installed():
+    import importlib.metadata
+
+    scripts = {e.name: e.value for e in importlib.metadata.entry_points(group="console_scripts")}
+    assert scripts.get("actengine-package") == "lerobot_policy_actengine.package:main"

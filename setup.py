@@ -9,10 +9,11 @@ drives CMake and reads the version.
 
 Environment: CMAKE_ARGS (extra configure arguments, shell-split, e.g. the ccache launchers or a
 toolchain file), CMAKE_BUILD_PARALLEL_LEVEL (jobs; CMake reads it), ACT_PIP_BUILD_DIR (the CMake
-build folder, default build-pip-<python tag>; kept, so a second build is incremental; one level deep
+build folder, default build-pip-<SOABI>-<interpreter hash>; kept, so a second build is incremental; one level deep
 like build/, so ccache with CCACHE_BASEDIR reuses a developer build's objects).
 """
 
+import hashlib
 import os
 import re
 import shlex
@@ -50,7 +51,10 @@ class CMakeBuild(build_ext):
         cmake = shutil.which("cmake")
         if cmake is None:
             raise RuntimeError("cmake (3.25 or newer) is needed to build actengine: apt install cmake, or pip install cmake")
+        # One folder per interpreter (two Pythons 3.11 share the SOABI, not the headers); venvs of one
+        # interpreter share it.
         tag = sysconfig.get_config_var("SOABI") or f"py{sys.version_info[0]}{sys.version_info[1]}"
+        tag += "-" + hashlib.sha1(os.path.realpath(sys.executable).encode()).hexdigest()[:8]
         build_dir = Path(os.environ.get("ACT_PIP_BUILD_DIR") or ROOT / f"build-pip-{tag}").resolve()
         build_dir.mkdir(parents=True, exist_ok=True)
         args = [

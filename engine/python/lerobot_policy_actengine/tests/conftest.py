@@ -143,3 +143,23 @@ def robot_observations(ticks, seed=0):
     for _ in range(ticks):
         yield {CAMERA: rng.integers(0, 256, (96, 128, 3), dtype=np.uint8),
                STATE: rng.standard_normal(2).astype(np.float32)}
+
+
+@pytest.fixture(scope="session")
+def int8_package(act_tiny, tmp_path_factory):
+    return act_convert(act_tiny, tmp_path_factory.mktemp("int8") / "package", "--precision", "int8", "--mode", "dynamic")
+
+
+def act_eval_error(blob, observations):
+    """act_eval's max |diff| / (1 + |ref|) of a blob's chunks against the reference in `observations`,
+    rounded up by half a unit of its last printed digit (it prints three significant digits)."""
+    import re
+    from decimal import Decimal
+
+    binary = require(os.environ.get("ACT_EVAL_BIN"), "act_eval (ACT_EVAL_BIN)")
+    result = subprocess.run([str(binary), "-m", str(blob), "-i", str(observations), "--compare", "-t", "1"],
+                            capture_output=True, text=True)
+    found = re.search(r"max \|diff\|/\(1\+\|ref\|\) ([0-9.eE+-]+)", result.stdout)
+    assert found, result.stdout + result.stderr
+    printed = Decimal(found.group(1))
+    return float(printed + Decimal(5).scaleb(printed.as_tuple().exponent - 1))

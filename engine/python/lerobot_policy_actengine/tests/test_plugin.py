@@ -195,3 +195,19 @@ def test_console_script_is_installed():
 
     scripts = {e.name: e.value for e in importlib.metadata.entry_points(group="console_scripts")}
     assert scripts.get("actengine-package") == "lerobot_policy_actengine.package:main"
+
+
+def test_int8_predict_action_within_act_evals_error(lerobot, act_tiny, reference, int8_package):
+    """INT8 (dynamic) through the plugin against LeRobot's ACTPolicy, 250 ticks with the queue, each chunk
+    inferred on one of the fixture's observations: within the error act_eval reports for that blob on
+    those observations (its chunks against LeRobot's reference)."""
+    from conftest import act_eval_error
+
+    bound = act_eval_error(int8_package / "model.actb", act_tiny / "reference.safetensors")
+    samples = [{CAMERA: reference["input.observation.images.front.u8_nhwc"][i], STATE: reference["input.observation.state"][i]}
+               for i in range(reference["input.observation.state"].shape[0])]
+    observations = [samples[(tick // 10) % len(samples)] for tick in range(TICKS)]  # n_action_steps 10
+    ours = run(lerobot, load_like_rollout(lerobot, int8_package), observations)
+    theirs = run(lerobot, load_lerobot_act(lerobot, act_tiny), observations)
+    error = (np.abs(ours - theirs) / (1 + np.abs(theirs))).max()
+    assert 0 < error <= bound, f"INT8 error {error:.4g}, act_eval reports {bound:.4g}"

@@ -101,9 +101,11 @@ class ActenginePolicy(PreTrainedPolicy):
             self._policy.reset()
 
     def drop_queued_actions(self) -> None:
-        """The next select_action runs the network (the queue, or with temporal ensembling the
-        ensemble, is emptied: actengine keeps them in one place)."""
-        self.reset()
+        """The next select_action runs the network (lerobot-rollout calls it when the task changes):
+        empties the action queue. With temporal ensembling every call runs the network anyway, and
+        LeRobot's ACT keeps its ensemble then (it clears only its _action_queue): so does this."""
+        if self._policy is not None and self.config.temporal_ensemble_coeff is None:
+            self._policy.reset()
 
     @torch.no_grad()
     def select_action(self, batch, **kwargs) -> torch.Tensor:

@@ -75,6 +75,12 @@ def _load_lerobot():
         _stub(f"lerobot.policies.{package}")
         _stub(f"lerobot.policies.{package}.{module}", **{cls: type(cls, (), {})})
     ns.factory = importlib.import_module("lerobot.policies.factory")
+    # lerobot-rollout's sync inference engine (what --inference.type=sync runs each tick); the two
+    # package __init__ files import every strategy, dataset and robot: empty packages instead.
+    for name in ("lerobot.rollout", "lerobot.rollout.inference"):
+        package = _stub(name)
+        package.__path__ = [str(Path(ns.src) / Path(*name.split(".")))]
+    ns.sync_inference = importlib.import_module("lerobot.rollout.inference.sync")
     ns.converters = converters
     return ns
 

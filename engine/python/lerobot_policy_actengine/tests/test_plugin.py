@@ -211,3 +211,28 @@ def test_int8_predict_action_within_act_evals_error(lerobot, act_tiny, reference
     theirs = run(lerobot, load_lerobot_act(lerobot, act_tiny), observations)
     error = (np.abs(ours - theirs) / (1 + np.abs(theirs))).max()
     assert 0 < error <= bound, f"INT8 error {error:.4g}, act_eval reports {bound:.4g}"
+
+
+@pytest.mark.parametrize("mode", ["queue", "temporal_ensembling"])
+def test_rollout_sync_inference_engine_matches_lerobot_act(lerobot, act_tiny, ensembling_checkpoint, fp32_package,
+                                                          ensembling_package, mode):
+    """lerobot-rollout's SyncInferenceEngine (reset, get_action per tick, a task change that drops the
+    queued actions) with the plugin and with LeRobot's ACTPolicy: the same robot actions."""
+    checkpoint, package = (act_tiny, fp32_package) if mode == "queue" else (ensembling_checkpoint, ensembling_package)
+    features = {"action": {"dtype": "float32", "shape": (2,), "names": ["steer", "throttle"]}}
+    observations = list(robot_observations(TICKS, seed=1))
+    results = []
+    for policy, pre, post in (load_like_rollout(lerobot, package), load_lerobot_act(lerobot, checkpoint)):
+        engine = lerobot.sync_inference.SyncInferenceEngine(policy, pre, post, features, ["steer", "throttle"],
+                                                            task="drive", device="cpu", robot_type="rover")
+        engine.reset()
+        actions = []
+        for tick, observation in enumerate(observations):
+            if tick == 95:  # mid-chunk: the next tick infers again
+                assert engine.set_task("park")
+            actions.append(engine.get_action(dict(observation)).numpy())
+        results.append(np.array(actions))
+    ours, theirs = results
+    assert ours.shape == theirs.shape == (TICKS, 2)
+    error = np.abs(ours - theirs) / (1 + np.abs(theirs))
+    assert error.max() <= 1e-4, f"{mode}: worst tick {int(error.argmax()) // 2}, relative error {error.max():.2e}"

@@ -51,7 +51,7 @@ void add_options(CLI::App& app, Options& o) {
       ->required();
   app.add_option("-o,--output", o.output, "output .actb file (written atomically)");
   app.add_option("--package", o.package, "write a folder for the robot: the blob (" + std::string(act::kPackageBlobName) +
-                 "), a drive calibration template and a README");
+                 "), a drive calibration template, a README, and LeRobot's config.json and processor files (--policy.path with the lerobot_policy_actengine plugin)");
   app.add_flag("--explain", o.explain, "print every config value and where it comes from (for a .pth: which tensor, file "
                "or flag), and what cannot be known; converts too if -o or --package is given");
   act::add_pytorch_options(app, o.pth);
@@ -296,7 +296,7 @@ void print_summary(const act::ImportSummary& s, const Options& o, uint64_t bytes
             << "compute      " << gmac(s.macs) << " GMAC per inference (backbone " << gmac(s.backbone_macs)
             << ", encoder " << gmac(s.encoder_macs) << ", decoder " << gmac(s.decoder_macs) << ")\n"
             << "wrote        " << o.output << " (" << human_bytes(static_cast<double>(bytes)) << ")\n";
-  if (!o.package.empty()) std::cout << "package      " << o.package << " (blob, drive_calibration.json, README.md)\n";
+  if (!o.package.empty()) std::cout << "package      " << o.package << " (blob, drive_calibration.json, README.md, LeRobot's config.json and processors)\n";
   for (const auto& note : s.notes) std::cout << "note: " << note << "\n";
 }
 

@@ -28,7 +28,7 @@ if [ "${1:-}" = "--projection" ]; then
   host_packages+=(llvm-19)
   arm64_packages=()
 elif [ "${1:-}" != "--packaging" ]; then  # the tests under emulation; --packaging: only the arm64 packages' build
-  host_packages+=(qemu-user)
+  host_packages+=(qemu-user debootstrap)  # debootstrap: the arm64 Python of scripts/check_arm64_wheel.sh
   arm64_packages+=(libgtest-dev libgmock-dev)
 fi
 

@@ -23,6 +23,8 @@ if [ "$mode" != "--packaging" ]; then
     libopenblas0-serial       # their BLAS: the test checkpoints' float64 references 3x faster than netlib's
     python3-pil               # act_drive's recording_to_lerobot.py and its test
     python3-dev pybind11-dev python3-pybind11 python3-pytest  # the Python module (engine/python) and its tests
+    python3-setuptools python3-wheel python3-pip python3-venv  # pip install . / pip wheel . offline (pyproject.toml)
+    python3-torchvision python3-tqdm  # LeRobot's ACTPolicy in ../shared/tools/lerobot (the LeRobot plugin's tests)
     clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes for scripts/run_fuzz.sh
     nodejs                    # ONNX Runtime (npm's onnxruntime-node) in the export tests
     chromium                  # the web-page tests (HTML reports, act_drive's live view), headless

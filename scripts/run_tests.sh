@@ -112,12 +112,12 @@ jobs=1 run_ctest "$root/build" -R "$live_view"
 stage_done release-tests
 # The kernel benchmarks' smoke run (one thread) beside the Python module's build (one file) and
 # pytest (one process), which leave the other core idle.
-echo "== kernel benchmarks (smoke run; the numbers are not judged), and the Python module (engine/python, pytest) =="
+echo "== kernel benchmarks (smoke run; the numbers are not judged), and the Python module and LeRobot plugin (engine/python, pytest) =="
 "$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01 >"$root/build/kernel_bench.txt" 2>&1 &
 kernel_bench=$!
 cmake -S "$root" -B "$root/build" -DACT_BUILD_PYTHON=ON >/dev/null  # a missing pybind11 fails here, not skips
-cmake --build "$root/build" -j "$jobs" --target _actengine act_convert
-run_ctest "$root/build" -R '^python_module$'
+cmake --build "$root/build" -j "$jobs" --target _actengine act_convert act_eval
+run_ctest "$root/build" -R '^python_(module|lerobot_plugin)$'
 wait "$kernel_bench" || { tail -n 40 "$root/build/kernel_bench.txt"; echo "act_kernel_bench failed" >&2; exit 1; }
 echo "$(grep -c 'GMAC/s=' "$root/build/kernel_bench.txt") benchmarks ran (build/kernel_bench.txt)"
 stage_done python-tests+kernel-bench-smoke

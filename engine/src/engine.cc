@@ -13,7 +13,9 @@ namespace act {
 
 namespace bn = blob_names;
 
-const char* version() { return "0.1.0"; }
+// ACT_VERSION: the project VERSION of the top-level CMakeLists.txt, the one version number of the
+// library, the tools and the Python wheel (setup.py reads it there too).
+const char* version() { return ACT_VERSION; }
 
 // ---------------------------------------------------------------------------------------- Impl
 

@@ -5,6 +5,8 @@
 #include <fstream>
 #include <iterator>
 
+#include <nlohmann/json.hpp>
+
 #include "support/command.h"
 #include "support/test_paths.h"
 
@@ -39,8 +41,33 @@ TEST(ActConvertPth, ConvertsWithFlagsAndWritesARobotPackage) {
       " --image-size 96x128 --n-action-steps 10 --n-heads 4 --assume-lerobot-defaults --package " + q(dir + "/pkg"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("PyTorch zip .pth"), std::string::npos) << r.output;
-  for (const char* file : {"model.actb", "drive_calibration.json", "README.md"}) {
+  for (const char* file : {"model.actb", "drive_calibration.json", "README.md", "config.json", "policy_preprocessor.json",
+                           "policy_postprocessor.json"}) {
     EXPECT_TRUE(fs::exists(dir + "/pkg/" + file)) << file;
+  }
+  // LeRobot's --policy.path files (engine/python/lerobot_policy_actengine): a .pth has no config.json,
+  // so the features come from the flags; the blob normalises, the processors do not.
+  const nlohmann::json config = nlohmann::json::parse(std::ifstream(dir + "/pkg/config.json"));
+  EXPECT_EQ(config["type"], "actengine");
+  int cameras = 0;
+  for (const auto& [key, feature] : config["input_features"].items()) {
+    if (feature["type"] == "VISUAL") {
+      ++cameras;
+      EXPECT_EQ(feature["shape"], nlohmann::json::array({3, 96, 128})) << key;
+    }
+  }
+  EXPECT_EQ(cameras, 1);
+  EXPECT_EQ(config["input_features"]["observation.state"]["shape"], nlohmann::json::array({2}));
+  EXPECT_EQ(config["output_features"]["action"]["shape"], nlohmann::json::array({2}));
+  EXPECT_EQ(config["n_action_steps"], 10);
+  EXPECT_EQ(config["normalization"], "blob");
+  EXPECT_EQ(config["blob"], "model.actb");
+  for (const char* name : {"policy_preprocessor.json", "policy_postprocessor.json"}) {
+    const nlohmann::json processor = nlohmann::json::parse(std::ifstream(dir + "/pkg/" + name));
+    ASSERT_FALSE(processor["steps"].empty()) << name;
+    for (const auto& step : processor["steps"]) {
+      EXPECT_EQ(std::string(step["registry_name"]).find("normalizer"), std::string::npos) << name;
+    }
   }
   std::ifstream readme(dir + "/pkg/README.md");
   const std::string text((std::istreambuf_iterator<char>(readme)), std::istreambuf_iterator<char>());

@@ -20,19 +20,18 @@
 
 #include "actengine/convert.h"
 #include "actengine/engine.h"
+#include "actengine/status.h"
 #include "apps/bench_support.h"
 #include "apps/diff_stats.h"
 #include "apps/observation_file.h"
 #include "apps/op_profile_report.h"
 #include "apps/progress.h"
-#include "apps/status_error.h"
 #include "graph/aligned_buffer.h"
 #include "graph/peak_together.h"
 #include "kernels/fp32/gemm_f32.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/peak/peak_probe.h"
 #include "weights/blob/actb.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/model_config.h"
 
@@ -113,12 +112,15 @@ struct BuiltinBlobs {
 
 void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBlobs& out) {
   auto imported = act::import_synthetic_model(opt.config, opt.seed);
-  act::throw_if_failed(imported.status());
+  if (!imported.ok()) throw act::Error(imported.status());
   const act::ImportedCheckpoint& model = **imported;
-  if (want_fp32) act::throw_if_failed(model.write_fp32(out.fp32.path).status());
+  if (want_fp32) {
+    const auto written = model.write_fp32(out.fp32.path);
+    if (!written.ok()) throw act::Error(written.status());
+  }
   if (!want_int8) return;
   auto frames = model.synthetic_calibration_set(5, opt.seed);
-  act::throw_if_failed(frames.status());
+  if (!frames.ok()) throw act::Error(frames.status());
   act::Int8Options int8;
   int8.mode = act::Int8Mode::kStatic;
   int8.holdout = 1;
@@ -128,9 +130,9 @@ void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBl
   // In a child process, so that the calibration's FP32 run and its buffers do not count in this
   // process's peak RSS. The child reports the held-out error through a pipe.
   int fds[2];
-  if (::pipe(fds) != 0) act::fail(act::ErrorCode::kIoError, "pipe() failed");
+  if (::pipe(fds) != 0) act::fail(act::StatusCode::kIoError, "pipe() failed");
   const pid_t child = ::fork();
-  if (child < 0) act::fail(act::ErrorCode::kIoError, "fork() failed");
+  if (child < 0) act::fail(act::StatusCode::kIoError, "fork() failed");
   if (child == 0) {
     ::close(fds[0]);
     int code = 0;
@@ -151,14 +153,14 @@ void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBl
   ::close(fds[0]);
   int status = 0;
   ::waitpid(child, &status, 0);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::ErrorCode::kInternal, "INT8 conversion of the built-in model failed");
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::StatusCode::kInternal, "INT8 conversion of the built-in model failed");
   out.has_int8 = true;
   out.int8_note = "INT8 static, mse calibration on 4 synthetic frames (held-out action MSE " + mse + ")";
 }
 
 std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   auto engine_or = act::Engine::open(path, {.threads = threads, .profile = true});
-  act::throw_if_failed(engine_or.status());
+  if (!engine_or.ok()) throw act::Error(engine_or.status());
   return std::move(*engine_or);
 }
 
@@ -281,7 +283,7 @@ class Benchmark {
   // The model: a blob, or a built-in synthetic one written to a temporary blob.
   void choose_model() {
     if (opt_.compare && !opt_.model.empty() && opt_.compare_with.empty()) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
+      act::fail(act::StatusCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
     }
     blob_path_ = model_label_ = opt_.model;
     other_path_ = opt_.compare_with;
@@ -294,7 +296,7 @@ class Benchmark {
       build_ms_ = ms_since(start);
       model_label_ = "built-in \"" + opt_.config + "\" (synthetic weights, seed " + std::to_string(opt_.seed) + ")";
     } else if (opt_.precision != "fp32") {
-      act::fail(act::ErrorCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
+      act::fail(act::StatusCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
     }
   }
 
@@ -307,7 +309,7 @@ class Benchmark {
     other_ = open_engine(other_path_, opt_.threads);
     const act::ModelInfo& info = engine_->model_info();
     if (other_->model_info().chunk_values() != info.chunk_values() || other_->model_info().summary != info.summary) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--compare-with " + other_path_ + " is not the same model (" +
+      act::fail(act::StatusCode::kInvalidArgument, "--compare-with " + other_path_ + " is not the same model (" +
                 other_->model_info().summary + " vs " + info.summary + ")");
     }
   }
@@ -317,7 +319,7 @@ class Benchmark {
     std::vector<float> chunk(engine_->model_info().chunk_values()), other_chunk(chunk.size());
     auto infer = [&](act::Engine& e, int i, std::vector<float>& out) {
       const act::Status s = e.infer_normalized(inputs.at(i), out);
-      act::throw_if_failed(s);
+      if (!s.ok()) throw act::Error(s);
     };
     const auto first_start = Clock::now();
     infer(*engine_, 0, chunk);
@@ -534,7 +536,7 @@ class Benchmark {
   // The last timed inference as a Chrome trace: one lane per thread.
   void write_trace() {
     act::StatusOr<std::string> trace = engine_->chrome_trace();
-    act::throw_if_failed(trace.status());
+    if (!trace.ok()) throw act::Error(trace.status());
     trace_file_->write(*trace);
     trace_file_->commit();
     std::printf("trace        %s (open in ui.perfetto.dev or chrome://tracing)\n", opt_.trace_path.c_str());

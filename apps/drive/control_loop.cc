@@ -8,8 +8,7 @@
 #include <thread>
 
 #include "actengine/scheduler.h"
-#include "apps/status_error.h"
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/model_config.h"
 
 namespace act::drive {
@@ -99,7 +98,7 @@ ModelInfo with_deployment(const ModelInfo& info, const DeploymentOptions& deploy
   }
   const std::optional<double> coeff = out.temporal_ensembling ? std::optional<double>(out.temporal_ensemble_coeff) : std::nullopt;
   if (const std::string problem = ModelConfig::deployment_problem(out.n_action_steps, coeff, out.chunk_size); !problem.empty()) {
-    fail(ErrorCode::kInvalidArgument, "--n-action-steps / --temporal-ensemble-coeff with this model: " + problem);
+    fail(StatusCode::kInvalidArgument, "--n-action-steps / --temporal-ensemble-coeff with this model: " + problem);
   }
   return out;
 }
@@ -119,8 +118,8 @@ std::vector<float> initial_state(const ControlOptions& options, int state_dim, c
   if (options.state_source != ControlOptions::StateSource::kLastAction) return state;
   if (!options.initial_state.empty()) {
     if (options.initial_state.size() != state.size()) {
-      fail(ErrorCode::kInvalidArgument, "the initial state has " + std::to_string(options.initial_state.size()) +
-                                            " values, the model's state " + std::to_string(state_dim));
+      fail(StatusCode::kInvalidArgument, "the initial state has " + std::to_string(options.initial_state.size()) +
+                                             " values, the model's state " + std::to_string(state_dim));
     }
     return options.initial_state;
   }
@@ -130,7 +129,7 @@ std::vector<float> initial_state(const ControlOptions& options, int state_dim, c
 
 ChunkScheduler make_scheduler(const ModelInfo& info) {
   StatusOr<ChunkScheduler> scheduler = ChunkScheduler::create(info);
-  throw_if_failed(scheduler.status(), "act_drive");
+  if (!scheduler.ok()) throw Error(scheduler.status().with_context("act_drive"));
   return std::move(scheduler).value();
 }
 

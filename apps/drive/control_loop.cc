@@ -9,7 +9,6 @@
 
 #include "actengine/scheduler.h"
 #include "actengine/status.h"
-#include "weights/blob/model_config.h"
 
 namespace act::drive {
 namespace {
@@ -96,8 +95,7 @@ ModelInfo with_deployment(const ModelInfo& info, const DeploymentOptions& deploy
     out.temporal_ensembling = deployment.temporal_ensemble_coeff->has_value();
     out.temporal_ensemble_coeff = deployment.temporal_ensemble_coeff->value_or(0.0);
   }
-  const std::optional<double> coeff = out.temporal_ensembling ? std::optional<double>(out.temporal_ensemble_coeff) : std::nullopt;
-  if (const std::string problem = ModelConfig::deployment_problem(out.n_action_steps, coeff, out.chunk_size); !problem.empty()) {
+  if (const std::string problem = ChunkScheduler::deployment_problem(out); !problem.empty()) {
     fail(StatusCode::kInvalidArgument, "--n-action-steps / --temporal-ensemble-coeff with this model: " + problem);
   }
   return out;

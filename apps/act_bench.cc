@@ -20,21 +20,14 @@
 
 #include "actengine/convert.h"
 #include "actengine/engine.h"
+#include "actengine/status.h"
 #include "apps/bench_support.h"
 #include "apps/diff_stats.h"
 #include "apps/observation_file.h"
 #include "apps/op_profile_report.h"
 #include "apps/progress.h"
-#include "apps/status_error.h"
-#include "graph/aligned_buffer.h"
-#include "graph/peak_together.h"
-#include "kernels/fp32/gemm_f32.h"
-#include "kernels/gemm_s8/gemm_s8.h"
-#include "kernels/peak/peak_probe.h"
-#include "weights/blob/actb.h"
-#include "weights/blob/error.h"
+#include "bench/probes/bench_probes.h"
 #include "weights/blob/file_util.h"
-#include "weights/blob/model_config.h"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -113,12 +106,15 @@ struct BuiltinBlobs {
 
 void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBlobs& out) {
   auto imported = act::import_synthetic_model(opt.config, opt.seed);
-  act::throw_if_failed(imported.status());
+  if (!imported.ok()) throw act::Error(imported.status());
   const act::ImportedCheckpoint& model = **imported;
-  if (want_fp32) act::throw_if_failed(model.write_fp32(out.fp32.path).status());
+  if (want_fp32) {
+    const auto written = model.write_fp32(out.fp32.path);
+    if (!written.ok()) throw act::Error(written.status());
+  }
   if (!want_int8) return;
   auto frames = model.synthetic_calibration_set(5, opt.seed);
-  act::throw_if_failed(frames.status());
+  if (!frames.ok()) throw act::Error(frames.status());
   act::Int8Options int8;
   int8.mode = act::Int8Mode::kStatic;
   int8.holdout = 1;
@@ -128,9 +124,9 @@ void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBl
   // In a child process, so that the calibration's FP32 run and its buffers do not count in this
   // process's peak RSS. The child reports the held-out error through a pipe.
   int fds[2];
-  if (::pipe(fds) != 0) act::fail(act::ErrorCode::kIoError, "pipe() failed");
+  if (::pipe(fds) != 0) act::fail(act::StatusCode::kIoError, "pipe() failed");
   const pid_t child = ::fork();
-  if (child < 0) act::fail(act::ErrorCode::kIoError, "fork() failed");
+  if (child < 0) act::fail(act::StatusCode::kIoError, "fork() failed");
   if (child == 0) {
     ::close(fds[0]);
     int code = 0;
@@ -151,20 +147,20 @@ void build_builtin(const Options& opt, bool want_fp32, bool want_int8, BuiltinBl
   ::close(fds[0]);
   int status = 0;
   ::waitpid(child, &status, 0);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::ErrorCode::kInternal, "INT8 conversion of the built-in model failed");
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) act::fail(act::StatusCode::kInternal, "INT8 conversion of the built-in model failed");
   out.has_int8 = true;
   out.int8_note = "INT8 static, mse calibration on 4 synthetic frames (held-out action MSE " + mse + ")";
 }
 
 std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   auto engine_or = act::Engine::open(path, {.threads = threads, .profile = true});
-  act::throw_if_failed(engine_or.status());
+  if (!engine_or.ok()) throw act::Error(engine_or.status());
   return std::move(*engine_or);
 }
 
 // The model's MACs each timed stage runs: the cameras' feature projections with the backbone they
 // follow, the action head with the decoder whose last op computes it; preprocess and other none.
-double stage_macs(const std::string& stage, const act::ModelConfig::Macs& macs) {
+double stage_macs(const std::string& stage, const act::bench::Macs& macs) {
   if (stage == "backbone") return macs.backbone + macs.projections;
   if (stage == "encoder") return macs.encoder;
   if (stage == "decoder") return macs.decoder + macs.head;
@@ -214,24 +210,22 @@ struct TimedRuns {
 // machine.
 struct Peak {
   bool int8 = false;
-  act::kernels::Isa isa{};
-  const act::kernels::PeakProbe* probe = nullptr;
+  act::bench::KernelPeak probe;
   int threads = 1;  ///< the threads the probe runs on at once: the engine's, at most one per core
   double before_runs = 0, after_runs = 0;  ///< the probe's readings, GMAC/s of all `threads`
 
   double gmacs() const { return std::max(before_runs, after_runs); }
   double gmacs_per_core() const { return gmacs() / threads; }
   /// One reading of the probe now (0 without one).
-  double read() const { return probe ? act::graph::measure_peak_gmacs_together(*probe, threads) : 0.0; }
+  double read() const { return probe.read(threads); }
 };
 
 // The probe for the engine's precision and kernel level, not yet read.
 Peak peak_probe_for(const act::ModelInfo& info, int engine_threads) {
   Peak peak;
-  peak.threads = act::graph::peak_probe_threads(engine_threads);
+  peak.threads = act::bench::peak_probe_threads(engine_threads);
   peak.int8 = info.precision.rfind("int8", 0) == 0;
-  peak.isa = act::kernels::parse_isa(info.isa).value_or(act::kernels::Isa::kRef);
-  peak.probe = act::kernels::isa_peak_probe(peak.isa, peak.int8 ? act::kernels::PeakKind::kInt8 : act::kernels::PeakKind::kFp32);
+  peak.probe = act::bench::KernelPeak(info.isa, peak.int8);
   return peak;
 }
 
@@ -257,8 +251,7 @@ class Benchmark {
   int run() {
     open_outputs();
     choose_model();
-    blob_file_.emplace(act::ActbFile::open(blob_path_));
-    config_ = act::ModelConfig::from_json(blob_file_->config());
+    blob_.emplace(act::bench::BlobFacts::open(blob_path_));
     open_engines();
     time_runs(Observations(opt_.input_path, engine_->model_info()));
     summarize_runs();
@@ -281,7 +274,7 @@ class Benchmark {
   // The model: a blob, or a built-in synthetic one written to a temporary blob.
   void choose_model() {
     if (opt_.compare && !opt_.model.empty() && opt_.compare_with.empty()) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
+      act::fail(act::StatusCode::kInvalidArgument, "--compare with --model needs the other precision's blob: --compare-with OTHER.actb");
     }
     blob_path_ = model_label_ = opt_.model;
     other_path_ = opt_.compare_with;
@@ -294,7 +287,7 @@ class Benchmark {
       build_ms_ = ms_since(start);
       model_label_ = "built-in \"" + opt_.config + "\" (synthetic weights, seed " + std::to_string(opt_.seed) + ")";
     } else if (opt_.precision != "fp32") {
-      act::fail(act::ErrorCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
+      act::fail(act::StatusCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
     }
   }
 
@@ -307,7 +300,7 @@ class Benchmark {
     other_ = open_engine(other_path_, opt_.threads);
     const act::ModelInfo& info = engine_->model_info();
     if (other_->model_info().chunk_values() != info.chunk_values() || other_->model_info().summary != info.summary) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--compare-with " + other_path_ + " is not the same model (" +
+      act::fail(act::StatusCode::kInvalidArgument, "--compare-with " + other_path_ + " is not the same model (" +
                 other_->model_info().summary + " vs " + info.summary + ")");
     }
   }
@@ -317,7 +310,7 @@ class Benchmark {
     std::vector<float> chunk(engine_->model_info().chunk_values()), other_chunk(chunk.size());
     auto infer = [&](act::Engine& e, int i, std::vector<float>& out) {
       const act::Status s = e.infer_normalized(inputs.at(i), out);
-      act::throw_if_failed(s);
+      if (!s.ok()) throw act::Error(s);
     };
     const auto first_start = Clock::now();
     infer(*engine_, 0, chunk);
@@ -374,7 +367,7 @@ class Benchmark {
       for (const auto& r : timed_.runs) samples.push_back(r.*member);
       stages_.emplace_back(name, act::summarize(samples));
     }
-    macs_ = config_.macs();
+    macs_ = blob_->macs();
     gmac_ = macs_.total() / 1e9;
     gmacs_per_s_ = gmac_ / (total().mean / 1e3);
     if (other_) {
@@ -404,7 +397,7 @@ class Benchmark {
       if (peak_gmacs > 0 && s.p50 > 0) stage["percent_of_peak_p50"] = percent_of_peak(gmac, s.p50);
     }
     rss_ = act::peak_rss_bytes();
-    huge_page_bytes_ = act::graph::AlignedBuffer::huge_page_bytes();
+    huge_page_bytes_ = act::bench::huge_page_bytes();
     if (opt_.op_profiling) {
       const std::vector<act::OpProfile> profile = engine_->op_profile();
       op_table_ = act::OpProfileTable::make(profile, peak_.gmacs(), timed_.op_ms);
@@ -416,11 +409,11 @@ class Benchmark {
   void print_report() const {
     const act::ModelInfo& info = engine_->model_info();
     std::printf("actengine act_bench %s\n", act::version());
-    std::printf("model        %s\n             %s\n", model_label_.c_str(), config_.summary().c_str());
+    std::printf("model        %s\n             %s\n", model_label_.c_str(), blob_->summary().c_str());
     std::printf("compute      %.3f GMAC per inference (backbone %.3f, projections %.3f, encoder %.3f, decoder %.3f, head %.4f)\n",
                 gmac_, macs_.backbone / 1e9, macs_.projections / 1e9, macs_.encoder / 1e9, macs_.decoder / 1e9, macs_.head / 1e9);
     std::printf("engine       %s, weights %.1f MB, %d threads\nkernels      %s\n", info.precision.c_str(),
-                static_cast<double>(blob_file_->file_size()) / 1e6, engine_->threads(), info.kernels.c_str());
+                static_cast<double>(blob_->file_size()) / 1e6, engine_->threads(), info.kernels.c_str());
     if (!builtin_.int8_note.empty()) std::printf("int8         %s\n", builtin_.int8_note.c_str());
     std::printf("machine      %s\n", machine_.one_line().c_str());
     if (!machine_.emulation.empty()) {
@@ -442,13 +435,13 @@ class Benchmark {
                   s.p90, s.p95, s.p99, s.max, peak);
     }
     std::printf("\nthroughput   %.2f inferences/s, %.1f GMAC/s achieved\n", 1e3 / total().mean, gmacs_per_s_);
-    if (peak_.probe != nullptr && peak_.gmacs_per_core() > 0) {
+    if (peak_.probe.has_probe() && peak_.gmacs_per_core() > 0) {
       char on_threads[96];
       if (peak_.threads == 1) {
-        std::snprintf(on_threads, sizeof on_threads, "on 1 thread (%s probe)", peak_.probe->name);
+        std::snprintf(on_threads, sizeof on_threads, "on 1 thread (%s probe)", peak_.probe.probe_name());
       } else {
         std::snprintf(on_threads, sizeof on_threads, "on %d threads (%s probe on each at once, %.1f per core)", peak_.threads,
-                      peak_.probe->name, peak_.gmacs_per_core());
+                      peak_.probe.probe_name(), peak_.gmacs_per_core());
       }
       std::printf("peak         %.1f %% of this CPU's %s peak at the mean run, %.1f %% at the median: %.1f GMAC/s %s%s\n",
                   pct_peak_, peak_.int8 ? "INT8" : "FP32", pct_peak_p50_, peak_.gmacs(), on_threads,
@@ -456,7 +449,7 @@ class Benchmark {
       std::printf("             the probe read %.1f GMAC/s before the timed runs and %.1f after: the higher is the peak\n",
                   peak_.before_runs, peak_.after_runs);
     } else {
-      std::printf("peak         no probe for the %s kernels on this CPU\n", act::kernels::isa_name(peak_.isa));
+      std::printf("peak         no probe for the %s kernels on this CPU\n", peak_.probe.isa_name());
     }
     std::printf("peak RSS     %.1f MB; %.1f MB of the engine's weights and values in huge pages\n",
                 static_cast<double>(rss_) / 1e6, static_cast<double>(huge_page_bytes_) / 1e6);
@@ -484,10 +477,10 @@ class Benchmark {
     j["emulated"] = !machine_.emulation.empty();  // then every time is the emulator's (machine.emulation says why)
     j["model"] = {{"source", opt_.model.empty() ? "built-in" : "blob"},
                   {"name", model_label_},
-                  {"summary", config_.summary()},
-                  {"config", config_.to_json()},
+                  {"summary", blob_->summary()},
+                  {"config", blob_->config_json()},
                   {"precision", info.precision},
-                  {"weight_bytes", blob_file_->file_size()},
+                  {"weight_bytes", blob_->file_size()},
                   {"gmac", {{"total", gmac_},
                             {"backbone", macs_.backbone / 1e9},
                             {"projections", macs_.projections / 1e9},
@@ -503,7 +496,7 @@ class Benchmark {
     j["throughput_per_s"] = 1e3 / total().mean;
     j["achieved_gmac_per_s"] = gmacs_per_s_;
     j["peak"] = {{"kind", peak_.int8 ? "int8" : "fp32"},
-                 {"probe", peak_.probe ? peak_.probe->name : ""},
+                 {"probe", peak_.probe.probe_name()},
                  {"threads", peak_.threads},
                  {"gmac_per_s", peak_.gmacs()},
                  {"gmac_per_s_per_core", peak_.gmacs_per_core()},
@@ -534,7 +527,7 @@ class Benchmark {
   // The last timed inference as a Chrome trace: one lane per thread.
   void write_trace() {
     act::StatusOr<std::string> trace = engine_->chrome_trace();
-    act::throw_if_failed(trace.status());
+    if (!trace.ok()) throw act::Error(trace.status());
     trace_file_->write(*trace);
     trace_file_->commit();
     std::printf("trace        %s (open in ui.perfetto.dev or chrome://tracing)\n", opt_.trace_path.c_str());
@@ -546,8 +539,7 @@ class Benchmark {
   BuiltinBlobs builtin_;  // owns the built-in model's temporary blobs until the benchmark ends
   std::string blob_path_, model_label_, other_path_;
   double build_ms_ = 0;
-  std::optional<act::ActbFile> blob_file_;
-  act::ModelConfig config_;
+  std::optional<act::bench::BlobFacts> blob_;
   // Its engines.
   std::unique_ptr<act::Engine> engine_, other_;
   double load_ms_ = 0;
@@ -555,7 +547,7 @@ class Benchmark {
   TimedRuns timed_;
   std::vector<std::pair<std::string, act::LatencySummary>> stages_;  // kStages order
   nlohmann::ordered_json stage_json_;
-  act::ModelConfig::Macs macs_;
+  act::bench::Macs macs_;
   double gmac_ = 0, gmacs_per_s_ = 0;
   std::optional<Comparison> comparison_;
   std::optional<act::OpProfileTable> op_table_;

@@ -19,11 +19,10 @@
 #include "apps/eval/html_report.h"
 #include "apps/progress.h"
 #include "apps/pytorch_options.h"
-#include "apps/status_error.h"
 #ifdef ACT_ONNX_EXPORT
 #include "actengine/onnx_export.h"
 #endif
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 
 namespace {
@@ -108,25 +107,28 @@ void add_options(CLI::App& app, Options& o) {
 // The checks that need to know which flags were given; fills what depends on them.
 void check_options(const CLI::App& app, Options& o) {
   if (o.onnx_path.empty() && (app.count("--onnx-part") || app.count("--onnx-normalization"))) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--onnx-part and --onnx-normalization need --export-onnx FILE.onnx");
+    act::fail(act::StatusCode::kInvalidArgument, "--onnx-part and --onnx-normalization need --export-onnx FILE.onnx");
   }
   // The ONNX model is written last: a folder that is not there fails now, before any conversion.
   if (const auto dir = std::filesystem::path(o.onnx_path).parent_path(); !o.onnx_path.empty() && !dir.empty() &&
                                                                          !std::filesystem::is_directory(dir)) {
-    act::fail(act::ErrorCode::kIoError, "--export-onnx " + o.onnx_path + ": there is no folder " + dir.string());
+    act::fail(act::StatusCode::kIoError, "--export-onnx " + o.onnx_path + ": there is no folder " + dir.string());
   }
   if (!o.calib_npy.empty() && o.calib_sources.empty()) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--export-calib needs the frames' sources: --calib DIR|VIDEO|DATASET|OBS.safetensors");
+    act::fail(act::StatusCode::kInvalidArgument, "--export-calib needs the frames' sources: --calib DIR|VIDEO|DATASET|OBS.safetensors");
   }
   if (!o.calib_npy.empty() && o.onnx_normalization == "out") {
-    act::fail(act::ErrorCode::kInvalidArgument, "--export-calib writes images in [0, 1], the input of an ONNX model exported "
+    act::fail(act::StatusCode::kInvalidArgument, "--export-calib writes images in [0, 1], the input of an ONNX model exported "
               "with --onnx-normalization in (the default)");
   }
   if (is_blob(o.checkpoint)) {
     // A blob only exports: say what it is when nothing is asked that a blob can give.
-    if (o.onnx_path.empty() && o.calib_npy.empty()) act::throw_if_failed(act::locate_checkpoint(o.checkpoint).status());
+    if (o.onnx_path.empty() && o.calib_npy.empty()) {
+      const auto location = act::locate_checkpoint(o.checkpoint);
+      if (!location.ok()) throw act::Error(location.status());
+    }
     if (app.count("--precision") || !o.output.empty() || !o.package.empty() || o.explain) {
-      act::fail(act::ErrorCode::kInvalidArgument, o.checkpoint + " is an .actb blob, already converted: with a blob, "
+      act::fail(act::StatusCode::kInvalidArgument, o.checkpoint + " is an .actb blob, already converted: with a blob, "
                 "act_convert only exports (--export-onnx, --export-calib); -o, --package, --precision and --explain need a checkpoint");
     }
     return;
@@ -134,19 +136,19 @@ void check_options(const CLI::App& app, Options& o) {
   if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
                                 app.count("--report") || app.count("--attention") || app.count("--keep-float") ||
                                 app.count("--linear-inputs"))) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse and "
+    act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse and "
               "--report need --precision int8");
   }
   if (!o.package.empty()) {
-    if (!o.output.empty()) act::fail(act::ErrorCode::kInvalidArgument, "give either -o or --package (which writes " +
+    if (!o.output.empty()) act::fail(act::StatusCode::kInvalidArgument, "give either -o or --package (which writes " +
                                      std::string(act::kPackageBlobName) + " into the folder)");
     o.output = act::prepare_package_dir(o.package);
   }
   if (o.output.empty() && !o.explain && o.onnx_path.empty() && o.calib_npy.empty()) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--output (or --package, --explain, --export-onnx or --export-calib) is required");
+    act::fail(act::StatusCode::kInvalidArgument, "--output (or --package, --explain, --export-onnx or --export-calib) is required");
   }
   if (std::filesystem::is_directory(o.checkpoint) && act::any_pytorch_option(app)) {
-    act::fail(act::ErrorCode::kInvalidArgument, "the .pth options (--config, --stats, ...) do not apply to a LeRobot "
+    act::fail(act::StatusCode::kInvalidArgument, "the .pth options (--config, --stats, ...) do not apply to a LeRobot "
               "checkpoint folder: its config.json and statistics are in the folder");
   }
   act::Int8Options& int8 = o.int8;
@@ -160,18 +162,18 @@ void check_options(const CLI::App& app, Options& o) {
                        : o.linear_inputs == "per-tensor" ? act::LinearInputCodes::kPerTensor
                                                          : act::LinearInputCodes::kAuto;
   if (int8.mode == act::Int8Mode::kDynamic && app.count("--linear-inputs")) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--linear-inputs needs calibration (--mode static or mixed): dynamic "
+    act::fail(act::StatusCode::kInvalidArgument, "--linear-inputs needs calibration (--mode static or mixed): dynamic "
               "mode's linear inputs are always per token");
   }
   if (app.count("--holdout")) int8.holdout = o.holdout;
   if (app.count("--target-mse")) int8.target_mse = o.target_mse;
   if (app.count("--max-mse")) int8.max_mse = o.max_mse;
   if (o.precision == "int8" && int8.mode != act::Int8Mode::kDynamic && o.calib_sources.empty()) {
-    act::fail(act::ErrorCode::kInvalidArgument, o.mode + " quantization needs calibration frames: --calib "
+    act::fail(act::StatusCode::kInvalidArgument, o.mode + " quantization needs calibration frames: --calib "
               "DIR|VIDEO|DATASET|OBS.safetensors (or --mode dynamic, which needs none)");
   }
   if (int8.mode == act::Int8Mode::kMixed && !int8.target_mse) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--mode mixed needs --target-mse (held-out MSE in normalised units)");
+    act::fail(act::StatusCode::kInvalidArgument, "--mode mixed needs --target-mse (held-out MSE in normalised units)");
   }
 }
 
@@ -179,7 +181,7 @@ void check_options(const CLI::App& app, Options& o) {
 // explanation was asked for (`exit_code` then says whether everything could be known).
 std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code) {
   const auto location = act::locate_checkpoint(o.checkpoint);
-  act::throw_if_failed(location.status());
+  if (!location.ok()) throw act::Error(location.status());
   if (!o.quiet) std::cerr << "reading " << location->path << " ...\n";
   if (!location->note.empty()) std::cerr << "act_convert: " << location->note << "\n";
   if (location->lerobot_folder) {
@@ -191,16 +193,16 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
     exit_code = 0;
     if (o.output.empty() && o.onnx_path.empty() && o.calib_npy.empty()) return nullptr;
     auto model = act::import_checkpoint(location->path, {}, o.deployment);
-    act::throw_if_failed(model.status());
+    if (!model.ok()) throw act::Error(model.status());
     return std::move(model).value();
   }
   auto plan = act::PthPlan::read(location->path, o.pth, o.deployment);
-  act::throw_if_failed(plan.status());
+  if (!plan.ok()) throw act::Error(plan.status());
   if (o.explain) act::print_explanation(std::cout, (*plan)->explanation());
   exit_code = (*plan)->explanation().missing.empty() ? 0 : 1;
   if (o.explain && o.output.empty() && o.onnx_path.empty() && o.calib_npy.empty()) return nullptr;
   auto model = act::import_checkpoint(**plan);
-  act::throw_if_failed(model.status());
+  if (!model.ok()) throw act::Error(model.status());
   return std::move(model).value();
 }
 
@@ -215,7 +217,7 @@ std::string html_report(const act::Int8Report& report, const Options& o) {
 uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
   if (o.precision != "int8") {
     auto bytes = model.write_fp32(o.output);
-    act::throw_if_failed(bytes.status());
+    if (!bytes.ok()) throw act::Error(bytes.status());
     return *bytes;
   }
   std::optional<act::ProgressLine> progress;
@@ -248,7 +250,7 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
     std::cerr << "act_convert: --max-mse " << *o.int8.max_mse << " missed: try --mode mixed --target-mse "
               << *o.int8.max_mse << ", more calibration frames, or another --calib-method.\n";
   }
-  act::throw_if_failed(report.status());
+  if (!report.ok()) throw act::Error(report.status());
   if (report_file) {
     report_file->write(std::filesystem::path(o.report_path).extension() == ".html" ? html_report(*report, o)
                                                                                   : report->to_json() + "\n");
@@ -334,7 +336,7 @@ void export_onnx(const std::string& blob, const Options& o) {
   options.part = act::parse_onnx_part(o.onnx_part).value();  // CLI11 checked the names
   options.normalization = act::parse_onnx_normalization(o.onnx_normalization).value();
   auto summary = act::export_onnx(blob, o.onnx_path, options);
-  act::throw_if_failed(summary.status());
+  if (!summary.ok()) throw act::Error(summary.status());
   if (o.quiet) return;
   const auto list = [](const std::vector<act::OnnxTensorInfo>& tensors) {
     std::string text;
@@ -372,7 +374,7 @@ class ScratchBlob {
   /// After the conversion: the blob, its name removed, as a path that still opens it.
   std::string unnamed() {
     fd_ = open(path_.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) act::fail(act::ErrorCode::kIoError, "cannot reopen the blob converted for the export, " + path_);
+    if (fd_ < 0) act::fail(act::StatusCode::kIoError, "cannot reopen the blob converted for the export, " + path_);
     std::remove(path_.c_str());
     return "/proc/self/fd/" + std::to_string(fd_);
   }
@@ -399,7 +401,7 @@ int main(int argc, char** argv) {
     if (is_blob(o.checkpoint)) {
       if (!o.calib_npy.empty()) {
         auto engine = act::Engine::open(o.checkpoint, {.threads = 1});
-        act::throw_if_failed(engine.status());
+        if (!engine.ok()) throw act::Error(engine.status());
         export_calibration((*engine)->model_info(), o);
       }
 #ifdef ACT_ONNX_EXPORT

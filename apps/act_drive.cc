@@ -12,6 +12,7 @@
 
 #include <opencv2/core/utils/logger.hpp>
 
+#include "actengine/status.h"
 #include "apps/drive/calibrate.h"
 #include "apps/pytorch_options.h"
 #include "apps/drive/calibration.h"
@@ -25,7 +26,6 @@
 #include "apps/drive/pwm_link.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_kind.h"
 
 namespace {
@@ -105,11 +105,11 @@ void check_camera_size(const std::string& requested, int height, int width, cons
   if (height == width) return;
   const std::string fix = ": --camera-size is HxW (height first); did you mean --camera-size " + hxw(width, height) + "?";
   if (camera.height() == width && camera.width() == height) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size " + requested + " asks for height " + std::to_string(height) +
+    act::fail(act::StatusCode::kInvalidArgument, "--camera-size " + requested + " asks for height " + std::to_string(height) +
               ", width " + std::to_string(width) + " but the camera delivers " + hxw(camera.height(), camera.width()) + fix);
   }
   if (!same_aspect(height, width, input.height, input.width) && same_aspect(width, height, input.height, input.width)) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size " + requested + " (height " + std::to_string(height) + ", width " +
+    act::fail(act::StatusCode::kInvalidArgument, "--camera-size " + requested + " (height " + std::to_string(height) + ", width " +
               std::to_string(width) + ") only fits the model's " + hxw(input.height, input.width) + " input transposed" + fix);
   }
 }
@@ -125,12 +125,12 @@ std::vector<float> parse_initial_state(const std::string& text, const act::Model
       values.push_back(std::stof(item, &used));
       if (used != item.size()) throw std::invalid_argument(item);
     } catch (const std::exception&) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--initial-state '" + text + "': '" + item + "' is not a number (expected "
+      act::fail(act::StatusCode::kInvalidArgument, "--initial-state '" + text + "': '" + item + "' is not a number (expected "
                 "'mean' or " + std::to_string(info.state_dim) + " comma-separated values)");
     }
   }
   if (values.size() != static_cast<size_t>(info.state_dim)) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--initial-state '" + text + "' has " + std::to_string(values.size()) +
+    act::fail(act::StatusCode::kInvalidArgument, "--initial-state '" + text + "' has " + std::to_string(values.size()) +
               " values but the model's state has " + std::to_string(info.state_dim) + " (or use --initial-state mean)");
   }
   return values;
@@ -161,16 +161,16 @@ Calibration load_calibration(const Options& opt) {
 
 // Checks that act_drive can feed this model and act on its output; throws with what does not fit.
 void check_model(const act::ModelInfo& info, const Calibration& calibration, const Options& opt) {
-  using act::ErrorCode;
-  act::check(info.cameras.size() == 1, ErrorCode::kUnimplemented,
+  using act::StatusCode;
+  act::check(info.cameras.size() == 1, StatusCode::kUnimplemented,
              "act_drive drives with one camera; the model has " + std::to_string(info.cameras.size()));
-  act::check(info.env_state_dim == 0, ErrorCode::kUnimplemented,
+  act::check(info.env_state_dim == 0, StatusCode::kUnimplemented,
              "the model needs an environment state (" + info.env_state_key + "), which a rover does not have");
-  act::check(calibration.max_action_index() < info.action_dim, ErrorCode::kInvalidArgument,
+  act::check(calibration.max_action_index() < info.action_dim, StatusCode::kInvalidArgument,
              "the calibration uses action index " + std::to_string(calibration.max_action_index()) + " but the model has " +
                  std::to_string(info.action_dim) + " action values");
   calibration.check_units(info);
-  act::check(opt.state != "last-action" || info.state_dim <= info.action_dim, ErrorCode::kInvalidArgument,
+  act::check(opt.state != "last-action" || info.state_dim <= info.action_dim, StatusCode::kInvalidArgument,
              "--state last-action: the model's state has " + std::to_string(info.state_dim) + " values but its action only " +
                  std::to_string(info.action_dim) + " (use --state zeros)");
 }
@@ -197,7 +197,7 @@ int drive(const Options& opt) {
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
   camera_options.stepped = opt.realtime == "off";
   if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.height, camera_options.width)) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
+    act::fail(act::StatusCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
   }
   Camera camera(camera_options);
 
@@ -318,7 +318,7 @@ int drive(const Options& opt) {
 void check_camera_kind(const std::string& camera) {
   switch (const act::FileKind kind = act::file_kind(camera)) {
     case act::FileKind::kRecording:
-      act::fail(act::ErrorCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera") +
+      act::fail(act::StatusCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera") +
                 "; to replay it as a camera: --camera " + camera + "/frames/%06d.png");
     case act::FileKind::kLeRobotCheckpoint:
     case act::FileKind::kTrainingCheckpoint:
@@ -327,7 +327,7 @@ void check_camera_kind(const std::string& camera) {
     case act::FileKind::kPyTorchZip:
     case act::FileKind::kPyTorchLegacy:
     case act::FileKind::kSafetensors:
-      act::fail(act::ErrorCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera"));
+      act::fail(act::StatusCode::kInvalidArgument, act::wrong_kind_message(camera, kind, "a camera"));
     default: break;
   }
 }
@@ -345,31 +345,31 @@ int run(const Options& opt) {
     }
     if (!opt.pwm.empty()) {
       parse_pwm_channels(opt.pwm);  // a typo is the first thing said
-      act::check(opt.serial.empty() && !opt.dry_run && !opt.calibrate, act::ErrorCode::kInvalidArgument,
+      act::check(opt.serial.empty() && !opt.dry_run && !opt.calibrate, act::StatusCode::kInvalidArgument,
                  "--pwm drives the pins itself: not with --serial, --dry-run or --calibrate (write the calibration "
                  "file from act_drive --calibrate's template and check it with a --duration run)");
     }
     if (opt.realtime == "off" && !opt.dry_run) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--realtime off replays a file faster than real time: only with --dry-run");
+      act::fail(act::StatusCode::kInvalidArgument, "--realtime off replays a file faster than real time: only with --dry-run");
     }
     if (opt.mode != "ai" && opt.http.empty() && opt.gamepad.empty()) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
+      act::fail(act::StatusCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
                 "(the page's stick and keys) or --gamepad /dev/input/eventN");
     }
     if (opt.calibrate) {
       return run_calibration(CalibrateOptions{opt.serial, opt.baud, opt.calibration_path}, g_stop, std::cin, std::cout, std::cerr);
     }
-    if (opt.model.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--model is required");
-    if (opt.camera.empty()) act::fail(act::ErrorCode::kInvalidArgument, "--camera is required");
+    if (opt.model.empty()) act::fail(act::StatusCode::kInvalidArgument, "--model is required");
+    if (opt.camera.empty()) act::fail(act::StatusCode::kInvalidArgument, "--camera is required");
     // Both checked before the camera opens, so the wrong kind of file is the first thing said.
-    if (const std::string hint = act::not_a_blob_hint(opt.model); !hint.empty()) act::fail(act::ErrorCode::kInvalidArgument, hint);
+    if (const std::string hint = act::not_a_blob_hint(opt.model); !hint.empty()) act::fail(act::StatusCode::kInvalidArgument, hint);
     check_camera_kind(opt.camera);
     if (opt.serial.empty() && opt.pwm.empty() && !opt.dry_run) {
-      act::fail(act::ErrorCode::kInvalidArgument, "--serial is required (or --pwm for the Pi's own PWM pins, or --dry-run "
-                                                  "to print the commands)");
+      act::fail(act::StatusCode::kInvalidArgument, "--serial is required (or --pwm for the Pi's own PWM pins, or --dry-run "
+                                                   "to print the commands)");
     }
     if (!opt.dry_run && opt.calibration_path.empty() && !opt.raw_endpoints) {
-      act::fail(act::ErrorCode::kInvalidArgument,
+      act::fail(act::StatusCode::kInvalidArgument,
                 (opt.pwm.empty() ? "--serial " + opt.serial : "--pwm " + opt.pwm) +
                 " without --calibration: refusing to drive a real car on guessed pulse widths. "
                 "Measure them with act_drive --calibrate --serial PORT -c calibration.json and pass "

@@ -12,14 +12,13 @@
 #include <memory>
 
 #include "actengine/engine.h"
+#include "actengine/status.h"
 #include "actengine/vision.h"
 #include "apps/diff_stats.h"
 #include "apps/eval/episode.h"
 #include "apps/eval/html_report.h"
 #include "apps/eval/metrics.h"
 #include "apps/observation_file.h"
-#include "apps/status_error.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"
 
@@ -44,13 +43,13 @@ struct Options {
 
 std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   auto engine = act::Engine::open(path, {.threads = threads});
-  act::throw_if_failed(engine.status(), path);
+  if (!engine.ok()) throw act::Error(engine.status().with_context(path));
   return std::move(engine).value();
 }
 
 // Today's mode: one model on an observation file, optionally against its stored reference.
 int run_observation_file(const Options& o) {
-  if (o.models.size() != 1) act::fail(act::ErrorCode::kInvalidArgument, "--input takes exactly one --model");
+  if (o.models.size() != 1) act::fail(act::StatusCode::kInvalidArgument, "--input takes exactly one --model");
   const std::unique_ptr<act::Engine> engine_ptr = open_engine(o.models[0], o.threads);
   act::Engine& engine = *engine_ptr;
   const act::ModelInfo& info = engine.model_info();
@@ -59,7 +58,7 @@ int run_observation_file(const Options& o) {
                                                       : act::ImageSource::kAuto;
   const act::ObservationBatch batch = act::ObservationBatch::read(o.input_path, info, source);
   if (o.compare && !batch.has_expected_actions()) {
-    act::fail(act::ErrorCode::kNotFound, o.input_path + ": --compare needs an 'output.action' tensor");
+    act::fail(act::StatusCode::kNotFound, o.input_path + ": --compare needs an 'output.action' tensor");
   }
   const size_t per = info.chunk_values();
   std::vector<float> actions(batch.size() * per);
@@ -67,7 +66,7 @@ int run_observation_file(const Options& o) {
   for (size_t i = 0; i < batch.size(); ++i) {
     std::span<float> out(actions.data() + i * per, per);
     const act::Status s = engine.infer(batch.at(i), out);
-    act::throw_if_failed(s, "observation " + std::to_string(i));
+    if (!s.ok()) throw act::Error(s.with_context("observation " + std::to_string(i)));
     if (o.compare) {
       const float* ref = batch.expected_actions(i);
       for (size_t j = 0; j < per; ++j) diff.add(out[j], ref[j]);
@@ -102,7 +101,7 @@ void check_same_interface(const act::ModelInfo& a, const act::ModelInfo& b, cons
     same = a.cameras[c].height == b.cameras[c].height && a.cameras[c].width == b.cameras[c].width;
   }
   if (!same) {
-    act::fail(act::ErrorCode::kInvalidArgument, b_path + " is not the same policy as " + a_path +
+    act::fail(act::StatusCode::kInvalidArgument, b_path + " is not the same policy as " + a_path +
               " (cameras, state, action or chunk sizes differ): act_eval compares versions of one policy");
   }
 }
@@ -176,7 +175,8 @@ int run_episode(const Options& o) {
     // Every camera sees the episode's one image (single-view sources).
     for (size_t c = 0; c < info.cameras.size(); ++c) {
       const act::CameraInfo& cam = info.cameras[c];
-      act::throw_if_failed(act::frame_to_model_rgb(image, cam.height, cam.width, rgb[c]), frame.source);
+      const act::Status converted = act::frame_to_model_rgb(image, cam.height, cam.width, rgb[c]);
+      if (!converted.ok()) throw act::Error(converted.with_context(frame.source));
       observation.images.push_back(act::ImageView::rgb_u8(rgb[c].data(), cam.height, cam.width));
     }
     observation.state = frame.state;
@@ -189,7 +189,7 @@ int run_episode(const Options& o) {
         std::fill(chunks[m].begin(), chunks[m].end(), std::numeric_limits<float>::quiet_NaN());
         continue;
       }
-      act::throw_if_failed(status, o.models[m] + " on " + frame.source);
+      if (!status.ok()) throw act::Error(status.with_context(o.models[m] + " on " + frame.source));
     }
     evaluation.add_frame(frame.source, frame.demonstration, chunks);
   }
@@ -257,7 +257,7 @@ int main(int argc, char** argv) {
 
   try {
     if (o.input_path.empty() && o.episode.episode.empty()) {
-      act::fail(act::ErrorCode::kInvalidArgument, "give --input OBS.safetensors or --episode PATH");
+      act::fail(act::StatusCode::kInvalidArgument, "give --input OBS.safetensors or --episode PATH");
     }
     return o.episode.episode.empty() ? run_observation_file(o) : run_episode(o);
   } catch (const std::exception& e) {

@@ -5,8 +5,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/status.h"
 #include "apps/drive/calibration.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -130,7 +130,7 @@ std::string readme(const ModelInfo& m, const std::string& source) {
 std::string prepare_package_dir(const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec) fail(ErrorCode::kIoError, "cannot create package folder " + dir + ": " + ec.message());
+  if (ec) fail(StatusCode::kIoError, "cannot create package folder " + dir + ": " + ec.message());
   return (fs::path(dir) / kPackageBlobName).string();
 }
 

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_kind.h"
 #include "weights/import/safetensors.h"
 
@@ -13,8 +13,8 @@ namespace {
 
 void expect_shape(const SafetensorsTensor& t, const std::vector<int64_t>& shape, const std::string& file) {
   if (t.shape != shape) {
-    fail(ErrorCode::kInvalidArgument, file + ": \"" + t.name + "\" has shape " + shape_string(t.shape) + ", expected " +
-         shape_string(shape));
+    fail(StatusCode::kInvalidArgument,
+         file + ": \"" + t.name + "\" has shape " + shape_string(t.shape) + ", expected " + shape_string(shape));
   }
 }
 
@@ -24,8 +24,8 @@ ObservationBatch ObservationBatch::read(const std::string& path, const ModelInfo
   // The wrong kind of input (an image, a blob, a folder) says what it is instead of failing to parse.
   if (const FileKind kind = file_kind(path); kind != FileKind::kSafetensors && kind != FileKind::kMissing &&
                                              kind != FileKind::kOther) {
-    fail(ErrorCode::kInvalidArgument, wrong_kind_message(path, kind, "an observation file (a .safetensors file of "
-                                                      "input.<feature key> tensors, as in the LeRobot fixtures)"));
+    fail(StatusCode::kInvalidArgument, wrong_kind_message(path, kind, "an observation file (a .safetensors file of "
+                                                       "input.<feature key> tensors, as in the LeRobot fixtures)"));
   }
   const SafetensorsFile file = SafetensorsFile::open(path);
   ObservationBatch b;
@@ -38,10 +38,10 @@ ObservationBatch ObservationBatch::read(const std::string& path, const ModelInfo
   if (!lead) lead = file.find(first_cam);
   if (!lead) lead = file.find(first_cam + ".u8_nhwc");
   if (!lead) {
-    fail(ErrorCode::kNotFound, path + ": no \"" + (model.state_dim > 0 ? state_name : first_cam) +
+    fail(StatusCode::kNotFound, path + ": no \"" + (model.state_dim > 0 ? state_name : first_cam) +
          "\" tensor (observations are named input.<feature key>)");
   }
-  if (lead->shape.empty() || lead->shape[0] < 1) fail(ErrorCode::kInvalidArgument, path + ": \"" + lead->name + "\" has no batch axis");
+  if (lead->shape.empty() || lead->shape[0] < 1) fail(StatusCode::kInvalidArgument, path + ": \"" + lead->name + "\" has no batch axis");
   const int64_t n = lead->shape[0];
   b.count_ = static_cast<size_t>(n);
 
@@ -51,14 +51,14 @@ ObservationBatch ObservationBatch::read(const std::string& path, const ModelInfo
     const SafetensorsTensor* u = file.find(fname + ".u8_nhwc");
     const bool use_u8 = source == ImageSource::kU8 || (source == ImageSource::kAuto && !f && u);
     if (use_u8) {
-      if (!u) fail(ErrorCode::kNotFound, path + ": missing \"" + fname + ".u8_nhwc\"");
-      if (u->dtype != DType::kU8) fail(ErrorCode::kInvalidArgument, path + ": \"" + u->name + "\" must be U8");
+      if (!u) fail(StatusCode::kNotFound, path + ": missing \"" + fname + ".u8_nhwc\"");
+      if (u->dtype != DType::kU8) fail(StatusCode::kInvalidArgument, path + ": \"" + u->name + "\" must be U8");
       expect_shape(*u, {n, cam.height, cam.width, 3}, path);
       b.images_u8_.emplace_back(u->data, u->data + u->nbytes);
       b.images_f32_.emplace_back();
       b.u8_.push_back(true);
     } else {
-      if (!f) fail(ErrorCode::kNotFound, path + ": missing \"" + fname + "\" (or its .u8_nhwc twin)");
+      if (!f) fail(StatusCode::kNotFound, path + ": missing \"" + fname + "\" (or its .u8_nhwc twin)");
       expect_shape(*f, {n, 3, cam.height, cam.width}, path);
       b.images_f32_.push_back(f->to_f32());
       b.images_u8_.emplace_back();

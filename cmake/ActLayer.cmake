@@ -1,17 +1,81 @@
-# act_add_layer(name DIR dir | DIRS dir... [DEPS ...]): one OBJECT library per architectural layer,
-# holding every .cc file directly in the given folder(s). The layers are linked together into
-# libactengine. Per-ISA kernel files get their instruction-set flags (act_set_isa_flags).
+# The layers' include roots. Each layer's headers are reachable only through a root of its own in the
+# build tree, <build>/layer_include/<root>/, which holds the layer's folder (at its path in the source
+# tree, so that "kernels/gemm_s8/gemm_s8.h" is spelled as in the sources) with a link to each of its
+# headers and sub-folders, and nothing else of the source tree. A layer sees its own root and, through
+# its DEPS, the roots of the layers below it, never those above; cmake/check_layer_includes.py (ctest
+# layer_includes) checks the include lines against the same rules.
+set(ACT_LAYER_INCLUDE_DIR ${PROJECT_BINARY_DIR}/layer_include)
+
+# act_layer_root(out root folder [HEADERS_ONLY] [EXCLUDE entry...]): makes the root <root> holding
+# <folder> (relative to the source dir) with a link to each header and sub-folder of it except the
+# EXCLUDEd names (HEADERS_ONLY: no sub-folders); its path in `out`.
+function(act_layer_root out root folder)
+  cmake_parse_arguments(ARG "HEADERS_ONLY" "" "EXCLUDE" ${ARGN})
+  set(dir ${ACT_LAYER_INCLUDE_DIR}/${root})
+  file(REMOVE_RECURSE ${dir})
+  file(MAKE_DIRECTORY ${dir}/${folder})
+  file(GLOB entries CONFIGURE_DEPENDS LIST_DIRECTORIES true RELATIVE ${PROJECT_SOURCE_DIR}/${folder}
+       ${PROJECT_SOURCE_DIR}/${folder}/*)
+  foreach(entry ${entries})
+    set(path ${PROJECT_SOURCE_DIR}/${folder}/${entry})
+    if(entry IN_LIST ARG_EXCLUDE)
+      continue()
+    endif()
+    if((IS_DIRECTORY ${path} AND NOT ARG_HEADERS_ONLY) OR (NOT IS_DIRECTORY ${path} AND entry MATCHES "\\.h$"))
+      file(CREATE_LINK ${path} ${dir}/${folder}/${entry} SYMBOLIC)
+    endif()
+  endforeach()
+  set(${out} ${dir} PARENT_SCOPE)
+endfunction()
+
+# act_header_root(out root header...): a root holding only the given headers (paths relative to the
+# source dir), each at its path: what a layer exports on purpose to those who may not see the layer.
+function(act_header_root out root)
+  set(dir ${ACT_LAYER_INCLUDE_DIR}/${root})
+  file(REMOVE_RECURSE ${dir})
+  foreach(header ${ARGN})
+    get_filename_component(parent ${dir}/${header} DIRECTORY)
+    file(MAKE_DIRECTORY ${parent})
+    file(CREATE_LINK ${PROJECT_SOURCE_DIR}/${header} ${dir}/${header} SYMBOLIC)
+  endforeach()
+  set(${out} ${dir} PARENT_SCOPE)
+endfunction()
+
+# The one public header the layers below the engine may include: the error vocabulary.
+act_header_root(ACT_STATUS_INCLUDE_ROOT status engine/include/actengine/status.h)
+set(ACT_STATUS_INCLUDE_ROOT ${ACT_STATUS_INCLUDE_ROOT}/engine/include)
+
+# act_add_layer(name DIR dir | DIRS dir... ROOT folder [HEADERS_ONLY] [EXCLUDE entry...]
+#               [PUBLIC_API] [DEPS ...]): one OBJECT library per architectural layer, holding every
+# .cc file directly in the given folder(s). Its include root is made from ROOT (act_layer_root, with
+# HEADERS_ONLY and EXCLUDE; EXCLUDEd .cc files are not built either), seen by the layer and by those that link it; a layer below the engine
+# sees actengine/status.h alone, an engine layer (PUBLIC_API) all of engine/include. The layers are
+# linked together into libactengine. Per-ISA kernel files get their instruction-set flags
+# (act_set_isa_flags).
 function(act_add_layer name)
-  cmake_parse_arguments(ARG "" "DIR" "DIRS;DEPS" ${ARGN})
+  cmake_parse_arguments(ARG "HEADERS_ONLY;PUBLIC_API" "DIR;ROOT" "DIRS;DEPS;EXCLUDE" ${ARGN})
   set(sources)
   foreach(dir ${ARG_DIR} ${ARG_DIRS})
     file(GLOB dir_sources CONFIGURE_DEPENDS ${dir}/*.cc)
-    list(APPEND sources ${dir_sources})
+    foreach(src ${dir_sources})
+      get_filename_component(src_name ${src} NAME)
+      if(NOT src_name IN_LIST ARG_EXCLUDE)
+        list(APPEND sources ${src})
+      endif()
+    endforeach()
   endforeach()
+  set(root_options)
+  if(ARG_HEADERS_ONLY)
+    list(APPEND root_options HEADERS_ONLY)
+  endif()
+  act_layer_root(root ${name} ${ARG_ROOT} ${root_options} EXCLUDE ${ARG_EXCLUDE})
   add_library(${name} OBJECT ${sources})
-  target_include_directories(${name} PUBLIC
-    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
-    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/engine/include>)
+  target_include_directories(${name} PUBLIC $<BUILD_INTERFACE:${root}>)
+  if(ARG_PUBLIC_API)
+    target_include_directories(${name} PUBLIC $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/engine/include>)
+  else()
+    target_include_directories(${name} PUBLIC $<BUILD_INTERFACE:${ACT_STATUS_INCLUDE_ROOT}>)
+  endif()
   target_link_libraries(${name} PUBLIC ${ARG_DEPS})
   act_set_warnings(${name})
   act_set_isa_flags(${sources})
@@ -48,3 +112,21 @@ function(act_set_isa_flags)
     endif()
   endforeach()
 endfunction()
+
+# The layers' headers the apps may include, exported on purpose (the apps otherwise see only the
+# public headers, engine/include; cmake/check_layer_includes.py gets the same list):
+#   weights/blob/file_util.h     atomic file writes, whole-file reads and checked JSON parsing: the
+#                                apps write their reports, packages and recordings as the library does
+#   weights/blob/file_kind.h     what kind of file a path is and which tool takes it: every tool's
+#                                wrong-kind-of-file message
+#   weights/import/safetensors.h the observation files (act_eval, act_bench --observations) are
+#                                safetensors; it includes weights/blob/file_mapping.h and
+#                                weights/blob/tensor_types.h, exported with it
+# And act_bench_probes (bench/probes) exports bench_probes.h to act_bench.
+set(ACT_PROBES_EXPORTED_HEADERS bench/probes/bench_probes.h)
+set(ACT_APP_EXPORTED_HEADERS
+  weights/blob/file_util.h
+  weights/blob/file_kind.h
+  weights/import/safetensors.h
+  weights/blob/file_mapping.h
+  weights/blob/tensor_types.h)

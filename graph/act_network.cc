@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <numeric>
 
+#include "actengine/status.h"
 #include "weights/blob/blob_names.h"
-#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -62,7 +62,7 @@ const float* ActNetwork::bias_table(const std::string& table, int rows, int widt
 ActNetwork::Tensor ActNetwork::as_f32(const Tensor& t) {
   if (!t.s8) return t;
   if (auto it = converted_.find(t.id); it != converted_.end() && !it->second.s8) return it->second;
-  check(t.params == kNoValue, ErrorCode::kInternal, "dequantizing a dynamically quantized value");
+  check(t.params == kNoValue, StatusCode::kInternal, "dequantizing a dynamically quantized value");
   const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const std::string name = v.name + ".f32";
   const ValueId y = graph_.add_value(name, v.shape);
@@ -102,7 +102,7 @@ ActNetwork::Tensor ActNetwork::as_s8(const Tensor& t) {
 }
 
 ActNetwork::Tensor ActNetwork::as_dynamic_s8(const Tensor& t) {
-  check(!t.s8, ErrorCode::kInternal, "dynamic quantization of an int8 value");
+  check(!t.s8, StatusCode::kInternal, "dynamic quantization of an int8 value");
   if (auto it = converted_.find(t.id); it != converted_.end() && it->second.params != kNoValue) return it->second;
   const Value v = graph_.value(t.id);  // a copy: add_value() below may reallocate the value list
   const std::string name = v.name + ".s8dyn";
@@ -330,7 +330,7 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
   // The stem (float, or int8 with an int8 or float output) runs its max-pool itself
   // (fuse_max_pool): conv() added it last.
   Op* stem = graph_.ops().back().get();
-  check(stem->outputs[0] == x.id, ErrorCode::kInternal, "the stem is not the last op");
+  check(stem->outputs[0] == x.id, StatusCode::kInternal, "the stem is not the last op");
   if (auto* int8_stem = dynamic_cast<ConvS8Op*>(stem)) {
     int8_stem->fuse_max_pool(3, 2, 1, pooled);
   } else {
@@ -538,7 +538,7 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
     tensors_.skip(bn::kImgProjWeight);
     tensors_.skip(bn::kImgProjBias);
   }
-  check(token_row == N, ErrorCode::kInternal, "the encoder's tokens do not add up to n_tokens");
+  check(token_row == N, StatusCode::kInternal, "the encoder's tokens do not add up to n_tokens");
   stage_ = Stage::kEncoder;
   ValueId x = encoder_tokens_;
   auto concat = std::make_unique<ConcatRowsOp>(D, std::move(tokens), x);
@@ -569,7 +569,7 @@ ActNetwork::ActNetwork(const ModelConfig& config, BlobTensors& tensors, const ke
   // (An external backbone's values, all of camera branches "camN.", are elsewhere.)
   for (const auto& [name, q] : quant_.activations) {
     if (graph_.find(name) == kNoValue && !(external_backbone && name.starts_with("cam"))) {
-      fail(ErrorCode::kDataLoss, "'" + tensors_.blob().path() + "': quantization parameters for \"" + name +
+      fail(StatusCode::kDataLoss, "'" + tensors_.blob().path() + "': quantization parameters for \"" + name +
            "\", which is no value of the network");
     }
   }

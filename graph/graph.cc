@@ -4,9 +4,9 @@
 #include <chrono>
 #include <map>
 
+#include "actengine/status.h"
 #include "kernels/gemm_s8/gemm_s8.h"
 #include "kernels/quant/quant_s8_variants.h"
-#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -41,7 +41,7 @@ ValueId Graph::add_row_view(std::string name, ValueId parent, int first_row, int
   const Value& p = value(parent);
   check(p.dtype == DataType::kF32 && p.shape.size() == 2 && p.view_of == kNoValue && first_row >= 0 && rows >= 0 &&
             first_row + rows <= p.shape[0],
-        ErrorCode::kInternal, "row view of \"" + p.name + "\": not rows of a float matrix");
+        StatusCode::kInternal, "row view of \"" + p.name + "\": not rows of a float matrix");
   const int64_t cols = p.shape[1];
   const ValueId id = add_value(std::move(name), {rows, cols});
   values_.back().view_of = parent;
@@ -180,8 +180,8 @@ const char* stage_name(Stage stage) {
 }
 
 void Graph::run(ThreadPool& pool, const kernels::KernelConfig& kernels, RunProfile* profile) {
-  check(planned_, ErrorCode::kInternal, "Graph::run before plan");
-  check(arena_floats_ >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), ErrorCode::kInternal,
+  check(planned_, StatusCode::kInternal, "Graph::run before plan");
+  check(arena_floats_ >= scratch_offset_ + scratch_per_thread_ * static_cast<size_t>(pool.threads()), StatusCode::kInternal,
         "graph planned for fewer threads than the pool has");
   RunContext ctx(arena_.floats(), values_, pool, kernels, arena_.floats() + scratch_offset_, scratch_per_thread_);
   if (profile == nullptr) {

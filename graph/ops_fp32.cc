@@ -4,8 +4,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "actengine/status.h"
 #include "graph/gemm_tiling.h"
-#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -46,7 +46,7 @@ std::vector<float> PackedF32Weights::unpacked() const {
 }
 
 const float* PackedF32Weights::for_kernels(const kernels::GemmF32Kernels& kernels) const {
-  check(kernels.nr == nr_, ErrorCode::kInternal,
+  check(kernels.nr == nr_, StatusCode::kInternal,
         std::string("float weights packed in panels of ") + std::to_string(nr_) + " columns, run by " + kernels.name);
   return panels_.floats();
 }
@@ -70,7 +70,7 @@ Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels
                    bool relu, ValueId input, ValueId residual, ValueId output)
     : s_(shape), bias_(bias), relu_(relu), residual_(residual), tile_pixels_(kernels::conv_f32_tile_pixels(shape)),
       packed_(std::move(weight)) {
-  check(packed_->rows() == shape.out_c && packed_->cols() == shape.patch_size(), ErrorCode::kInternal,
+  check(packed_->rows() == shape.out_c && packed_->cols() == shape.patch_size(), StatusCode::kInternal,
         "conv2d_f32: packed weights do not match the convolution's shape");
   inputs = {input};
   if (residual != kNoValue) inputs.push_back(residual);
@@ -78,7 +78,7 @@ Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels
 }
 
 void Conv2dOp::fuse_max_pool(int kernel, int stride, int pad, ValueId pooled) {
-  check(residual_ == kNoValue && !max_pool_, ErrorCode::kInternal, "Conv2dOp: a max-pool fused into a conv with a residual or a pool already");
+  check(residual_ == kNoValue && !max_pool_, StatusCode::kInternal, "Conv2dOp: a max-pool fused into a conv with a residual or a pool already");
   max_pool_ = FusedMaxPool::over(s_, kernel, stride, pad);
   outputs.push_back(pooled);
 }
@@ -139,7 +139,7 @@ LinearOp::LinearOp(std::shared_ptr<const PackedF32Weights> weight, int rows, int
                    MatrixRef residual, Epilogue epilogue, ValueId output)
     : rows_(rows), in_(in), out_(out), x_(x), bias_(bias), residual_(residual), epilogue_(epilogue),
       packed_(std::move(weight)) {
-  check(packed_->rows() == out && packed_->cols() == in, ErrorCode::kInternal,
+  check(packed_->rows() == out && packed_->cols() == in, StatusCode::kInternal,
         "linear_f32: packed weights do not match the layer's shape");
   for (const MatrixRef* r : {&x_, &bias_, &residual_}) {
     if (r->value != kNoValue) inputs.push_back(r->value);
@@ -218,7 +218,7 @@ std::string LayerNormOp::kernel(const kernels::KernelConfig& k) const {
 }
 
 void LayerNormOp::write_row_codes(const RowCodes& codes) {
-  check(!codes_.present() && codes.cols == cols_, ErrorCode::kInternal, "LayerNormOp: row codes asked for twice or of another width");
+  check(!codes_.present() && codes.cols == cols_, StatusCode::kInternal, "LayerNormOp: row codes asked for twice or of another width");
   codes_ = codes;
   for (ValueId v : codes.values()) outputs.push_back(v);
 }
@@ -259,7 +259,7 @@ size_t AttentionOp::scratch_per_thread() const {
 
 void AttentionOp::run(const RunContext& ctx) const {
   const kernels::GemmF32Kernels& gemm = ctx.kernels().gemm_f32;
-  check(gemm.nr == nr_, ErrorCode::kInternal,
+  check(gemm.nr == nr_, StatusCode::kInternal,
         "attention scratch sized for panels of " + std::to_string(nr_) + " columns, run by " + gemm.name);
   const float* q = q_.resolve(ctx);
   const float* k = k_.resolve(ctx);
@@ -297,7 +297,7 @@ void AttentionOp::run(const RunContext& ctx) const {
 
 ConcatRowsOp::ConcatRowsOp(int cols, std::vector<Part> parts, ValueId output) : cols_(cols), parts_(std::move(parts)) {
   for (const auto& p : parts_) {
-    check(p.projection == nullptr || (p.projection->rows() == cols && p.bias != nullptr), ErrorCode::kInternal,
+    check(p.projection == nullptr || (p.projection->rows() == cols && p.bias != nullptr), StatusCode::kInternal,
           "concat_rows_f32: a projection of another width, or without its bias");
     if (p.source.value != kNoValue) inputs.push_back(p.source.value);
   }

@@ -7,8 +7,8 @@
 #include <cstring>
 #include <limits>
 
+#include "actengine/status.h"
 #include "graph/gemm_tiling.h"
-#include "weights/blob/error.h"
 
 namespace act::graph {
 
@@ -37,12 +37,12 @@ kernels::QuantS8 symmetric_quant(float absmax) {
 
 PackedWeights::PackedWeights(const kernels::GemmS8Kernels& kernels, int n, int k, const int8_t* w, const int32_t* bias,
                              int32_t a_zero_point, bool unsigned_activations) {
-  check(k >= 1 && k <= kernels::kGemmS8MaxK, ErrorCode::kUnimplemented,
+  check(k >= 1 && k <= kernels::kGemmS8MaxK, StatusCode::kUnimplemented,
         "an int8 layer with " + std::to_string(k) + " inputs per output (the INT8 kernels take at most " +
             std::to_string(kernels::kGemmS8MaxK) + ")");
   buffer_ = AlignedBuffer(kernels.packed_size(n, k));
   if (unsigned_activations) {
-    check(kernels.pack_u8a != nullptr, ErrorCode::kInternal, "unsigned activations on a gemm_s8 variant without them");
+    check(kernels.pack_u8a != nullptr, StatusCode::kInternal, "unsigned activations on a gemm_s8 variant without them");
     kernels.pack_u8a(n, k, w, static_cast<size_t>(k), bias, a_zero_point, buffer_.data());
   } else {
     repack(kernels, n, k, w, bias, a_zero_point);
@@ -143,8 +143,8 @@ ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec
               spec.s8_out ? integer_bias(spec.shape.out_c, spec.bias, spec.input_q.scale, spec.w_scale).data() : nullptr,
               spec.input_params != kNoValue ? 0 : spec.input_q.zero_point + (spec.unsigned_input ? 128 : 0),
               spec.unsigned_input) {
-  check(!spec.s8_out || spec.input_params == kNoValue, ErrorCode::kInternal, "an int8-out conv needs static input parameters");
-  check(!spec.unsigned_input || spec.input_params == kNoValue, ErrorCode::kInternal, "unsigned conv input with dynamic parameters");
+  check(!spec.s8_out || spec.input_params == kNoValue, StatusCode::kInternal, "an int8-out conv needs static input parameters");
+  check(!spec.unsigned_input || spec.input_params == kNoValue, StatusCode::kInternal, "unsigned conv input with dynamic parameters");
   if (spec.s8_out) requant_scale_ = requant_scales(spec.shape.out_c, spec.input_q.scale, spec.w_scale, spec.output_q.scale);
   inputs = {input};
   if (spec.input_params != kNoValue) inputs.push_back(spec.input_params);
@@ -153,7 +153,7 @@ ConvS8Op::ConvS8Op(const kernels::GemmS8Kernels& kernels, const ConvS8Spec& spec
 }
 
 void ConvS8Op::fuse_max_pool(int kernel, int stride, int pad, ValueId pooled) {
-  check(spec_.residual == kNoValue && !max_pool_, ErrorCode::kInternal,
+  check(spec_.residual == kNoValue && !max_pool_, StatusCode::kInternal,
         "ConvS8Op: a max-pool fused into a conv with a residual or a pool already");
   max_pool_ = FusedMaxPool::over(spec_.shape, kernel, stride, pad);
   outputs.push_back(pooled);
@@ -294,8 +294,8 @@ LinearS8Op::LinearS8Op(const kernels::GemmS8Kernels& kernels, int rows, int in, 
       packed_(kernels, out, in, weight, nullptr, x_codes.per_tensor() ? x_codes.fixed->zero_point : 0) {
   const bool bias_table = bias_.ld != 0;
   const bool has_residual = residual_.value != kNoValue || residual_.constant != nullptr;
-  check(!(bias_table && has_residual), ErrorCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
-  check(x_codes.cols == in, ErrorCode::kInternal, "LinearS8Op: input codes of another width");
+  check(!(bias_table && has_residual), StatusCode::kInternal, "LinearS8Op: a per-row bias table and a residual together");
+  check(x_codes.cols == in, StatusCode::kInternal, "LinearS8Op: input codes of another width");
   const bool quantized_here = x_codes_from == InputCodes::kQuantizedHere;
   if (quantized_here && x_.value != kNoValue) inputs.push_back(x_.value);
   if (!quantized_here) inputs = x_codes.values();
@@ -335,7 +335,7 @@ double LinearS8Op::macs() const {
 }
 
 void LinearS8Op::fuse_head(std::shared_ptr<const PackedF32Weights> weight, const float* bias, ValueId output) {
-  check(!head_ && weight->cols() == out_ && bias != nullptr, ErrorCode::kInternal,
+  check(!head_ && weight->cols() == out_ && bias != nullptr, StatusCode::kInternal,
         "LinearS8Op: a second head, or one of another width");
   head_ = FusedHead{std::move(weight), bias, output};
   outputs.push_back(output);
@@ -351,13 +351,13 @@ std::string LinearS8Op::kernel(const kernels::KernelConfig& k) const {
 }
 
 void LinearS8Op::fuse_layernorm(const float* gamma, const float* beta, ValueId normed) {
-  check(!y_codes_.present(), ErrorCode::kInternal, "LinearS8Op: a LayerNorm fused after the output's codes were asked for");
+  check(!y_codes_.present(), StatusCode::kInternal, "LinearS8Op: a LayerNorm fused after the output's codes were asked for");
   norms_.push_back({gamma, beta, normed});
   outputs.push_back(normed);
 }
 
 void LinearS8Op::write_row_codes(const RowCodes& codes) {
-  check(!y_codes_.present() && codes.cols == out_, ErrorCode::kInternal, "LinearS8Op: row codes asked for twice or of another width");
+  check(!y_codes_.present() && codes.cols == out_, StatusCode::kInternal, "LinearS8Op: row codes asked for twice or of another width");
   y_codes_ = codes;
   for (ValueId v : codes.values()) outputs.push_back(v);
   if (!norms_.empty()) return;  // the codes of the last norm's output: never requantized by the GEMM

@@ -10,11 +10,10 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "actengine/status.h"
 #include "actengine/vision.h"
 #include "apps/media/media_io.h"
 #include "apps/observation_file.h"
-#include "apps/status_error.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_kind.h"
 #include "weights/blob/file_util.h"
 
@@ -51,7 +50,7 @@ class Loader {
 
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
-    if (!fs::exists(p)) fail(ErrorCode::kNotFound, "calibration source not found: " + source);
+    if (!fs::exists(p)) fail(StatusCode::kNotFound, "calibration source not found: " + source);
     // A model given as frames says what it is (a checkpoint folder holding images is still a folder of images).
     switch (const FileKind kind = file_kind(source)) {
       case FileKind::kLeRobotCheckpoint:
@@ -61,7 +60,7 @@ class Loader {
       case FileKind::kActb:
       case FileKind::kPyTorchZip:
       case FileKind::kPyTorchLegacy:
-        fail(ErrorCode::kInvalidArgument, wrong_kind_message(source, kind, "calibration frames"));
+        fail(StatusCode::kInvalidArgument, wrong_kind_message(source, kind, "calibration frames"));
       default: break;
     }
     if (fs::is_directory(p)) {
@@ -72,7 +71,7 @@ class Loader {
     if (lower_extension(p) == ".safetensors") return add_observation_file(p, max_frames);
     if (is_video_file(p)) return add_video(p, max_frames);
     if (is_image_file(p)) return add_images({p}, max_frames, p.string());
-    fail(ErrorCode::kInvalidArgument, "calibration source " + source +
+    fail(StatusCode::kInvalidArgument, "calibration source " + source +
          " is not a folder, a video (mp4, avi, mkv, mov, webm), an image or an observation .safetensors file");
   }
 
@@ -91,7 +90,8 @@ class Loader {
            " are stretched to the model's " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width, " +
            cam.key + "): another aspect ratio than training's; use frames from the robot's camera at its training setting");
     }
-    throw_if_failed(frame_to_model_rgb(image, cam.height, cam.width, rgb));
+    const Status converted = frame_to_model_rgb(image, cam.height, cam.width, rgb);
+    if (!converted.ok()) throw Error(converted);
   }
 
   // A frame whose cameras all see `image`. The states the source lacks (or has with the wrong
@@ -109,10 +109,10 @@ class Loader {
   }
 
   void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
-    if (files.empty()) fail(ErrorCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
+    if (files.empty()) fail(StatusCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
     for (size_t i : spread(files.size(), max_frames)) {
       const cv::Mat image = media::read_image(files[i].string());
-      if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + files[i].string());
+      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode image " + files[i].string());
       add_frame_all_cameras(image);
     }
   }
@@ -125,7 +125,7 @@ class Loader {
   static std::unique_ptr<media::VideoReader> open_video(const fs::path& p) {
     // FFmpeg only, as act_drive reads video files: the same decoder gives the same frames.
     std::unique_ptr<media::VideoReader> video = media::open_video(p.string(), cv::CAP_FFMPEG);
-    if (!video) fail(ErrorCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
+    if (!video) fail(StatusCode::kDataLoss, "cannot open video " + p.string() + " (OpenCV/FFmpeg)");
     return video;
   }
 
@@ -157,10 +157,10 @@ class Loader {
 
   void add_video(const fs::path& p, size_t max_frames) {
     const size_t n = video_length(p);
-    if (n == 0) fail(ErrorCode::kDataLoss, "video " + p.string() + " has no frames");
+    if (n == 0) fail(StatusCode::kDataLoss, "video " + p.string() + " has no frames");
     const std::vector<size_t> wanted = spread(n, max_frames);
     const std::vector<cv::Mat> frames = video_frames(p, wanted);
-    if (frames.empty()) fail(ErrorCode::kDataLoss, "could not decode any frame of " + p.string());
+    if (frames.empty()) fail(StatusCode::kDataLoss, "could not decode any frame of " + p.string());
     for (const cv::Mat& frame : frames) add_frame_all_cameras(frame);
   }
 
@@ -178,10 +178,11 @@ class Loader {
         }
       }
       if (files.empty()) {
-        fail(ErrorCode::kNotFound, "LeRobot dataset " + dir.string() + " has no videos for camera \"" + cam.key + "\"");
+        fail(StatusCode::kNotFound,
+             "LeRobot dataset " + dir.string() + " has no videos for camera \"" + cam.key + "\"");
       }
       if (!per_camera.empty() && files.size() != per_camera[0].size()) {
-        fail(ErrorCode::kDataLoss, "LeRobot dataset " + dir.string() + ": cameras have different numbers of video files");
+        fail(StatusCode::kDataLoss, "LeRobot dataset " + dir.string() + ": cameras have different numbers of video files");
       }
       per_camera.push_back(std::move(files));
     }
@@ -237,7 +238,7 @@ class Loader {
       // States of another length belong to another model: calibrating on sampled states instead would
       // hide that (and once did, with a note saying the source had none).
       if (model_.state_dim > 0 && state.size() != static_cast<size_t>(model_.state_dim)) {
-        fail(ErrorCode::kInvalidArgument, where + ": the recording's state has " + std::to_string(state.size()) +
+        fail(StatusCode::kInvalidArgument, where + ": the recording's state has " + std::to_string(state.size()) +
              " values, the model's has " + std::to_string(model_.state_dim) + " (recorded with another model?)");
       }
       entries.emplace_back(dir / frame, std::move(state));
@@ -245,7 +246,7 @@ class Loader {
     if (entries.empty()) return add_image_folder(dir, max_frames);
     for (size_t i : spread(entries.size(), max_frames)) {
       const cv::Mat image = media::read_image(entries[i].first.string());
-      if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
+      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
       add_frame_all_cameras(image, &entries[i].second);
     }
   }
@@ -299,7 +300,7 @@ std::vector<fs::path> files_in(const fs::path& dir, bool (*pick)(const fs::path&
 }
 
 CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames) {
-  if (sources.empty()) fail(ErrorCode::kInvalidArgument, "no calibration sources given");
+  if (sources.empty()) fail(StatusCode::kInvalidArgument, "no calibration sources given");
   Loader loader(model);
   // Every source contributes its share of the frames.
   const size_t share = std::max<size_t>(1, (max_frames + sources.size() - 1) / sources.size());

@@ -2,7 +2,7 @@
 
 #include <bit>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act {
 
@@ -16,8 +16,8 @@ void write_npy_f32(detail::AtomicFileWriter& out, const std::vector<int64_t>& sh
   }
   if (shape.size() > 1) dims.resize(dims.size() - 2);  // a 1-d shape keeps its comma: "(3,)"
   if (count != static_cast<int64_t>(values.size())) {
-    fail(ErrorCode::kInvalidArgument, out.path() + ": an array of shape (" + dims + ") holds " + std::to_string(count) +
-         " values, not " + std::to_string(values.size()));
+    fail(StatusCode::kInvalidArgument, out.path() + ": an array of shape (" + dims + ") holds " +
+                                           std::to_string(count) + " values, not " + std::to_string(values.size()));
   }
   std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + dims + "), }";
   // Magic (6) + version (2) + header length (2) + header + '\n' is padded with spaces to 64 bytes.

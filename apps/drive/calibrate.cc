@@ -7,9 +7,9 @@
 #include <sstream>
 #include <thread>
 
+#include "actengine/status.h"
 #include "apps/drive/calibration.h"
 #include "apps/drive/serial_link.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -126,7 +126,7 @@ int run_calibration(const CalibrateOptions& options, const std::atomic<bool>& st
           Calibration::from_json(calibration.to_json(), "being saved");  // the same checks act_drive applies
           std::ofstream file(output);
           file << calibration.to_json().dump(2) << "\n";
-          if (!file) fail(ErrorCode::kIoError, "cannot write " + output);
+          if (!file) fail(StatusCode::kIoError, "cannot write " + output);
           out << "saved " << output << "\n";
         } catch (const Error& e) {
           out << "not saved: " << e.what() << "\n";

@@ -6,8 +6,8 @@
 #include <fstream>
 #include <set>
 
+#include "actengine/status.h"
 #include "apps/arduino/act_rover/rover_protocol.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 
 namespace act::drive {
@@ -23,7 +23,7 @@ constexpr EndpointNames kSteeringNames{"left_us", "center_us", "right_us"};
 constexpr EndpointNames kThrottleNames{"reverse_us", "neutral_us", "forward_us"};
 
 [[noreturn]] void bad(const std::string& source, const std::string& what) {
-  fail(ErrorCode::kInvalidArgument, "calibration " + source + ": " + what);
+  fail(StatusCode::kInvalidArgument, "calibration " + source + ": " + what);
 }
 
 void reject_unknown_keys(const nlohmann::json& object, const std::set<std::string>& known, const std::string& source,
@@ -135,7 +135,9 @@ Calibration Calibration::load(const std::string& path) {
   try {
     return from_json(nlohmann::json(detail::read_json_file(path)), path);
   } catch (const Error& e) {
-    if (e.code() == ErrorCode::kNotFound) fail(e.code(), "calibration file " + path + " cannot be opened: " + e.what());
+    if (e.code() == StatusCode::kNotFound) {
+      fail(e.code(), "calibration file " + path + " cannot be opened: " + e.what());
+    }
     throw;
   }
 }
@@ -164,11 +166,11 @@ void Calibration::check_units(const ModelInfo& model) const {
     char range[96];
     std::snprintf(range, sizeof range, "action %zu of the model spans about [%.4g, %.4g]", i, lo, hi);
     if (action_units == Units::kMicroseconds && scale < kSmallestPulseScale) {
-      fail(ErrorCode::kInvalidArgument, std::string("the calibration says \"action_units\": \"microseconds\", but ") +
+      fail(StatusCode::kInvalidArgument, std::string("the calibration says \"action_units\": \"microseconds\", but ") +
            range + ": set \"action_units\": \"normalized\"");
     }
     if (action_units == Units::kNormalized && scale >= kSmallestPulseScale) {
-      fail(ErrorCode::kInvalidArgument, std::string("the calibration says \"action_units\": \"normalized\", but ") +
+      fail(StatusCode::kInvalidArgument, std::string("the calibration says \"action_units\": \"normalized\", but ") +
            range + " (pulse widths?): set \"action_units\": \"microseconds\"");
     }
   }

@@ -9,8 +9,8 @@
 #include <mutex>
 #include <vector>
 
+#include "actengine/status.h"
 #include "apps/media/media_io.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 
@@ -111,24 +111,24 @@ Camera::Camera(CameraOptions options) {
   const std::string& source = shared_->options.source;
   is_file_ = kind == SourceKind::kFile;
   if (shared_->options.stepped && kind != SourceKind::kFile) {
-    fail(ErrorCode::kInvalidArgument, "--realtime off replays a video file or an image sequence; '" + source +
-                                          "' is a live source");
+    fail(StatusCode::kInvalidArgument, "--realtime off replays a video file or an image sequence; '" + source +
+                                           "' is a live source");
   }
   std::unique_ptr<media::VideoReader>& video = shared_->video;
   video = open_capture(shared_->options, kind);
   if (!video) {
     const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) && !std::filesystem::exists(source);
-    fail(ErrorCode::kNotFound, "cannot open camera '" + source + "'" + (missing ? ": no such file" : "") +
-                                    " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
+    fail(StatusCode::kNotFound, "cannot open camera '" + source + "'" + (missing ? ": no such file" : "") +
+                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
                                     "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
   }
   cv::Mat first;
   if (!video->read(first) || first.empty()) {
-    fail(ErrorCode::kIoError, "camera '" + source + "' opened but delivered no frame");
+    fail(StatusCode::kIoError, "camera '" + source + "' opened but delivered no frame");
   }
   if (first.type() != CV_8UC3) {
-    fail(ErrorCode::kUnimplemented, "camera '" + source + "' delivers " + std::to_string(first.channels()) +
-                                         "-channel frames; act_drive needs 8-bit colour (BGR)");
+    fail(StatusCode::kUnimplemented, "camera '" + source + "' delivers " + std::to_string(first.channels()) +
+                                          "-channel frames; act_drive needs 8-bit colour (BGR)");
   }
   width_ = first.cols;
   height_ = first.rows;

@@ -8,9 +8,7 @@
 #include <thread>
 
 #include "actengine/scheduler.h"
-#include "apps/status_error.h"
-#include "weights/blob/error.h"
-#include "weights/blob/model_config.h"
+#include "actengine/status.h"
 
 namespace act::drive {
 namespace {
@@ -97,9 +95,8 @@ ModelInfo with_deployment(const ModelInfo& info, const DeploymentOptions& deploy
     out.temporal_ensembling = deployment.temporal_ensemble_coeff->has_value();
     out.temporal_ensemble_coeff = deployment.temporal_ensemble_coeff->value_or(0.0);
   }
-  const std::optional<double> coeff = out.temporal_ensembling ? std::optional<double>(out.temporal_ensemble_coeff) : std::nullopt;
-  if (const std::string problem = ModelConfig::deployment_problem(out.n_action_steps, coeff, out.chunk_size); !problem.empty()) {
-    fail(ErrorCode::kInvalidArgument, "--n-action-steps / --temporal-ensemble-coeff with this model: " + problem);
+  if (const std::string problem = ChunkScheduler::deployment_problem(out); !problem.empty()) {
+    fail(StatusCode::kInvalidArgument, "--n-action-steps / --temporal-ensemble-coeff with this model: " + problem);
   }
   return out;
 }
@@ -119,8 +116,8 @@ std::vector<float> initial_state(const ControlOptions& options, int state_dim, c
   if (options.state_source != ControlOptions::StateSource::kLastAction) return state;
   if (!options.initial_state.empty()) {
     if (options.initial_state.size() != state.size()) {
-      fail(ErrorCode::kInvalidArgument, "the initial state has " + std::to_string(options.initial_state.size()) +
-                                            " values, the model's state " + std::to_string(state_dim));
+      fail(StatusCode::kInvalidArgument, "the initial state has " + std::to_string(options.initial_state.size()) +
+                                             " values, the model's state " + std::to_string(state_dim));
     }
     return options.initial_state;
   }
@@ -130,7 +127,7 @@ std::vector<float> initial_state(const ControlOptions& options, int state_dim, c
 
 ChunkScheduler make_scheduler(const ModelInfo& info) {
   StatusOr<ChunkScheduler> scheduler = ChunkScheduler::create(info);
-  throw_if_failed(scheduler.status(), "act_drive");
+  if (!scheduler.ok()) throw Error(scheduler.status().with_context("act_drive"));
   return std::move(scheduler).value();
 }
 

@@ -53,7 +53,7 @@ struct ControlOptions {
 };
 
 /// `info` with `deployment`'s choices in place of the blob's; throws act::Error(kInvalidArgument) when
-/// they do not fit its chunk (LeRobot's rules, ModelConfig::deployment_problem).
+/// they do not fit its chunk (LeRobot's rules, ChunkScheduler::deployment_problem).
 ModelInfo with_deployment(const ModelInfo& info, const DeploymentOptions& deployment);
 
 /// The first tick of each period during which the rover held the safe action because of a fault.

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act::drive {
 namespace {
@@ -42,7 +42,7 @@ void list_ports(std::ostream& out) {
     char* message = sp_last_error_message();
     const std::string why = text_or(message, "unknown error");
     sp_free_error_message(message);
-    fail(ErrorCode::kIoError, "--list-ports: cannot list serial ports: " + why);
+    fail(StatusCode::kIoError, "--list-ports: cannot list serial ports: " + why);
   }
   int count = 0;
   for (sp_port** port = ports; *port; ++port, ++count) {

@@ -5,7 +5,7 @@
 #include <atomic>
 #include <cstring>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act::drive {
 namespace {
@@ -24,10 +24,10 @@ static_assert(std::atomic<size_t>::is_always_lock_free, "a signal handler reads 
 }  // namespace
 
 void arm_emergency_writes(std::span<const EmergencyWrite> writes) {
-  check(writes.size() <= kMaxEmergencyWrites, ErrorCode::kInternal, "too many emergency writes");
+  check(writes.size() <= kMaxEmergencyWrites, StatusCode::kInternal, "too many emergency writes");
   g_armed.store(0);
   for (size_t i = 0; i < writes.size(); ++i) {
-    check(writes[i].bytes.size() <= kMaxEmergencyBytes, ErrorCode::kInternal, "emergency write too long");
+    check(writes[i].bytes.size() <= kMaxEmergencyBytes, StatusCode::kInternal, "emergency write too long");
     std::memcpy(g_slots[i].bytes, writes[i].bytes.data(), writes[i].bytes.size());
     g_slots[i].length = writes[i].bytes.size();
     g_slots[i].fd = writes[i].fd;

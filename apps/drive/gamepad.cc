@@ -11,7 +11,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act::drive {
 namespace {
@@ -55,16 +55,16 @@ bool GamepadMapping::active() const { return steering_ != 0 || throttle_ != 0; }
 Gamepad::Gamepad(const std::string& path, Cockpit& cockpit, std::ostream& log)
     : cockpit_(cockpit), log_(log), path_(path), mapping_({ABS_X, 0, 0}, {ABS_RY, 0, 0}) {
   fd_ = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
-  if (fd_ < 0) fail(ErrorCode::kIoError, "--gamepad: cannot open " + path + ": " + std::strerror(errno));
+  if (fd_ < 0) fail(StatusCode::kIoError, "--gamepad: cannot open " + path + ": " + std::strerror(errno));
   if (const int rc = libevdev_new_from_fd(fd_, &device_); rc < 0) {
     ::close(fd_);
-    fail(ErrorCode::kInvalidArgument, "--gamepad: " + path + " is not an input device: " + std::strerror(-rc));
+    fail(StatusCode::kInvalidArgument, "--gamepad: " + path + " is not an input device: " + std::strerror(-rc));
   }
   name_ = libevdev_get_name(device_) ? libevdev_get_name(device_) : "";
   if (!libevdev_has_event_code(device_, EV_ABS, ABS_X)) {
     libevdev_free(device_);
     ::close(fd_);
-    fail(ErrorCode::kInvalidArgument, "--gamepad: " + path + " (" + name_ + ") has no stick (no ABS_X axis): not a gamepad");
+    fail(StatusCode::kInvalidArgument, "--gamepad: " + path + " (" + name_ + ") has no stick (no ABS_X axis): not a gamepad");
   }
   const uint16_t throttle = libevdev_has_event_code(device_, EV_ABS, ABS_RY) ? ABS_RY : ABS_Y;
   mapping_ = GamepadMapping(axis_of(device_, ABS_X), axis_of(device_, throttle));

@@ -5,9 +5,8 @@
 
 #include <cstring>
 
+#include "actengine/status.h"
 #include "actengine/vision.h"
-#include "apps/status_error.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -28,7 +27,7 @@ class EngineModel : public ChunkModel {
 
 std::unique_ptr<ChunkModel> open_engine_model(const std::string& path, int threads) {
   auto engine = Engine::open(path, {.threads = threads});
-  throw_if_failed(engine.status());
+  if (!engine.ok()) throw Error(engine.status());
   return std::make_unique<EngineModel>(std::move(engine.value()));
 }
 
@@ -162,7 +161,8 @@ InferenceResult InferenceWorker::infer_once(ChunkModel& model, std::vector<float
   result.frame_age_ms = ms_between(frame->captured, start);
 
   const CameraInfo& camera = info_.cameras.front();
-  throw_if_failed(frame_to_model_rgb(frame->bgr, camera.height, camera.width, result.model_input));
+  const Status converted = frame_to_model_rgb(frame->bgr, camera.height, camera.width, result.model_input);
+  if (!converted.ok()) throw Error(converted);
   const auto preprocessed = Clock::now();
   result.preprocess_ms = ms_between(start, preprocessed);
 

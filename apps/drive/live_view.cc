@@ -22,9 +22,9 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "actengine/status.h"
 #include "actengine/vision.h"
 #include "apps/media/media_io.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -370,7 +370,7 @@ void parse_http_address(const std::string& text, LiveViewOptions& options) {
   } catch (const std::exception&) {
   }
   if (used != port.size() || value < 0 || value > 65535 || options.address.empty()) {
-    fail(ErrorCode::kInvalidArgument, "--http '" + text + "': expected [ADDR:]PORT, e.g. 8887 or 0.0.0.0:8887");
+    fail(StatusCode::kInvalidArgument, "--http '" + text + "': expected [ADDR:]PORT, e.g. 8887 or 0.0.0.0:8887");
   }
   options.port = value;
 }
@@ -557,8 +557,8 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     port_ = http.bind_to_port(options_.address, options_.port) ? options_.port : -1;
   }
   if (port_ <= 0) {
-    fail(ErrorCode::kIoError, "--http: cannot listen on " + options_.address + ":" + std::to_string(options_.port) +
-                                  " (in use, or not an address of this machine)");
+    fail(StatusCode::kIoError, "--http: cannot listen on " + options_.address + ":" + std::to_string(options_.port) +
+                                   " (in use, or not an address of this machine)");
   }
   server_->thread = std::thread([this] { server_->http.listen_after_bind(); });
 }

@@ -5,8 +5,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "actengine/status.h"
 #include "actengine/vision.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -46,7 +46,7 @@ OverlayVideo::OverlayVideo(const std::string& path, double fps, int image_height
   const cv::Size size(image_width * scale, image_height * scale + kBandHeight);
   writer_ = media::create_video(path, "mp4v", fps, size);
   if (!writer_) {
-    fail(ErrorCode::kIoError, "--overlay-video: OpenCV cannot write " + path + " (use an .mp4 or .avi file in an existing folder)");
+    fail(StatusCode::kIoError, "--overlay-video: OpenCV cannot write " + path + " (use an .mp4 or .avi file in an existing folder)");
   }
   thread_ = std::thread([this] { run(); });
 }

@@ -15,9 +15,9 @@
 #include <thread>
 #include <vector>
 
+#include "actengine/status.h"
 #include "apps/drive/emergency_neutral.h"
 #include "apps/executable_dir.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -45,7 +45,7 @@ int try_write_attribute(const std::string& path, int64_t value) {
   const int fd = open_attribute(path);
   if (fd < 0) {
     const int err = errno;
-    fail(ErrorCode::kIoError, "cannot open " + path + ": " + (err == EACCES ? kPermissionHint : std::strerror(err)));
+    fail(StatusCode::kIoError, "cannot open " + path + ": " + (err == EACCES ? kPermissionHint : std::strerror(err)));
   }
   const int err = write_text(fd, format_value(value)) ? 0 : errno;
   ::close(fd);
@@ -53,7 +53,7 @@ int try_write_attribute(const std::string& path, int64_t value) {
 }
 
 void check_written(int err, const std::string& path, int64_t value) {
-  check(err == 0, ErrorCode::kIoError, "cannot write " + std::to_string(value) + " to " + path + ": " + std::strerror(err));
+  check(err == 0, StatusCode::kIoError, "cannot write " + std::to_string(value) + " to " + path + ": " + std::strerror(err));
 }
 
 void write_attribute(const std::string& path, int64_t value) { check_written(try_write_attribute(path, value), path, value); }
@@ -73,7 +73,7 @@ int read_channel_count(const std::string& chip_dir) {
 
 PwmChannels parse_pwm_channels(const std::string& text) {
   const auto bad = [&] {
-    fail(ErrorCode::kInvalidArgument, "--pwm '" + text + "': expected CHIP:STEERING,THROTTLE, e.g. pwmchip0:0,1");
+    fail(StatusCode::kInvalidArgument, "--pwm '" + text + "': expected CHIP:STEERING,THROTTLE, e.g. pwmchip0:0,1");
   };
   const size_t colon = text.find(':'), comma = text.find(',');
   if (colon == std::string::npos || colon == 0 || comma == std::string::npos || comma < colon) bad();
@@ -86,7 +86,7 @@ PwmChannels parse_pwm_channels(const std::string& text) {
   };
   channels.steering = number(text.substr(colon + 1, comma - colon - 1));
   channels.throttle = number(text.substr(comma + 1));
-  check(channels.steering != channels.throttle, ErrorCode::kInvalidArgument,
+  check(channels.steering != channels.throttle, StatusCode::kInvalidArgument,
         "--pwm '" + text + "': steering and throttle need two different channels");
   return channels;
 }
@@ -94,16 +94,16 @@ PwmChannels parse_pwm_channels(const std::string& text) {
 // ---- PwmSysfsLink ----
 
 PwmSysfsLink::PwmSysfsLink(PwmLinkOptions options, std::ostream& log) : options_(std::move(options)), log_(log) {
-  check(in_range(options_.neutral.steering_us) && in_range(options_.neutral.throttle_us), ErrorCode::kInvalidArgument,
+  check(in_range(options_.neutral.steering_us) && in_range(options_.neutral.throttle_us), StatusCode::kInvalidArgument,
         "the neutral pulse widths are outside " + std::to_string(ROVER_PWM_MIN_US) + ".." + std::to_string(ROVER_PWM_MAX_US) + " us");
   const std::string chip_dir = options_.sysfs_root + "/" + options_.channels.chip;
-  check(fs::is_directory(chip_dir), ErrorCode::kNotFound,
+  check(fs::is_directory(chip_dir), StatusCode::kNotFound,
         "no PWM chip " + chip_dir + ": the kernel's PWM driver is not enabled; " + kPwmOverlayHint +
             "; act_drive --list-ports lists the chips found");
   const int count = read_channel_count(chip_dir);
-  check(count > 0, ErrorCode::kIoError, "cannot read the channel count " + chip_dir + "/npwm");
+  check(count > 0, StatusCode::kIoError, "cannot read the channel count " + chip_dir + "/npwm");
   for (const int channel : {options_.channels.steering, options_.channels.throttle}) {
-    check(channel < count, ErrorCode::kNotFound,
+    check(channel < count, StatusCode::kNotFound,
           chip_dir + " has " + std::to_string(count) + " channel" + (count == 1 ? "" : "s") + " (0.." + std::to_string(count - 1) +
               "), not " + std::to_string(channel) + "; " + kPwmOverlayHint);
   }
@@ -136,7 +136,7 @@ void PwmSysfsLink::open_channel(Channel& channel, int number, uint16_t neutral_u
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   if (channel.duty_fd < 0) {
-    fail(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
+    fail(err == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError,
          "PWM channel " + channel.dir + " is not usable: " +
              (err == EACCES ? std::string(kPermissionHint)
                             : std::string(std::strerror(err)) + (err == ENOENT ? std::string("; ") + kPwmOverlayHint : "")));
@@ -156,7 +156,7 @@ void PwmSysfsLink::open_channel(Channel& channel, int number, uint16_t neutral_u
 
 void PwmSysfsLink::start_watchdog() {
   int pair[2];
-  check(::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, pair) == 0, ErrorCode::kIoError,
+  check(::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, pair) == 0, StatusCode::kIoError,
         std::string("cannot create the watchdog's heartbeat socket: ") + std::strerror(errno));
   heartbeat_fd_ = pair[0];
   const int child_end = pair[1];
@@ -181,7 +181,8 @@ void PwmSysfsLink::start_watchdog() {
   }
   const int fork_error = errno;
   ::close(child_end);
-  check(pid > 0, ErrorCode::kIoError, std::string("cannot start the PWM watchdog: fork: ") + std::strerror(fork_error));
+  check(pid > 0, StatusCode::kIoError,
+        std::string("cannot start the PWM watchdog: fork: ") + std::strerror(fork_error));
   watchdog_pid_ = pid;
   // It answers with one byte once it holds the duty-cycle files open; an exec or open failure closes the socket.
   pollfd ready{heartbeat_fd_, POLLIN, 0};
@@ -191,8 +192,8 @@ void PwmSysfsLink::start_watchdog() {
     ::kill(pid, SIGKILL);
     ::waitpid(pid, nullptr, 0);
     watchdog_pid_ = -1;
-    fail(ErrorCode::kIoError, "the PWM watchdog " + options_.watchdog_path +
-                                  " did not start (its message, if any, is above; act_drive does not drive PWM without it)");
+    fail(StatusCode::kIoError, "the PWM watchdog " + options_.watchdog_path +
+                                   " did not start (its message, if any, is above; act_drive does not drive PWM without it)");
   }
 }
 

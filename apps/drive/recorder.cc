@@ -7,9 +7,9 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "actengine/status.h"
 #include "actengine/vision.h"
 #include "apps/media/media_io.h"
-#include "weights/blob/error.h"
 
 namespace fs = std::filesystem;
 
@@ -21,7 +21,7 @@ constexpr size_t kMaxQueuedFrames = 64;
 
 std::FILE* open_table(const fs::path& path) {
   std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) fail(ErrorCode::kIoError, "--record: cannot create " + path.string() + ": " + std::strerror(errno));
+  if (!f) fail(StatusCode::kIoError, "--record: cannot create " + path.string() + ": " + std::strerror(errno));
   return f;
 }
 
@@ -53,16 +53,16 @@ Recorder::Recorder(const std::string& dir, int state_dim, int action_dim, int im
     : dir_(dir), state_dim_(state_dim), action_dim_(action_dim), image_height_(image_height), image_width_(image_width) {
   std::error_code ec;
   if (fs::exists(dir) && !fs::is_empty(dir, ec)) {
-    fail(ErrorCode::kInvalidArgument, "--record: " + dir + " exists and is not empty (choose a new folder)");
+    fail(StatusCode::kInvalidArgument, "--record: " + dir + " exists and is not empty (choose a new folder)");
   }
   for (const char* sub : {"frames", "tick_frames"}) {
     fs::create_directories(fs::path(dir) / sub, ec);
-    if (ec) fail(ErrorCode::kIoError, "--record: cannot create " + dir + "/" + sub + ": " + ec.message());
+    if (ec) fail(StatusCode::kIoError, "--record: cannot create " + dir + "/" + sub + ": " + ec.message());
   }
   {
     std::ofstream out(fs::path(dir) / "meta.json");
     out << meta.dump(2) << "\n";
-    if (!out) fail(ErrorCode::kIoError, "--record: cannot write " + dir + "/meta.json");
+    if (!out) fail(StatusCode::kIoError, "--record: cannot write " + dir + "/meta.json");
   }
   log_ = open_table(fs::path(dir) / "log.jsonl");
   ticks_ = open_table(fs::path(dir) / "ticks.csv");

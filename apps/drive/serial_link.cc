@@ -10,8 +10,8 @@
 #include <iomanip>
 #include <sstream>
 
+#include "actengine/status.h"
 #include "apps/drive/emergency_neutral.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {
@@ -28,8 +28,8 @@ speed_t baud_constant(int baud) {
     case 500000: return B500000;
     case 1000000: return B1000000;
     default:
-      fail(ErrorCode::kInvalidArgument, "unsupported baud rate " + std::to_string(baud) +
-                                             " (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 1000000)");
+      fail(StatusCode::kInvalidArgument, "unsupported baud rate " + std::to_string(baud) +
+                                              " (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 1000000)");
   }
 }
 
@@ -68,14 +68,14 @@ void SerialPort::open(const std::string& path, int baud) {
     if (err == ENOENT) hint = " (is the Arduino plugged in? see ls /dev/ttyUSB* /dev/ttyACM*)";
     if (err == EACCES) hint = " (permission: add the user to the 'dialout' group)";
     if (err == EBUSY) hint = " (another program has it open)";
-    fail(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
+    fail(err == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError,
          "cannot open serial port " + path + ": " + std::strerror(err) + hint);
   }
   termios tty{};
   if (::tcgetattr(fd, &tty) != 0) {
     const int err = errno;
     ::close(fd);
-    fail(ErrorCode::kInvalidArgument, "serial port " + path + " is not a terminal device: " + std::strerror(err));
+    fail(StatusCode::kInvalidArgument, "serial port " + path + " is not a terminal device: " + std::strerror(err));
   }
   ::cfmakeraw(&tty);
   tty.c_cflag |= CLOCAL | CREAD;
@@ -87,7 +87,7 @@ void SerialPort::open(const std::string& path, int baud) {
   if (::tcsetattr(fd, TCSANOW, &tty) != 0) {
     const int err = errno;
     ::close(fd);
-    fail(ErrorCode::kIoError, "cannot configure serial port " + path + ": " + std::strerror(err));
+    fail(StatusCode::kIoError, "cannot configure serial port " + path + ": " + std::strerror(err));
   }
   ::tcflush(fd, TCIOFLUSH);  // drop whatever the board printed before we listened
   fd_ = fd;
@@ -181,13 +181,13 @@ void SerialLink::connect() {
     if (now - start > options_.ready_timeout) {
       port_.close();
       state_ = State::kDisconnected;
-      fail(ErrorCode::kIoError,
+      fail(StatusCode::kIoError,
            "no ready line from the board on " + options_.path + " within " +
                std::to_string(options_.ready_timeout.count()) + " ms at " + std::to_string(options_.baud) +
                " baud (is apps/arduino/act_rover uploaded, the baud rate the same, the port right?)");
     }
     poll(now);
-    if (state_ == State::kDisconnected) fail(ErrorCode::kIoError, "serial port " + options_.path + ": " + last_error_);
+    if (state_ == State::kDisconnected) fail(StatusCode::kIoError, "serial port " + options_.path + ": " + last_error_);
     if (state_ == State::kWaitingReady) read_input(std::chrono::milliseconds(10), now);
   }
 }

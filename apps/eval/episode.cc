@@ -11,8 +11,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/status.h"
 #include "apps/convert/calib_frames.h"
-#include "weights/blob/error.h"
 
 namespace act::eval {
 
@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 namespace {
 
 [[noreturn]] void bad(const std::string& where, const std::string& problem) {
-  fail(ErrorCode::kInvalidArgument, where + ": " + problem);
+  fail(StatusCode::kInvalidArgument, where + ": " + problem);
 }
 
 std::string at_line(const std::string& file, size_t line) { return file + " line " + std::to_string(line); }
@@ -84,7 +84,7 @@ std::vector<std::string> split(const std::string& line) {
 // dropped (and counted in `cut_rows`) instead of being an error.
 CsvTable read_csv(const std::string& path, const char* what, bool recording = false, size_t* cut_rows = nullptr) {
   std::ifstream in(path);
-  if (!in) fail(ErrorCode::kNotFound, std::string("cannot open the ") + what + " CSV " + path);
+  if (!in) fail(StatusCode::kNotFound, std::string("cannot open the ") + what + " CSV " + path);
   CsvTable table{path, {}, {}};
   std::string line;
   size_t number = 0;
@@ -170,7 +170,7 @@ void extend_demonstrations(std::vector<EpisodeFrame>& frames, const ModelInfo& m
 
 void check_state_model(const ModelInfo& model, const std::string& where) {
   if (model.env_state_dim > 0) {
-    fail(ErrorCode::kUnimplemented, where + ": the model takes an environment state (" + model.env_state_key +
+    fail(StatusCode::kUnimplemented, where + ": the model takes an environment state (" + model.env_state_key +
          "), which act_eval's episodes do not carry yet");
   }
 }
@@ -257,7 +257,7 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
   // The frames and their states, from log.jsonl.
   const fs::path log_path = dir / "log.jsonl";
   std::ifstream log(log_path);
-  if (!log) fail(ErrorCode::kNotFound, "cannot open " + log_path.string());
+  if (!log) fail(StatusCode::kNotFound, "cannot open " + log_path.string());
   std::string line;
   size_t line_number = 0, without_action = 0;
   while (std::getline(log, line)) {
@@ -377,7 +377,7 @@ Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& mode
 
 Episode read_episode(const EpisodeSources& sources, const ModelInfo& model) {
   const fs::path p(sources.episode);
-  if (!fs::exists(p)) fail(ErrorCode::kNotFound, "episode not found: " + sources.episode);
+  if (!fs::exists(p)) fail(StatusCode::kNotFound, "episode not found: " + sources.episode);
   if (fs::is_directory(p) && fs::exists(p / "log.jsonl")) {
     if (!sources.actions_csv.empty() || !sources.states_csv.empty()) {
       bad(sources.episode, "an act_drive recording carries its own states and actions: drop --states and --actions");
@@ -391,20 +391,20 @@ EpisodeImages::EpisodeImages(const Episode& episode) : episode_(episode) {
   if (episode.video.empty()) return;
   // FFmpeg only, as act_convert and act_drive read video files: the same decoder gives the same frames.
   video_ = media::open_video(episode.video, cv::CAP_FFMPEG);
-  if (!video_) fail(ErrorCode::kDataLoss, "cannot open video " + episode.video + " (OpenCV/FFmpeg)");
+  if (!video_) fail(StatusCode::kDataLoss, "cannot open video " + episode.video + " (OpenCV/FFmpeg)");
 }
 
 cv::Mat EpisodeImages::image(size_t i) {
   const EpisodeFrame& frame = episode_.frames.at(i);
   if (!frame.image_path.empty()) {
     cv::Mat image = media::read_image(frame.image_path);
-    if (image.empty()) fail(ErrorCode::kDataLoss, "cannot decode image " + frame.image_path);
+    if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode image " + frame.image_path);
     return image;
   }
   cv::Mat image;
   while (next_video_index_ <= frame.video_index) {
     if (!video_ || !video_->read(image)) {
-      fail(ErrorCode::kDataLoss, episode_.video + " has only " + std::to_string(next_video_index_) +
+      fail(StatusCode::kDataLoss, episode_.video + " has only " + std::to_string(next_video_index_) +
            " frames; the actions CSV names frame " + std::to_string(frame.video_index));
     }
     ++next_video_index_;

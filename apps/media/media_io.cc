@@ -4,8 +4,8 @@
 
 #include <filesystem>
 
+#include "actengine/status.h"
 #include "apps/executable_dir.h"
-#include "weights/blob/error.h"
 
 namespace act::media {
 namespace {
@@ -31,7 +31,7 @@ const MediaIo& module() {
     }
     return {&entry(), ""};  // never unloaded: OpenCV's libraries stay until the process ends
   }();
-  if (!loaded.first) fail(ErrorCode::kNotFound, loaded.second);
+  if (!loaded.first) fail(StatusCode::kNotFound, loaded.second);
   return *loaded.first;
 }
 

@@ -32,7 +32,10 @@ file="${1#"$root"/}"
 shift
 [ -f "$root/$file" ] || die "no file $file"
 lib="$build/engine/libactengine.a"
-if [ ! -f "$lib" ] || [ ! -f "$build/build.ninja" ]; then die "no built library in $build (build it first: ninja -C $build)"; fi
+probes="$build/bench/probes/libact_bench_probes.a"  # thread_cpu_seconds (kernels/peak)
+if [ ! -f "$lib" ] || [ ! -f "$probes" ] || [ ! -f "$build/build.ninja" ]; then
+  die "no built library in $build (build it first: ninja -C $build)"
+fi
 # The compile flags this build gives the file (its ISA's -m options included).
 flags="$(awk -v obj="/$(basename "$file").o:" '$1 == "build" && index($2, obj) {found = 1; next}
   found && $1 == "FLAGS" {sub(/^[ \t]*FLAGS = /, ""); print; exit}' "$build/build.ninja")"
@@ -57,5 +60,5 @@ compile_b=$!
 wait "$compile_a" || die "compiling A ($rev) failed"
 wait "$compile_b" || die "compiling B (the working tree) failed"
 g++ -O2 -std=c++20 -I"$root" -DACT_AB_TABLE_A="${table}_ab_A" -DACT_AB_TABLE_B="${table}_ab_B" \
-  "$root/bench/tools/gemm_s8_ab_main.cc" "$work/a.o" "$work/b.o" "$lib" -lcpuinfo -lpthread -o "$work/gemm_s8_ab"
+  "$root/bench/tools/gemm_s8_ab_main.cc" "$work/a.o" "$work/b.o" "$probes" "$lib" -lcpuinfo -lpthread -o "$work/gemm_s8_ab"
 "$work/gemm_s8_ab" "$@"

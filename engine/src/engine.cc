@@ -5,9 +5,9 @@
 #include <cstdlib>
 #include <new>
 
+#include "actengine/status.h"
 #include "engine/src/engine_impl.h"
 #include "weights/blob/blob_names.h"
-#include "weights/blob/error.h"
 
 namespace act {
 
@@ -30,7 +30,7 @@ constexpr float kMaxNormalizedInput = 1e6f;
 void check_finite(std::span<const float> values, const char* what) {
   const size_t bad = static_cast<size_t>(std::count_if(values.begin(), values.end(), [](float v) { return !std::isfinite(v); }));
   if (bad > 0) {
-    fail(ErrorCode::kInvalidArgument, std::string(what) + " is not finite (" + std::to_string(bad) + " of " +
+    fail(StatusCode::kInvalidArgument, std::string(what) + " is not finite (" + std::to_string(bad) + " of " +
          std::to_string(values.size()) + " values NaN or infinite): is the observation far outside what the model " +
          "was trained on, or are the weights damaged?");
   }
@@ -46,7 +46,7 @@ kernels::KernelConfig engine_kernels(const std::string& isa_option) {
     source = "ACT_ISA";
   }
   kernels::KernelConfigChoice choice = kernels::kernel_config(requested);
-  if (!choice.config) fail(ErrorCode::kInvalidArgument, source + ": " + choice.error);
+  if (!choice.config) fail(StatusCode::kInvalidArgument, source + ": " + choice.error);
   return *choice.config;
 }
 
@@ -145,13 +145,13 @@ void Engine::Impl::load_features(size_t camera, const ImageView& features) {
   const CameraConfig& cam = config_.cameras[camera];
   const std::string what = "backbone features " + std::to_string(camera) + " (" + cam.key + ")";
   if (features.format != ImageView::Format::kBackboneFeaturesF32Chw) {
-    fail(ErrorCode::kInvalidArgument, "image " + std::to_string(camera) + " (" + cam.key + ") is an image, but the engine " +
+    fail(StatusCode::kInvalidArgument, "image " + std::to_string(camera) + " (" + cam.key + ") is an image, but the engine " +
          "was opened with external_backbone: pass the backbone's output, ImageView::backbone_features");
   }
-  if (features.data == nullptr) fail(ErrorCode::kInvalidArgument, what + " has no data");
+  if (features.data == nullptr) fail(StatusCode::kInvalidArgument, what + " has no data");
   const int fh = config_.feature_height(cam), fw = config_.feature_width(cam);
   if (features.height != fh || features.width != fw) {
-    fail(ErrorCode::kInvalidArgument, what + " are " + std::to_string(features.height) + "x" + std::to_string(features.width) +
+    fail(StatusCode::kInvalidArgument, what + " are " + std::to_string(features.height) + "x" + std::to_string(features.width) +
          ", the model's feature map is " + std::to_string(fh) + "x" + std::to_string(fw) + " (height x width)");
   }
   const size_t pixels = static_cast<size_t>(fh) * static_cast<size_t>(fw), d = static_cast<size_t>(config_.dim_model);
@@ -160,7 +160,7 @@ void Engine::Impl::load_features(size_t camera, const ImageView& features) {
   for (size_t c = 0; c < d; ++c) {
     for (size_t i = 0; i < pixels; ++i) {
       const float v = src[c * pixels + i];
-      if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contain NaN or Inf");
+      if (!std::isfinite(v)) fail(StatusCode::kInvalidArgument, what + " contain NaN or Inf");
       dst[i * d + c] = v;
     }
   }
@@ -171,12 +171,13 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   const CameraConfig& cam = config_.cameras[camera];
   const std::string what = "image " + std::to_string(camera) + " (" + cam.key + ")";
   if (image.format == ImageView::Format::kBackboneFeaturesF32Chw) {
-    fail(ErrorCode::kInvalidArgument, what + " holds backbone features: open the engine with EngineOptions::external_backbone");
+    fail(StatusCode::kInvalidArgument, what + " holds backbone features: open the engine with EngineOptions::external_backbone");
   }
-  if (image.data == nullptr) fail(ErrorCode::kInvalidArgument, what + " has no data");
+  if (image.data == nullptr) fail(StatusCode::kInvalidArgument, what + " has no data");
   if (image.height != cam.height || image.width != cam.width) {
-    fail(ErrorCode::kInvalidArgument, what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) +
-         ", the model expects " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
+    fail(StatusCode::kInvalidArgument,
+         what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) + ", the model expects " +
+             std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
   }
   const InputNorm& norm = camera_norm_[camera];
   // A static INT8 stem takes int8 codes (ActNetwork::camera_input_s8): the same quantize kernel the
@@ -195,7 +196,7 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
   if (image.format == ImageView::Format::kRgbU8Hwc) {
     const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;
-    if (stride < w * 3) fail(ErrorCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
+    if (stride < w * 3) fail(StatusCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
     // uint8 -> [0, 1] by a float32 division, as LeRobot does (255 -> exactly 1.0); then normalise.
     float lut[3][256];
     for (size_t c = 0; c < 3; ++c) {
@@ -237,9 +238,9 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   for (size_t c = 0; c < 3; ++c) {
     for (size_t i = 0; i < h * w; ++i) {
       const float v = src[c * h * w + i];
-      if (!std::isfinite(v)) fail(ErrorCode::kInvalidArgument, what + " contains NaN or Inf");
+      if (!std::isfinite(v)) fail(StatusCode::kInvalidArgument, what + " contains NaN or Inf");
       if (v < -kFloatImageSlack || v > 1.0f + kFloatImageSlack) {
-        fail(ErrorCode::kInvalidArgument, what + " has the value " + std::to_string(v) + " (channel " +
+        fail(StatusCode::kInvalidArgument, what + " has the value " + std::to_string(v) + " (channel " +
              std::to_string(c) + ", pixel " + std::to_string(i) + "): float images hold [0, 1]" +
              (v > 2.0f ? " (a 0-255 image? divide it by 255, or pass it as uint8)" : ""));
       }
@@ -252,29 +253,29 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
 void Engine::Impl::load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm,
                                float* dst) {
   if (values.size() != expected) {
-    fail(ErrorCode::kInvalidArgument, std::string(what) + " has " + std::to_string(values.size()) +
+    fail(StatusCode::kInvalidArgument, std::string(what) + " has " + std::to_string(values.size()) +
          " values, the model expects " + std::to_string(expected));
   }
   for (size_t i = 0; i < expected; ++i) {
     const std::string name = std::string(what) + "[" + std::to_string(i) + "]";
-    if (!std::isfinite(values[i])) fail(ErrorCode::kInvalidArgument, name + " is not finite");
+    if (!std::isfinite(values[i])) fail(StatusCode::kInvalidArgument, name + " is not finite");
     dst[i] = norm.apply(values[i], i);
     if (!(std::fabs(dst[i]) <= kMaxNormalizedInput)) {
       char text[160];
       std::snprintf(text, sizeof text, " = %g is %g after normalisation: far outside anything the model was trained on",
                     values[i], dst[i]);
-      fail(ErrorCode::kInvalidArgument, name + text);
+      fail(StatusCode::kInvalidArgument, name + text);
     }
   }
 }
 
 void Engine::Impl::run(const Observation& obs, std::span<float> actions_normalized) {
   if (obs.images.size() != config_.cameras.size()) {
-    fail(ErrorCode::kInvalidArgument, "observation has " + std::to_string(obs.images.size()) + " images, the model has " +
+    fail(StatusCode::kInvalidArgument, "observation has " + std::to_string(obs.images.size()) + " images, the model has " +
          std::to_string(config_.cameras.size()) + " cameras");
   }
   if (actions_normalized.size() != info_.chunk_values()) {
-    fail(ErrorCode::kInvalidArgument, "action buffer holds " + std::to_string(actions_normalized.size()) +
+    fail(StatusCode::kInvalidArgument, "action buffer holds " + std::to_string(actions_normalized.size()) +
          " values, the chunk has " + std::to_string(info_.chunk_values()));
   }
   using Clock = std::chrono::steady_clock;
@@ -283,13 +284,13 @@ void Engine::Impl::run(const Observation& obs, std::span<float> actions_normaliz
   if (config_.state_dim > 0) {
     load_vector("state", obs.state, static_cast<size_t>(config_.state_dim), state_norm_, network_->state_input());
   } else if (!obs.state.empty()) {
-    fail(ErrorCode::kInvalidArgument, "the model takes no robot state, but the observation has one");
+    fail(StatusCode::kInvalidArgument, "the model takes no robot state, but the observation has one");
   }
   if (config_.env_state_dim > 0) {
     load_vector("environment state", obs.env_state, static_cast<size_t>(config_.env_state_dim), env_norm_,
                 network_->env_state_input());
   } else if (!obs.env_state.empty()) {
-    fail(ErrorCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
+    fail(StatusCode::kInvalidArgument, "the model takes no environment state, but the observation has one");
   }
   const auto preprocessed = Clock::now();
   network_->run(pool_, profile_ ? &last_run_ : nullptr);
@@ -313,15 +314,15 @@ void Engine::Impl::unnormalize(std::span<const float> normalized, std::span<floa
 std::vector<float> Engine::Impl::intermediate(const std::string& name) {
   graph::Graph& g = network_->graph();
   const graph::ValueId id = g.find(name);
-  if (id == graph::kNoValue) fail(ErrorCode::kNotFound, "the network has no value \"" + name + "\"");
+  if (id == graph::kNoValue) fail(StatusCode::kNotFound, "the network has no value \"" + name + "\"");
   if (!keep_intermediates_) {
-    fail(ErrorCode::kFailedPrecondition, "intermediate \"" + name + "\": open the engine with EngineOptions::keep_intermediates");
+    fail(StatusCode::kFailedPrecondition, "intermediate \"" + name + "\": open the engine with EngineOptions::keep_intermediates");
   }
-  if (!has_run_) fail(ErrorCode::kFailedPrecondition, "intermediate \"" + name + "\": no inference has run yet");
+  if (!has_run_) fail(StatusCode::kFailedPrecondition, "intermediate \"" + name + "\": no inference has run yet");
   const graph::Value& v = g.value(id);
-  if (v.dtype == graph::DataType::kS32) fail(ErrorCode::kUnimplemented, "intermediate \"" + name + "\" is an int32 accumulator");
+  if (v.dtype == graph::DataType::kS32) fail(StatusCode::kUnimplemented, "intermediate \"" + name + "\" is an int32 accumulator");
   if (v.dtype == graph::DataType::kS8 && !v.quant) {
-    fail(ErrorCode::kUnimplemented, "intermediate \"" + name + "\" is int8 quantized at run time; its scale is not kept");
+    fail(StatusCode::kUnimplemented, "intermediate \"" + name + "\" is int8 quantized at run time; its scale is not kept");
   }
   return g.read_f32(id);
 }
@@ -334,7 +335,7 @@ Engine::~Engine() = default;
 StatusOr<std::unique_ptr<Engine>> Engine::open(const std::string& blob_path, const EngineOptions& options) {
   std::unique_ptr<Engine> engine;
   Status s = guarded([&] {
-    if (options.threads < 0) fail(ErrorCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
+    if (options.threads < 0) fail(StatusCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
     engine.reset(new Engine(std::make_unique<Impl>(blob_path, options)));
   });
   if (!s.ok()) return s;

@@ -8,12 +8,12 @@
 #include <string>
 
 #include "actengine/engine.h"
+#include "actengine/status.h"
 #include "graph/act_network.h"
 #include "graph/thread_pool.h"
 #include "kernels/config/kernel_config.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_tensors.h"
-#include "weights/blob/error.h"
 #include "weights/blob/model_config.h"
 
 namespace act {
@@ -93,18 +93,6 @@ class Engine::Impl {
   InferenceTimings timings_;
 };
 
-/// The public Status of an internal error: the codes mirror each other value for value.
-inline Status to_status(const Error& e) {
-  static_assert(static_cast<int>(ErrorCode::kInvalidArgument) == static_cast<int>(StatusCode::kInvalidArgument) &&
-                static_cast<int>(ErrorCode::kNotFound) == static_cast<int>(StatusCode::kNotFound) &&
-                static_cast<int>(ErrorCode::kDataLoss) == static_cast<int>(StatusCode::kDataLoss) &&
-                static_cast<int>(ErrorCode::kUnimplemented) == static_cast<int>(StatusCode::kUnimplemented) &&
-                static_cast<int>(ErrorCode::kFailedPrecondition) == static_cast<int>(StatusCode::kFailedPrecondition) &&
-                static_cast<int>(ErrorCode::kIoError) == static_cast<int>(StatusCode::kIoError) &&
-                static_cast<int>(ErrorCode::kInternal) == static_cast<int>(StatusCode::kInternal));
-  return Status(static_cast<StatusCode>(e.code()), e.what());
-}
-
 /// Runs `fn`, turning act::Error and std exceptions into a Status (the API never throws).
 template <typename Fn>
 Status guarded(Fn&& fn) {
@@ -112,7 +100,7 @@ Status guarded(Fn&& fn) {
     fn();
     return Status();
   } catch (const Error& e) {
-    return to_status(e);
+    return e.status();
   } catch (const std::bad_alloc&) {
     return Status(StatusCode::kInternal, "out of memory");
   } catch (const std::exception& e) {

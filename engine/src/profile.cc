@@ -46,8 +46,8 @@ void Engine::Impl::reset_op_profile() {
 }
 
 std::string Engine::Impl::chrome_trace() const {
-  if (!profile_) fail(ErrorCode::kFailedPrecondition, "chrome_trace: open the engine with EngineOptions::profile");
-  if (!has_run_) fail(ErrorCode::kFailedPrecondition, "chrome_trace: no inference has run yet");
+  if (!profile_) fail(StatusCode::kFailedPrecondition, "chrome_trace: open the engine with EngineOptions::profile");
+  if (!has_run_) fail(StatusCode::kFailedPrecondition, "chrome_trace: no inference has run yet");
   const auto& ops = network_->graph().ops();
   const auto origin = last_run_.op_start.front();
   const auto micros = [&](std::chrono::steady_clock::time_point t) {

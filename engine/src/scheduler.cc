@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include "weights/blob/model_config.h"
@@ -22,6 +23,11 @@ StatusOr<ChunkScheduler> ChunkScheduler::create(const ModelInfo& info) {
     if (!problem.empty()) return invalid(problem);
   }
   return ChunkScheduler(info);
+}
+
+std::string ChunkScheduler::deployment_problem(const ModelInfo& info) {
+  const std::optional<double> coeff = info.temporal_ensembling ? std::optional<double>(info.temporal_ensemble_coeff) : std::nullopt;
+  return ModelConfig::deployment_problem(info.n_action_steps, coeff, info.chunk_size);
 }
 
 ChunkScheduler::ChunkScheduler(const ModelInfo& info)

@@ -8,8 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/status.h"
 #include "support/command.h"
-#include "weights/blob/error.h"
 #include "support/test_paths.h"
 
 namespace fs = std::filesystem;

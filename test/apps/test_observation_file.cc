@@ -5,10 +5,10 @@
 #include <optional>
 #include <vector>
 
+#include "actengine/status.h"
 #include "apps/observation_file.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 #include "weights/import/safetensors.h"
 
 namespace act {
@@ -35,7 +35,7 @@ class ObservationFileTest : public ::testing::Test {
     write_safetensors(path_, out);
     return test::error_thrown_by([&] { ObservationBatch::read(path_, model_, source); });
   }
-  void expect_error(const std::optional<Error>& e, ErrorCode code, const std::string& needle) {
+  void expect_error(const std::optional<Error>& e, StatusCode code, const std::string& needle) {
     ASSERT_TRUE(e.has_value()) << "read without an error; expected: " << needle;
     EXPECT_EQ(e->code(), code) << e->what();
     EXPECT_NE(std::string(e->what()).find(needle), std::string::npos) << "message: " << e->what() << "\nexpected: " << needle;
@@ -55,27 +55,27 @@ TEST_F(ObservationFileTest, ReadsAWellFormedFile) {
 TEST_F(ObservationFileTest, ImageInTheWrongLayoutOrSize) {
   // NHWC floats where NCHW is expected: the shapes differ, and both are named.
   expect_error(read_error({{"input.observation.images.front", {2, 4, 6, 3}}, {"input.observation.state", {2, 2}}}),
-               ErrorCode::kInvalidArgument, "has shape [2, 4, 6, 3], expected [2, 3, 4, 6]");
+               StatusCode::kInvalidArgument, "has shape [2, 4, 6, 3], expected [2, 3, 4, 6]");
   // Another camera size.
   expect_error(read_error({{"input.observation.images.front", {2, 3, 8, 6}}, {"input.observation.state", {2, 2}}}),
-               ErrorCode::kInvalidArgument, "expected [2, 3, 4, 6]");
+               StatusCode::kInvalidArgument, "expected [2, 3, 4, 6]");
   // A u8 image stored as float.
   expect_error(read_error({{"input.observation.images.front.u8_nhwc", {2, 4, 6, 3}}, {"input.observation.state", {2, 2}}}),
-               ErrorCode::kInvalidArgument, "must be U8");
+               StatusCode::kInvalidArgument, "must be U8");
 }
 
 TEST_F(ObservationFileTest, StateOrActionsOfTheWrongSizeOrMissing) {
   expect_error(read_error({{"input.observation.images.front", {2, 3, 4, 6}}, {"input.observation.state", {2, 3}}}),
-               ErrorCode::kInvalidArgument, "\"input.observation.state\" has shape [2, 3], expected [2, 2]");
+               StatusCode::kInvalidArgument, "\"input.observation.state\" has shape [2, 3], expected [2, 2]");
   // The batch size comes from the state; an image batch that disagrees is named.
   expect_error(read_error({{"input.observation.images.front", {3, 3, 4, 6}}, {"input.observation.state", {2, 2}}}),
-               ErrorCode::kInvalidArgument, "expected [2, 3, 4, 6]");
+               StatusCode::kInvalidArgument, "expected [2, 3, 4, 6]");
   expect_error(read_error({{"input.observation.images.front", {2, 3, 4, 6}}, {"input.observation.state", {2, 2}},
                            {"output.action", {2, 4, 2}}}),
-               ErrorCode::kInvalidArgument, "\"output.action\" has shape [2, 4, 2], expected [2, 3, 2]");
-  expect_error(read_error({{"input.observation.state", {2, 2}}}), ErrorCode::kNotFound,
+               StatusCode::kInvalidArgument, "\"output.action\" has shape [2, 4, 2], expected [2, 3, 2]");
+  expect_error(read_error({{"input.observation.state", {2, 2}}}), StatusCode::kNotFound,
                "missing \"input.observation.images.front\"");
-  expect_error(read_error({{"input.observation.state", {0, 2}}}), ErrorCode::kInvalidArgument, "no batch axis");
+  expect_error(read_error({{"input.observation.state", {0, 2}}}), StatusCode::kInvalidArgument, "no batch axis");
 }
 
 }  // namespace

@@ -5,9 +5,9 @@
 #include <cmath>
 #include <fstream>
 
+#include "actengine/status.h"
 #include "apps/drive/calibration.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 
 namespace act::drive {
 namespace {

@@ -10,12 +10,12 @@
 #include <thread>
 
 
+#include "actengine/status.h"
 #include "apps/drive/camera.h"
 #include "apps/media/media_io.h"
 #include "drive/drive_test_util.h"
 #include "drive/stalling_stream.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 
 namespace act::drive::test {
 namespace {

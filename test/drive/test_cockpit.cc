@@ -6,10 +6,10 @@
 #include <fstream>
 #include <sstream>
 
+#include "actengine/status.h"
 #include "apps/drive/cockpit.h"
 #include "apps/drive/gamepad.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 
 namespace act::drive::test {
 namespace {

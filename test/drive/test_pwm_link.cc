@@ -15,13 +15,13 @@
 #include <new>
 #include <sstream>
 
+#include "actengine/status.h"
 #include "apps/drive/control_loop.h"
 #include "apps/drive/emergency_neutral.h"
 #include "apps/drive/pwm_link.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_pwm.h"
 #include "support/command.h"
-#include "weights/blob/error.h"
 #include "support/test_paths.h"
 
 namespace act::drive::test {

@@ -4,8 +4,8 @@
 #include <cmath>
 
 #include "actengine/engine.h"
+#include "actengine/status.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 #include "weights/import/synthetic_model.h"
 
 namespace act {
@@ -25,7 +25,7 @@ TEST(SyntheticModel, ConfigsAndErrors) {
       synthetic_config(bad);
       ADD_FAILURE() << bad << " accepted";
     } catch (const Error& e) {
-      EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+      EXPECT_EQ(e.code(), StatusCode::kInvalidArgument);
       EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
     }
   }

@@ -3,10 +3,10 @@
 // runs them. The checksum is skipped for most inputs (the first byte decides) so that mutations
 // reach the header and tensor-directory checks behind it. (The check that the network reads every
 // tensor needs a whole model, megabytes, beyond the inputs a fuzzer mutates.)
+#include "actengine/status.h"
 #include "test/fuzz/fuzz_input_file.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_tensors.h"
-#include "weights/blob/error.h"
 #include "weights/blob/quant_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -3,7 +3,7 @@
 // tried as both; JSON that does not parse is the JSON library's business, not ours.
 #include <nlohmann/json.hpp>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/import/lerobot_import.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,10 +1,10 @@
 // libFuzzer target: act_eval's observation reader (a safetensors file checked against a model's
 // inputs). The model is a small fixed one (a camera, robot and environment state) so that valid
 // inputs stay a few hundred bytes.
+#include "actengine/status.h"
 #include "apps/observation_file.h"
 #include "test/fuzz/fuzz_input_file.h"
 #include "test/fuzz/fuzz_models.h"
-#include "weights/blob/error.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static act::fuzz::InputFile input;

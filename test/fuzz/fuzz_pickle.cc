@@ -2,8 +2,8 @@
 // read_pytorch_checkpoint, and the same bytes as one bare pickle through the safe pickle reader.
 #include <span>
 
+#include "actengine/status.h"
 #include "test/fuzz/fuzz_input_file.h"
-#include "weights/blob/error.h"
 #include "weights/import/pickle_reader.h"
 #include "weights/import/pytorch_checkpoint.h"
 

@@ -1,6 +1,6 @@
 // libFuzzer target: the safetensors reader (header, dtypes, offsets) and the float conversions.
+#include "actengine/status.h"
 #include "test/fuzz/fuzz_input_file.h"
-#include "weights/blob/error.h"
 #include "weights/import/safetensors.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -7,9 +7,9 @@
 #include <fstream>
 #include <iterator>
 
+#include "actengine/status.h"
 #include "support/test_paths.h"
 #include "weights/import/config_inference.h"
-#include "weights/blob/error.h"
 #include "weights/import/lerobot_import.h"
 #include "weights/import/pytorch_checkpoint.h"
 

@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act::test {
 
@@ -54,7 +54,7 @@ std::optional<Error> error_thrown_by(F&& f) {
 
 /// Success iff `f()` throws act::Error with `code` and a message containing every one of `needles`.
 template <typename F>
-::testing::AssertionResult throws_error(F&& f, ErrorCode code, const std::vector<std::string>& needles) {
+::testing::AssertionResult throws_error(F&& f, StatusCode code, const std::vector<std::string>& needles) {
   try {
     f();
   } catch (const Error& e) {

@@ -15,10 +15,10 @@
 #include <string>
 #include <vector>
 
+#include "actengine/status.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
 #include "weights/blob/blob_tensors.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/quant_config.h"
 #include "weights/import/safetensors.h"
@@ -130,7 +130,7 @@ class ActbBad : public ::testing::Test {
     header_size_ = get_le(good_, 16, 8);
   }
 
-  ::testing::AssertionResult rejects(const std::vector<uint8_t>& bytes, ErrorCode code,
+  ::testing::AssertionResult rejects(const std::vector<uint8_t>& bytes, StatusCode code,
                                      std::vector<std::string> needles, bool verify = true) {
     test::write_file(path_, bytes);
     needles.push_back(path_);
@@ -138,7 +138,7 @@ class ActbBad : public ::testing::Test {
   }
   ::testing::AssertionResult corrupt(const std::vector<uint8_t>& bytes, std::vector<std::string> needles,
                                      bool verify = true) {
-    return rejects(bytes, ErrorCode::kDataLoss, std::move(needles), verify);
+    return rejects(bytes, StatusCode::kDataLoss, std::move(needles), verify);
   }
   // A hand-built blob with these tensor entries over `data_size` bytes of data must be rejected.
   ::testing::AssertionResult rejects_entries(const std::string& entries, size_t data_size,
@@ -341,22 +341,22 @@ TEST(Actb, GetMissingTensorIsNotFound) {
   small_writer().write(path);
   const ActbFile f = ActbFile::open(path);
   EXPECT_EQ(f.find("nope"), nullptr);
-  EXPECT_TRUE(throws_error([&] { f.get("nope"); }, ErrorCode::kNotFound, {"'nope'", path}));
+  EXPECT_TRUE(throws_error([&] { f.get("nope"); }, StatusCode::kNotFound, {"'nope'", path}));
 }
 
 TEST(Actb, F32AccessorChecksDtype) {
   const std::string path = test::scratch_dir() + "/f32.actb";
   small_writer().write(path);
   const ActbFile f = ActbFile::open(path);
-  EXPECT_TRUE(throws_error([&] { f.get("q").f32(); }, ErrorCode::kInvalidArgument, {"'q'", "I8", "F32"}));
+  EXPECT_TRUE(throws_error([&] { f.get("q").f32(); }, StatusCode::kInvalidArgument, {"'q'", "I8", "F32"}));
 }
 
 TEST(Actb, OpenMissingOrDirectory) {
   const std::string dir = test::scratch_dir();
-  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir + "/missing.actb"); }, ErrorCode::kNotFound,
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir + "/missing.actb"); }, StatusCode::kNotFound,
                            {dir + "/missing.actb"}));
   // A folder says what it is (a LeRobot checkpoint folder would also say to convert it first).
-  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, ErrorCode::kInvalidArgument, {dir, "is a folder, not an .actb blob"}));
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(dir); }, StatusCode::kInvalidArgument, {dir, "is a folder, not an .actb blob"}));
 }
 
 // ------------------------------------------------------------------------- config against tensors
@@ -392,7 +392,7 @@ TEST(QuantConfigJson, AttentionPrecisionRoundTripsAndDefaultsToFloat) {
   EXPECT_FALSE(QuantConfig::from_json(older).int8_attention);
   nlohmann::json bad = QuantConfig{}.to_json();
   bad["attention"] = "int4";
-  EXPECT_TRUE(throws_error([&] { QuantConfig::from_json(bad); }, ErrorCode::kDataLoss, {"attention", "\"int4\""}));
+  EXPECT_TRUE(throws_error([&] { QuantConfig::from_json(bad); }, StatusCode::kDataLoss, {"attention", "\"int4\""}));
 }
 
 TEST(ActbSemantics, ConfigAndTensorsMustAgree) {
@@ -407,18 +407,18 @@ TEST(ActbSemantics, ConfigAndTensorsMustAgree) {
   };
   EXPECT_EQ(blob_model_config(blob("ok.actb", small_int8_config(), {0, 0})).precision, Precision::kInt8);
   EXPECT_TRUE(throws_error([&] { blob_model_config(blob("zp.actb", small_int8_config(), {0, 7})); },
-                           ErrorCode::kDataLoss, {dir + "/zp.actb", "\"w\"", "zero point 7", "symmetric"}));
+                           StatusCode::kDataLoss, {dir + "/zp.actb", "\"w\"", "zero point 7", "symmetric"}));
   nlohmann::json fp32 = small_int8_config();
   fp32["precision"] = "fp32";
-  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("fp32.actb", fp32, {0, 0})); }, ErrorCode::kDataLoss,
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("fp32.actb", fp32, {0, 0})); }, StatusCode::kDataLoss,
                            {dir + "/fp32.actb", "\"w\"", "precision is not int8"}));
   nlohmann::json null_norm = small_int8_config();
   null_norm["input_norm"] = nullptr;
-  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("null.actb", null_norm, {0, 0})); }, ErrorCode::kDataLoss,
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("null.actb", null_norm, {0, 0})); }, StatusCode::kDataLoss,
                            {dir + "/null.actb", "input_norm"}));
   nlohmann::json backbone = small_int8_config();
   backbone["backbone"] = "vgg16";
-  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("vgg.actb", backbone, {0, 0})); }, ErrorCode::kDataLoss,
+  EXPECT_TRUE(throws_error([&] { blob_model_config(blob("vgg.actb", backbone, {0, 0})); }, StatusCode::kDataLoss,
                            {dir + "/vgg.actb", "\"vgg16\"", "resnet18, resnet34, resnet50, resnet101, resnet152"}));
 }
 
@@ -430,11 +430,11 @@ TEST(ActbSemantics, TensorsNobodyReadAreNamed) {
   for (const ActbTensor& t : f.tensors()) {
     if (t.name != "q") tensors.find(t.name);
   }
-  EXPECT_TRUE(throws_error([&] { tensors.check_all_read(); }, ErrorCode::kDataLoss, {path, "\"q\"", "does not use"}));
+  EXPECT_TRUE(throws_error([&] { tensors.check_all_read(); }, StatusCode::kDataLoss, {path, "\"q\"", "does not use"}));
   tensors.find("q");
   EXPECT_NO_THROW(tensors.check_all_read());
-  EXPECT_TRUE(throws_error([&] { tensors.f32("q", f.get("q").shape); }, ErrorCode::kDataLoss, {path, "\"q\"", "I8"}));
-  EXPECT_TRUE(throws_error([&] { tensors.get("q", {99}); }, ErrorCode::kDataLoss, {path, "\"q\"", "[99]"}));
+  EXPECT_TRUE(throws_error([&] { tensors.f32("q", f.get("q").shape); }, StatusCode::kDataLoss, {path, "\"q\"", "I8"}));
+  EXPECT_TRUE(throws_error([&] { tensors.get("q", {99}); }, StatusCode::kDataLoss, {path, "\"q\"", "[99]"}));
 }
 
 TEST(ActbSemantics, ReleasedTensorsAreNotReadAgain) {
@@ -443,8 +443,8 @@ TEST(ActbSemantics, ReleasedTensorsAreNotReadAgain) {
   ActbFile f = ActbFile::open(path);
   BlobTensors tensors(f);
   tensors.release("a");
-  EXPECT_TRUE(throws_error([&] { tensors.f32("a", {2, 3}); }, ErrorCode::kInternal, {path, "\"a\"", "released"}));
-  EXPECT_TRUE(throws_error([&] { tensors.release("q"); }, ErrorCode::kInternal, {path, "\"q\"", "no float tensor"}));
+  EXPECT_TRUE(throws_error([&] { tensors.f32("a", {2, 3}); }, StatusCode::kInternal, {path, "\"a\"", "released"}));
+  EXPECT_TRUE(throws_error([&] { tensors.release("q"); }, StatusCode::kInternal, {path, "\"q\"", "no float tensor"}));
   EXPECT_EQ(tensors.f32("b", {3})[2], 9.0f);  // the others stay readable
 }
 
@@ -454,35 +454,35 @@ TEST(ActbWrite, RejectsBadTensors) {
   ActbWriter w;
   w.add_f32("a", {2}, {1, 2});
   const std::vector<int8_t> q(6, 1);
-  EXPECT_TRUE(throws_error([&] { w.add_f32("a", {1}, {3}); }, ErrorCode::kInvalidArgument, {"'a'", "duplicate"}));
-  EXPECT_TRUE(throws_error([&] { w.add_f32("b", {3}, {1, 2}); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_f32("a", {1}, {3}); }, StatusCode::kInvalidArgument, {"'a'", "duplicate"}));
+  EXPECT_TRUE(throws_error([&] { w.add_f32("b", {3}, {1, 2}); }, StatusCode::kInvalidArgument,
                            {"'b'", "[3]", "8 bytes"}));
-  EXPECT_TRUE(throws_error([&] { w.add_tensor("c", DType::kF16, {3}, q.data(), 5); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_tensor("c", DType::kF16, {3}, q.data(), 5); }, StatusCode::kInvalidArgument,
                            {"'c'", "F16"}));
-  EXPECT_TRUE(throws_error([&] { w.add_f32("d", {-2}, {}); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_f32("d", {-2}, {}); }, StatusCode::kInvalidArgument,
                            {"'d'", "negative dimension"}));
-  EXPECT_TRUE(throws_error([&] { w.add_tensor("e", DType::kI8, {4}, nullptr, 4); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.add_tensor("e", DType::kI8, {4}, nullptr, 4); }, StatusCode::kInvalidArgument,
                            {"'e'", "null"}));
-  EXPECT_TRUE(throws_error([&] { w.add_f32("", {1}, {1}); }, ErrorCode::kInvalidArgument, {"empty name"}));
+  EXPECT_TRUE(throws_error([&] { w.add_f32("", {1}, {1}); }, StatusCode::kInvalidArgument, {"empty name"}));
 }
 
 TEST(ActbWrite, RejectsBadQuantParams) {
   ActbWriter w;
   const std::vector<int8_t> q(6, 1);
   auto add = [&](QuantParams p) { return [&w, &q, p] { w.add_tensor("q", DType::kI8, {2, 3}, q.data(), 6, p); }; };
-  EXPECT_TRUE(throws_error(add({{0.1f, 0.2f}, {0}, 0}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{0.1f, 0.2f}, {0}, 0}), StatusCode::kInvalidArgument,
                            {"'q'", "2 scales but 1 zero_points"}));
-  EXPECT_TRUE(throws_error(add({{}, {0}, 0}), ErrorCode::kInvalidArgument, {"zero_points but no scales"}));
-  EXPECT_TRUE(throws_error(add({{0.0f}, {0}, 0}), ErrorCode::kInvalidArgument, {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{-1.0f}, {0}, 0}), ErrorCode::kInvalidArgument, {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::quiet_NaN()}, {0}, 0}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{}, {0}, 0}), StatusCode::kInvalidArgument, {"zero_points but no scales"}));
+  EXPECT_TRUE(throws_error(add({{0.0f}, {0}, 0}), StatusCode::kInvalidArgument, {"positive finite"}));
+  EXPECT_TRUE(throws_error(add({{-1.0f}, {0}, 0}), StatusCode::kInvalidArgument, {"positive finite"}));
+  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::quiet_NaN()}, {0}, 0}), StatusCode::kInvalidArgument,
                            {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::infinity()}, {0}, 0}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{std::numeric_limits<float>::infinity()}, {0}, 0}), StatusCode::kInvalidArgument,
                            {"positive finite"}));
-  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 2}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 2}), StatusCode::kInvalidArgument,
                            {"axis 2 is out of range", "[2, 3]"}));
-  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, -1}), ErrorCode::kInvalidArgument, {"axis -1"}));
-  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 0}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, -1}), StatusCode::kInvalidArgument, {"axis -1"}));
+  EXPECT_TRUE(throws_error(add({{1, 1, 1}, {0, 0, 0}, 0}), StatusCode::kInvalidArgument,
                            {"3 scales", "2 channels on axis 0"}));
   // Valid: per-channel along axis 1, and per-tensor (axis ignored).
   w.add_tensor("ok1", DType::kI8, {2, 3}, q.data(), 6, {{1, 2, 3}, {0, 0, 0}, 1});
@@ -493,10 +493,10 @@ TEST(ActbWrite, RejectsInvalidUtf8) {
   const std::string dir = test::scratch_dir();
   ActbWriter w;
   w.add_f32("bad\xfe", {1}, {1});
-  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, ErrorCode::kInvalidArgument, {"JSON"}));
+  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, StatusCode::kInvalidArgument, {"JSON"}));
   ActbWriter p;
   p.set_producer("\xc3");
-  EXPECT_TRUE(throws_error([&] { p.write(dir + "/x.actb"); }, ErrorCode::kInvalidArgument, {"JSON"}));
+  EXPECT_TRUE(throws_error([&] { p.write(dir + "/x.actb"); }, StatusCode::kInvalidArgument, {"JSON"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
 
@@ -504,7 +504,7 @@ TEST(ActbWrite, RejectsNonObjectConfig) {
   const std::string dir = test::scratch_dir();
   ActbWriter w;
   w.set_config(nlohmann::json::array({1, 2}));
-  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { w.write(dir + "/x.actb"); }, StatusCode::kInvalidArgument,
                            {"config must be a JSON object", "array"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -582,7 +582,7 @@ TEST(ActbWrite, ChecksumLeftForLaterIsSealedBeforeCommit) {
   {
     detail::AtomicFileWriter file(dir + "/later.actb");
     w.write_to(file, ActbWriter::Checksum::kLater);
-    EXPECT_TRUE(throws_error([&] { ActbFile::open(file.readable_path()); }, ErrorCode::kDataLoss, {"checksum mismatch"}));
+    EXPECT_TRUE(throws_error([&] { ActbFile::open(file.readable_path()); }, StatusCode::kDataLoss, {"checksum mismatch"}));
     EXPECT_NO_THROW(ActbFile::open(file.readable_path(), /*verify_checksum=*/false));
     seal_actb_checksum(file);
     file.commit();
@@ -593,7 +593,7 @@ TEST(ActbWrite, ChecksumLeftForLaterIsSealedBeforeCommit) {
   // Nothing written: nothing to seal, and no file appears.
   {
     detail::AtomicFileWriter empty(dir + "/empty.actb");
-    EXPECT_TRUE(throws_error([&] { seal_actb_checksum(empty); }, ErrorCode::kInvalidArgument, {"no .actb blob"}));
+    EXPECT_TRUE(throws_error([&] { seal_actb_checksum(empty); }, StatusCode::kInvalidArgument, {"no .actb blob"}));
   }
   EXPECT_FALSE(fs::exists(dir + "/empty.actb"));
 }
@@ -601,7 +601,7 @@ TEST(ActbWrite, ChecksumLeftForLaterIsSealedBeforeCommit) {
 TEST(ActbWrite, MissingFolderFailsCleanly) {
   const std::string dir = test::scratch_dir();
   const std::string path = dir + "/no/such/dir/m.actb";
-  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, ErrorCode::kIoError,
+  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, StatusCode::kIoError,
                            {path, "No such file or directory"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -612,7 +612,7 @@ TEST(ActbWrite, ReadOnlyFolderFailsCleanly) {
   fs::create_directories(dir);
   ASSERT_EQ(::chmod(dir.c_str(), 0555), 0);
   const std::string path = dir + "/m.actb";
-  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, ErrorCode::kIoError, {path, "Permission denied"}));
+  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, StatusCode::kIoError, {path, "Permission denied"}));
   ::chmod(dir.c_str(), 0755);
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -622,7 +622,7 @@ TEST(ActbWrite, FailedRenameRemovesTempFile) {
   const std::string dir = test::scratch_dir();
   const std::string path = dir + "/m.actb";
   fs::create_directories(path + "/keep");
-  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, ErrorCode::kIoError, {path, "rename"}));
+  EXPECT_TRUE(throws_error([&] { small_writer().write(path); }, StatusCode::kIoError, {path, "rename"}));
   EXPECT_EQ(list_dir(dir), std::vector<std::string>{"m.actb"});
   EXPECT_TRUE(fs::is_directory(path + "/keep"));
 }
@@ -634,7 +634,7 @@ TEST(ActbWrite, WriteErrorMidwayRemovesTempFile) {
   w.add_f32("big", {50000}, std::vector<float>(50000, 1.0f));
   {
     test::FileSizeLimit limit(4096);  // the 200 KB write fails part way with EFBIG
-    EXPECT_TRUE(throws_error([&] { w.write(path); }, ErrorCode::kIoError, {path, "File too large"}));
+    EXPECT_TRUE(throws_error([&] { w.write(path); }, StatusCode::kIoError, {path, "File too large"}));
   }
   EXPECT_TRUE(list_dir(dir).empty());
   w.write(path);  // and works again once the limit is gone
@@ -667,7 +667,7 @@ TEST_F(ActbBad, BadMagic) {
 TEST_F(ActbBad, SafetensorsFileIsNotAnActb) {
   const std::vector<float> v = {1, 2};
   write_safetensors(path_, {{"a", DType::kF32, {2}, v.data(), 8}});
-  EXPECT_TRUE(throws_error([&] { ActbFile::open(path_); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { ActbFile::open(path_); }, StatusCode::kInvalidArgument,
                            {path_, "is a safetensors file, not an .actb blob"}));
 }
 
@@ -675,7 +675,7 @@ TEST_F(ActbBad, WrongVersion) {
   for (uint32_t version : {0u, 2u, 7u, 0xFFFFFFFFu}) {
     std::vector<uint8_t> b = good_;
     put_le(b, 8, version, 4);
-    EXPECT_TRUE(rejects(b, ErrorCode::kUnimplemented,
+    EXPECT_TRUE(rejects(b, StatusCode::kUnimplemented,
                         {"format version " + std::to_string(version) + ", this build reads 1"}))
         << version;
   }
@@ -959,7 +959,7 @@ TEST_F(ActbBad, RandomCorruptionNeverCrashes) {
       }
       ++opened;
     } catch (const Error& e) {
-      ASSERT_TRUE(e.code() == ErrorCode::kDataLoss || e.code() == ErrorCode::kUnimplemented) << e.what();
+      ASSERT_TRUE(e.code() == StatusCode::kDataLoss || e.code() == StatusCode::kUnimplemented) << e.what();
       ASSERT_NE(std::string(e.what()).find(path_), std::string::npos) << e.what();
       ++rejected;
     }

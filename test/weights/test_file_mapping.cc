@@ -52,7 +52,7 @@ TEST(FileMapping, ReleasedPagesAreReadAgainFromTheFileOrAsZeros) {
     const bool released = i >= 2 * page && i < 4 * page;
     ASSERT_EQ(copy.data()[i], released ? 0 : bytes[i]) << "byte " << i;
   }
-  EXPECT_TRUE(throws_error([&] { copy.release_pages(copy.data() + page, 5 * page); }, ErrorCode::kInternal,
+  EXPECT_TRUE(throws_error([&] { copy.release_pages(copy.data() + page, 5 * page); }, StatusCode::kInternal,
                            {path, "outside the mapping"}));
 }
 
@@ -74,18 +74,18 @@ TEST(FileMapping, DefaultConstructedIsEmpty) {
 
 TEST(FileMapping, MissingFileIsNotFound) {
   const std::string path = test::scratch_dir() + "/nope.bin";
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kNotFound,
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kNotFound,
                            {path, "No such file or directory"}));
 }
 
 TEST(FileMapping, MissingFolderIsNotFound) {
   const std::string path = test::scratch_dir() + "/no_dir/nope.bin";
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kNotFound, {path}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kNotFound, {path}));
 }
 
 TEST(FileMapping, DirectoryIsIoError) {
   const std::string dir = test::scratch_dir();
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(dir); }, ErrorCode::kIoError, {dir, "not a regular file"}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(dir); }, StatusCode::kIoError, {dir, "not a regular file"}));
 }
 
 TEST(FileMapping, PrivateCopyIsImmuneToChangesOfTheFile) {
@@ -112,15 +112,15 @@ TEST(FileMapping, FifoIsRefusedAtOnce) {
   // Opening a FIFO for reading used to wait for a writer forever (and ignore SIGINT/SIGTERM).
   const std::string path = test::scratch_dir() + "/model.fifo";
   ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kIoError, {path, "a FIFO"}));
-  EXPECT_TRUE(throws_error([&] { detail::read_regular_file(path); }, ErrorCode::kIoError, {path, "a FIFO"}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kIoError, {path, "a FIFO"}));
+  EXPECT_TRUE(throws_error([&] { detail::read_regular_file(path); }, StatusCode::kIoError, {path, "a FIFO"}));
 }
 
 TEST(FileMapping, ReadRegularFileReadsItWhole) {
   const std::string path = test::scratch_dir() + "/text.json";
   test::write_file(path, test::bytes_of("{\"a\": 1}"));
   EXPECT_EQ(detail::read_regular_file(path), "{\"a\": 1}");
-  EXPECT_TRUE(throws_error([&] { detail::read_regular_file(path + ".missing"); }, ErrorCode::kNotFound, {path}));
+  EXPECT_TRUE(throws_error([&] { detail::read_regular_file(path + ".missing"); }, StatusCode::kNotFound, {path}));
 }
 
 TEST(FileMapping, UnreadableFileIsIoError) {
@@ -128,7 +128,7 @@ TEST(FileMapping, UnreadableFileIsIoError) {
   const std::string path = test::scratch_dir() + "/secret.bin";
   test::write_file(path, {1, 2, 3});
   ASSERT_EQ(::chmod(path.c_str(), 0), 0);
-  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, ErrorCode::kIoError, {path, "Permission denied"}));
+  EXPECT_TRUE(throws_error([&] { FileMapping::open(path); }, StatusCode::kIoError, {path, "Permission denied"}));
 }
 
 TEST(FileMapping, MoveTransfersOwnership) {

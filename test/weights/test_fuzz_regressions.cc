@@ -9,9 +9,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/status.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 #include "weights/import/lerobot_import.h"
 #include "weights/blob/model_config.h"
 #include "weights/blob/quant_config.h"
@@ -46,13 +46,13 @@ TEST(FuzzRegressions, LeRobotConfigFeatureShapeThatIsNotAnInteger) {
   // Seen by UBSan in fuzz_lerobot_config (on a hand-made input; the fuzzer had not reached it yet):
   // "shape": [1e300] was converted to int64, which is undefined behaviour.
   const auto config = read_regression_json("config_float_feature_shape.json");
-  EXPECT_ERROR(lerobot_model_config(config, "config.json"), ErrorCode::kDataLoss,
+  EXPECT_ERROR(lerobot_model_config(config, "config.json"), StatusCode::kDataLoss,
                "feature \"observation.state\" needs a string \"type\" and an integer \"shape\"");
   // Its neighbours: a dimension beyond int (once silently wrapped: 2^32 + 2 became 2), a negative one.
   for (const char* shape : {"[4294967298]", "[-2]", "\"2\""}) {
     auto patched = config;
     patched["input_features"]["observation.state"]["shape"] = nlohmann::ordered_json::parse(shape);
-    EXPECT_ERROR(lerobot_model_config(patched, "config.json"), ErrorCode::kDataLoss, "observation.state");
+    EXPECT_ERROR(lerobot_model_config(patched, "config.json"), StatusCode::kDataLoss, "observation.state");
   }
 }
 
@@ -64,14 +64,14 @@ TEST(FuzzRegressions, BlobModelConfigIntegersAreRangeChecked) {
   for (const char* value : {"1e300", "4294967298", "2.5", "\"64\""}) {
     nlohmann::json bad = good;
     bad["dim_model"] = nlohmann::json::parse(value);
-    EXPECT_ERROR(ModelConfig::from_json(bad), ErrorCode::kDataLoss, "dim_model");
+    EXPECT_ERROR(ModelConfig::from_json(bad), StatusCode::kDataLoss, "dim_model");
   }
   nlohmann::json bad_camera = good;
   bad_camera["cameras"][0]["height"] = 1e300;
-  EXPECT_ERROR(ModelConfig::from_json(bad_camera), ErrorCode::kDataLoss, "height");
+  EXPECT_ERROR(ModelConfig::from_json(bad_camera), StatusCode::kDataLoss, "height");
   nlohmann::json bad_blocks = good;
   bad_blocks["backbone_blocks"] = {2, 2, 1e300, 2};
-  EXPECT_ERROR(ModelConfig::from_json(bad_blocks), ErrorCode::kDataLoss, "backbone_blocks");
+  EXPECT_ERROR(ModelConfig::from_json(bad_blocks), StatusCode::kDataLoss, "backbone_blocks");
 }
 
 // The blob's precision is parsed once, into ModelConfig: fp32 or int8, anything else is an error.
@@ -86,10 +86,10 @@ TEST(FuzzRegressions, BlobModelConfigPrecisionIsValidated) {
   EXPECT_EQ(ModelConfig::from_json(int8).precision, Precision::kInt8);
   nlohmann::json fp16 = int8;
   fp16["precision"] = "fp16";
-  EXPECT_ERROR(ModelConfig::from_json(fp16), ErrorCode::kUnimplemented, "precision 'fp16' is not supported");
+  EXPECT_ERROR(ModelConfig::from_json(fp16), StatusCode::kUnimplemented, "precision 'fp16' is not supported");
   nlohmann::json missing = int8;
   missing.erase("precision");
-  EXPECT_ERROR(ModelConfig::from_json(missing), ErrorCode::kDataLoss, "precision");
+  EXPECT_ERROR(ModelConfig::from_json(missing), StatusCode::kDataLoss, "precision");
 }
 
 TEST(FuzzRegressions, BlobQuantizationParametersAreRangeChecked) {
@@ -99,7 +99,7 @@ TEST(FuzzRegressions, BlobQuantizationParametersAreRangeChecked) {
   };
   ASSERT_NO_THROW(QuantConfig::from_json(quant("[0.5, 3]")));
   for (const char* bad : {"[1e300, 3]", "[0.5, 1e300]", "[0.5, 2.5]", "[0.5, 4294967298]", "[-0.5, 0]"}) {
-    EXPECT_ERROR(QuantConfig::from_json(quant(bad)), ErrorCode::kDataLoss, "\"conv1\"");
+    EXPECT_ERROR(QuantConfig::from_json(quant(bad)), StatusCode::kDataLoss, "\"conv1\"");
   }
 }
 
@@ -115,17 +115,17 @@ TEST(FuzzRegressions, ProcessorStepFieldsAreChecked) {
   EXPECT_EQ(parsed.norm_map->at("STATE"), "MEAN_STD");
 
   EXPECT_ERROR(parse_processor_step(pipeline(step + R"(, "config": {"eps": 1e300}})"), "normalizer_processor", "p.json"),
-               ErrorCode::kDataLoss, "p.json: eps must be a finite non-negative number");
+               StatusCode::kDataLoss, "p.json: eps must be a finite non-negative number");
   EXPECT_ERROR(parse_processor_step(pipeline(step + R"(, "config": {"norm_map": {"STATE": 1}}})"), "normalizer_processor",
                                     "p.json"),
-               ErrorCode::kDataLoss, "norm_map values must be strings");
+               StatusCode::kDataLoss, "norm_map values must be strings");
   EXPECT_ERROR(parse_processor_step(pipeline(R"({"registry_name": "normalizer_processor", "state_file": "../x"})"),
                                     "normalizer_processor", "p.json"),
-               ErrorCode::kDataLoss, "state_file must be a file name");
-  EXPECT_ERROR(parse_processor_step(pipeline(step + "}"), "unnormalizer_processor", "p.json"), ErrorCode::kNotFound,
+               StatusCode::kDataLoss, "state_file must be a file name");
+  EXPECT_ERROR(parse_processor_step(pipeline(step + "}"), "unnormalizer_processor", "p.json"), StatusCode::kNotFound,
                "no \"unnormalizer_processor\" step");
   EXPECT_ERROR(parse_processor_step(nlohmann::ordered_json::parse("[1]"), "normalizer_processor", "p.json"),
-               ErrorCode::kDataLoss, "expected {\"steps\"");
+               StatusCode::kDataLoss, "expected {\"steps\"");
 }
 
 }  // namespace

@@ -9,10 +9,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/status.h"
 #include "support/act_test_util.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 #include "weights/import/lerobot_import.h"
 #include "weights/import/safetensors.h"
 
@@ -36,7 +36,7 @@ class ImportTest : public ::testing::Test {
     test::patch_checkpoint(legacy ? legacy_ : tiny_, dst, patch);
     return dst;
   }
-  void expect_error(const std::string& dir, ErrorCode code, const std::string& needle) {
+  void expect_error(const std::string& dir, StatusCode code, const std::string& needle) {
     const std::optional<Error> e = test::error_thrown_by([&] { import_lerobot_checkpoint(dir); });
     ASSERT_TRUE(e.has_value()) << "the import of " << dir << " succeeded; expected: " << needle;
     EXPECT_EQ(e->code(), code) << e->what();
@@ -92,27 +92,27 @@ TEST_F(ImportTest, ConfigRoundTripsThroughJson) {
 }
 
 TEST_F(ImportTest, MissingFolderOrConfig) {
-  expect_error(scratch_ + "/does-not-exist", ErrorCode::kNotFound, "does-not-exist");
+  expect_error(scratch_ + "/does-not-exist", StatusCode::kNotFound, "does-not-exist");
   fs::create_directories(scratch_ + "/empty");
-  expect_error(scratch_ + "/empty", ErrorCode::kNotFound, "config.json");
+  expect_error(scratch_ + "/empty", StatusCode::kNotFound, "config.json");
 }
 
 TEST_F(ImportTest, RefusesUnsupportedOrInconsistentConfigs) {
-  expect_error(patched(R"({"type": "diffusion"})"), ErrorCode::kInvalidArgument, "not \"act\"");
-  expect_error(patched(R"({"vision_backbone": "efficientnet_b0"})"), ErrorCode::kUnimplemented, "efficientnet_b0");
-  expect_error(patched(R"({"feedforward_activation": "swish"})"), ErrorCode::kUnimplemented, "swish");
-  expect_error(patched(R"({"n_heads": 5})"), ErrorCode::kInvalidArgument, "n_heads");
-  expect_error(patched(R"({"n_action_steps": 11})"), ErrorCode::kInvalidArgument, "n_action_steps");
-  expect_error(patched(R"({"temporal_ensemble_coeff": 0.01})"), ErrorCode::kInvalidArgument, "n_action_steps == 1");
-  expect_error(patched(R"({"temporal_ensemble_coeff": -100, "n_action_steps": 1})"), ErrorCode::kInvalidArgument,
+  expect_error(patched(R"({"type": "diffusion"})"), StatusCode::kInvalidArgument, "not \"act\"");
+  expect_error(patched(R"({"vision_backbone": "efficientnet_b0"})"), StatusCode::kUnimplemented, "efficientnet_b0");
+  expect_error(patched(R"({"feedforward_activation": "swish"})"), StatusCode::kUnimplemented, "swish");
+  expect_error(patched(R"({"n_heads": 5})"), StatusCode::kInvalidArgument, "n_heads");
+  expect_error(patched(R"({"n_action_steps": 11})"), StatusCode::kInvalidArgument, "n_action_steps");
+  expect_error(patched(R"({"temporal_ensemble_coeff": 0.01})"), StatusCode::kInvalidArgument, "n_action_steps == 1");
+  expect_error(patched(R"({"temporal_ensemble_coeff": -100, "n_action_steps": 1})"), StatusCode::kInvalidArgument,
                "ensemble weights exp(-coeff * i) overflow float32");
-  expect_error(patched(R"({"replace_final_stride_with_dilation": 1})"), ErrorCode::kUnimplemented, "Bottleneck");
-  expect_error(patched(R"({"n_obs_steps": 2})"), ErrorCode::kUnimplemented, "n_obs_steps");
-  expect_error(patched(R"({"dim_model": "big"})"), ErrorCode::kDataLoss, "dim_model");
-  expect_error(patched(R"({"normalization_mapping": {"VISUAL": "SOMETHING"}})"), ErrorCode::kUnimplemented, "SOMETHING");
+  expect_error(patched(R"({"replace_final_stride_with_dilation": 1})"), StatusCode::kUnimplemented, "Bottleneck");
+  expect_error(patched(R"({"n_obs_steps": 2})"), StatusCode::kUnimplemented, "n_obs_steps");
+  expect_error(patched(R"({"dim_model": "big"})"), StatusCode::kDataLoss, "dim_model");
+  expect_error(patched(R"({"normalization_mapping": {"VISUAL": "SOMETHING"}})"), StatusCode::kUnimplemented, "SOMETHING");
   expect_error(patched(R"({"input_features": {"observation.images.front": {"type": "VISUAL", "shape": [1, 96, 128]}}})"),
-               ErrorCode::kInvalidArgument, "[3, H, W]");
-  expect_error(patched(R"({"output_features": {}})"), ErrorCode::kInvalidArgument, "action");
+               StatusCode::kInvalidArgument, "[3, H, W]");
+  expect_error(patched(R"({"output_features": {}})"), StatusCode::kInvalidArgument, "action");
 }
 
 TEST_F(ImportTest, AnAbsurdlyLargeWeightIsRefused) {
@@ -138,7 +138,7 @@ TEST_F(ImportTest, AnAbsurdlyLargeWeightIsRefused) {
   }
   ASSERT_FALSE(damaged.empty());
   write_safetensors(weights, out);
-  expect_error(dir, ErrorCode::kInvalidArgument, "\"" + damaged + "\" holds 3e+38");
+  expect_error(dir, StatusCode::kInvalidArgument, "\"" + damaged + "\" holds 3e+38");
 }
 
 TEST_F(ImportTest, DuplicateKeysInTheConfigAreRefused) {
@@ -149,36 +149,36 @@ TEST_F(ImportTest, DuplicateKeysInTheConfigAreRefused) {
   const size_t brace = text.find('{');
   text.insert(brace + 1, "\n  \"chunk_size\": 7,");
   std::ofstream(dir + "/config.json", std::ios::trunc) << text;
-  expect_error(dir, ErrorCode::kDataLoss, "duplicate key 'chunk_size'");
+  expect_error(dir, StatusCode::kDataLoss, "duplicate key 'chunk_size'");
 }
 
 TEST_F(ImportTest, OldStyleConfigIsNamed) {
   const std::string dir = scratch_ + "/old";
   fs::create_directories(dir);
   std::ofstream(dir + "/config.json") << R"({"type": "act", "input_shapes": {"observation.state": [2]}})";
-  expect_error(dir, ErrorCode::kUnimplemented, "input_shapes");
+  expect_error(dir, StatusCode::kUnimplemented, "input_shapes");
 }
 
 TEST_F(ImportTest, MalformedConfigJson) {
   const std::string dir = scratch_ + "/badjson";
   fs::create_directories(dir);
   std::ofstream(dir + "/config.json") << "{\"type\": \"act\", ";
-  expect_error(dir, ErrorCode::kDataLoss, "not valid JSON");
+  expect_error(dir, StatusCode::kDataLoss, "not valid JSON");
 }
 
 TEST_F(ImportTest, WeightsThatDoNotMatchTheConfig) {
   // More layers than the weights have: the first missing tensor is named.
-  expect_error(patched(R"({"n_encoder_layers": 3})"), ErrorCode::kNotFound, "model.encoder.layers.2.");
+  expect_error(patched(R"({"n_encoder_layers": 3})"), StatusCode::kNotFound, "model.encoder.layers.2.");
   // Fewer layers than the weights have: the leftovers are reported, never ignored.
-  expect_error(patched(R"({"n_encoder_layers": 1})"), ErrorCode::kInvalidArgument, "model.encoder.layers.1.");
+  expect_error(patched(R"({"n_encoder_layers": 1})"), StatusCode::kInvalidArgument, "model.encoder.layers.1.");
   // Another FFN width: the shape mismatch is named.
-  expect_error(patched(R"({"dim_feedforward": 256})"), ErrorCode::kInvalidArgument, "linear1.weight");
+  expect_error(patched(R"({"dim_feedforward": 256})"), StatusCode::kInvalidArgument, "linear1.weight");
   // LeRobot's glu cannot run: its linear2 expects the full FFN width.
-  expect_error(patched(R"({"feedforward_activation": "glu"})"), ErrorCode::kInvalidArgument, "linear2.weight");
+  expect_error(patched(R"({"feedforward_activation": "glu"})"), StatusCode::kInvalidArgument, "linear2.weight");
   // resnet34 needs more blocks than resnet18 weights have.
-  expect_error(patched(R"({"vision_backbone": "resnet34"})"), ErrorCode::kNotFound, "layer1.2");
+  expect_error(patched(R"({"vision_backbone": "resnet34"})"), StatusCode::kNotFound, "layer1.2");
   // Pre-norm needs the encoder's final norm.
-  expect_error(patched(R"({"pre_norm": true})"), ErrorCode::kNotFound, "model.encoder.norm.weight");
+  expect_error(patched(R"({"pre_norm": true})"), StatusCode::kNotFound, "model.encoder.norm.weight");
 }
 
 TEST_F(ImportTest, StateDictWithAnExtraOrAMissingKey) {
@@ -203,12 +203,12 @@ TEST_F(ImportTest, StateDictWithAnExtraOrAMissingKey) {
   };
   const std::optional<Error> extra = error_of(state_dict("", true));
   ASSERT_TRUE(extra.has_value());
-  EXPECT_EQ(extra->code(), ErrorCode::kInvalidArgument) << extra->what();
+  EXPECT_EQ(extra->code(), StatusCode::kInvalidArgument) << extra->what();
   EXPECT_NE(std::string(extra->what()).find("tensors the config does not account for: \"model.extra_head.weight\""),
             std::string::npos) << extra->what();
   const std::optional<Error> missing = error_of(state_dict("model.action_head.weight", false));
   ASSERT_TRUE(missing.has_value());
-  EXPECT_EQ(missing->code(), ErrorCode::kNotFound) << missing->what();
+  EXPECT_EQ(missing->code(), StatusCode::kNotFound) << missing->what();
   EXPECT_NE(std::string(missing->what()).find("model.action_head.weight"), std::string::npos) << missing->what();
 }
 
@@ -216,17 +216,17 @@ TEST_F(ImportTest, MissingOrCorruptFiles) {
   {
     const std::string dir = patched("{}");
     fs::remove(dir + "/policy_preprocessor_step_3_normalizer_processor.safetensors");
-    expect_error(dir, ErrorCode::kNotFound, "normalizer_processor.safetensors");
+    expect_error(dir, StatusCode::kNotFound, "normalizer_processor.safetensors");
   }
   {
     const std::string dir = patched("{}");
     fs::remove(dir + "/policy_postprocessor.json");
-    expect_error(dir, ErrorCode::kNotFound, "policy_postprocessor.json");
+    expect_error(dir, StatusCode::kNotFound, "policy_postprocessor.json");
   }
   {
     const std::string dir = patched("{}");
     fs::remove(dir + "/model.safetensors");
-    expect_error(dir, ErrorCode::kNotFound, "model.safetensors");
+    expect_error(dir, StatusCode::kNotFound, "model.safetensors");
   }
   {
     // A truncated weights file.
@@ -234,14 +234,14 @@ TEST_F(ImportTest, MissingOrCorruptFiles) {
     fs::remove(dir + "/model.safetensors");
     fs::copy_file(tiny_ + "/model.safetensors", dir + "/model.safetensors");
     fs::resize_file(dir + "/model.safetensors", fs::file_size(dir + "/model.safetensors") / 2);
-    expect_error(dir, ErrorCode::kDataLoss, "model.safetensors");
+    expect_error(dir, StatusCode::kDataLoss, "model.safetensors");
   }
 }
 
 TEST_F(ImportTest, LegacyCheckpointWithoutItsNormalisationBuffers) {
   // Legacy layout with MIN_MAX images: those buffers are not in the file.
   expect_error(patched(R"({"normalization_mapping": {"VISUAL": "MIN_MAX", "STATE": "MEAN_STD", "ACTION": "MEAN_STD"}})", true),
-               ErrorCode::kNotFound, "observation.images.front");
+               StatusCode::kNotFound, "observation.images.front");
 }
 
 TEST_F(ImportTest, EnvStateInTheConfigButNotInTheWeights) {
@@ -249,7 +249,7 @@ TEST_F(ImportTest, EnvStateInTheConfigButNotInTheWeights) {
       "observation.state": {"type": "STATE", "shape": [2]},
       "observation.images.front": {"type": "VISUAL", "shape": [3, 96, 128]},
       "observation.environment_state": {"type": "ENV", "shape": [2]}}})");
-  expect_error(dir, ErrorCode::kNotFound, "encoder_env_state_input_proj");
+  expect_error(dir, StatusCode::kNotFound, "encoder_env_state_input_proj");
 }
 
 TEST_F(ImportTest, CurrentLayoutFeatureWithoutStatisticsIsPassedThroughAndSaid) {

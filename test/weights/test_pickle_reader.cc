@@ -5,7 +5,7 @@
 
 #include <string>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/import/pickle_reader.h"
 
 namespace act {
@@ -20,7 +20,7 @@ PickleRef parse(const std::string& bytes, const PickleLimits& limits = {}) {
 }
 
 // Expects parse() to throw act::Error with `code` and a message containing `text`.
-void expect_error(const std::string& bytes, ErrorCode code, const std::string& text, const PickleLimits& limits = {}) {
+void expect_error(const std::string& bytes, StatusCode code, const std::string& text, const PickleLimits& limits = {}) {
   try {
     parse(bytes, limits);
     ADD_FAILURE() << "parsed, expected an error containing '" << text << "'";
@@ -87,42 +87,42 @@ TEST(PickleReader, BytesThroughCodecsEncode) {
 }
 
 TEST(PickleReader, RefusesGlobalsOutsideTheWhitelistByName) {
-  expect_error(kProto2 + "cposix\nsystem\nq\x00"s + unicode("touch x") + "\x85R.", ErrorCode::kUnimplemented,
+  expect_error(kProto2 + "cposix\nsystem\nq\x00"s + unicode("touch x") + "\x85R.", StatusCode::kUnimplemented,
                "GLOBAL 'posix.system' is not allowed");
-  expect_error(kProto2 + "cbuiltins\neval\n.", ErrorCode::kUnimplemented, "'builtins.eval'");
-  expect_error(kProto2 + "ctorch\nload\n.", ErrorCode::kUnimplemented, "'torch.load'");
+  expect_error(kProto2 + "cbuiltins\neval\n.", StatusCode::kUnimplemented, "'builtins.eval'");
+  expect_error(kProto2 + "ctorch\nload\n.", StatusCode::kUnimplemented, "'torch.load'");
   // Protocol 4's STACK_GLOBAL takes the names from the stack.
-  expect_error("\x80\x04\x8c\x02os\x94\x8c\x06system\x94\x93.", ErrorCode::kUnimplemented, "GLOBAL 'os.system'");
+  expect_error("\x80\x04\x8c\x02os\x94\x8c\x06system\x94\x93.", StatusCode::kUnimplemented, "GLOBAL 'os.system'");
 }
 
 TEST(PickleReader, RefusesReduceOnAnythingButTheWhitelistedCallables) {
-  expect_error(kProto2 + unicode("os.system") + ")R.", ErrorCode::kDataLoss, "REDUCE on a str 'os.system'");
-  expect_error(kProto2 + "ctorch\nFloatStorage\n)R.", ErrorCode::kUnimplemented, "REDUCE calling torch.FloatStorage");
-  expect_error(kProto2 + "ccollections\nOrderedDict\n]\x85R.", ErrorCode::kUnimplemented, "OrderedDict(...) with arguments");
-  expect_error(kProto2 + "ctorch._utils\n_rebuild_tensor_v2\n)R.", ErrorCode::kDataLoss, "takes 6 or 7 arguments");
+  expect_error(kProto2 + unicode("os.system") + ")R.", StatusCode::kDataLoss, "REDUCE on a str 'os.system'");
+  expect_error(kProto2 + "ctorch\nFloatStorage\n)R.", StatusCode::kUnimplemented, "REDUCE calling torch.FloatStorage");
+  expect_error(kProto2 + "ccollections\nOrderedDict\n]\x85R.", StatusCode::kUnimplemented, "OrderedDict(...) with arguments");
+  expect_error(kProto2 + "ctorch._utils\n_rebuild_tensor_v2\n)R.", StatusCode::kDataLoss, "takes 6 or 7 arguments");
 }
 
 TEST(PickleReader, RefusesObjectConstructionOpcodes) {
-  expect_error(kProto2 + "ccollections\nOrderedDict\n)\x81.", ErrorCode::kUnimplemented, "NEWOBJ");
-  expect_error("(i__builtin__\nobject\n.", ErrorCode::kUnimplemented, "INST");
-  expect_error(kProto2 + "\x8f.", ErrorCode::kUnimplemented, "EMPTY_SET");
-  expect_error(kProto2 + "\xff.", ErrorCode::kDataLoss, "unknown opcode 0xff");
+  expect_error(kProto2 + "ccollections\nOrderedDict\n)\x81.", StatusCode::kUnimplemented, "NEWOBJ");
+  expect_error("(i__builtin__\nobject\n.", StatusCode::kUnimplemented, "INST");
+  expect_error(kProto2 + "\x8f.", StatusCode::kUnimplemented, "EMPTY_SET");
+  expect_error(kProto2 + "\xff.", StatusCode::kDataLoss, "unknown opcode 0xff");
 }
 
 TEST(PickleReader, RefusesHugeLengthsBeforeAllocating) {
-  expect_error(kProto2 + std::string("X\xf0\xff\xff\xff", 5) + "abc.", ErrorCode::kDataLoss, "length 4294967280 runs past the end");
-  expect_error(kProto2 + std::string("\x8d\xff\xff\xff\xff\xff\xff\xff\x7f", 9) + ".", ErrorCode::kDataLoss, "runs past the end");
-  expect_error(kProto2 + std::string("B\xff\xff\xff\x7f", 5) + ".", ErrorCode::kDataLoss, "runs past the end");
-  expect_error(kProto2 + std::string("\x8b\xff\xff\xff\x7f", 5) + ".", ErrorCode::kDataLoss, "runs past the end");
-  expect_error(kProto2 + std::string("\x8b\xff\xff\xff\xff", 5) + ".", ErrorCode::kDataLoss, "negative length");
+  expect_error(kProto2 + std::string("X\xf0\xff\xff\xff", 5) + "abc.", StatusCode::kDataLoss, "length 4294967280 runs past the end");
+  expect_error(kProto2 + std::string("\x8d\xff\xff\xff\xff\xff\xff\xff\x7f", 9) + ".", StatusCode::kDataLoss, "runs past the end");
+  expect_error(kProto2 + std::string("B\xff\xff\xff\x7f", 5) + ".", StatusCode::kDataLoss, "runs past the end");
+  expect_error(kProto2 + std::string("\x8b\xff\xff\xff\x7f", 5) + ".", StatusCode::kDataLoss, "runs past the end");
+  expect_error(kProto2 + std::string("\x8b\xff\xff\xff\xff", 5) + ".", StatusCode::kDataLoss, "negative length");
 }
 
 TEST(PickleReader, BoundsTheMemo) {
-  expect_error(kProto2 + "h\x05.", ErrorCode::kDataLoss, "memo entry 5 was never stored");
-  expect_error(kProto2 + std::string("j\xff\xff\xff\xff", 5) + ".", ErrorCode::kDataLoss, "memo entry 4294967295");
+  expect_error(kProto2 + "h\x05.", StatusCode::kDataLoss, "memo entry 5 was never stored");
+  expect_error(kProto2 + std::string("j\xff\xff\xff\xff", 5) + ".", StatusCode::kDataLoss, "memo entry 4294967295");
   PickleLimits small;
   small.max_memo = 2;
-  expect_error(kProto2 + "Nq\x00q\x01q\x02."s, ErrorCode::kDataLoss, "more than 2 memo entries", small);
+  expect_error(kProto2 + "Nq\x00q\x01q\x02."s, StatusCode::kDataLoss, "more than 2 memo entries", small);
   // Overwriting an existing index is no growth.
   EXPECT_EQ(parse(kProto2 + "Nq\x00q\x01q\x01q\x00."s, small)->kind, Kind::kNone);
 }
@@ -132,40 +132,40 @@ TEST(PickleReader, BoundsTheNumberOfValues) {
   small.max_values = 100;
   std::string many = kProto2 + "]";
   for (int i = 0; i < 200; ++i) many += "Na";  // [None, None, ...]
-  expect_error(many + ".", ErrorCode::kDataLoss, "more than 100 values", small);
+  expect_error(many + ".", StatusCode::kDataLoss, "more than 100 values", small);
 }
 
 TEST(PickleReader, BoundsTheNestingDepth) {
   std::string deep = kProto2 + "N";
   for (int i = 0; i < 100000; ++i) deep += "\x85";  // ((((None,),),),...)
   deep += ".";
-  expect_error(deep, ErrorCode::kDataLoss, "nested deeper than 64");
+  expect_error(deep, StatusCode::kDataLoss, "nested deeper than 64");
   std::string ok = kProto2 + "N";
   for (int i = 0; i < 63; ++i) ok += "\x85";
   EXPECT_EQ(parse(ok + ".")->depth, 64);
 }
 
 TEST(PickleReader, NoCyclesAndNoChangesAfterAContainerIsPlaced) {
-  expect_error(kProto2 + "]2a.", ErrorCode::kUnimplemented, "after it was placed");          // l.append(l)
-  expect_error(kProto2 + "]q\x00]h\x00"s "a" "a.", ErrorCode::kUnimplemented, "placed");        // a in b, then b in a
-  expect_error(kProto2 + "}q\x00]h\x00"s "a0h\x00K\x01K\x02s.", ErrorCode::kUnimplemented, "SETITEM on a dict");
+  expect_error(kProto2 + "]2a.", StatusCode::kUnimplemented, "after it was placed");          // l.append(l)
+  expect_error(kProto2 + "]q\x00]h\x00"s "a" "a.", StatusCode::kUnimplemented, "placed");        // a in b, then b in a
+  expect_error(kProto2 + "}q\x00]h\x00"s "a0h\x00K\x01K\x02s.", StatusCode::kUnimplemented, "SETITEM on a dict");
 }
 
 TEST(PickleReader, RefusesMalformedStructure) {
-  expect_error(kProto2, ErrorCode::kDataLoss, "runs past the end");                 // no STOP
-  expect_error(kProto2 + ".", ErrorCode::kDataLoss, "0 values on the stack");
-  expect_error(kProto2 + "NN.", ErrorCode::kDataLoss, "2 values on the stack");
-  expect_error(kProto2 + "a.", ErrorCode::kDataLoss, "stack underflow");
-  expect_error(kProto2 + "N(a.", ErrorCode::kDataLoss, "stack underflow");          // APPEND cannot reach below a MARK
-  expect_error(kProto2 + "(N.", ErrorCode::kDataLoss, "unclosed MARK");
-  expect_error(kProto2 + "Nt.", ErrorCode::kDataLoss, "no MARK");
-  expect_error(kProto2 + "N.junk", ErrorCode::kDataLoss, "4 bytes after STOP");
-  expect_error(kProto2 + "NNa.", ErrorCode::kDataLoss, "APPEND on a None");
-  expect_error(kProto2 + "}(K\x01u.", ErrorCode::kDataLoss, "odd number");
-  expect_error(kProto2 + "}(]K\x01u.", ErrorCode::kUnimplemented, "dict key of type list");
-  expect_error(kProto2 + "ccollections\nOrderedDict\n.", ErrorCode::kDataLoss, "bare global");
-  expect_error(kProto2 + "ccollections", ErrorCode::kDataLoss, "without a newline");
-  expect_error("\x80\x09N.", ErrorCode::kDataLoss, "protocol 9");
+  expect_error(kProto2, StatusCode::kDataLoss, "runs past the end");                 // no STOP
+  expect_error(kProto2 + ".", StatusCode::kDataLoss, "0 values on the stack");
+  expect_error(kProto2 + "NN.", StatusCode::kDataLoss, "2 values on the stack");
+  expect_error(kProto2 + "a.", StatusCode::kDataLoss, "stack underflow");
+  expect_error(kProto2 + "N(a.", StatusCode::kDataLoss, "stack underflow");          // APPEND cannot reach below a MARK
+  expect_error(kProto2 + "(N.", StatusCode::kDataLoss, "unclosed MARK");
+  expect_error(kProto2 + "Nt.", StatusCode::kDataLoss, "no MARK");
+  expect_error(kProto2 + "N.junk", StatusCode::kDataLoss, "4 bytes after STOP");
+  expect_error(kProto2 + "NNa.", StatusCode::kDataLoss, "APPEND on a None");
+  expect_error(kProto2 + "}(K\x01u.", StatusCode::kDataLoss, "odd number");
+  expect_error(kProto2 + "}(]K\x01u.", StatusCode::kUnimplemented, "dict key of type list");
+  expect_error(kProto2 + "ccollections\nOrderedDict\n.", StatusCode::kDataLoss, "bare global");
+  expect_error(kProto2 + "ccollections", StatusCode::kDataLoss, "without a newline");
+  expect_error("\x80\x09N.", StatusCode::kDataLoss, "protocol 9");
 }
 
 TEST(PickleReader, NeverCrashesOnDamagedInput) {

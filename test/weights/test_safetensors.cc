@@ -12,9 +12,9 @@
 #include <string>
 #include <vector>
 
+#include "actengine/status.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
-#include "weights/blob/error.h"
 
 namespace act {
 namespace {
@@ -54,7 +54,7 @@ class SafetensorsBad : public ::testing::Test {
   ::testing::AssertionResult rejects(const std::vector<uint8_t>& bytes, std::vector<std::string> needles) {
     test::write_file(path_, bytes);
     needles.push_back(path_);
-    return throws_error([&] { SafetensorsFile::open(path_); }, ErrorCode::kDataLoss, needles);
+    return throws_error([&] { SafetensorsFile::open(path_); }, StatusCode::kDataLoss, needles);
   }
   ::testing::AssertionResult rejects_header(const std::string& header, size_t data_size,
                                             std::vector<std::string> needles) {
@@ -217,7 +217,7 @@ TEST(Safetensors, GetMissingTensorIsNotFound) {
   const SafetensorsFile f = SafetensorsFile::open(path);
   EXPECT_EQ(f.find("missing"), nullptr);
   EXPECT_NE(f.find("a"), nullptr);
-  EXPECT_TRUE(throws_error([&] { f.get("missing"); }, ErrorCode::kNotFound, {"'missing'", path}));
+  EXPECT_TRUE(throws_error([&] { f.get("missing"); }, StatusCode::kNotFound, {"'missing'", path}));
 }
 
 TEST(Safetensors, ToF32RejectsIntegerTensors) {
@@ -225,7 +225,7 @@ TEST(Safetensors, ToF32RejectsIntegerTensors) {
   const std::vector<int8_t> v = {1, 2};
   write_safetensors(path, {wt("q", DType::kI8, {2}, v)});
   const SafetensorsFile f = SafetensorsFile::open(path);
-  EXPECT_TRUE(throws_error([&] { f.get("q").to_f32(); }, ErrorCode::kInvalidArgument, {"'q'", "I8"}));
+  EXPECT_TRUE(throws_error([&] { f.get("q").to_f32(); }, StatusCode::kInvalidArgument, {"'q'", "I8"}));
 }
 
 TEST(Safetensors, ToF32RejectsInconsistentHandBuiltTensor) {
@@ -235,12 +235,12 @@ TEST(Safetensors, ToF32RejectsInconsistentHandBuiltTensor) {
   const float v[2] = {1, 2};
   t.data = reinterpret_cast<const uint8_t*>(v);
   t.nbytes = sizeof v;
-  EXPECT_TRUE(throws_error([&] { t.to_f32(); }, ErrorCode::kInvalidArgument, {"'t'", "[4]"}));
+  EXPECT_TRUE(throws_error([&] { t.to_f32(); }, StatusCode::kInvalidArgument, {"'t'", "[4]"}));
 }
 
 TEST(Safetensors, OpenMissingFileIsNotFound) {
   const std::string path = test::scratch_dir() + "/missing.safetensors";
-  EXPECT_TRUE(throws_error([&] { SafetensorsFile::open(path); }, ErrorCode::kNotFound, {path}));
+  EXPECT_TRUE(throws_error([&] { SafetensorsFile::open(path); }, StatusCode::kNotFound, {path}));
 }
 
 // ------------------------------------------------------------------------------------ writer
@@ -262,7 +262,7 @@ TEST(SafetensorsWrite, MissingFolderFailsCleanly) {
   const std::string dir = test::scratch_dir();
   const std::string path = dir + "/no_such_dir/w.safetensors";
   const std::vector<float> a = {1};
-  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("a", DType::kF32, {1}, a)}); }, ErrorCode::kIoError,
+  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("a", DType::kF32, {1}, a)}); }, StatusCode::kIoError,
                            {path, "No such file or directory"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -274,7 +274,7 @@ TEST(SafetensorsWrite, ReadOnlyFolderFailsCleanly) {
   ASSERT_EQ(::chmod(dir.c_str(), 0555), 0);
   const std::vector<float> a = {1};
   const std::string path = dir + "/w.safetensors";
-  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("a", DType::kF32, {1}, a)}); }, ErrorCode::kIoError,
+  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("a", DType::kF32, {1}, a)}); }, StatusCode::kIoError,
                            {path, "Permission denied"}));
   ::chmod(dir.c_str(), 0755);
   EXPECT_TRUE(list_dir(dir).empty());
@@ -286,7 +286,7 @@ TEST(SafetensorsWrite, FailedRenameRemovesTempFile) {
   const std::string path = dir + "/target";
   fs::create_directories(path + "/child");
   const std::vector<float> a = {1, 2, 3};
-  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("a", DType::kF32, {3}, a)}); }, ErrorCode::kIoError,
+  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("a", DType::kF32, {3}, a)}); }, StatusCode::kIoError,
                            {path, "rename"}));
   EXPECT_EQ(list_dir(dir), std::vector<std::string>{"target"});
   EXPECT_TRUE(fs::is_directory(path + "/child"));
@@ -299,7 +299,7 @@ TEST(SafetensorsWrite, WriteErrorMidwayRemovesTempFile) {
   {
     test::FileSizeLimit limit(4096);  // the 200 KB write fails part way with EFBIG
     EXPECT_TRUE(throws_error([&] { write_safetensors(path, {wt("big", DType::kF32, {50000}, v)}); },
-                             ErrorCode::kIoError, {path, "File too large"}));
+                             StatusCode::kIoError, {path, "File too large"}));
   }
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -310,21 +310,21 @@ TEST(SafetensorsWrite, RejectsInconsistentTensorsWithoutWriting) {
   const std::vector<float> v = {1, 2, 3};
   auto write = [&](std::vector<SafetensorsWriteTensor> ts) { return [&path, ts] { write_safetensors(path, ts); }; };
 
-  EXPECT_TRUE(throws_error(write({wt("a", DType::kF32, {2, 2}, v)}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(write({wt("a", DType::kF32, {2, 2}, v)}), StatusCode::kInvalidArgument,
                            {"'a'", "[2, 2]", "12 bytes"}));
-  EXPECT_TRUE(throws_error(write({wt("a", DType::kF16, {3}, v)}), ErrorCode::kInvalidArgument, {"'a'", "F16"}));
+  EXPECT_TRUE(throws_error(write({wt("a", DType::kF16, {3}, v)}), StatusCode::kInvalidArgument, {"'a'", "F16"}));
   EXPECT_TRUE(throws_error(write({wt("a", DType::kF32, {3}, v), wt("a", DType::kF32, {3}, v)}),
-                           ErrorCode::kInvalidArgument, {"'a'", "duplicate"}));
-  EXPECT_TRUE(throws_error(write({wt("__metadata__", DType::kF32, {3}, v)}), ErrorCode::kInvalidArgument,
+                           StatusCode::kInvalidArgument, {"'a'", "duplicate"}));
+  EXPECT_TRUE(throws_error(write({wt("__metadata__", DType::kF32, {3}, v)}), StatusCode::kInvalidArgument,
                            {"reserved"}));
-  EXPECT_TRUE(throws_error(write({wt("", DType::kF32, {3}, v)}), ErrorCode::kInvalidArgument, {"empty name"}));
-  EXPECT_TRUE(throws_error(write({wt("neg", DType::kF32, {-3}, v)}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(write({wt("", DType::kF32, {3}, v)}), StatusCode::kInvalidArgument, {"empty name"}));
+  EXPECT_TRUE(throws_error(write({wt("neg", DType::kF32, {-3}, v)}), StatusCode::kInvalidArgument,
                            {"'neg'", "negative dimension"}));
-  EXPECT_TRUE(throws_error(write({{"null", DType::kF32, {3}, nullptr, 12}}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(write({{"null", DType::kF32, {3}, nullptr, 12}}), StatusCode::kInvalidArgument,
                            {"'null'", "null"}));
-  EXPECT_TRUE(throws_error(write({wt("bad\xff", DType::kF32, {3}, v)}), ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error(write({wt("bad\xff", DType::kF32, {3}, v)}), StatusCode::kInvalidArgument,
                            {"JSON"}));
-  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {}, {{"k", "\xc3"}}); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([&] { write_safetensors(path, {}, {{"k", "\xc3"}}); }, StatusCode::kInvalidArgument,
                            {"JSON"}));
   EXPECT_TRUE(list_dir(dir).empty());
 }
@@ -563,7 +563,7 @@ TEST_F(SafetensorsBad, RandomCorruptionNeverCrashes) {
       }
       ++opened;
     } catch (const Error& e) {
-      ASSERT_EQ(e.code(), ErrorCode::kDataLoss) << e.what();
+      ASSERT_EQ(e.code(), StatusCode::kDataLoss) << e.what();
       ++rejected;
     }
   }

@@ -9,8 +9,8 @@
 #include <limits>
 #include <vector>
 
+#include "actengine/status.h"
 #include "support/file_test_util.h"
-#include "weights/blob/error.h"
 
 namespace act {
 namespace {
@@ -73,21 +73,21 @@ TEST(TensorTypes, ShapeElements) {
 }
 
 TEST(TensorTypes, ShapeElementsRejectsNegativeDims) {
-  EXPECT_TRUE(throws_error([] { shape_elements({2, -1, 3}); }, ErrorCode::kInvalidArgument,
+  EXPECT_TRUE(throws_error([] { shape_elements({2, -1, 3}); }, StatusCode::kInvalidArgument,
                            {"negative dimension -1", "[2, -1, 3]"}));
   // A negative dim is reported even next to a zero dim.
-  EXPECT_TRUE(throws_error([] { shape_elements({0, -5}); }, ErrorCode::kInvalidArgument, {"negative"}));
+  EXPECT_TRUE(throws_error([] { shape_elements({0, -5}); }, StatusCode::kInvalidArgument, {"negative"}));
   EXPECT_TRUE(throws_error([] { shape_elements({std::numeric_limits<int64_t>::min()}); },
-                           ErrorCode::kInvalidArgument, {"negative"}));
+                           StatusCode::kInvalidArgument, {"negative"}));
 }
 
 TEST(TensorTypes, ShapeElementsRejectsOverflow) {
   EXPECT_TRUE(throws_error([] { shape_elements({int64_t{1} << 32, int64_t{1} << 32}); },
-                           ErrorCode::kInvalidArgument, {"overflows", "[4294967296, 4294967296]"}));
+                           StatusCode::kInvalidArgument, {"overflows", "[4294967296, 4294967296]"}));
   EXPECT_TRUE(throws_error([] { shape_elements({std::numeric_limits<int64_t>::max(), 3}); },
-                           ErrorCode::kInvalidArgument, {"overflows"}));
+                           StatusCode::kInvalidArgument, {"overflows"}));
   EXPECT_TRUE(throws_error([] { shape_elements({1 << 16, 1 << 16, 1 << 16, 1 << 16, 2}); },
-                           ErrorCode::kInvalidArgument, {"overflows"}));
+                           StatusCode::kInvalidArgument, {"overflows"}));
 }
 
 TEST(TensorTypes, ShapeString) {
@@ -248,7 +248,7 @@ TEST(TensorTypes, ConvertRejectsNonFloatDtypes) {
   const uint8_t src[8] = {};
   float dst[8];
   for (DType d : {DType::kI8, DType::kU8, DType::kI32, DType::kF64, DType::kI64}) {
-    EXPECT_TRUE(throws_error([&] { convert_to_f32(d, src, 1, dst); }, ErrorCode::kInvalidArgument,
+    EXPECT_TRUE(throws_error([&] { convert_to_f32(d, src, 1, dst); }, StatusCode::kInvalidArgument,
                              {dtype_name(d), "F32"}))
         << dtype_name(d);
   }

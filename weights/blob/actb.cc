@@ -9,7 +9,7 @@
 #include <limits>
 #include <utility>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_kind.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/tensor_header.h"
@@ -121,7 +121,7 @@ std::string parse_quant(const nlohmann::json& j, QuantParams* q) {
 
 const float* ActbTensor::f32() const {
   if (dtype != DType::kF32) {
-    fail(ErrorCode::kInvalidArgument, "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", not F32");
+    fail(StatusCode::kInvalidArgument, "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", not F32");
   }
   // Data is 64-byte aligned inside the mapping (checked at open), so viewing it as floats is safe.
   return static_cast<const float*>(static_cast<const void*>(data));
@@ -145,22 +145,22 @@ void ActbWriter::add_f32_ref(const std::string& name, std::vector<int64_t> shape
 void ActbWriter::add(const std::string& name, DType dtype, std::vector<int64_t> shape, const void* data, size_t nbytes,
                      QuantParams quant, bool copy) {
   const std::string where = "actb tensor '" + name + "': ";
-  if (name.empty()) fail(ErrorCode::kInvalidArgument, "actb tensor with an empty name");
-  if (index_.count(name) != 0) fail(ErrorCode::kInvalidArgument, where + "duplicate tensor name");
+  if (name.empty()) fail(StatusCode::kInvalidArgument, "actb tensor with an empty name");
+  if (index_.count(name) != 0) fail(StatusCode::kInvalidArgument, where + "duplicate tensor name");
   uint64_t elements = 0;
   try {
     elements = shape_elements(shape);
   } catch (const Error& e) {
-    fail(ErrorCode::kInvalidArgument, where + e.what());
+    fail(StatusCode::kInvalidArgument, where + e.what());
   }
   uint64_t expected = 0;
   if (!detail::checked_mul(elements, dtype_size(dtype), &expected) || expected != nbytes) {
-    fail(ErrorCode::kInvalidArgument, where + "shape " + shape_string(shape) + " with dtype " + dtype_name(dtype) +
-                                           " does not match " + std::to_string(nbytes) + " bytes");
+    fail(StatusCode::kInvalidArgument, where + "shape " + shape_string(shape) + " with dtype " + dtype_name(dtype) +
+                                            " does not match " + std::to_string(nbytes) + " bytes");
   }
-  if (data == nullptr && nbytes != 0) fail(ErrorCode::kInvalidArgument, where + "data is null");
+  if (data == nullptr && nbytes != 0) fail(StatusCode::kInvalidArgument, where + "data is null");
   const std::string quant_error = check_quant(quant, shape);
-  if (!quant_error.empty()) fail(ErrorCode::kInvalidArgument, where + quant_error);
+  if (!quant_error.empty()) fail(StatusCode::kInvalidArgument, where + quant_error);
 
   const auto* bytes = static_cast<const uint8_t*>(data);
   Pending p{name, dtype, std::move(shape), {}, copy ? nullptr : bytes, nbytes, std::move(quant)};
@@ -181,8 +181,8 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out, Checksum checksum) cons
   const std::string& path = out.path();
   // The reader insists on an object; refuse to produce a file it would reject.
   if (!config_.is_object()) {
-    fail(ErrorCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
-                                           config_.type_name());
+    fail(StatusCode::kInvalidArgument, "'" + path + "': .actb config must be a JSON object, got " +
+                                            config_.type_name());
   }
   // Lay the tensors out back to back, each at a 64-byte aligned offset in the data area.
   nlohmann::ordered_json dir = nlohmann::ordered_json::array();
@@ -216,8 +216,8 @@ void ActbWriter::write_to(detail::AtomicFileWriter& out, Checksum checksum) cons
   header["tensors"] = std::move(dir);
   const std::string text = detail::dump_json(header, "the .actb header of '" + path + "'");
   if (text.size() > kMaxHeaderSize) {
-    fail(ErrorCode::kInvalidArgument, "'" + path + "': .actb header of " + std::to_string(text.size()) +
-                                           " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
+    fail(StatusCode::kInvalidArgument, "'" + path + "': .actb header of " + std::to_string(text.size()) +
+                                            " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
   }
   const uint64_t data_offset = align_up(kFixedHeaderSize + text.size());
 
@@ -275,8 +275,8 @@ FixedHeader read_fixed_header(const std::string& path, const uint8_t* base, uint
   FixedHeader h;
   h.version = read_le32(base + 8);
   if (h.version != kActbFormatVersion) {
-    fail(ErrorCode::kUnimplemented, "'" + path + "': format version " + std::to_string(h.version) +
-                                         ", this build reads " + std::to_string(kActbFormatVersion));
+    fail(StatusCode::kUnimplemented, "'" + path + "': format version " + std::to_string(h.version) +
+                                          ", this build reads " + std::to_string(kActbFormatVersion));
   }
   const uint32_t reserved0 = read_le32(base + 12);
   h.header_size = read_le64(base + 16);
@@ -433,7 +433,7 @@ void check_no_overlap(const std::string& path, const std::vector<ActbTensor>& te
 void seal_actb_checksum(detail::AtomicFileWriter& file) {
   const FileMapping written = FileMapping::open(file.readable_path());
   if (written.size() < kFixedHeaderSize) {
-    fail(ErrorCode::kInvalidArgument, "'" + file.path() + "': no .actb blob was written to seal");
+    fail(StatusCode::kInvalidArgument, "'" + file.path() + "': no .actb blob was written to seal");
   }
   uint8_t field[8];
   put_le64(checksum_of(written.data(), written.size()), field);
@@ -443,7 +443,7 @@ void seal_actb_checksum(detail::AtomicFileWriter& file) {
 ActbFile ActbFile::open(const std::string& path, bool verify_checksum, FileMapping::Mode mode) {
   ActbFile f;
   // The wrong kind of input (a checkpoint folder, an image...) says what it is and what to run.
-  if (const std::string hint = not_a_blob_hint(path); !hint.empty()) fail(ErrorCode::kInvalidArgument, hint);
+  if (const std::string hint = not_a_blob_hint(path); !hint.empty()) fail(StatusCode::kInvalidArgument, hint);
   f.mapping_ = FileMapping::open(path, mode);
   const uint8_t* base = f.mapping_.data();
   const uint64_t size = f.mapping_.size();
@@ -471,7 +471,7 @@ const ActbTensor* ActbFile::find(const std::string& name) const {
 
 const ActbTensor& ActbFile::get(const std::string& name) const {
   const ActbTensor* t = find(name);
-  if (t == nullptr) fail(ErrorCode::kNotFound, "tensor '" + name + "' not found in '" + path() + "'");
+  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + path() + "'");
   return *t;
 }
 

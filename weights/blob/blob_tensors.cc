@@ -1,6 +1,6 @@
 #include "weights/blob/blob_tensors.h"
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/quant_config.h"
 
 namespace act {
@@ -27,19 +27,19 @@ void check_quantization(const ActbFile& blob, const ModelConfig& config) {
   const auto section = blob.config().find("quantization");
   const bool int8 = config.precision == Precision::kInt8;
   if (section == blob.config().end()) {
-    if (int8) fail(ErrorCode::kDataLoss, "int8 blob without a quantization section");
+    if (int8) fail(StatusCode::kDataLoss, "int8 blob without a quantization section");
     return;
   }
-  if (!int8) fail(ErrorCode::kDataLoss, "a quantization section in a blob whose precision is not int8");
+  if (!int8) fail(StatusCode::kDataLoss, "a quantization section in a blob whose precision is not int8");
   const QuantConfig quant = QuantConfig::from_json(*section);
   if (!quant.static_activations() && !quant.activations.empty()) {
-    fail(ErrorCode::kDataLoss, "dynamic quantization with activation parameters (\"" + quant.activations.begin()->first +
+    fail(StatusCode::kDataLoss, "dynamic quantization with activation parameters (\"" + quant.activations.begin()->first +
          "\", ...): only static and mixed blobs have them");
   }
   for (const std::string& name : quant.float_layers) {
     const ActbTensor* t = blob.find(name);
     if (t == nullptr || t->dtype != DType::kF32) {
-      fail(ErrorCode::kDataLoss, "quantization float_layers names \"" + name + "\", " +
+      fail(StatusCode::kDataLoss, "quantization float_layers names \"" + name + "\", " +
            (t == nullptr ? "which is no tensor of the blob" : "which the blob stores as int8"));
     }
   }
@@ -52,7 +52,7 @@ ModelConfig blob_model_config(const ActbFile& blob) {
     ModelConfig config = ModelConfig::from_json(blob.config());
     for (const ActbTensor& t : blob.tensors()) {
       if (const std::string problem = tensor_problem(t, config.precision); !problem.empty()) {
-        fail(ErrorCode::kDataLoss, "tensor \"" + t.name + "\" " + problem);
+        fail(StatusCode::kDataLoss, "tensor \"" + t.name + "\" " + problem);
       }
     }
     check_quantization(blob, config);
@@ -60,7 +60,7 @@ ModelConfig blob_model_config(const ActbFile& blob) {
   } catch (const Error& e) {
     // A config breaking one of ModelConfig's invariants is a bad argument to an importer, but in a
     // blob it is damage.
-    fail(e.code() == ErrorCode::kInvalidArgument ? ErrorCode::kDataLoss : e.code(), "'" + blob.path() + "': " + e.what());
+    fail(e.code() == StatusCode::kInvalidArgument ? StatusCode::kDataLoss : e.code(), "'" + blob.path() + "': " + e.what());
   }
 }
 
@@ -73,7 +73,7 @@ const ActbTensor* BlobTensors::find(const std::string& name) {
 void BlobTensors::release(const std::string& name) {
   const ActbTensor* t = find(name);
   if (t == nullptr || t->dtype != DType::kF32) {
-    fail(ErrorCode::kInternal, "'" + blob_.path() + "': no float tensor \"" + name + "\" to release");
+    fail(StatusCode::kInternal, "'" + blob_.path() + "': no float tensor \"" + name + "\" to release");
   }
   released_[static_cast<size_t>(t - blob_.tensors().data())] = true;
   blob_.release_pages(*t);
@@ -81,12 +81,12 @@ void BlobTensors::release(const std::string& name) {
 
 const ActbTensor& BlobTensors::get(const std::string& name, const std::vector<int64_t>& shape) {
   const ActbTensor* t = find(name);
-  if (t == nullptr) fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': missing tensor \"" + name + "\"");
+  if (t == nullptr) fail(StatusCode::kDataLoss, "'" + blob_.path() + "': missing tensor \"" + name + "\"");
   if (released_[static_cast<size_t>(t - blob_.tensors().data())]) {
-    fail(ErrorCode::kInternal, "'" + blob_.path() + "': tensor \"" + name + "\" read after its pages were released");
+    fail(StatusCode::kInternal, "'" + blob_.path() + "': tensor \"" + name + "\" read after its pages were released");
   }
   if (t->shape != shape) {
-    fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+    fail(StatusCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has shape " + shape_string(t->shape) +
          ", the model config implies " + shape_string(shape));
   }
   return *t;
@@ -95,7 +95,7 @@ const ActbTensor& BlobTensors::get(const std::string& name, const std::vector<in
 const float* BlobTensors::f32(const std::string& name, const std::vector<int64_t>& shape) {
   const ActbTensor& t = get(name, shape);
   if (t.dtype != DType::kF32) {
-    fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has dtype " + dtype_name(t.dtype) +
+    fail(StatusCode::kDataLoss, "'" + blob_.path() + "': tensor \"" + name + "\" has dtype " + dtype_name(t.dtype) +
          ", the model reads it as F32");
   }
   return t.f32();
@@ -116,7 +116,7 @@ void BlobTensors::check_all_read() const {
   std::string list;
   for (size_t i = 0; i < unread.size() && i < 8; ++i) list += (i ? ", " : "") + ("\"" + unread[i] + "\"");
   if (unread.size() > 8) list += ", ... (" + std::to_string(unread.size()) + " in all)";
-  fail(ErrorCode::kDataLoss, "'" + blob_.path() + "': tensors the model config does not use: " + list +
+  fail(StatusCode::kDataLoss, "'" + blob_.path() + "': tensors the model config does not use: " + list +
        " (does the config belong to these tensors?)");
 }
 

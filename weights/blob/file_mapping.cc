@@ -12,7 +12,7 @@
 #include <system_error>
 #include <utility>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act {
 
@@ -47,8 +47,8 @@ const char* file_kind(mode_t mode) {
 const uint8_t* read_private_copy(int fd, const std::string& path, size_t size) {
   void* p = ::mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (p == MAP_FAILED) {
-    fail(ErrorCode::kIoError, "cannot allocate " + std::to_string(size) + " bytes to read '" + path + "': " +
-                                   errno_text(errno));
+    fail(StatusCode::kIoError, "cannot allocate " + std::to_string(size) + " bytes to read '" + path + "': " +
+                                    errno_text(errno));
   }
   auto* bytes = static_cast<uint8_t*>(p);
   size_t done = 0;
@@ -58,15 +58,15 @@ const uint8_t* read_private_copy(int fd, const std::string& path, size_t size) {
     if (n <= 0) {
       const int err = n < 0 ? errno : 0;
       ::munmap(p, size);
-      fail(ErrorCode::kIoError, "cannot read '" + path + "': " +
-                                    (err != 0 ? errno_text(err) : "the file became shorter while it was read"));
+      fail(StatusCode::kIoError, "cannot read '" + path + "': " +
+                                     (err != 0 ? errno_text(err) : "the file became shorter while it was read"));
     }
     done += static_cast<size_t>(n);
   }
   char extra = 0;
   if (::pread(fd, &extra, 1, static_cast<off_t>(size)) > 0) {
     ::munmap(p, size);
-    fail(ErrorCode::kIoError, "cannot read '" + path + "': the file grew while it was read");
+    fail(StatusCode::kIoError, "cannot read '" + path + "': the file grew while it was read");
   }
   ::mprotect(p, size, PROT_READ);
   return bytes;
@@ -83,22 +83,22 @@ FileMapping FileMapping::open(const std::string& path, Mode mode) {
   } while (fd < 0 && errno == EINTR);
   if (fd < 0) {
     const int err = errno;
-    const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIoError;
+    const StatusCode code = (err == ENOENT || err == ENOTDIR) ? StatusCode::kNotFound : StatusCode::kIoError;
     fail(code, "cannot open '" + path + "': " + errno_text(err));
   }
   FdGuard guard(fd);
 
   struct stat st{};
   if (::fstat(fd, &st) != 0) {
-    fail(ErrorCode::kIoError, "cannot stat '" + path + "': " + errno_text(errno));
+    fail(StatusCode::kIoError, "cannot stat '" + path + "': " + errno_text(errno));
   }
   // Directories, FIFOs and devices open fine with O_RDONLY but cannot be mapped as weights.
   if (!S_ISREG(st.st_mode)) {
-    fail(ErrorCode::kIoError, "cannot map '" + path + "': not a regular file (" + file_kind(st.st_mode) + ")");
+    fail(StatusCode::kIoError, "cannot map '" + path + "': not a regular file (" + file_kind(st.st_mode) + ")");
   }
   if (st.st_size < 0 || static_cast<uint64_t>(st.st_size) > std::numeric_limits<size_t>::max()) {
-    fail(ErrorCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +
-                                   " does not fit in the address space");
+    fail(StatusCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +
+                                    " does not fit in the address space");
   }
 
   FileMapping m;
@@ -112,8 +112,8 @@ FileMapping FileMapping::open(const std::string& path, Mode mode) {
   }
   void* p = ::mmap(nullptr, m.size_, PROT_READ, MAP_PRIVATE, fd, 0);
   if (p == MAP_FAILED) {
-    fail(ErrorCode::kIoError, "cannot mmap '" + path + "' (" + std::to_string(m.size_) +
-                                   " bytes): " + errno_text(errno));
+    fail(StatusCode::kIoError, "cannot mmap '" + path + "' (" + std::to_string(m.size_) +
+                                    " bytes): " + errno_text(errno));
   }
   m.data_ = static_cast<const uint8_t*>(p);
   return m;
@@ -121,7 +121,7 @@ FileMapping FileMapping::open(const std::string& path, Mode mode) {
 
 void FileMapping::release_pages(const uint8_t* begin, size_t bytes) {
   if (bytes == 0) return;
-  check(begin >= data_ && bytes <= size_ - static_cast<size_t>(begin - data_), ErrorCode::kInternal,
+  check(begin >= data_ && bytes <= size_ - static_cast<size_t>(begin - data_), StatusCode::kInternal,
         "releasing pages outside the mapping of '" + path_ + "'");
   const auto page = static_cast<uintptr_t>(::sysconf(_SC_PAGESIZE));
   const uintptr_t first = (reinterpret_cast<uintptr_t>(begin) + page - 1) / page * page;

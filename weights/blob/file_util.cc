@@ -14,7 +14,7 @@
 #include <system_error>
 #include <utility>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_mapping.h"
 
 namespace act::detail {
@@ -45,8 +45,8 @@ AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path)) {
   if (fd_ >= 0) return;
   const int tmpfile_err = errno;
   if (tmpfile_err != EOPNOTSUPP && tmpfile_err != EISDIR && tmpfile_err != EINVAL) {
-    fail(ErrorCode::kIoError, "cannot write '" + path_ + "': cannot create a file in '" + dir + "': " +
-                                   errno_text(tmpfile_err));
+    fail(StatusCode::kIoError, "cannot write '" + path_ + "': cannot create a file in '" + dir + "': " +
+                                    errno_text(tmpfile_err));
   }
   // A file system without O_TMPFILE: a named temporary file, removed by the destructor. O_TRUNC
   // rather than O_EXCL: a stale one left by a crashed process with the same pid (common in
@@ -57,7 +57,7 @@ AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path)) {
   } while (fd_ < 0 && errno == EINTR);
   if (fd_ < 0) {
     const int err = errno;
-    fail(ErrorCode::kIoError,
+    fail(StatusCode::kIoError,
          "cannot write '" + path_ + "': cannot create '" + temp_path_ + "': " + errno_text(err));
   }
 }
@@ -82,8 +82,8 @@ void AtomicFileWriter::write(const void* data, size_t size) {
 
 void AtomicFileWriter::write_at(size_t offset, const void* data, size_t size) {
   if (offset + size > written_) {
-    fail(ErrorCode::kInvalidArgument, "cannot overwrite bytes " + std::to_string(offset) + " to " +
-                                          std::to_string(offset + size) + " of " + describe_target() + ": " +
+    fail(StatusCode::kInvalidArgument, "cannot overwrite bytes " + std::to_string(offset) + " to " +
+                                           std::to_string(offset + size) + " of " + describe_target() + ": " +
                                           std::to_string(written_) + " bytes are written");
   }
   write_all(data, size, static_cast<off_t>(offset));
@@ -98,9 +98,9 @@ void AtomicFileWriter::write_all(const void* data, size_t size, off_t offset) {
     if (n < 0) {
       if (errno == EINTR) continue;
       const int err = errno;
-      fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": " + errno_text(err));
+      fail(StatusCode::kIoError, "cannot write " + describe_target() + ": " + errno_text(err));
     }
-    if (n == 0) fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": write returned 0");
+    if (n == 0) fail(StatusCode::kIoError, "cannot write " + describe_target() + ": write returned 0");
     p += n;
     size -= static_cast<size_t>(n);
     if (offset >= 0) offset += n;
@@ -131,24 +131,24 @@ void AtomicFileWriter::name_unnamed_file() {
   }
   const int err = errno;
   temp_path_.clear();
-  fail(ErrorCode::kIoError, "cannot write '" + path_ + "': cannot give the new file a name: " + errno_text(err));
+  fail(StatusCode::kIoError, "cannot write '" + path_ + "': cannot give the new file a name: " + errno_text(err));
 }
 
 void AtomicFileWriter::commit() {
   // fsync before rename: otherwise a crash can leave the new name pointing at unwritten blocks.
   if (::fsync(fd_) != 0) {
     const int err = errno;
-    fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": fsync failed: " + errno_text(err));
+    fail(StatusCode::kIoError, "cannot write " + describe_target() + ": fsync failed: " + errno_text(err));
   }
   if (temp_path_.empty()) name_unnamed_file();
   const int fd = std::exchange(fd_, -1);
   if (::close(fd) != 0) {
     const int err = errno;
-    fail(ErrorCode::kIoError, "cannot write " + describe_target() + ": close failed: " + errno_text(err));
+    fail(StatusCode::kIoError, "cannot write " + describe_target() + ": close failed: " + errno_text(err));
   }
   if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
     const int err = errno;
-    fail(ErrorCode::kIoError,
+    fail(StatusCode::kIoError,
          "cannot write '" + path_ + "': rename from '" + temp_path_ + "' failed: " + errno_text(err));
   }
   committed_ = true;
@@ -170,7 +170,7 @@ std::string read_regular_file(const std::string& path) {
 
 template <class Json>
 Json parse_untrusted_json(const std::string& path, const char* begin, size_t size, const std::string& failure) {
-  const auto bad = [&](const std::string& why) { fail(ErrorCode::kDataLoss, "'" + path + "': " + failure + ": " + why); };
+  const auto bad = [&](const std::string& why) { fail(StatusCode::kDataLoss, "'" + path + "': " + failure + ": " + why); };
   // The key sets of the objects currently open, innermost last; keys only occur in the innermost one.
   std::vector<std::set<std::string>> open_objects;
   std::string duplicate;
@@ -230,7 +230,7 @@ nlohmann::ordered_json read_json_file(const std::string& path) {
 }
 
 void throw_dump_error(const std::string& what, const char* reason) {
-  fail(ErrorCode::kInvalidArgument, "cannot serialise " + what + " as JSON: " + clip(reason));
+  fail(StatusCode::kInvalidArgument, "cannot serialise " + what + " as JSON: " + clip(reason));
 }
 
 bool json_to_i64(const nlohmann::json& j, int64_t* out) {

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -216,7 +216,7 @@ std::string ModelConfig::ensemble_coeff_problem(double coeff, int chunk_size) {
 }
 
 void ModelConfig::validate() const {
-  auto bad = [](const std::string& msg) { fail(ErrorCode::kInvalidArgument, "invalid model config: " + msg); };
+  auto bad = [](const std::string& msg) { fail(StatusCode::kInvalidArgument, "invalid model config: " + msg); };
   const ResNetArchitecture* resnet = find_resnet(backbone);
   if (resnet == nullptr) {
     bad("backbone \"" + backbone + "\" is not one this engine runs (" + resnet_names() + ")");
@@ -231,12 +231,12 @@ void ModelConfig::validate() const {
         (bottleneck ? " of bottlenecks" : " of basic blocks"));
   }
   if (dilate_layer4 && !bottleneck) {
-    fail(ErrorCode::kUnimplemented,
+    fail(StatusCode::kUnimplemented,
          "replace_final_stride_with_dilation needs a Bottleneck ResNet (resnet50+); torchvision refuses "
          "dilation in BasicBlock (" + backbone + ")");
   }
   if (cameras.empty()) {
-    fail(ErrorCode::kUnimplemented, "the model has no camera (VISUAL) input; image-less ACT is not supported");
+    fail(StatusCode::kUnimplemented, "the model has no camera (VISUAL) input; image-less ACT is not supported");
   }
   for (const auto& cam : cameras) {
     if (cam.height < 1 || cam.width < 1 || cam.height > 8192 || cam.width > 8192) {
@@ -269,21 +269,21 @@ NormMode norm_from_json(const nlohmann::json& j) {
   if (s == "IDENTITY") return NormMode::kIdentity;
   if (s == "MEAN_STD") return NormMode::kMeanStd;
   if (s == "MIN_MAX") return NormMode::kMinMax;
-  fail(ErrorCode::kDataLoss, "unknown normalisation mode '" + s + "'");
+  fail(StatusCode::kDataLoss, "unknown normalisation mode '" + s + "'");
 }
 
 Activation activation_from_string(const std::string& s) {
   if (s == "relu") return Activation::kRelu;
   if (s == "gelu") return Activation::kGelu;
   if (s == "glu") return Activation::kGlu;
-  fail(ErrorCode::kDataLoss, "unknown activation '" + s + "'");
+  fail(StatusCode::kDataLoss, "unknown activation '" + s + "'");
 }
 
 // A precision this build cannot run is kUnimplemented (a newer converter's blob), not data loss.
 Precision precision_from_string(const std::string& s) {
   if (s == "fp32") return Precision::kFp32;
   if (s == "int8") return Precision::kInt8;
-  fail(ErrorCode::kUnimplemented, "model config: precision '" + s + "' is not supported by this build (fp32, int8)");
+  fail(StatusCode::kUnimplemented, "model config: precision '" + s + "' is not supported by this build (fp32, int8)");
 }
 
 }  // namespace
@@ -326,13 +326,13 @@ void check_input_norm(const ModelConfig& c) {
   std::vector<std::string> seen;
   for (const auto& [key, mode] : c.input_norm) {
     const std::string entry = "model config in blob: \"input_norm\" entry \"" + key + "\" ";
-    if (std::find(keys.begin(), keys.end(), key) == keys.end()) fail(ErrorCode::kDataLoss, entry + "is no input feature of the model");
-    if (std::find(seen.begin(), seen.end(), key) != seen.end()) fail(ErrorCode::kDataLoss, entry + "appears twice");
+    if (std::find(keys.begin(), keys.end(), key) == keys.end()) fail(StatusCode::kDataLoss, entry + "is no input feature of the model");
+    if (std::find(seen.begin(), seen.end(), key) != seen.end()) fail(StatusCode::kDataLoss, entry + "appears twice");
     seen.push_back(key);
   }
   for (const std::string& key : keys) {
     if (std::find(seen.begin(), seen.end(), key) == seen.end()) {
-      fail(ErrorCode::kDataLoss, "model config in blob: \"input_norm\" has no entry for the input feature \"" + key +
+      fail(StatusCode::kDataLoss, "model config in blob: \"input_norm\" has no entry for the input feature \"" + key +
            "\" (its normalisation would be skipped)");
     }
   }
@@ -343,7 +343,7 @@ void check_input_norm(const ModelConfig& c) {
 int int_field(const nlohmann::json& j, const std::string& key) {
   int32_t v = 0;
   if (!detail::json_to_i32(j.at(key), &v)) {
-    fail(ErrorCode::kDataLoss, "malformed model config in blob: \"" + key + "\" must be a 32-bit integer");
+    fail(StatusCode::kDataLoss, "malformed model config in blob: \"" + key + "\" must be a 32-bit integer");
   }
   return v;
 }
@@ -356,7 +356,7 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     c.backbone = j.at("backbone").get<std::string>();
     for (const auto& blocks : j.at("backbone_blocks")) {
       int32_t v = 0;
-      if (!detail::json_to_i32(blocks, &v)) fail(ErrorCode::kDataLoss, "malformed model config in blob: bad backbone_blocks");
+      if (!detail::json_to_i32(blocks, &v)) fail(StatusCode::kDataLoss, "malformed model config in blob: bad backbone_blocks");
       c.backbone_blocks.push_back(v);
     }
     c.bottleneck = j.at("bottleneck").get<bool>();
@@ -380,12 +380,12 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     c.n_action_steps = int_field(j, "n_action_steps");
     if (!j.at("temporal_ensemble_coeff").is_null()) c.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
     const nlohmann::json& input_norm = j.at("input_norm");
-    if (!input_norm.is_array()) fail(ErrorCode::kDataLoss, "malformed model config in blob: \"input_norm\" must be an array");
+    if (!input_norm.is_array()) fail(StatusCode::kDataLoss, "malformed model config in blob: \"input_norm\" must be an array");
     for (const auto& e : input_norm) c.input_norm.emplace_back(e.at("key").get<std::string>(), norm_from_json(e.at("mode")));
     c.action_norm = norm_from_json(j.at("action_norm"));
     c.precision = precision_from_string(j.at("precision").get<std::string>());
   } catch (const nlohmann::json::exception& e) {
-    fail(ErrorCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
+    fail(StatusCode::kDataLoss, std::string("malformed model config in blob: ") + e.what());
   }
   c.validate();
   check_input_norm(c);

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -19,7 +19,7 @@ const char* quant_mode_name(QuantMode mode) {
 const ActivationQuant& QuantConfig::activation(const std::string& value_name) const {
   const auto it = activations.find(value_name);
   if (it == activations.end()) {
-    fail(ErrorCode::kDataLoss, "the blob has no quantization parameters for activation \"" + value_name + "\"");
+    fail(StatusCode::kDataLoss, "the blob has no quantization parameters for activation \"" + value_name + "\"");
   }
   return it->second;
 }
@@ -46,25 +46,25 @@ QuantConfig QuantConfig::from_json(const nlohmann::json& j) {
     } else if (mode == "mixed") {
       c.mode = QuantMode::kMixed;
     } else {
-      fail(ErrorCode::kDataLoss, "unknown quantization mode \"" + mode + "\"");
+      fail(StatusCode::kDataLoss, "unknown quantization mode \"" + mode + "\"");
     }
     c.calibration = j.value("calibration", "");
     for (const auto& [name, v] : j.at("activations").items()) {
       ActivationQuant q{};
       if (!detail::json_to_f32(v.at(0), &q.scale) || !detail::json_to_i32(v.at(1), &q.zero_point) ||
           !(q.scale > 0.0f) || q.zero_point < -128 || q.zero_point > 127) {
-        fail(ErrorCode::kDataLoss, "bad quantization parameters for activation \"" + name + "\"");
+        fail(StatusCode::kDataLoss, "bad quantization parameters for activation \"" + name + "\"");
       }
       c.activations[name] = q;
     }
     c.float_layers = j.at("float_layers").get<std::vector<std::string>>();
     const std::string attention = j.value("attention", "fp32");
     if (attention != "int8" && attention != "fp32") {
-      fail(ErrorCode::kDataLoss, "unknown attention precision \"" + attention + "\" (int8 or fp32)");
+      fail(StatusCode::kDataLoss, "unknown attention precision \"" + attention + "\" (int8 or fp32)");
     }
     c.int8_attention = attention == "int8";
   } catch (const nlohmann::json::exception& e) {
-    fail(ErrorCode::kDataLoss, std::string("malformed quantization section: ") + e.what());
+    fail(StatusCode::kDataLoss, std::string("malformed quantization section: ") + e.what());
   }
   return c;
 }

@@ -1,11 +1,11 @@
 #include "weights/blob/tensor_header.h"
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 
 namespace act::detail {
 
-void fail_corrupt(const std::string& path, const std::string& what) { fail(ErrorCode::kDataLoss, "'" + path + "': " + what); }
+void fail_corrupt(const std::string& path, const std::string& what) { fail(StatusCode::kDataLoss, "'" + path + "': " + what); }
 
 nlohmann::json parse_json_object_header(const std::string& path, const uint8_t* data, size_t size) {
   nlohmann::json header = parse_json_header(path, data, size);

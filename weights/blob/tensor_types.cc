@@ -4,7 +4,7 @@
 #include <cstring>
 #include <limits>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act {
 
@@ -23,7 +23,7 @@ size_t dtype_size(DType dtype) {
     case DType::kF64: return 8;
     case DType::kI64: return 8;
   }
-  fail(ErrorCode::kInternal, "dtype_size: invalid DType value " + std::to_string(static_cast<int>(dtype)));
+  fail(StatusCode::kInternal, "dtype_size: invalid DType value " + std::to_string(static_cast<int>(dtype)));
 }
 
 const char* dtype_name(DType dtype) {
@@ -56,7 +56,7 @@ uint64_t shape_elements(const std::vector<int64_t>& shape) {
   bool has_zero = false;
   for (int64_t d : shape) {
     if (d < 0) {
-      fail(ErrorCode::kInvalidArgument,
+      fail(StatusCode::kInvalidArgument,
            "negative dimension " + std::to_string(d) + " in shape " + shape_string(shape));
     }
     has_zero = has_zero || d == 0;
@@ -67,7 +67,7 @@ uint64_t shape_elements(const std::vector<int64_t>& shape) {
   for (int64_t d : shape) {
     const auto u = static_cast<uint64_t>(d);
     if (n > std::numeric_limits<uint64_t>::max() / u) {
-      fail(ErrorCode::kInvalidArgument, "element count of shape " + shape_string(shape) + " overflows");
+      fail(StatusCode::kInvalidArgument, "element count of shape " + shape_string(shape) + " overflows");
     }
     n *= u;
   }
@@ -141,7 +141,7 @@ void convert_to_f32(DType dtype, const void* src, size_t count, float* dst) {
       convert_16<bf16_to_float>(src, count, dst);
       return;
     default:
-      fail(ErrorCode::kInvalidArgument,
+      fail(StatusCode::kInvalidArgument,
            std::string("cannot convert dtype ") + dtype_name(dtype) + " to F32 (only F32, F16, BF16)");
   }
 }

@@ -7,7 +7,7 @@
 #include <set>
 #include <sstream>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -93,12 +93,12 @@ class Planner {
   const SafetensorsTensor* tensor(const std::string& name) const { return sd_.find(name); }
   const SafetensorsTensor& required(const std::string& name) const {
     const SafetensorsTensor* t = sd_.find(name);
-    if (!t) fail(ErrorCode::kInvalidArgument, sd_.origin() + ": no \"" + name + "\": this is not the state dict of a LeRobot ACT policy");
+    if (!t) fail(StatusCode::kInvalidArgument, sd_.origin() + ": no \"" + name + "\": this is not the state dict of a LeRobot ACT policy");
     return *t;
   }
   std::string described(const SafetensorsTensor& t) const { return t.name + " " + shape_string(t.shape); }
   int dim(const SafetensorsTensor& t, size_t i, size_t rank) const {
-    if (t.shape.size() != rank) fail(ErrorCode::kInvalidArgument, sd_.origin() + ": " + described(t) + " should have " + std::to_string(rank) + " dimensions");
+    if (t.shape.size() != rank) fail(StatusCode::kInvalidArgument, sd_.origin() + ": " + described(t) + " should have " + std::to_string(rank) + " dimensions");
     return static_cast<int>(t.shape[i]);
   }
   // How many "<prefix><i>." indices exist; they must be 0..n-1.
@@ -112,7 +112,7 @@ class Planner {
       seen.insert(std::stoi(idx));
     }
     if (!seen.empty() && (*seen.begin() != 0 || *seen.rbegin() != static_cast<int>(seen.size()) - 1)) {
-      fail(ErrorCode::kInvalidArgument, sd_.origin() + ": the indices of " + prefix + "<i> are not 0.." + std::to_string(seen.size() - 1));
+      fail(StatusCode::kInvalidArgument, sd_.origin() + ": the indices of " + prefix + "<i> are not 0.." + std::to_string(seen.size() - 1));
     }
     return static_cast<int>(seen.size());
   }
@@ -154,7 +154,7 @@ class Planner {
     std::string counts;
     for (int b : blocks) counts += (counts.empty() ? "" : "+") + std::to_string(b);
     if (bb == resnets.end()) {
-      fail(ErrorCode::kUnimplemented, sd_.origin() + ": the backbone has " + counts + " blocks per stage" +
+      fail(StatusCode::kUnimplemented, sd_.origin() + ": the backbone has " + counts + " blocks per stage" +
            (bottleneck ? " (bottleneck)" : "") + ", which is no torchvision ResNet this engine runs");
     }
     infer("vision_backbone", bb->name, "model.backbone.layer<s>.<block> keys: " + counts + " blocks" + (bottleneck ? ", conv3 (bottleneck)" : ""));
@@ -278,12 +278,12 @@ class Planner {
     take_inferred(c, "dim_feedforward");
     if (inferred_.count("feedforward_activation")) {
       if (src_.activation && *src_.activation != "glu") {
-        fail(ErrorCode::kInvalidArgument, "--activation " + *src_.activation + " contradicts the weights: " + inferred_["feedforward_activation"].second);
+        fail(StatusCode::kInvalidArgument, "--activation " + *src_.activation + " contradicts the weights: " + inferred_["feedforward_activation"].second);
       }
       take_inferred(c, "feedforward_activation");
     } else {
       if (src_.activation == "glu") {
-        fail(ErrorCode::kInvalidArgument, "--activation glu contradicts the weights (linear2 takes all of dim_feedforward)");
+        fail(StatusCode::kInvalidArgument, "--activation glu contradicts the weights (linear2 takes all of dim_feedforward)");
       }
       choose(c, "feedforward_activation", src_.activation, "--activation", "relu", "relu and gelu leave no trace in the weights");
     }
@@ -315,10 +315,10 @@ class Planner {
   void normalization(OrderedJson& c, const std::vector<std::string>& cameras) {
     if (has_buffers_) {
       if (!src_.stats_paths.empty()) {
-        fail(ErrorCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics "
+        fail(StatusCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics "
              "(normalize_inputs.* buffers); drop --stats");
       }
-      if (src_.no_normalization) fail(ErrorCode::kInvalidArgument, sd_.origin() + ": --no-normalization, but the state dict carries normalisation statistics");
+      if (src_.no_normalization) fail(StatusCode::kInvalidArgument, sd_.origin() + ": --no-normalization, but the state dict carries normalisation statistics");
       OrderedJson mapping = OrderedJson::object();
       std::string visual = cameras.empty() ? "IDENTITY" : buffer_mode("normalize_inputs.buffer_" + flat(cameras[0]));
       mapping["VISUAL"] = visual;
@@ -352,7 +352,7 @@ class Planner {
   // --config: LeRobot's config.json is the source; the weights must agree with it, flags override it.
   void merge_config_file() {
     OrderedJson c = detail::read_json_file(src_.config_path);
-    if (!c.is_object()) fail(ErrorCode::kDataLoss, src_.config_path + ": expected a JSON object");
+    if (!c.is_object()) fail(StatusCode::kDataLoss, src_.config_path + ": expected a JSON object");
     const std::string cfg = "config.json";
     for (const auto& [field, inferred] : inferred_) {
       const auto& [value, source] = inferred;
@@ -363,14 +363,14 @@ class Planner {
         const std::string key = field.substr(dot + 1);
         given = features.contains(key) ? features[key].value("shape", OrderedJson::array()) : OrderedJson();
         if (given != OrderedJson::array({value})) {
-          fail(ErrorCode::kInvalidArgument, src_.config_path + ": " + field + " has shape " + given.dump() + ", but " + source +
+          fail(StatusCode::kInvalidArgument, src_.config_path + ": " + field + " has shape " + given.dump() + ", but " + source +
                " says [" + value.dump() + "]");
         }
       } else {
         if (!c.contains(field)) continue;  // the import reports fields it needs
         given = c[field];
         if (given != value) {
-          fail(ErrorCode::kInvalidArgument, src_.config_path + ": " + field + " is " + given.dump() + ", but " + source + " says " + value.dump());
+          fail(StatusCode::kInvalidArgument, src_.config_path + ": " + field + " is " + given.dump() + ", but " + source + " says " + value.dump());
         }
       }
     }
@@ -385,7 +385,7 @@ class Planner {
         if (f.is_object() && f.value("type", "") == "VISUAL") f["shape"] = {3, src_.image_size->first, src_.image_size->second};
       }
     }
-    if (!src_.cameras.empty()) fail(ErrorCode::kInvalidArgument, "--camera and --config: the cameras come from config.json's input_features");
+    if (!src_.cameras.empty()) fail(StatusCode::kInvalidArgument, "--camera and --config: the cameras come from config.json's input_features");
     for (const auto& [field, value] : c.items()) {
       std::string source = cfg;
       if (inferred_.count(field)) source = inferred_[field].second + " (agrees with " + cfg + ")";
@@ -399,7 +399,7 @@ class Planner {
     }
     if (has_buffers_) {
       if (!src_.stats_paths.empty()) {
-        fail(ErrorCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics (normalize_inputs.* buffers); drop --stats");
+        fail(StatusCode::kInvalidArgument, sd_.origin() + ": the state dict carries its own normalisation statistics (normalize_inputs.* buffers); drop --stats");
       }
       plan_.statistics_source = "the state dict's normalisation buffers";
     } else if (src_.no_normalization) {
@@ -431,7 +431,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
   OwnedTensorSet out(origin);
   auto add = [&](const std::string& path, const std::string& name, std::vector<float> values) {
     if (const SafetensorsTensor* existing = out.find(name)) {
-      if (existing->to_f32() != values) fail(ErrorCode::kInvalidArgument, path + ": \"" + name + "\" differs from an earlier statistics file");
+      if (existing->to_f32() != values) fail(StatusCode::kInvalidArgument, path + ": \"" + name + "\" differs from an earlier statistics file");
       return;
     }
     const int64_t n = static_cast<int64_t>(values.size());
@@ -441,7 +441,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
     if (std::filesystem::path(path).extension() == ".json") {
       // LeRobot's meta/stats.json: {"<feature>": {"<stat>": [nested numbers], ...}, ...}
       const OrderedJson j = detail::read_json_file(path);
-      if (!j.is_object()) fail(ErrorCode::kDataLoss, path + ": expected {\"<feature>\": {\"<stat>\": [...]}}");
+      if (!j.is_object()) fail(StatusCode::kDataLoss, path + ": expected {\"<feature>\": {\"<stat>\": [...]}}");
       for (const auto& [feature, stats] : j.items()) {
         if (!stats.is_object()) continue;
         for (const auto& [stat, value] : stats.items()) {
@@ -457,7 +457,7 @@ OwnedTensorSet read_statistics_files(const std::vector<std::string>& paths) {
       }
     }
   }
-  if (out.names().empty()) fail(ErrorCode::kInvalidArgument, origin + ": no statistics found");
+  if (out.names().empty()) fail(StatusCode::kInvalidArgument, origin + ": no statistics found");
   return out;
 }
 
@@ -473,8 +473,9 @@ ImportedModel import_pytorch_conversion(const PyTorchConversion& plan) {
   if (!plan.missing.empty()) {
     std::string list;
     for (const auto& m : plan.missing) list += "\n  - " + m;
-    fail(ErrorCode::kInvalidArgument, plan.checkpoint.state_dict.origin() + ": cannot convert without knowing:" + list +
-         "\n(act_convert --explain shows what was inferred from the weights and from where)");
+    fail(StatusCode::kInvalidArgument,
+         plan.checkpoint.state_dict.origin() + ": cannot convert without knowing:" + list +
+             "\n(act_convert --explain shows what was inferred from the weights and from where)");
   }
   ImportedModel model = plan.stats ? import_lerobot_state_dict(plan.config, plan.checkpoint.state_dict, *plan.stats)
                                    : import_lerobot_state_dict(plan.config, plan.checkpoint.state_dict);

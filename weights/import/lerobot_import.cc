@@ -13,9 +13,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/status.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_names.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"
 
@@ -54,21 +54,21 @@ class ConfigReader {
   ConfigReader(const OrderedJson& j, std::string file) : j_(j), file_(std::move(file)) {}
 
   const OrderedJson& at(const std::string& key) const {
-    if (!j_.contains(key)) fail(ErrorCode::kDataLoss, file_ + ": missing field \"" + key + "\"");
+    if (!j_.contains(key)) fail(StatusCode::kDataLoss, file_ + ": missing field \"" + key + "\"");
     return j_.at(key);
   }
   int get_int(const std::string& key) const {
     const auto& v = at(key);
-    if (!v.is_number_integer()) fail(ErrorCode::kDataLoss, file_ + ": field \"" + key + "\" must be an integer");
+    if (!v.is_number_integer()) fail(StatusCode::kDataLoss, file_ + ": field \"" + key + "\" must be an integer");
     const auto x = v.get<int64_t>();
     if (x < std::numeric_limits<int>::min() || x > std::numeric_limits<int>::max()) {
-      fail(ErrorCode::kInvalidArgument, file_ + ": field \"" + key + "\" out of range");
+      fail(StatusCode::kInvalidArgument, file_ + ": field \"" + key + "\" out of range");
     }
     return static_cast<int>(x);
   }
   std::string get_string(const std::string& key) const {
     const auto& v = at(key);
-    if (!v.is_string()) fail(ErrorCode::kDataLoss, file_ + ": field \"" + key + "\" must be a string");
+    if (!v.is_string()) fail(StatusCode::kDataLoss, file_ + ": field \"" + key + "\" must be a string");
     return v.get<std::string>();
   }
   bool get_bool(const std::string& key) const {
@@ -76,7 +76,7 @@ class ConfigReader {
     // replace_final_stride_with_dilation is declared int in LeRobot and may be written as 0/1.
     if (v.is_boolean()) return v.get<bool>();
     if (v.is_number_integer()) return v.get<int64_t>() != 0;
-    fail(ErrorCode::kDataLoss, file_ + ": field \"" + key + "\" must be a boolean");
+    fail(StatusCode::kDataLoss, file_ + ": field \"" + key + "\" must be a boolean");
   }
   const std::string& file() const { return file_; }
 
@@ -94,7 +94,7 @@ LeRobotMode parse_mode(const std::string& s, const std::string& where) {
   if (s == "MIN_MAX") return LeRobotMode::kMinMax;
   if (s == "QUANTILES") return LeRobotMode::kQuantiles;
   if (s == "QUANTILE10") return LeRobotMode::kQuantile10;
-  fail(ErrorCode::kUnimplemented, where + ": unknown normalisation mode \"" + s + "\"");
+  fail(StatusCode::kUnimplemented, where + ": unknown normalisation mode \"" + s + "\"");
 }
 
 struct Feature {
@@ -106,11 +106,11 @@ struct Feature {
 std::vector<Feature> read_features(const ConfigReader& cfg, const std::string& field) {
   std::vector<Feature> out;
   const auto& obj = cfg.at(field);
-  if (!obj.is_object()) fail(ErrorCode::kDataLoss, cfg.file() + ": \"" + field + "\" must be an object");
+  if (!obj.is_object()) fail(StatusCode::kDataLoss, cfg.file() + ": \"" + field + "\" must be an object");
   for (const auto& [key, value] : obj.items()) {  // ordered_json keeps the file's key order
     const std::string& name = key;  // (clang 14 cannot capture a structured binding)
     const auto malformed = [&] {
-      fail(ErrorCode::kDataLoss, cfg.file() + ": feature \"" + name + "\" needs a string \"type\" and an integer \"shape\"");
+      fail(StatusCode::kDataLoss, cfg.file() + ": feature \"" + name + "\" needs a string \"type\" and an integer \"shape\"");
     };
     if (!value.is_object() || !value.contains("type") || !value["type"].is_string() || !value.contains("shape") ||
         !value["shape"].is_array()) {
@@ -139,18 +139,18 @@ struct ParsedConfig {
 
 // `path` names where the config came from in messages.
 ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vector<std::string>& notes) {
-  if (!j.is_object()) fail(ErrorCode::kDataLoss, path.string() + ": expected a JSON object");
+  if (!j.is_object()) fail(StatusCode::kDataLoss, path.string() + ": expected a JSON object");
   ConfigReader cfg(j, path.string());
   if (j.contains("input_shapes") && !j.contains("input_features")) {
-    fail(ErrorCode::kUnimplemented, path.string() +
+    fail(StatusCode::kUnimplemented, path.string() +
          ": this is a pre-2025 LeRobot config (input_shapes / input_normalization_modes); re-save it with a "
          "current LeRobot first");
   }
   if (cfg.get_string("type") != "act") {
-    fail(ErrorCode::kInvalidArgument, path.string() + ": policy type is \"" + cfg.get_string("type") + "\", not \"act\"");
+    fail(StatusCode::kInvalidArgument, path.string() + ": policy type is \"" + cfg.get_string("type") + "\", not \"act\"");
   }
   if (j.contains("n_obs_steps") && cfg.get_int("n_obs_steps") != 1) {
-    fail(ErrorCode::kUnimplemented, path.string() + ": n_obs_steps must be 1 for ACT");
+    fail(StatusCode::kUnimplemented, path.string() + ": n_obs_steps must be 1 for ACT");
   }
 
   ParsedConfig pc;
@@ -158,7 +158,7 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   const std::string backbone = cfg.get_string("vision_backbone");
   const ResNetArchitecture* resnet = find_resnet(backbone);
   if (resnet == nullptr) {
-    fail(ErrorCode::kUnimplemented, path.string() + ": vision_backbone \"" + backbone + "\" is not supported (" +
+    fail(StatusCode::kUnimplemented, path.string() + ": vision_backbone \"" + backbone + "\" is not supported (" +
          resnet_names() + ")");
   }
   m.backbone = backbone;
@@ -177,7 +177,7 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   } else if (act == "glu") {
     m.activation = Activation::kGlu;
   } else {
-    fail(ErrorCode::kUnimplemented, path.string() + ": feedforward_activation \"" + act + "\" is not supported (relu, gelu, glu)");
+    fail(StatusCode::kUnimplemented, path.string() + ": feedforward_activation \"" + act + "\" is not supported (relu, gelu, glu)");
   }
   m.n_encoder_layers = cfg.get_int("n_encoder_layers");
   m.n_decoder_layers = cfg.get_int("n_decoder_layers");
@@ -185,7 +185,7 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   m.n_action_steps = cfg.get_int("n_action_steps");
   if (j.contains("temporal_ensemble_coeff") && !j.at("temporal_ensemble_coeff").is_null()) {
     if (!j.at("temporal_ensemble_coeff").is_number()) {
-      fail(ErrorCode::kDataLoss, path.string() + ": temporal_ensemble_coeff must be a number or null");
+      fail(StatusCode::kDataLoss, path.string() + ": temporal_ensemble_coeff must be a number or null");
     }
     m.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
   }
@@ -193,9 +193,9 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
 
   // Normalisation mapping: feature type -> mode; a type missing from it means IDENTITY.
   const auto& mapping = cfg.at("normalization_mapping");
-  if (!mapping.is_object()) fail(ErrorCode::kDataLoss, path.string() + ": normalization_mapping must be an object");
+  if (!mapping.is_object()) fail(StatusCode::kDataLoss, path.string() + ": normalization_mapping must be an object");
   for (const auto& [type, mode] : mapping.items()) {
-    if (!mode.is_string()) fail(ErrorCode::kDataLoss, path.string() + ": normalization_mapping[" + type + "] must be a string");
+    if (!mode.is_string()) fail(StatusCode::kDataLoss, path.string() + ": normalization_mapping[" + type + "] must be a string");
     pc.mapping[type] = parse_mode(mode.get<std::string>(), path.string());
   }
 
@@ -205,19 +205,19 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   for (const auto& f : pc.inputs) {
     if (f.type == "VISUAL") {
       if (f.shape.size() != 3 || f.shape[0] != 3) {
-        fail(ErrorCode::kInvalidArgument, path.string() + ": camera \"" + f.key + "\" must have shape [3, H, W]");
+        fail(StatusCode::kInvalidArgument, path.string() + ": camera \"" + f.key + "\" must have shape [3, H, W]");
       }
       m.cameras.push_back({f.key, static_cast<int>(f.shape[1]), static_cast<int>(f.shape[2])});
     } else if (f.type == "STATE") {
       if (f.key != "observation.state") {
-        fail(ErrorCode::kUnimplemented, path.string() + ": STATE feature \"" + f.key +
+        fail(StatusCode::kUnimplemented, path.string() + ": STATE feature \"" + f.key +
              "\" is not used by LeRobot's ACT (only \"observation.state\" is)");
       }
-      if (f.shape.size() != 1) fail(ErrorCode::kInvalidArgument, path.string() + ": observation.state must be 1-D");
+      if (f.shape.size() != 1) fail(StatusCode::kInvalidArgument, path.string() + ": observation.state must be 1-D");
       m.state_key = f.key;
       m.state_dim = static_cast<int>(f.shape[0]);
     } else if (f.type == "ENV") {
-      if (f.shape.size() != 1) fail(ErrorCode::kInvalidArgument, path.string() + ": \"" + f.key + "\" must be 1-D");
+      if (f.shape.size() != 1) fail(StatusCode::kInvalidArgument, path.string() + ": \"" + f.key + "\" must be 1-D");
       if (have_env) {
         notes.push_back("input feature \"" + f.key + "\" (ENV) is ignored: LeRobot's ACT uses only the first ENV feature");
         continue;
@@ -226,7 +226,7 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
       m.env_state_key = f.key;
       m.env_state_dim = static_cast<int>(f.shape[0]);
     } else {
-      fail(ErrorCode::kUnimplemented, path.string() + ": input feature \"" + f.key + "\" has type \"" + f.type +
+      fail(StatusCode::kUnimplemented, path.string() + ": input feature \"" + f.key + "\" has type \"" + f.type +
            "\", which ACT does not use");
     }
   }
@@ -236,14 +236,14 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   bool have_action = false;
   for (const auto& f : read_features(cfg, "output_features")) {
     if (f.key == "action" && f.type == "ACTION") {
-      if (f.shape.size() != 1) fail(ErrorCode::kInvalidArgument, path.string() + ": action must be 1-D");
+      if (f.shape.size() != 1) fail(StatusCode::kInvalidArgument, path.string() + ": action must be 1-D");
       m.action_dim = static_cast<int>(f.shape[0]);
       have_action = true;
     } else {
-      fail(ErrorCode::kUnimplemented, path.string() + ": output feature \"" + f.key + "\" is not ACT's \"action\"");
+      fail(StatusCode::kUnimplemented, path.string() + ": output feature \"" + f.key + "\" is not ACT's \"action\"");
     }
   }
-  if (!have_action) fail(ErrorCode::kInvalidArgument, path.string() + ": output_features has no \"action\"");
+  if (!have_action) fail(StatusCode::kInvalidArgument, path.string() + ": output_features has no \"action\"");
   return pc;
 }
 
@@ -280,15 +280,15 @@ std::optional<std::pair<std::vector<float>, std::vector<float>>> read_stats(cons
   auto a = lookup(key, a_name);
   auto b = lookup(key, b_name);
   if (!a && !b) return std::nullopt;
-  if (!a || !b) fail(ErrorCode::kNotFound, where + ": feature \"" + key + "\" has \"" + (a ? a_name : b_name) +
+  if (!a || !b) fail(StatusCode::kNotFound, where + ": feature \"" + key + "\" has \"" + (a ? a_name : b_name) +
                      "\" but not \"" + (a ? b_name : a_name) + "\"");
   if (a->size() != expected || b->size() != expected) {
-    fail(ErrorCode::kInvalidArgument, where + ": statistics of \"" + key + "\" have " + std::to_string(a->size()) +
+    fail(StatusCode::kInvalidArgument, where + ": statistics of \"" + key + "\" have " + std::to_string(a->size()) +
          " values, expected " + std::to_string(expected));
   }
   for (size_t i = 0; i < expected; ++i) {
     if (!std::isfinite((*a)[i]) || !std::isfinite((*b)[i])) {
-      fail(ErrorCode::kInvalidArgument, where + ": statistics of \"" + key +
+      fail(StatusCode::kInvalidArgument, where + ": statistics of \"" + key +
            "\" are not finite (LeRobot leaves them at infinity when they were never set)");
     }
   }
@@ -345,24 +345,24 @@ class Weights {
   // Fetches a tensor as float, checking the shape; records it as used.
   std::vector<float> take(const std::string& name, const std::vector<int64_t>& shape) {
     const SafetensorsTensor* t = file_.find(name);
-    if (!t) fail(ErrorCode::kNotFound, file_.origin() + ": missing tensor \"" + name + "\" (expected " + shape_string(shape) + ")");
+    if (!t) fail(StatusCode::kNotFound, file_.origin() + ": missing tensor \"" + name + "\" (expected " + shape_string(shape) + ")");
     if (t->shape != shape) {
-      fail(ErrorCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
+      fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" has shape " + shape_string(t->shape) +
            ", the config implies " + shape_string(shape));
     }
     if (t->dtype != DType::kF32 && t->dtype != DType::kF16 && t->dtype != DType::kBF16) {
-      fail(ErrorCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" has dtype " + dtype_name(t->dtype) +
-           "; expected F32, F16 or BF16");
+      fail(StatusCode::kInvalidArgument,
+           file_.origin() + ": tensor \"" + name + "\" has dtype " + dtype_name(t->dtype) + "; expected F32, F16 or BF16");
     }
     used_.insert(name);
     std::vector<float> v = t->to_f32();
     for (float x : v) {
-      if (!std::isfinite(x)) fail(ErrorCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" contains NaN or Inf");
+      if (!std::isfinite(x)) fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" contains NaN or Inf");
       // A finite 3e38 once converted without a word and made every action infinite.
       if (std::fabs(x) > kMaxWeightMagnitude) {
         char value[32];
         std::snprintf(value, sizeof value, "%g", x);
-        fail(ErrorCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" holds " + value +
+        fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" holds " + value +
              ": no trained network weight is that large (the limit is 1e6); is the checkpoint damaged?");
       }
     }
@@ -517,7 +517,7 @@ class Importer {
       std::string list;
       for (size_t i = 0; i < unexpected.size() && i < 8; ++i) list += (i ? ", " : "") + ("\"" + unexpected[i] + "\"");
       if (unexpected.size() > 8) list += ", ... (" + std::to_string(unexpected.size()) + " in all)";
-      fail(ErrorCode::kInvalidArgument, file.origin() + ": tensors the config does not account for: " + list +
+      fail(StatusCode::kInvalidArgument, file.origin() + ": tensors the config does not account for: " + list +
            " (does config.json belong to these weights?)");
     }
     out_.config = m;
@@ -542,7 +542,7 @@ class Importer {
     if (legacy) {
       for (LeRobotMode mode : [&] { std::vector<LeRobotMode> v; for (auto& [t, md] : pc.mapping) v.push_back(md); return v; }()) {
         if (mode == LeRobotMode::kQuantiles || mode == LeRobotMode::kQuantile10) {
-          fail(ErrorCode::kInvalidArgument, "legacy checkpoint uses QUANTILES normalisation, which only the current layout has");
+          fail(StatusCode::kInvalidArgument, "legacy checkpoint uses QUANTILES normalisation, which only the current layout has");
         }
       }
       in_lookup = [&](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
@@ -585,12 +585,12 @@ class Importer {
           for (const auto& [type, mode] : *parsed.norm_map) modes[type] = parse_mode(mode, path.string());
         }
         const fs::path state_path = dir_ / parsed.state_file;
-        if (!fs::exists(state_path)) fail(ErrorCode::kNotFound, "missing normalisation statistics " + state_path.string());
+        if (!fs::exists(state_path)) fail(StatusCode::kNotFound, "missing normalisation statistics " + state_path.string());
         state.emplace(SafetensorsFile::open(state_path.string()));
         where = state_path.string();
       };
       if (!fs::exists(dir_ / "policy_postprocessor.json")) {
-        fail(ErrorCode::kNotFound, (dir_ / "policy_postprocessor.json").string() + " is missing (current-layout checkpoint)");
+        fail(StatusCode::kNotFound, (dir_ / "policy_postprocessor.json").string() + " is missing (current-layout checkpoint)");
       }
       step("policy_preprocessor.json", "normalizer_processor", eps_in, map_in, in_file, in_where);
       step("policy_postprocessor.json", "unnormalizer_processor", eps_out, map_out, out_file, out_where);
@@ -620,7 +620,7 @@ class Importer {
       const size_t n = static_cast<size_t>(f.type == "VISUAL" ? 3 : f.shape[0]);
       auto stats = read_stats(in_lookup, f.key, mode, n, in_where);
       if (!stats) {
-        if (legacy || external_stats_) fail(ErrorCode::kNotFound, in_where + ": no normalisation statistics for \"" + f.key + "\"");
+        if (legacy || external_stats_) fail(StatusCode::kNotFound, in_where + ": no normalisation statistics for \"" + f.key + "\"");
         // Current layout: LeRobot passes a feature without statistics through unchanged.
         out_.notes.push_back("no statistics for \"" + f.key + "\" in " + in_where + ": it is not normalised (as LeRobot does)");
         m.input_norm.emplace_back(f.key, NormMode::kIdentity);
@@ -637,7 +637,7 @@ class Importer {
     if (action_mode != LeRobotMode::kIdentity) {
       action_stats = read_stats(out_lookup, "action", action_mode, static_cast<size_t>(m.action_dim), out_where);
       if (!action_stats) {
-        if (legacy || external_stats_) fail(ErrorCode::kNotFound, out_where + ": no un-normalisation statistics for \"action\"");
+        if (legacy || external_stats_) fail(StatusCode::kNotFound, out_where + ": no un-normalisation statistics for \"action\"");
         out_.notes.push_back("no statistics for \"action\" in " + out_where + ": actions are not un-normalised (as LeRobot does)");
       }
     }
@@ -672,7 +672,7 @@ class Importer {
     Mat folded(weight.size());
     Mat bias(c.out_c);
     for (int o = 0; o < c.out_c; ++o) {
-      if (var[o] < 0.0f) fail(ErrorCode::kInvalidArgument, "model.backbone." + c.bn + ".running_var is negative");
+      if (var[o] < 0.0f) fail(StatusCode::kInvalidArgument, "model.backbone." + c.bn + ".running_var is negative");
       const double scale = gamma[o] / std::sqrt(static_cast<double>(var[o]) + kBatchNormEps);
       bias[o] = static_cast<float>(beta[o] - mean[o] * scale);
       // [O, I, KH, KW] -> [O, KH, KW, I] so a patch of an NHWC image is one contiguous row.
@@ -836,7 +836,7 @@ class Importer {
 ProcessorStep parse_processor_step(const nlohmann::ordered_json& pipeline, const std::string& registry_name,
                                    const std::string& where) {
   if (!pipeline.is_object() || !pipeline.contains("steps") || !pipeline["steps"].is_array()) {
-    fail(ErrorCode::kDataLoss, where + ": expected {\"steps\": [...]}");
+    fail(StatusCode::kDataLoss, where + ": expected {\"steps\": [...]}");
   }
   for (const auto& s : pipeline["steps"]) {
     if (!s.is_object() || !s.contains("registry_name") || s["registry_name"] != registry_name) continue;
@@ -847,42 +847,42 @@ ProcessorStep parse_processor_step(const nlohmann::ordered_json& pipeline, const
       // Read as double: a value outside float's range must be an error, not an overflowing cast.
       const double value = eps.is_number() ? eps.get<double>() : -1.0;
       if (!(value >= 0.0 && value <= std::numeric_limits<float>::max())) {
-        fail(ErrorCode::kDataLoss, where + ": eps must be a finite non-negative number");
+        fail(StatusCode::kDataLoss, where + ": eps must be a finite non-negative number");
       }
       step.eps = static_cast<float>(value);
     }
     if (config.is_object() && config.contains("norm_map") && config["norm_map"].is_object()) {
       step.norm_map.emplace();
       for (const auto& [type, mode] : config["norm_map"].items()) {
-        if (!mode.is_string()) fail(ErrorCode::kDataLoss, where + ": norm_map values must be strings");
+        if (!mode.is_string()) fail(StatusCode::kDataLoss, where + ": norm_map values must be strings");
         (*step.norm_map)[type] = mode.get<std::string>();
       }
     }
     if (!s.contains("state_file") || !s["state_file"].is_string()) {
-      fail(ErrorCode::kDataLoss, where + ": step " + registry_name + " has no state_file");
+      fail(StatusCode::kDataLoss, where + ": step " + registry_name + " has no state_file");
     }
     step.state_file = s["state_file"].get<std::string>();
     if (step.state_file.empty() || step.state_file.find('/') != std::string::npos ||
         step.state_file.find("..") != std::string::npos) {
-      fail(ErrorCode::kDataLoss, where + ": state_file must be a file name in the checkpoint folder");
+      fail(StatusCode::kDataLoss, where + ": state_file must be a file name in the checkpoint folder");
     }
     return step;
   }
-  fail(ErrorCode::kNotFound, where + ": no \"" + registry_name + "\" step; cannot tell how to normalise");
+  fail(StatusCode::kNotFound, where + ": no \"" + registry_name + "\" step; cannot tell how to normalise");
 }
 
 ImportedModel import_lerobot_checkpoint(const std::string& checkpoint_dir) {
   const fs::path dir(checkpoint_dir);
-  if (!fs::is_directory(dir)) fail(ErrorCode::kNotFound, "checkpoint folder not found: " + checkpoint_dir);
+  if (!fs::is_directory(dir)) fail(StatusCode::kNotFound, "checkpoint folder not found: " + checkpoint_dir);
   const fs::path config_path = dir / "config.json";
   if (!fs::exists(config_path)) {
-    fail(ErrorCode::kNotFound, "not a LeRobot checkpoint folder: " + config_path.string() + " is missing");
+    fail(StatusCode::kNotFound, "not a LeRobot checkpoint folder: " + config_path.string() + " is missing");
   }
   const OrderedJson config = detail::read_json_file(config_path.string());
   std::optional<SafetensorsFile> weights;
   const auto open_weights = [&]() -> const TensorSet& {
     const fs::path path = dir / "model.safetensors";
-    if (!fs::exists(path)) fail(ErrorCode::kNotFound, "checkpoint has no weights: " + path.string() + " is missing");
+    if (!fs::exists(path)) fail(StatusCode::kNotFound, "checkpoint has no weights: " + path.string() + " is missing");
     return weights.emplace(SafetensorsFile::open(path.string()));
   };
   const std::string layout = fs::exists(dir / "policy_preprocessor.json") ? "current" : "legacy";

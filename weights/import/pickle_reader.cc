@@ -4,7 +4,7 @@
 #include <cstring>
 #include <unordered_map>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act {
 
@@ -102,10 +102,10 @@ class Parser {
 
  private:
   [[noreturn]] void error(const std::string& what) const {
-    fail(ErrorCode::kDataLoss, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what);
+    fail(StatusCode::kDataLoss, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what);
   }
   [[noreturn]] void unsupported(const std::string& what) const {
-    fail(ErrorCode::kUnimplemented, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what +
+    fail(StatusCode::kUnimplemented, origin_ + ": pickle byte " + std::to_string(op_pos_) + ": " + what +
          " (a PyTorch state dict only needs dicts, lists, tuples, numbers, strings and tensors; this reader "
          "never runs code from a checkpoint)");
   }

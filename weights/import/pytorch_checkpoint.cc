@@ -6,7 +6,7 @@
 #include <map>
 #include <optional>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_mapping.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/pickle_reader.h"
@@ -44,11 +44,11 @@ uint64_t storage_bytes(const PickleTensor& t) {
 // Copies a (possibly strided) view of a storage into a contiguous buffer, checking every bound.
 std::vector<uint8_t> materialize(const std::string& where, const PickleTensor& t, std::span<const uint8_t> storage) {
   if (!t.storage_type.dtype) {
-    fail(ErrorCode::kUnimplemented, where + ": torch." + t.storage_type.name + " tensors are not supported");
+    fail(StatusCode::kUnimplemented, where + ": torch." + t.storage_type.name + " tensors are not supported");
   }
   const uint64_t esize = t.storage_type.element_size;
   if (storage.size() / esize != static_cast<uint64_t>(t.storage_elements) || storage.size() % esize != 0) {
-    fail(ErrorCode::kDataLoss, where + ": storage '" + t.storage_key + "' has " + std::to_string(storage.size()) +
+    fail(StatusCode::kDataLoss, where + ": storage '" + t.storage_key + "' has " + std::to_string(storage.size()) +
          " bytes, the pickle says " + std::to_string(t.storage_elements) + " elements of " + std::to_string(esize) + " bytes");
   }
   uint64_t elements = 1;
@@ -65,13 +65,13 @@ std::vector<uint8_t> materialize(const std::string& where, const PickleTensor& t
       }
     }
     if (last >= static_cast<uint64_t>(t.storage_elements)) {
-      fail(ErrorCode::kDataLoss, where + ": view (offset " + std::to_string(t.offset) + ", size " + shape_string(t.size) +
+      fail(StatusCode::kDataLoss, where + ": view (offset " + std::to_string(t.offset) + ", size " + shape_string(t.size) +
            ", stride " + shape_string(t.stride) + ") reaches outside its storage of " + std::to_string(t.storage_elements) + " elements");
     }
     // More elements than the storage holds only happens for expanded (stride 0) views; refusing them
     // keeps the memory used bounded by the file size.
     if (elements > static_cast<uint64_t>(t.storage_elements)) {
-      fail(ErrorCode::kUnimplemented, where + ": expanded views (more elements than their storage) are not supported");
+      fail(StatusCode::kUnimplemented, where + ": expanded views (more elements than their storage) are not supported");
     }
   }
   std::vector<uint8_t> out(static_cast<size_t>(elements * esize));
@@ -109,7 +109,7 @@ const PickleValue& select_state_dict(const PickleValue& root, const std::string&
     return root;
   }
   if (root.kind != Kind::kDict) {
-    fail(ErrorCode::kInvalidArgument, path + ": the saved object is a " + root.describe() + ", not a state dict");
+    fail(StatusCode::kInvalidArgument, path + ": the saved object is a " + root.describe() + ", not a state dict");
   }
   std::vector<std::string> candidates, entries;
   for (const auto& [k, v] : root.entries) {
@@ -126,8 +126,8 @@ const PickleValue& select_state_dict(const PickleValue& root, const std::string&
   std::string chosen = key;
   if (!key.empty()) {
     const PickleValue* v = root.find(key);
-    if (!v) fail(ErrorCode::kNotFound, path + ": no entry '" + key + "' (entries: " + list(entries) + ")");
-    if (!is_tensor_dict(*v)) fail(ErrorCode::kInvalidArgument, path + ": entry '" + key + "' is a " + v->describe() + ", not a dict of tensors");
+    if (!v) fail(StatusCode::kNotFound, path + ": no entry '" + key + "' (entries: " + list(entries) + ")");
+    if (!is_tensor_dict(*v)) fail(StatusCode::kInvalidArgument, path + ": entry '" + key + "' is a " + v->describe() + ", not a dict of tensors");
   } else if (candidates.size() == 1) {
     chosen = candidates[0];
   } else {
@@ -139,9 +139,9 @@ const PickleValue& select_state_dict(const PickleValue& root, const std::string&
     }
     if (chosen.empty()) {
       if (candidates.empty()) {
-        fail(ErrorCode::kInvalidArgument, path + ": no state dict (a dict of tensors) in the saved dict; its entries: " + list(entries));
+        fail(StatusCode::kInvalidArgument, path + ": no state dict (a dict of tensors) in the saved dict; its entries: " + list(entries));
       }
-      fail(ErrorCode::kInvalidArgument, path + ": several dicts of tensors (" + list(candidates) +
+      fail(StatusCode::kInvalidArgument, path + ": several dicts of tensors (" + list(candidates) +
            "); pick one with --state-dict-key");
     }
   }
@@ -158,7 +158,7 @@ void collect_storage_types(const PickleValue& v, std::map<std::string, PickleSto
   if (v.kind == Kind::kTensor) {
     const auto [it, inserted] = types.emplace(v.tensor->storage_key, v.tensor->storage_type);
     if (!inserted && it->second.name != v.tensor->storage_type.name) {
-      fail(ErrorCode::kDataLoss, path + ": storage '" + v.tensor->storage_key + "' is both " + it->second.name + " and " +
+      fail(StatusCode::kDataLoss, path + ": storage '" + v.tensor->storage_key + "' is both " + it->second.name + " and " +
            v.tensor->storage_type.name);
     }
   }
@@ -173,17 +173,17 @@ PickleRef read_zip(const std::string& path, std::span<const uint8_t> file, std::
   for (const auto& e : zip.entries()) {
     const size_t slash = e.name.find('/');
     if (slash != std::string::npos && e.name.compare(slash, std::string::npos, "/data.pkl") == 0) {
-      if (pkl) fail(ErrorCode::kDataLoss, path + ": two data.pkl entries ('" + pkl->name + "', '" + e.name + "')");
+      if (pkl) fail(StatusCode::kDataLoss, path + ": two data.pkl entries ('" + pkl->name + "', '" + e.name + "')");
       pkl = &e;
     }
   }
-  if (!pkl) fail(ErrorCode::kDataLoss, path + ": a zip archive without <name>/data.pkl is not a PyTorch checkpoint");
+  if (!pkl) fail(StatusCode::kDataLoss, path + ": a zip archive without <name>/data.pkl is not a PyTorch checkpoint");
   prefix = pkl->name.substr(0, pkl->name.size() - std::strlen("data.pkl"));
   if (const ZipEntry* order = zip.find(prefix + "byteorder")) {
     std::vector<uint8_t> scratch;
     const auto bytes = zip.read(*order, scratch);
     if (std::string(bytes.begin(), bytes.end()) != "little") {
-      fail(ErrorCode::kUnimplemented, path + ": saved on a big-endian machine (byteorder '" +
+      fail(StatusCode::kUnimplemented, path + ": saved on a big-endian machine (byteorder '" +
            std::string(bytes.begin(), bytes.begin() + static_cast<ptrdiff_t>(std::min<size_t>(bytes.size(), 16))) + "')");
     }
   }
@@ -194,7 +194,7 @@ PickleRef read_zip(const std::string& path, std::span<const uint8_t> file, std::
 
 PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::string& state_dict_key) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) fail(ErrorCode::kNotFound, "PyTorch checkpoint not found: " + path);
+  if (!std::filesystem::is_regular_file(path, ec)) fail(StatusCode::kNotFound, "PyTorch checkpoint not found: " + path);
   const FileMapping file = FileMapping::open(path);
   const std::span<const uint8_t> bytes(file.data(), file.size());
   PyTorchCheckpoint out;
@@ -219,42 +219,44 @@ PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::st
     };
     const PickleRef magic = next("magic number");
     if (magic->kind != Kind::kBigInt || magic->text != std::string(std::begin(kLegacyMagic), std::end(kLegacyMagic))) {
-      fail(ErrorCode::kDataLoss, path + ": not a PyTorch checkpoint (wrong magic number)");
+      fail(StatusCode::kDataLoss, path + ": not a PyTorch checkpoint (wrong magic number)");
     }
     const PickleRef version = next("protocol version");
     if (version->kind != Kind::kInt || version->integer != kLegacyProtocolVersion) {
-      fail(ErrorCode::kUnimplemented, path + ": legacy format version " + version->describe() + " (only 1001 is supported)");
+      fail(StatusCode::kUnimplemented, path + ": legacy format version " + version->describe() + " (only 1001 is supported)");
     }
     const PickleRef sys_info = next("sys_info");
     const PickleValue* little = sys_info->find("little_endian");
     if (!little || little->kind != Kind::kBool || !little->boolean) {
-      fail(ErrorCode::kUnimplemented, path + ": saved on a big-endian machine, or sys_info is missing little_endian");
+      fail(StatusCode::kUnimplemented, path + ": saved on a big-endian machine, or sys_info is missing little_endian");
     }
     root = next("main");
     const PickleRef keys = next("storage keys");
-    if (keys->kind != Kind::kList) fail(ErrorCode::kDataLoss, path + ": the storage key list is a " + keys->describe());
+    if (keys->kind != Kind::kList) {
+      fail(StatusCode::kDataLoss, path + ": the storage key list is a " + keys->describe());
+    }
     std::map<std::string, PickleStorageType> types;
     collect_storage_types(*root, types, path);
     for (const auto& key : keys->items) {
-      if (!key->is_string()) fail(ErrorCode::kDataLoss, path + ": storage key " + key->describe() + " is not a str");
+      if (!key->is_string()) fail(StatusCode::kDataLoss, path + ": storage key " + key->describe() + " is not a str");
       const auto type = types.find(key->text);
-      if (type == types.end()) fail(ErrorCode::kDataLoss, path + ": storage '" + key->text + "' is used by no tensor");
-      if (bytes.size() - pos < 8) fail(ErrorCode::kDataLoss, path + ": truncated before storage '" + key->text + "'");
+      if (type == types.end()) fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' is used by no tensor");
+      if (bytes.size() - pos < 8) fail(StatusCode::kDataLoss, path + ": truncated before storage '" + key->text + "'");
       uint64_t numel = 0;
       for (int i = 7; i >= 0; --i) numel = (numel << 8) | bytes[pos + static_cast<size_t>(i)];
       pos += 8;
       uint64_t nbytes = 0;
       if (!detail::checked_mul(numel, type->second.element_size, &nbytes) || nbytes > bytes.size() - pos) {
-        fail(ErrorCode::kDataLoss, path + ": storage '" + key->text + "' (" + std::to_string(numel) + " elements) runs past the end of the file");
+        fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' (" + std::to_string(numel) + " elements) runs past the end of the file");
       }
       if (!storages.emplace(key->text, bytes.subspan(pos, static_cast<size_t>(nbytes))).second) {
-        fail(ErrorCode::kDataLoss, path + ": storage '" + key->text + "' is listed twice");
+        fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' is listed twice");
       }
       pos += static_cast<size_t>(nbytes);
     }
-    if (pos != bytes.size()) fail(ErrorCode::kDataLoss, path + ": " + std::to_string(bytes.size() - pos) + " unexpected bytes at the end");
+    if (pos != bytes.size()) fail(StatusCode::kDataLoss, path + ": " + std::to_string(bytes.size() - pos) + " unexpected bytes at the end");
   } else {
-    fail(ErrorCode::kInvalidArgument, path + ": not a PyTorch checkpoint (neither torch.save's zip format nor its legacy format)");
+    fail(StatusCode::kInvalidArgument, path + ": not a PyTorch checkpoint (neither torch.save's zip format nor its legacy format)");
   }
 
   const PickleValue& state_dict = select_state_dict(*root, path, state_dict_key, out);
@@ -264,14 +266,14 @@ PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::st
     const std::string where = path + ": tensor '" + k->text + "'";
     auto storage = storages.find(t.storage_key);
     if (storage == storages.end()) {
-      if (out.format != "zip") fail(ErrorCode::kDataLoss, where + ": storage '" + t.storage_key + "' is not in the file");
+      if (out.format != "zip") fail(StatusCode::kDataLoss, where + ": storage '" + t.storage_key + "' is not in the file");
       // Read (and CRC-checked) once, however many tensors view it.
       const ZipEntry* entry = zip.find(prefix + "data/" + t.storage_key);
-      if (!entry) fail(ErrorCode::kDataLoss, where + ": storage " + prefix + "data/" + t.storage_key + " is missing");
+      if (!entry) fail(StatusCode::kDataLoss, where + ": storage " + prefix + "data/" + t.storage_key + " is missing");
       // The size the pickle implies is known before inflating: a deflated entry that declares more is
       // refused here, not after inflating it (a few kB can declare gigabytes).
       if (t.storage_type.dtype && entry->size != storage_bytes(t)) {
-        fail(ErrorCode::kDataLoss, where + ": storage " + entry->name + " declares " + std::to_string(entry->size) +
+        fail(StatusCode::kDataLoss, where + ": storage " + entry->name + " declares " + std::to_string(entry->size) +
              " bytes, the pickle says " + std::to_string(t.storage_elements) + " elements of " +
              std::to_string(t.storage_type.element_size) + " bytes");
       }

@@ -6,7 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/tensor_header.h"
 
@@ -74,14 +74,14 @@ SafetensorsTensor parse_entry(const std::string& path, const std::string& name, 
 
 std::vector<float> SafetensorsTensor::to_f32() const {
   if (dtype != DType::kF32 && dtype != DType::kF16 && dtype != DType::kBF16) {
-    fail(ErrorCode::kInvalidArgument,
+    fail(StatusCode::kInvalidArgument,
          "tensor '" + name + "' has dtype " + dtype_name(dtype) + ", cannot convert to F32");
   }
   const uint64_t count = elements();
   // Guards hand-built tensors; tensors from open() always pass.
   if (count > nbytes / dtype_size(dtype) || count * dtype_size(dtype) != nbytes) {
-    fail(ErrorCode::kInvalidArgument, "tensor '" + name + "': shape " + shape_string(shape) + " does not match " +
-                                           std::to_string(nbytes) + " bytes");
+    fail(StatusCode::kInvalidArgument, "tensor '" + name + "': shape " + shape_string(shape) + " does not match " +
+                                            std::to_string(nbytes) + " bytes");
   }
   std::vector<float> out(static_cast<size_t>(count));
   convert_to_f32(dtype, data, out.size(), out.data());
@@ -160,7 +160,7 @@ const SafetensorsTensor* TensorSet::find(const std::string& name) const {
 
 const SafetensorsTensor& TensorSet::get(const std::string& name) const {
   const SafetensorsTensor* t = find(name);
-  if (t == nullptr) fail(ErrorCode::kNotFound, "tensor '" + name + "' not found in '" + origin_ + "'");
+  if (t == nullptr) fail(StatusCode::kNotFound, "tensor '" + name + "' not found in '" + origin_ + "'");
   return *t;
 }
 
@@ -172,9 +172,9 @@ std::vector<std::string> TensorSet::names() const {
 }
 
 void OwnedTensorSet::add_f32(const std::string& name, std::vector<int64_t> shape, std::vector<float> values) {
-  if (index_.count(name)) fail(ErrorCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
+  if (index_.count(name)) fail(StatusCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
   if (shape_elements(shape) != values.size()) {
-    fail(ErrorCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(values.size()) +
+    fail(StatusCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(values.size()) +
          " values for shape " + shape_string(shape));
   }
   std::vector<float>& stored = storage_[name] = std::move(values);
@@ -188,10 +188,10 @@ void OwnedTensorSet::add_f32(const std::string& name, std::vector<int64_t> shape
 }
 
 void OwnedTensorSet::add(const std::string& name, DType dtype, std::vector<int64_t> shape, std::vector<uint8_t> bytes) {
-  if (index_.count(name)) fail(ErrorCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
+  if (index_.count(name)) fail(StatusCode::kInvalidArgument, origin_ + ": duplicate tensor '" + name + "'");
   uint64_t expected = 0;
   if (!detail::checked_mul(shape_elements(shape), dtype_size(dtype), &expected) || expected != bytes.size()) {
-    fail(ErrorCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(bytes.size()) +
+    fail(StatusCode::kInvalidArgument, origin_ + ": tensor '" + name + "' has " + std::to_string(bytes.size()) +
          " bytes for " + dtype_name(dtype) + " shape " + shape_string(shape));
   }
   std::vector<uint8_t>& stored = byte_storage_[name] = std::move(bytes);
@@ -212,7 +212,7 @@ void OwnedTensorSet::rename(const std::function<std::string(const std::string&)>
   for (auto& [old_name, t] : index_) {
     std::string name = new_name(old_name);
     if (index.count(name)) {
-      fail(ErrorCode::kInvalidArgument, origin_ + ": renaming '" + old_name + "' to '" + name + "' collides with another tensor");
+      fail(StatusCode::kInvalidArgument, origin_ + ": renaming '" + old_name + "' to '" + name + "' collides with another tensor");
     }
     if (auto it = storage_.find(old_name); it != storage_.end()) storage[name] = std::move(it->second);
     if (auto it = byte_storage_.find(old_name); it != byte_storage_.end()) byte_storage[name] = std::move(it->second);
@@ -237,22 +237,22 @@ void write_safetensors(const std::string& path, const std::vector<SafetensorsWri
   uint64_t offset = 0;
   for (const SafetensorsWriteTensor& t : tensors) {
     const std::string where = "write_safetensors '" + path + "': tensor '" + t.name + "': ";
-    if (t.name.empty()) fail(ErrorCode::kInvalidArgument, where + "empty name");
-    if (t.name == "__metadata__") fail(ErrorCode::kInvalidArgument, where + "name is reserved");
-    if (!seen.insert(t.name).second) fail(ErrorCode::kInvalidArgument, where + "duplicate name");
+    if (t.name.empty()) fail(StatusCode::kInvalidArgument, where + "empty name");
+    if (t.name == "__metadata__") fail(StatusCode::kInvalidArgument, where + "name is reserved");
+    if (!seen.insert(t.name).second) fail(StatusCode::kInvalidArgument, where + "duplicate name");
     uint64_t elements = 0;
     try {
       elements = shape_elements(t.shape);
     } catch (const Error& e) {
-      fail(ErrorCode::kInvalidArgument, where + e.what());
+      fail(StatusCode::kInvalidArgument, where + e.what());
     }
     uint64_t expected = 0;
     if (!detail::checked_mul(elements, dtype_size(t.dtype), &expected) || expected != t.nbytes) {
-      fail(ErrorCode::kInvalidArgument, where + "shape " + shape_string(t.shape) + " with dtype " +
-                                             dtype_name(t.dtype) + " does not match " + std::to_string(t.nbytes) +
+      fail(StatusCode::kInvalidArgument, where + "shape " + shape_string(t.shape) + " with dtype " +
+                                              dtype_name(t.dtype) + " does not match " + std::to_string(t.nbytes) +
                                              " bytes");
     }
-    if (t.data == nullptr && t.nbytes != 0) fail(ErrorCode::kInvalidArgument, where + "data is null");
+    if (t.data == nullptr && t.nbytes != 0) fail(StatusCode::kInvalidArgument, where + "data is null");
     nlohmann::ordered_json entry = nlohmann::ordered_json::object();
     entry["dtype"] = dtype_name(t.dtype);
     entry["shape"] = t.shape;
@@ -265,8 +265,8 @@ void write_safetensors(const std::string& path, const std::vector<SafetensorsWri
   // Pad with spaces so the data area starts 8-byte aligned (JSON allows trailing whitespace).
   text.append((8 - text.size() % 8) % 8, ' ');
   if (text.size() > kMaxHeaderSize) {
-    fail(ErrorCode::kInvalidArgument, "write_safetensors '" + path + "': header of " + std::to_string(text.size()) +
-                                           " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
+    fail(StatusCode::kInvalidArgument, "write_safetensors '" + path + "': header of " + std::to_string(text.size()) +
+                                            " bytes exceeds the limit of " + std::to_string(kMaxHeaderSize));
   }
 
   detail::AtomicFileWriter out(path);

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <random>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 
 namespace act {
 
@@ -58,10 +58,10 @@ nlohmann::ordered_json synthetic_config(const std::string& name) {
     state = action = 2;
   } else if (parse_size(name, &width, &height)) {
     if (width < 32 || height < 32 || width > 4096 || height > 4096) {
-      fail(ErrorCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
+      fail(StatusCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
     }
   } else {
-    fail(ErrorCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or WxH such as 640x480)");
+    fail(StatusCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or WxH such as 640x480)");
   }
   nlohmann::ordered_json c;
   c["type"] = "act";

@@ -4,7 +4,7 @@
 
 #include <zlib.h>
 
-#include "weights/blob/error.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 
 namespace act {
@@ -40,7 +40,7 @@ ZipArchive ZipArchive::open(std::span<const uint8_t> bytes, std::string origin) 
   ZipArchive zip;
   zip.bytes_ = bytes;
   zip.origin_ = std::move(origin);
-  const auto corrupt = [&](const std::string& what) { fail(ErrorCode::kDataLoss, zip.origin_ + ": zip: " + what); };
+  const auto corrupt = [&](const std::string& what) { fail(StatusCode::kDataLoss, zip.origin_ + ": zip: " + what); };
   const size_t n = bytes.size();
   const uint8_t* d = bytes.data();
   // [begin, begin + size) lies inside the archive.
@@ -125,7 +125,7 @@ const ZipEntry* ZipArchive::find(const std::string& name) const {
 
 std::span<const uint8_t> ZipArchive::read(const ZipEntry& e, std::vector<uint8_t>& scratch) const {
   const auto corrupt = [&](const std::string& what) {
-    fail(ErrorCode::kDataLoss, origin_ + ": zip entry '" + e.name + "': " + what);
+    fail(StatusCode::kDataLoss, origin_ + ": zip entry '" + e.name + "': " + what);
   };
   const size_t n = bytes_.size();
   const uint8_t* d = bytes_.data();

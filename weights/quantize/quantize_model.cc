@@ -4,9 +4,9 @@
 #include <cmath>
 #include <set>
 
+#include "actengine/status.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_names.h"
-#include "weights/blob/error.h"
 
 namespace act {
 
@@ -50,7 +50,7 @@ ActbWriter int8_blob(const ImportedModel& model, const QuantConfig& quant) {
   const std::set<std::string> quantize(layers.begin(), layers.end());
   for (const auto& name : quant.float_layers) {
     if (!quantize.count(name)) {
-      fail(ErrorCode::kInvalidArgument, "\"" + name + "\" is not a quantizable layer of this model (the layers are "
+      fail(StatusCode::kInvalidArgument, "\"" + name + "\" is not a quantizable layer of this model (the layers are "
            "named by their weights, as the report's per-layer SQNR lists them, e.g. \"" + layers.front() + "\")");
     }
   }

@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <deque>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "actengine/engine.h"
@@ -41,6 +42,11 @@ class ChunkScheduler {
   /// ensembling as in `info` (an Engine's model_info()). kInvalidArgument when the sizes make no
   /// sense (action_dim or chunk_size < 1, or a queue with n_action_steps outside [1, chunk_size]).
   static StatusOr<ChunkScheduler> create(const ModelInfo& info);
+
+  /// Why `info`'s deployment choices (n_action_steps, temporal ensembling and its coefficient) do
+  /// not fit its chunk_size under LeRobot's ACTConfig rules (1 <= n_action_steps <= chunk_size,
+  /// ensembling needs n_action_steps == 1, a coefficient whose weights stay finite), or "" when they do.
+  static std::string deployment_problem(const ModelInfo& info);
 
   /// Adds a chunk (chunk_size x action_dim, row-major) predicted from an observation captured at
   /// `observation_tick`. Queue: it replaces the previous chunk. Ensembling: it joins the chunks that

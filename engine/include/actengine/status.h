@@ -1,8 +1,15 @@
-// actengine public API: Status and StatusOr. The public API never throws; every call that can fail
-// returns one of these, with a message that names what is wrong.
+// actengine's one error vocabulary: StatusCode, Status and StatusOr, which the public API returns
+// (it never throws), and act::Error, the exception the code below it throws (it holds a Status).
+//
+// This header depends on nothing of the project's. It is the one public header every layer may
+// include: the kernels, weights/ and graph/ see it through an include root that holds only this
+// file (cmake/ActLayer.cmake), and the layer check (cmake/check_layer_includes.py) refuses any other
+// actengine/ header below the engine. The API boundary (engine/src) catches Error and returns its
+// status(); kernels never throw.
 #pragma once
 
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 
@@ -33,6 +40,11 @@ class [[nodiscard]] Status {
   const std::string& message() const { return message_; }
   /// "invalid argument: <message>", or "ok".
   std::string to_string() const;
+  /// The same code with "<context>: <message>" (an ok status, or an empty context, stays as it is).
+  Status with_context(const std::string& context) const {
+    if (ok() || context.empty()) return *this;
+    return Status(code_, context + ": " + message_);
+  }
 
  private:
   StatusCode code_ = StatusCode::kOk;
@@ -61,5 +73,27 @@ class [[nodiscard]] StatusOr {
   Status status_;
   std::optional<T> value_;
 };
+
+/// The exception form of a failed Status, thrown below the public API (and by the apps, to unwind to
+/// main()'s one catch). what() is the status's message.
+class Error : public std::runtime_error {
+ public:
+  Error(StatusCode code, const std::string& message) : Error(Status(code, message)) {}
+  explicit Error(Status status) : Error(failed(std::move(status)), 0) {}
+  StatusCode code() const { return status_.code(); }
+  const Status& status() const { return status_; }
+
+ private:
+  Error(Status status, int) : std::runtime_error(status.message()), status_(std::move(status)) {}
+  static Status failed(Status status) {
+    return status.ok() ? Status(StatusCode::kInternal, "act::Error built from an ok Status") : status;
+  }
+  Status status_;
+};
+
+[[noreturn]] inline void fail(StatusCode code, const std::string& message) { throw Error(code, message); }
+inline void check(bool condition, StatusCode code, const std::string& message) {
+  if (!condition) fail(code, message);
+}
 
 }  // namespace act

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "actengine/status.h"
 #include "weights/blob/blob_names.h"
-#include "weights/blob/error.h"
 
 namespace act {
 
@@ -17,7 +17,7 @@ std::vector<float> StateSampler::sample(const std::string& key, int dim) {
   std::uniform_real_distribution<float> uniform(-1.0f, 1.0f);
   const auto statistic = [&](const std::string& name) {
     const NamedTensor* t = model_.find(name);
-    if (t == nullptr || t->values.size() != v.size()) fail(ErrorCode::kInternal, "no statistics \"" + name + "\" to sample states from");
+    if (t == nullptr || t->values.size() != v.size()) fail(StatusCode::kInternal, "no statistics \"" + name + "\" to sample states from");
     return t->values.data();
   };
   const float* sub = mode == NormMode::kIdentity ? nullptr : statistic(bn::norm_sub(key));
@@ -46,21 +46,21 @@ void complete_calibration_frames(CalibrationSet& set, StateSampler& states) {
     CalibrationFrame& f = set.frames[i];
     const std::string where = "calibration frame " + std::to_string(i) + ": ";
     if (f.images.size() != config.cameras.size()) {
-      fail(ErrorCode::kInvalidArgument, where + "has " + std::to_string(f.images.size()) + " images, the model has " +
+      fail(StatusCode::kInvalidArgument, where + "has " + std::to_string(f.images.size()) + " images, the model has " +
            std::to_string(config.cameras.size()) + " cameras");
     }
     for (size_t c = 0; c < config.cameras.size(); ++c) {
       const CameraConfig& cam = config.cameras[c];
       const size_t bytes = static_cast<size_t>(cam.height) * cam.width * 3;
       if (f.images[c].size() != bytes) {
-        fail(ErrorCode::kInvalidArgument, where + "image " + std::to_string(c) + " (" + cam.key + ") has " +
+        fail(StatusCode::kInvalidArgument, where + "image " + std::to_string(c) + " (" + cam.key + ") has " +
              std::to_string(f.images[c].size()) + " bytes, the model's " + std::to_string(cam.height) + "x" +
              std::to_string(cam.width) + " RGB input needs " + std::to_string(bytes));
       }
     }
     const auto check_state = [&](const std::vector<float>& v, int dim, const char* what) {
       if (!v.empty() && v.size() != static_cast<size_t>(dim)) {
-        fail(ErrorCode::kInvalidArgument, where + "has " + std::to_string(v.size()) + " " + what + " values, the model takes " +
+        fail(StatusCode::kInvalidArgument, where + "has " + std::to_string(v.size()) + " " + what + " values, the model takes " +
              std::to_string(dim));
       }
     };

@@ -43,7 +43,8 @@ void apply_deployment(ModelConfig& config, const DeploymentOptions& deployment, 
   if (const std::string problem = ModelConfig::deployment_problem(config.n_action_steps, config.temporal_ensemble_coeff,
                                                                  config.chunk_size);
       !problem.empty()) {
-    fail(ErrorCode::kInvalidArgument, "deployment settings (" + config_path + " with the overrides given): " + problem);
+    fail(StatusCode::kInvalidArgument,
+         "deployment settings (" + config_path + " with the overrides given): " + problem);
   }
 }
 

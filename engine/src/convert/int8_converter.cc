@@ -10,9 +10,9 @@
 #include <tuple>
 #include <utility>
 
+#include "actengine/status.h"
 #include "engine/src/convert/calibration_frames.h"
 #include "engine/src/engine_impl.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/quantize/activation_ranges.h"
 #include "kernels/quant/quant_s8.h"
@@ -49,7 +49,7 @@ QuantMode quant_mode(Int8Mode mode) {
     case Int8Mode::kStatic: return QuantMode::kStatic;
     case Int8Mode::kMixed: return QuantMode::kMixed;
   }
-  fail(ErrorCode::kInvalidArgument, "unknown INT8 mode");
+  fail(StatusCode::kInvalidArgument, "unknown INT8 mode");
 }
 
 // The FP32 model's chunks on the evaluation frames, computed once.
@@ -95,16 +95,17 @@ class Converter {
   Int8Report run(const CalibrationSet& calibration) {
     const auto t0 = std::chrono::steady_clock::now();
     if (opt_.mode == Int8Mode::kMixed && !opt_.target_mse) {
-      fail(ErrorCode::kInvalidArgument, "mixed mode needs a target MSE (held-out, normalised units)");
+      fail(StatusCode::kInvalidArgument, "mixed mode needs a target MSE (held-out, normalised units)");
     }
     if (opt_.mode == Int8Mode::kDynamic && opt_.linear_inputs != LinearInputCodes::kAuto) {
-      fail(ErrorCode::kInvalidArgument, "linear_inputs needs calibration (static or mixed mode): dynamic mode's linear "
-                                        "inputs are all per token, with no calibrated ranges for per-tensor codes");
+      fail(StatusCode::kInvalidArgument,
+           "linear_inputs needs calibration (static or mixed mode): dynamic mode's linear "
+           "inputs are all per token, with no calibrated ranges for per-tensor codes");
     }
     if (!(opt_.percentile >= 50.0 && opt_.percentile <= 100.0)) {
-      fail(ErrorCode::kInvalidArgument, "percentile " + format_number(opt_.percentile) + " is outside [50, 100]");
+      fail(StatusCode::kInvalidArgument, "percentile " + format_number(opt_.percentile) + " is outside [50, 100]");
     }
-    if (opt_.calib_samples == 0) fail(ErrorCode::kInvalidArgument, "calib_samples must be at least 1");
+    if (opt_.calib_samples == 0) fail(StatusCode::kInvalidArgument, "calib_samples must be at least 1");
     choose_frames(calibration);
     const ScratchBlob fp32(fp32_blob(model_), output_);
     fp32_ = std::make_unique<Engine::Impl>(fp32.path(), scratch_engine_options(true));
@@ -126,8 +127,9 @@ class Converter {
     Int8Report r = report(quant, *blob, err, std::move(sensitivity), fp32.bytes());
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (opt_.max_mse && !(err.mse <= *opt_.max_mse)) {
-      fail(ErrorCode::kFailedPrecondition, "the INT8 model misses the maximum held-out MSE: " + format_number(err.mse) +
-           " > " + format_number(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
+      fail(StatusCode::kFailedPrecondition,
+           "the INT8 model misses the maximum held-out MSE: " + format_number(err.mse) + " > " +
+               format_number(*opt_.max_mse) + " (normalised units); nothing was written.\n" + r.to_text());
     }
     blob->commit();
     return r;
@@ -161,7 +163,7 @@ class Converter {
     } else if (opt_.mode == Int8Mode::kDynamic) {
       frames_ = synthetic_calibration_frames(states_, opt_.holdout.value_or(8), opt_.seed);
     } else {
-      fail(ErrorCode::kInvalidArgument, std::string(int8_mode_name(opt_.mode)) +
+      fail(StatusCode::kInvalidArgument, std::string(int8_mode_name(opt_.mode)) +
            " quantization needs calibration frames (dynamic mode needs none)");
     }
     complete_calibration_frames(frames_, states_);
@@ -211,7 +213,7 @@ class Converter {
       case CalibrationMethod::kPercentile: return observer.choose_percentile(opt_.percentile);
       case CalibrationMethod::kMse: return observer.choose_mse();
     }
-    fail(ErrorCode::kInvalidArgument, "unknown calibration method");
+    fail(StatusCode::kInvalidArgument, "unknown calibration method");
   }
 
   // The calibration points' ranges over the calibration frames -> the backbone's parameters, by
@@ -329,7 +331,7 @@ class Converter {
     };
     auto [best, best_blob, best_err] = try_prefix(layers.size());
     if (!(best_err.mse <= target)) {
-      fail(ErrorCode::kFailedPrecondition, "the target MSE " + format_number(target) +
+      fail(StatusCode::kFailedPrecondition, "the target MSE " + format_number(target) +
            " cannot be met: even with every layer in float the held-out MSE is " + format_number(best_err.mse));
     }
     size_t lo = 1, hi = layers.size();
@@ -491,7 +493,7 @@ class Converter {
       if (!l.int8 && !kept_float) continue;  // always float (action head, state projections)
       const std::string& value = gq.value(l.output).name;
       const graph::ValueId f = gf.find(value);
-      check(f != graph::kNoValue, ErrorCode::kInternal, "layer " + value + " has no FP32 twin");
+      check(f != graph::kNoValue, StatusCode::kInternal, "layer " + value + " has no FP32 twin");
       acc.push_back({{l.weight.empty() ? value : l.weight, value, l.op->type(), kept_float, 0.0}, l.output, f});
     }
     std::vector<float> tmp(chunk_values());

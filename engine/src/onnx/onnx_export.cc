@@ -15,13 +15,13 @@
 #include <vector>
 
 #include "actengine/onnx_export.h"
+#include "actengine/status.h"
 #include "engine/src/engine_impl.h"
 #include "graph/act_network.h"
 #include "kernels/config/kernel_config.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_names.h"
 #include "weights/blob/blob_tensors.h"
-#include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/blob/model_config.h"
 
@@ -201,7 +201,7 @@ class OnnxBuilder {
   void add_feature_output(size_t c) {
     const ValueId feats = g_.find("cam" + std::to_string(c) + ".img_feat_proj");
     const auto it = features_nchw_.find(feats);
-    check(it != features_nchw_.end(), ErrorCode::kInternal, "camera " + std::to_string(c) + ": no backbone features");
+    check(it != features_nchw_.end(), StatusCode::kInternal, "camera " + std::to_string(c) + ": no backbone features");
     const CameraConfig& cam = config_.cameras[c];
     const std::string name = cam.key + ".features";
     node("Identity", {it->second}, name);
@@ -212,7 +212,7 @@ class OnnxBuilder {
   // ---------------------------------------------------------------------------------- operands
   const OnnxValue& value(ValueId id) {
     const auto it = values_.find(id);
-    check(it != values_.end(), ErrorCode::kInternal, "ONNX export: value \"" + g_.value(id).name + "\" used before it is made");
+    check(it != values_.end(), StatusCode::kInternal, "ONNX export: value \"" + g_.value(id).name + "\" used before it is made");
     return it->second;
   }
 
@@ -229,7 +229,7 @@ class OnnxBuilder {
   }
   // A float image value in NCHW.
   std::string float_nchw(ValueId id) {
-    check(value(id).nchw, ErrorCode::kInternal, "ONNX export: \"" + g_.value(id).name + "\" is no image");
+    check(value(id).nchw, StatusCode::kInternal, "ONNX export: \"" + g_.value(id).name + "\" is no image");
     return float_of(id);
   }
 
@@ -304,7 +304,7 @@ class OnnxBuilder {
       const OnnxValue& in = value(op.inputs[0]);
       return set(op.outputs[0], {float_of(op.inputs[0]), in.nchw, std::nullopt});
     }
-    fail(ErrorCode::kUnimplemented, "ONNX export: no translation for op \"" + op.name + "\" (" + op.type() + ")");
+    fail(StatusCode::kUnimplemented, "ONNX export: no translation for op \"" + op.name + "\" (" + op.type() + ")");
   }
 
   // Conv weights OHWI -> OIHW.
@@ -420,7 +420,7 @@ class OnnxBuilder {
                                                                   in, out, 1, 1, 0);
       const std::string weight = w_s8 ? dequantized_weight(w_s8, {out, in, 1, 1}, w_scale, {})
                                       : constant_f32("weight", {out, in, 1, 1}, {w_f32, w_f32 + w_size});
-      check(bias.value == graph::kNoValue && bias.ld == 0, ErrorCode::kInternal, "ONNX export: projection bias is no vector");
+      check(bias.value == graph::kNoValue && bias.ld == 0, StatusCode::kInternal, "ONNX export: projection bias is no vector");
       const std::string y = conv_node(s, float_nchw(x_ref.value), weight, bias.constant + bias.col_offset, "", false, "proj");
       set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
       return;
@@ -554,7 +554,7 @@ void check_onnx_model(const onnx::ModelProto& model) {
                                                                    /*data_prop=*/true));
     onnx::checker::check_model(inferred);
   } catch (const std::exception& e) {
-    fail(ErrorCode::kInternal, std::string("the exported ONNX model fails ONNX's checker: ") + e.what());
+    fail(StatusCode::kInternal, std::string("the exported ONNX model fails ONNX's checker: ") + e.what());
   }
 }
 
@@ -582,7 +582,7 @@ StatusOr<OnnxExportSummary> export_onnx(const std::string& blob_path, const std:
     const ModelConfig config = blob_model_config(blob);
     // The reference kernels: the network is only read (its rebuilt bias tables are computed with them).
     const kernels::KernelConfigChoice kernels = kernels::kernel_config("ref");
-    check(kernels.config.has_value(), ErrorCode::kInternal, kernels.error);
+    check(kernels.config.has_value(), StatusCode::kInternal, kernels.error);
     graph::ActNetwork network(config, tensors, *kernels.config);
     summary.precision = precision_name(config.precision);
     if (config.precision == Precision::kInt8) summary.precision += " " + blob.config()["quantization"].value("mode", "?");
@@ -590,7 +590,7 @@ StatusOr<OnnxExportSummary> export_onnx(const std::string& blob_path, const std:
     const onnx::ModelProto model = OnnxBuilder(network, tensors, options).build();
     check_onnx_model(model);
     std::string bytes;
-    if (!model.SerializeToString(&bytes)) fail(ErrorCode::kInternal, "the ONNX model cannot be serialised (over 2 GB?)");
+    if (!model.SerializeToString(&bytes)) fail(StatusCode::kInternal, "the ONNX model cannot be serialised (over 2 GB?)");
     detail::AtomicFileWriter out(onnx_path);
     out.write(bytes);
     out.commit();

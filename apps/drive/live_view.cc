@@ -86,14 +86,14 @@ void parse_http_address(const std::string& text, LiveViewOptions& options) {
 
 LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource& frames)
     : options_(std::move(options)), token_(random_token()), server_(std::make_unique<Server>()) {
+  server_->http.new_task_queue = [] { return new httplib::ThreadPool(kServerThreads); };
+  add_view_routes(cockpit, frames);
+  add_control_routes(cockpit);
+  listen();
+}
+
+void LiveView::add_view_routes(Cockpit& cockpit, const FrameSource& frames) {
   httplib::Server& http = server_->http;
-  http.new_task_queue = [] { return new httplib::ThreadPool(kServerThreads); };
-  const auto authorized = [this](const httplib::Request& req, httplib::Response& res) {
-    const std::string given = req.has_header("X-Act-Token") ? req.get_header_value("X-Act-Token") : req.get_param_value("token");
-    if (given == token_) return true;
-    reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
-    return false;
-  };
   // The newest frame as the model sees it (after preprocessing), JPEG-encoded; empty before the first.
   const auto model_view_jpeg = [this, &frames] {
     std::vector<uchar> jpeg;
@@ -105,7 +105,6 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     media::encode_image(".jpg", bgr, jpeg);
     return jpeg;
   };
-
   http.Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveViewPage, "text/html"); });
   http.Get("/stats", [&cockpit](const httplib::Request&, httplib::Response& res) {
     reply_json(res, 200, status_json(cockpit.status()));
@@ -132,6 +131,16 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
       return true;
     });
   });
+}
+
+void LiveView::add_control_routes(Cockpit& cockpit) {
+  httplib::Server& http = server_->http;
+  const auto authorized = [this](const httplib::Request& req, httplib::Response& res) {
+    const std::string given = req.has_header("X-Act-Token") ? req.get_header_value("X-Act-Token") : req.get_param_value("token");
+    if (given == token_) return true;
+    reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
+    return false;
+  };
   http.Post("/estop", [&cockpit](const httplib::Request&, httplib::Response& res) {
     cockpit.estop();
     reply_json(res, 200, {{"ok", "e-stop: neutral until resumed"}});
@@ -160,7 +169,10 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     cockpit.manual(steering, throttle);
     reply_json(res, 200, {{"ok", "manual"}});
   });
+}
 
+void LiveView::listen() {
+  httplib::Server& http = server_->http;
   if (options_.port == 0) {
     port_ = http.bind_to_any_port(options_.address);
   } else {

@@ -43,6 +43,12 @@ class LiveView {
 
  private:
   struct Server;
+  /// The page, the stats and the model's view (frame and MJPEG stream): anyone may read them.
+  void add_view_routes(Cockpit& cockpit, const FrameSource& frames);
+  /// E-stop (open to all), then resume, mode and manual driving (token only).
+  void add_control_routes(Cockpit& cockpit);
+  /// Binds options_'s address and serves on a thread of its own.
+  void listen();
   LiveViewOptions options_;
   std::string token_;
   int port_ = 0;

@@ -193,9 +193,8 @@ class LinearS8Op : public Op, public RowCodesWriter {
   size_t weight_bytes() const { return static_cast<size_t>(in_) * static_cast<size_t>(out_); }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
   const float* w_scale() const { return w_scale_; }
-  /// The per-tensor parameters of the input codes and of the output codes, when they are.
+  /// The per-tensor parameters of the input codes, when they are.
   std::optional<kernels::QuantS8> input_quant() const { return x_codes_.fixed; }
-  std::optional<kernels::QuantS8> output_quant() const { return y_codes_.fixed; }
 
  private:
   /// True when the GEMM writes the output codes itself (requantizing, see above).

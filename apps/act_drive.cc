@@ -192,24 +192,28 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
           {"calibration", calibration.to_json()}};
 }
 
-int drive(const Options& opt) {
-  const Calibration calibration = load_calibration(opt);
+CameraOptions camera_options_of(const Options& opt) {
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
   camera_options.stepped = opt.realtime == "off";
   if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.height, camera_options.width)) {
     act::fail(act::StatusCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
   }
-  Camera camera(camera_options);
+  return camera_options;
+}
 
+InferenceWorkerOptions worker_options_of(const Options& opt) {
   InferenceWorkerOptions worker_options;
   worker_options.max_frame_age = std::chrono::milliseconds(opt.max_frame_age_ms);
   if (opt.realtime == "off") worker_options.max_frame_age = std::chrono::hours(24);  // a replay's frames have no age
   worker_options.placement = {opt.inference_priority, opt.inference_cpus};
   worker_options.keep_model_inputs = !opt.record_dir.empty();
-  InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options, std::cerr);
-  const act::ModelInfo info = with_deployment(worker.info(), opt.deployment);  // fails early on a bad override
-  check_model(info, calibration, opt);
-  const std::vector<float> initial_state = parse_initial_state(opt.initial_state, info);
+  return worker_options;
+}
+
+// Checks the camera against the model's input (a requested size it did not deliver fails, another
+// aspect ratio warns), then says what drives what.
+void report_model_and_camera(const Options& opt, const act::ModelInfo& info, const CameraOptions& camera_options,
+                             const Camera& camera) {
   const act::CameraInfo& input = info.cameras.front();
   if (!opt.camera_size.empty()) check_camera_size(opt.camera_size, camera_options.height, camera_options.width, camera, input);
   if (!same_aspect(camera.height(), camera.width(), input.height, input.width)) {
@@ -221,16 +225,21 @@ int drive(const Options& opt) {
             << (info.temporal_ensembling ? "" : std::to_string(info.n_action_steps) + " of " + std::to_string(info.chunk_size) + " actions")
             << "\nact_drive: camera " << opt.camera << " " << hxw(camera.height(), camera.width()) << " -> "
             << hxw(input.height, input.width) << " (HxW)\n";
+}
 
-  // Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
-  // Set up before the board is touched, so that a busy port or a wrong gamepad fails first.
+/// Live view and driving by hand: the cockpit carries e-stop, mode and manual input into the loop.
+struct ManualControls {
   std::optional<Cockpit> cockpit;
   std::optional<LiveView> live_view;
   std::optional<Gamepad> gamepad;
-  if (!opt.http.empty() || !opt.gamepad.empty() || opt.mode != "ai") cockpit.emplace(*parse_mode(opt.mode));
+};
+
+// Set up before the board is touched, so that a busy port or a wrong gamepad fails first.
+void open_manual_controls(const Options& opt, const act::CameraInfo& input, const Camera& camera, ManualControls& manual) {
+  if (!opt.http.empty() || !opt.gamepad.empty() || opt.mode != "ai") manual.cockpit.emplace(*parse_mode(opt.mode));
   if (!opt.gamepad.empty()) {
-    gamepad.emplace(opt.gamepad, *cockpit, std::cerr);
-    std::cerr << "act_drive: gamepad " << opt.gamepad << " (" << gamepad->name() << "): left stick steers, right stick "
+    manual.gamepad.emplace(opt.gamepad, *manual.cockpit, std::cerr);
+    std::cerr << "act_drive: gamepad " << opt.gamepad << " (" << manual.gamepad->name() << "): left stick steers, right stick "
               << "throttle, B e-stop, Start resume\n";
   }
   if (!opt.http.empty()) {
@@ -238,17 +247,17 @@ int drive(const Options& opt) {
     parse_http_address(opt.http, view_options);
     view_options.image_height = input.height;
     view_options.image_width = input.width;
-    live_view.emplace(view_options, *cockpit, camera);
-    std::cerr << "act_drive: live view on " << live_view->url() << " (token " << live_view->token()
+    manual.live_view.emplace(view_options, *manual.cockpit, camera);
+    std::cerr << "act_drive: live view on " << manual.live_view->url() << " (token " << manual.live_view->token()
               << ": needed to resume, change mode or drive from the page; the e-stop needs none)\n";
   }
+}
 
-  std::unique_ptr<ActuatorLink> link;
-  NeutralOnExit neutral_on_exit;
-  neutral_on_exit.safe = calibration.safe_command();
-  if (opt.dry_run) {
-    link = std::make_unique<DryRunLink>(std::cout);
-  } else if (!opt.pwm.empty()) {
+// Where the commands go: standard output (--dry-run), the Pi's PWM pins (--pwm) or the board on
+// --serial, which is connected here (ready, failsafe set, neutral).
+std::unique_ptr<ActuatorLink> open_link(const Options& opt, const Calibration& calibration) {
+  if (opt.dry_run) return std::make_unique<DryRunLink>(std::cout);
+  if (!opt.pwm.empty()) {
     PwmLinkOptions pwm_options;
     pwm_options.channels = parse_pwm_channels(opt.pwm);
     pwm_options.sysfs_root = opt.pwm_sysfs_root;
@@ -257,31 +266,23 @@ int drive(const Options& opt) {
     auto pwm = std::make_unique<PwmSysfsLink>(pwm_options, std::cerr);
     std::cerr << "act_drive: PWM " << opt.pwm_sysfs_root << "/" << opt.pwm << " at 50 Hz, neutral; watchdog pid "
               << pwm->watchdog_pid() << "\n";
-    link = std::move(pwm);
-  } else {
-    SerialLinkOptions serial_options;
-    serial_options.path = opt.serial;
-    serial_options.baud = opt.baud;
-    serial_options.ready_timeout = std::chrono::milliseconds(static_cast<int64_t>(opt.ready_timeout * 1000));
-    serial_options.failsafe = calibration.safe_command();
-    auto serial = std::make_unique<SerialLink>(serial_options, std::cerr);
-    serial->connect();
-    std::cerr << "act_drive: board ready on " << opt.serial << "\n";
-    link = std::move(serial);
+    return pwm;
   }
-  neutral_on_exit.link = link.get();
+  SerialLinkOptions serial_options;
+  serial_options.path = opt.serial;
+  serial_options.baud = opt.baud;
+  serial_options.ready_timeout = std::chrono::milliseconds(static_cast<int64_t>(opt.ready_timeout * 1000));
+  serial_options.failsafe = calibration.safe_command();
+  auto serial = std::make_unique<SerialLink>(serial_options, std::cerr);
+  serial->connect();
+  std::cerr << "act_drive: board ready on " << opt.serial << "\n";
+  return serial;
+}
 
-  std::optional<Recorder> recorder;
-  if (!opt.record_dir.empty()) {
-    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, input.height, input.width,
-                     record_meta(opt, info, camera, calibration));
-  }
-
-  std::optional<OverlayVideo> overlay;
-  if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width);
-
+ControlOptions control_options_of(const Options& opt, const std::vector<float>& initial_state, ManualControls& manual,
+                                  std::optional<OverlayVideo>& overlay) {
   ControlOptions control;
-  control.cockpit = cockpit ? &*cockpit : nullptr;
+  control.cockpit = manual.cockpit ? &*manual.cockpit : nullptr;
   control.overlay = overlay ? &*overlay : nullptr;
   control.realtime = opt.realtime == "on";
   control.control_hz = opt.control_hz;
@@ -292,8 +293,11 @@ int drive(const Options& opt) {
   control.initial_state = initial_state;
   control.placement = {opt.control_priority, opt.control_cpus};
   control.deployment = opt.deployment;
-  ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);
-  const DriveSummary summary = loop.run(g_stop);
+  return control;
+}
+
+// Closes the recording and the overlay video, saying where they went and what was dropped.
+void close_outputs(const Options& opt, std::optional<Recorder>& recorder, std::optional<OverlayVideo>& overlay) {
   if (recorder) {
     recorder->close();
     std::cerr << "act_drive: recorded to " << opt.record_dir;
@@ -306,6 +310,42 @@ int drive(const Options& opt) {
     if (overlay->dropped() > 0) std::cerr << " (" << overlay->dropped() << " dropped: the encoder was too slow)";
     std::cerr << "\n";
   }
+}
+
+int drive(const Options& opt) {
+  const Calibration calibration = load_calibration(opt);
+  const CameraOptions camera_options = camera_options_of(opt);
+  Camera camera(camera_options);
+
+  InferenceWorker worker([&] { return open_engine_model(opt.model, opt.threads); }, camera, worker_options_of(opt), std::cerr);
+  const act::ModelInfo info = with_deployment(worker.info(), opt.deployment);  // fails early on a bad override
+  check_model(info, calibration, opt);
+  const std::vector<float> initial_state = parse_initial_state(opt.initial_state, info);
+  const act::CameraInfo& input = info.cameras.front();
+  report_model_and_camera(opt, info, camera_options, camera);
+
+  ManualControls manual;
+  open_manual_controls(opt, input, camera, manual);
+
+  std::unique_ptr<ActuatorLink> link;
+  NeutralOnExit neutral_on_exit;  // declared after the link: sends neutral before it is destroyed
+  neutral_on_exit.safe = calibration.safe_command();
+  link = open_link(opt, calibration);
+  neutral_on_exit.link = link.get();
+
+  std::optional<Recorder> recorder;
+  if (!opt.record_dir.empty()) {
+    recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, input.height, input.width,
+                     record_meta(opt, info, camera, calibration));
+  }
+
+  std::optional<OverlayVideo> overlay;
+  if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width);
+
+  ControlLoop loop(control_options_of(opt, initial_state, manual, overlay), calibration, camera, worker, *link,
+                   recorder ? &*recorder : nullptr, std::cerr);
+  const DriveSummary summary = loop.run(g_stop);
+  close_outputs(opt, recorder, overlay);
   std::cerr << summary.to_string();
   if (!camera.stop()) {
     std::cerr << "act_drive: camera '" << opt.camera << "' is blocked in its backend and did not stop within "
@@ -382,13 +422,8 @@ int run(const Options& opt) {
   }
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"act_drive: drive the RC rover with an ACT policy. Camera -> model -> action chunks -> PWM commands "
-               "over serial to the Arduino sketch apps/arduino/act_rover, at a fixed control rate. Holds neutral "
-               "whenever something is wrong (stale frames, inference errors, serial errors, signals)."};
-  Options opt;
+// The model, the camera, the board and the control rate.
+void add_model_camera_and_board_options(CLI::App& app, Options& opt) {
   app.add_option("-m,--model", opt.model, "the .actb model (act_convert output)");
   app.add_option("--camera", opt.camera, "camera: an index (0), a device (/dev/video0), a video file, an image "
                  "sequence (frames/%06d.png), a URL or a GStreamer pipeline ending in appsink");
@@ -414,6 +449,10 @@ int main(int argc, char** argv) {
                  "'mean' (the training mean from the model's statistics) or comma-separated values")->capture_default_str();
   app.add_flag("--raw-endpoints", opt.raw_endpoints, "drive --serial without a calibration file: 1000/1500/2000 us "
                                                      "endpoints, throttle capped at 0.3");
+}
+
+// Listing devices, the model's state, real-time scheduling, statistics and the run's length.
+void add_loop_options(CLI::App& app, Options& opt) {
   app.add_flag("--list-cameras", opt.list_cameras, "list the V4L2 cameras and exit");
   app.add_flag("--list-ports", opt.list_ports, "list the serial ports (USB ones with maker and product) and the PWM chips "
                "and channels (--pwm), then exit");
@@ -430,6 +469,10 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--duration", opt.duration, "stop after S seconds (0 = run until Ctrl-C or the video ends)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+}
+
+// Recording, the live view, driving by hand, replay, calibration and the Pi's PWM pins.
+void add_output_and_manual_options(CLI::App& app, Options& opt) {
   app.add_option("--record", opt.record_dir, "save frames, states, actions and timings to this new folder (README: "
                                              "recording format; usable as act_convert calibration input)");
   app.add_option("--http", opt.http, "serve the live view (frame, gauges, e-stop, driving by hand) on [ADDR:]PORT, "
@@ -452,6 +495,18 @@ int main(int argc, char** argv) {
                                    "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "
                                    "if act_drive dies");
   app.add_option("--pwm-sysfs-root", opt.pwm_sysfs_root, "where the PWM chips are (a test and expert knob)")->capture_default_str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"act_drive: drive the RC rover with an ACT policy. Camera -> model -> action chunks -> PWM commands "
+               "over serial to the Arduino sketch apps/arduino/act_rover, at a fixed control rate. Holds neutral "
+               "whenever something is wrong (stale frames, inference errors, serial errors, signals)."};
+  Options opt;
+  add_model_camera_and_board_options(app, opt);
+  add_loop_options(app, opt);
+  add_output_and_manual_options(app, opt);
   CLI11_PARSE(app, argc, argv);
 
   install_signal_handlers();

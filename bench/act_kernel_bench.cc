@@ -580,177 +580,234 @@ std::string cpu_model() {
   return "unknown";
 }
 
-}  // namespace
-}  // namespace act::bench
+// The measured peaks by ISA, for 1..max_threads threads (index T - 1).
+using Peaks = std::vector<double>;
+using PeakTable = std::map<kernels::Isa, Peaks>;
 
-int main(int argc, char** argv) {
-  using namespace act;
-  benchmark::Initialize(&argc, argv);
-  const char* shapes_env = std::getenv("ACT_BENCH_SHAPES");
-  const std::vector<bench::Shape> shapes = bench::read_shapes(shapes_env != nullptr ? shapes_env : ACT_BENCH_SHAPES_FILE);
+/// What every registration needs: the shapes, the thread counts and the peaks to rate against.
+struct BenchPlan {
+  std::vector<Shape> shapes;
+  int max_threads = 1;
+  PeakTable peak, peak_f32;  // the int8 and the float FMA probes' peaks
+  std::vector<kernels::Isa> isas;
 
-  const int max_threads = std::min(2, ThreadPool::hardware_threads());
-  // By ISA, the int8 and the float FMA probes' peaks of 1..max_threads threads (index T - 1).
-  using Peaks = std::vector<double>;
-  std::map<kernels::Isa, Peaks> peak, peak_f32;
+  /// The peak of t threads for kernels of `isa` (0: no probe).
+  static double peak_of(const PeakTable& peaks, kernels::Isa isa, int t) {
+    const auto it = peaks.find(isa);
+    return it == peaks.end() ? 0.0 : it->second[static_cast<size_t>(t - 1)];
+  }
+};
+
+benchmark::internal::Benchmark* with_stats(benchmark::internal::Benchmark* b) {
+  return b->Unit(benchmark::kMillisecond)
+      ->UseRealTime()
+      ->ComputeStatistics("max", stat_max)
+      ->ComputeStatistics("min", stat_min);
+}
+
+/// The ISA whose float FMA probe rates `isa`'s float kernels (kRef, which has no peak, if none).
+kernels::Isa f32_peak_isa_of(kernels::Isa isa) {
+  const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
+  return probe != nullptr ? probe->isa : kernels::Isa::kRef;
+}
+
+/// Registers every probe as a benchmark and measures the ISA peaks on 1..max_threads threads at
+/// once (they rate every kernel below, so they are taken before any of them runs).
+void register_probes_and_measure_peaks(BenchPlan& plan) {
   for (int i = 0; i < kernels::kPeakProbeCount; ++i) {
     const kernels::PeakProbe& p = kernels::kPeakProbes[i];
     if (!kernels::cpu_supports(p.isa) || p.fn(1) == 0) continue;
-    benchmark::RegisterBenchmark((std::string("peak/") + p.name).c_str(), bench::bm_probe, &p)
+    benchmark::RegisterBenchmark((std::string("peak/") + p.name).c_str(), bm_probe, &p)
         ->UseRealTime()
-        ->ComputeStatistics("max", bench::stat_max)
-        ->ComputeStatistics("min", bench::stat_min);
+        ->ComputeStatistics("max", stat_max)
+        ->ComputeStatistics("min", stat_min);
     if (p.is_isa_peak) {
-      Peaks& peaks = (p.kind == kernels::PeakKind::kInt8 ? peak : peak_f32)[p.isa];
-      for (int t = 1; t <= max_threads; ++t) {
+      Peaks& peaks = (p.kind == kernels::PeakKind::kInt8 ? plan.peak : plan.peak_f32)[p.isa];
+      for (int t = 1; t <= plan.max_threads; ++t) {
         peaks.push_back(graph::measure_peak_gmacs_together(p, t));
         benchmark::AddCustomContext(std::string("peak_") + p.name + "_GMACps" + (t > 1 ? "_threads:" + std::to_string(t) : ""),
                                     std::to_string(peaks.back()));
       }
     }
   }
-  // The peak of t threads for kernels of `isa` (0: no probe).
-  const auto peak_of = [&](const std::map<kernels::Isa, Peaks>& peaks, kernels::Isa isa, int t) {
-    const auto it = peaks.find(isa);
-    return it == peaks.end() ? 0.0 : it->second[static_cast<size_t>(t - 1)];
-  };
-  const bench::Shape* smallest = shapes.empty() ? nullptr : &shapes[0];
-  for (const bench::Shape& s : shapes) {
+}
+
+/// gemm_s8 over the shape file, every variant; the reference on the smallest shape only.
+void register_gemm_s8(const BenchPlan& plan) {
+  const Shape* smallest = plan.shapes.empty() ? nullptr : &plan.shapes[0];
+  for (const Shape& s : plan.shapes) {
     if (s.macs() < smallest->macs()) smallest = &s;
   }
-  auto reg = [](benchmark::internal::Benchmark* b) {
-    return b->Unit(benchmark::kMillisecond)
-        ->UseRealTime()
-        ->ComputeStatistics("max", bench::stat_max)
-        ->ComputeStatistics("min", bench::stat_min);
-  };
-  // Every variant of every family this CPU runs: each ISA's own tables (isa_tables), not the
-  // per-level configuration, so that no variant is measured twice.
-  const std::vector<kernels::Isa> isas = kernels::cpu_isas();
-  for (kernels::Isa isa : isas) {
+  for (kernels::Isa isa : plan.isas) {
     const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
     if (v == nullptr) continue;
-    for (const bench::Shape& s : shapes) {
+    for (const Shape& s : plan.shapes) {
       if (isa == kernels::Isa::kRef && &s != smallest) continue;
       const std::string key = std::string("gemm_s8/") + kernels::isa_name(isa) + "/" + s.name;
-      for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : max_threads); ++t) {
+      for (int t = 1; t <= (isa == kernels::Isa::kRef ? 1 : plan.max_threads); ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm, v, s, peak_of(peak, isa, t), t, key));
+        with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_gemm, v, s, BenchPlan::peak_of(plan.peak, isa, t), t, key));
       }
     }
   }
-  // The FP32 path's products, % of the float FMA probe of their ISA: the packed GEMM on every
-  // transformer linear (the f32-out shapes) of the default config (302 tokens) and the rover's
-  // (360x640: 242 tokens; the decoder's 100 queries are the same), then every convolution of both
-  // cameras through conv_f32. SIMD variants only (the reference is checked by the tests).
-  for (kernels::Isa isa : isas) {
+}
+
+/// The FP32 path's products, % of the float FMA probe of their ISA: the packed GEMM on every
+/// transformer linear (the f32-out shapes) of the default config (302 tokens) and the rover's
+/// (360x640: 242 tokens; the decoder's 100 queries are the same), then every convolution of both
+/// cameras through conv_f32. SIMD variants only (the reference is checked by the tests).
+void register_fp32(const BenchPlan& plan) {
+  for (kernels::Isa isa : plan.isas) {
     const kernels::GemmF32Kernels* g = kernels::isa_tables(isa).gemm_f32;
     if (g == nullptr || isa == kernels::Isa::kRef) continue;
-    const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
-    const kernels::Isa f32_peak_isa = probe != nullptr ? probe->isa : kernels::Isa::kRef;
-    for (const bench::Shape& s : shapes) {
+    const kernels::Isa f32_peak_isa = f32_peak_isa_of(isa);
+    for (const Shape& s : plan.shapes) {
       if (!s.f32_out) continue;
       for (const int tokens : {302, 242}) {
         if (tokens != 302 && s.m != 302) continue;
-        bench::Shape linear = s;
+        Shape linear = s;
         if (s.m == 302) linear.m = tokens;
         const std::string key = std::string("gemm_f32/") + kernels::isa_name(isa) + "/" + s.name + "/" + std::to_string(linear.m);
-        for (int t = 1; t <= max_threads; ++t) {
+        for (int t = 1; t <= plan.max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_gemm_f32, g, linear, peak_of(peak_f32, f32_peak_isa, t), t, key));
+          with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_gemm_f32, g, linear,
+                                                  BenchPlan::peak_of(plan.peak_f32, f32_peak_isa, t), t, key));
         }
       }
     }
     for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
-      for (const bench::ConvBench& cb : bench::resnet18_convs(h, w)) {
+      for (const ConvBench& cb : resnet18_convs(h, w)) {
         const std::string key = std::string("conv_f32/") + kernels::isa_name(isa) + "/" + std::to_string(h) + "x" +
                                 std::to_string(w) + "/" + cb.name;
-        for (int t = 1; t <= max_threads; ++t) {
+        for (int t = 1; t <= plan.max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv_f32, g, cb, peak_of(peak_f32, f32_peak_isa, t), t, key));
+          with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_conv_f32, g, cb,
+                                                  BenchPlan::peak_of(plan.peak_f32, f32_peak_isa, t), t, key));
         }
       }
     }
   }
-  // Convolutions: the SIMD variants only (the reference's GEMM is checked by the tests).
-  for (kernels::Isa isa : isas) {
+}
+
+/// Convolutions: the SIMD variants only (the reference's GEMM is checked by the tests).
+void register_conv_s8(const BenchPlan& plan) {
+  for (kernels::Isa isa : plan.isas) {
     const kernels::GemmS8Kernels* v = kernels::isa_tables(isa).gemm_s8;
     if (v == nullptr || isa == kernels::Isa::kRef) continue;
     for (auto [h, w] : {std::pair{480, 640}, std::pair{360, 640}}) {
-      std::vector<bench::ConvBench> convs = bench::resnet18_convs(h, w);
+      std::vector<ConvBench> convs = resnet18_convs(h, w);
       if (v->pack_u8a != nullptr) {  // the stem as the network runs it where the variant has one
         convs.insert(convs.begin() + 1, convs.front());
         convs[1].name += "_u8a";
         convs[1].unsigned_input = true;
       }
-      for (const bench::ConvBench& cb : convs) {
+      for (const ConvBench& cb : convs) {
         const std::string key = std::string("conv_s8/") + kernels::isa_name(isa) + "/" + std::to_string(h) + "x" +
                                 std::to_string(w) + "/" + cb.name;
-        for (int t = 1; t <= max_threads; ++t) {
+        for (int t = 1; t <= plan.max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_conv, v, cb, peak_of(peak, isa, t), t, key));
+          with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_conv, v, cb, BenchPlan::peak_of(plan.peak, isa, t), t, key));
         }
       }
     }
   }
-  for (kernels::Isa isa : isas) {
+}
+
+/// Per element-wise variant: the float attention op at its level (% of its float FMA probe),
+/// LayerNorm, softmax and softmax into int8.
+void register_elementwise(const BenchPlan& plan) {
+  for (kernels::Isa isa : plan.isas) {
     const kernels::ElementwiseF32Kernels* e = kernels::isa_tables(isa).elementwise;
     if (e == nullptr) continue;
-    // The float attention op at the level of this element-wise variant, % of its float FMA probe.
-    const kernels::PeakProbe* probe = kernels::isa_peak_probe(isa, kernels::PeakKind::kFp32);
-    const kernels::Isa f32_peak_isa = probe != nullptr ? probe->isa : kernels::Isa::kRef;
+    const kernels::Isa f32_peak_isa = f32_peak_isa_of(isa);
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_f32/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
-      for (int t = 1; t <= max_threads; ++t) {
+      for (int t = 1; t <= plan.max_threads; ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention, isa, tokens, peak_of(peak_f32, f32_peak_isa, t), t, key));
+        with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_attention, isa, tokens,
+                                                BenchPlan::peak_of(plan.peak_f32, f32_peak_isa, t), t, key));
       }
     }
     const std::string ew = std::string("eltwise/") + kernels::isa_name(isa);
-    reg(benchmark::RegisterBenchmark((ew + "/layernorm/302x512").c_str(), bench::bm_layernorm, e, 302, 512));
-    reg(benchmark::RegisterBenchmark((ew + "/softmax/2416x302").c_str(), bench::bm_softmax, e, 8 * 302, 302));
-    reg(benchmark::RegisterBenchmark((ew + "/softmax_s8/2416x302").c_str(), bench::bm_softmax_s8, e, 8 * 302, 302));
+    with_stats(benchmark::RegisterBenchmark((ew + "/layernorm/302x512").c_str(), bm_layernorm, e, 302, 512));
+    with_stats(benchmark::RegisterBenchmark((ew + "/softmax/2416x302").c_str(), bm_softmax, e, 8 * 302, 302));
+    with_stats(benchmark::RegisterBenchmark((ew + "/softmax_s8/2416x302").c_str(), bm_softmax_s8, e, 8 * 302, 302));
   }
-  // The int8 attention: at each level with a gemm_s8 variant of its own (not the reference).
-  for (kernels::Isa isa : isas) {
+}
+
+/// The int8 attention: at each level with a gemm_s8 variant of its own (not the reference).
+void register_attention_s8(const BenchPlan& plan) {
+  for (kernels::Isa isa : plan.isas) {
     if (kernels::isa_tables(isa).gemm_s8 == nullptr || isa == kernels::Isa::kRef) continue;
     for (int tokens : {302, 242}) {
       const std::string key = std::string("attention_s8/") + kernels::isa_name(isa) + "/" + std::to_string(tokens);
-      for (int t = 1; t <= max_threads; ++t) {
+      for (int t = 1; t <= plan.max_threads; ++t) {
         const std::string name = key + "/threads:" + std::to_string(t);
-        reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_attention_s8, isa, tokens, peak_of(peak, isa, t), t, key));
+        with_stats(
+            benchmark::RegisterBenchmark(name.c_str(), bm_attention_s8, isa, tokens, BenchPlan::peak_of(plan.peak, isa, t), t, key));
       }
     }
   }
-  for (kernels::Isa isa : isas) {
+}
+
+/// Quantizers and the max-pool, every variant (bytes/s).
+void register_quant_and_pool(const BenchPlan& plan) {
+  for (kernels::Isa isa : plan.isas) {
     const kernels::QuantS8Kernels* k = kernels::isa_tables(isa).quant;
     if (k == nullptr) continue;
     const std::string qn = std::string("quant/") + kernels::isa_name(isa);
     for (auto [rows, cols] : {std::pair{302, 512}, std::pair{302, 3200}}) {
       const std::string name = qn + "/rows_dynamic/" + std::to_string(rows) + "x" + std::to_string(cols);
-      reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_quant_rows, k, rows, cols));
+      with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_quant_rows, k, rows, cols));
     }
-    reg(benchmark::RegisterBenchmark((qn + "/rows_symmetric/8x302x64").c_str(), bench::bm_quant_heads, k));
-    reg(benchmark::RegisterBenchmark((qn + "/dequantize/154624").c_str(), bench::bm_dequant, k, size_t{302 * 512}));
+    with_stats(benchmark::RegisterBenchmark((qn + "/rows_symmetric/8x302x64").c_str(), bm_quant_heads, k));
+    with_stats(benchmark::RegisterBenchmark((qn + "/dequantize/154624").c_str(), bm_dequant, k, size_t{302 * 512}));
   }
-  for (kernels::Isa isa : isas) {
+  for (kernels::Isa isa : plan.isas) {
     const kernels::MaxPoolS8Kernels* k = kernels::isa_tables(isa).maxpool_s8;
     if (k == nullptr) continue;
     const std::string name = std::string("pool/") + kernels::isa_name(isa) + "/maxpool_3x3s2/240x320x64";
-    reg(benchmark::RegisterBenchmark(name.c_str(), bench::bm_maxpool, k, 240, 320));
+    with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_maxpool, k, 240, 320));
   }
-  for (int t = 1; t <= max_threads; ++t) {
-    benchmark::RegisterBenchmark(("thread_pool/dispatch/threads:" + std::to_string(t)).c_str(), bench::bm_dispatch, t)
+}
+
+/// The thread pool's own costs: an empty parallel section, and a cache line's round trip.
+void register_thread_pool(const BenchPlan& plan) {
+  for (int t = 1; t <= plan.max_threads; ++t) {
+    benchmark::RegisterBenchmark(("thread_pool/dispatch/threads:" + std::to_string(t)).c_str(), bm_dispatch, t)
         ->Unit(benchmark::kMicrosecond)
         ->UseRealTime();
   }
-  if (max_threads > 1) {
-    benchmark::RegisterBenchmark("thread_pool/cache_line_round_trip", bench::bm_cache_line_round_trip)
+  if (plan.max_threads > 1) {
+    benchmark::RegisterBenchmark("thread_pool/cache_line_round_trip", bm_cache_line_round_trip)
         ->Unit(benchmark::kNanosecond)
         ->UseRealTime();
   }
+}
+
+}  // namespace
+}  // namespace act::bench
+
+int main(int argc, char** argv) {
+  using namespace act;
+  benchmark::Initialize(&argc, argv);
+  bench::BenchPlan plan;
+  const char* shapes_env = std::getenv("ACT_BENCH_SHAPES");
+  plan.shapes = bench::read_shapes(shapes_env != nullptr ? shapes_env : ACT_BENCH_SHAPES_FILE);
+  plan.max_threads = std::min(2, ThreadPool::hardware_threads());
+  bench::register_probes_and_measure_peaks(plan);
+  // Every variant of every family this CPU runs: each ISA's own tables (isa_tables), not the
+  // per-level configuration, so that no variant is measured twice.
+  plan.isas = kernels::cpu_isas();
+  bench::register_gemm_s8(plan);
+  bench::register_fp32(plan);
+  bench::register_conv_s8(plan);
+  bench::register_elementwise(plan);
+  bench::register_attention_s8(plan);
+  bench::register_quant_and_pool(plan);
+  bench::register_thread_pool(plan);
   benchmark::AddCustomContext("cpu_model", bench::cpu_model());
-  benchmark::AddCustomContext("threads", "1.." + std::to_string(max_threads) + " (see /threads:T)");
+  benchmark::AddCustomContext("threads", "1.." + std::to_string(plan.max_threads) + " (see /threads:T)");
   benchmark::AddCustomContext("isas", kernels::isa_mask_names(kernels::cpu_isa_mask()));
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();

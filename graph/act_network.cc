@@ -297,10 +297,9 @@ ValueId ActNetwork::attention(const std::string& out_name, int nq, int nk, Matri
   return y;
 }
 
-ValueId ActNetwork::backbone(size_t camera, int first_row) {
+ActNetwork::Tensor ActNetwork::camera_image(size_t camera) {
   const CameraConfig& cam = config_.cameras[camera];
   const std::string p = cam_prefix(camera);
-  camera_ = camera;
   const std::vector<int64_t> image_shape = {cam.height, cam.width, 3};
   // An int8 stem with static activations quantizes the image with fixed parameters: the engine
   // writes those codes itself (what as_s8() would make of the float image), no float image; stored
@@ -320,8 +319,10 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
     calibration_point(CalibrationRole::kCameraImage, image.id);
   }
   camera_inputs_.push_back(image.id);
+  return image;
+}
 
-  int h = cam.height, w = cam.width;
+ActNetwork::Tensor ActNetwork::stem_and_max_pool(const std::string& p, const Tensor& image, int& h, int& w) {
   Tensor x = conv(config_.stem(), image, h, w, true, nullptr, p + "backbone.stem");
   const int pooled_h = kernels::Conv2dShape::out_dim(h, 3, 2, 1, 1);
   const int pooled_w = kernels::Conv2dShape::out_dim(w, 3, 2, 1, 1);
@@ -345,7 +346,10 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
   x.id = pooled;
   h = pooled_h;
   w = pooled_w;
+  return x;
+}
 
+ActNetwork::Tensor ActNetwork::residual_stages(const std::string& p, Tensor x, int& h, int& w) {
   const auto stages = config_.backbone_stages();
   for (size_t s = 0; s < stages.size(); ++s) {
     for (size_t b = 0; b < stages[s].size(); ++b) {
@@ -368,7 +372,11 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
       w = bw;
     }
   }
-  // 1x1 input projection with bias: the NHWC feature map is already [h*w tokens, C] row-major.
+  return x;
+}
+
+// 1x1 input projection with bias: the NHWC feature map is already [h*w tokens, C] row-major.
+ValueId ActNetwork::image_projection(const std::string& p, const Tensor& x, int h, int w, int first_row) {
   const int C = config_.feature_channels(), D = config_.dim_model;
   const std::string proj_name = p + "img_feat_proj";
   const float* proj_bias = weight(bn::kImgProjBias, {D});
@@ -390,6 +398,17 @@ ValueId ActNetwork::backbone(size_t camera, int first_row) {
          MatrixRef::of_constant(proj_bias, 0), {}, Epilogue::kNone, y);
   calibration_point(CalibrationRole::kImageProjection, y);
   return y;
+}
+
+ValueId ActNetwork::backbone(size_t camera, int first_row) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const std::string p = cam_prefix(camera);
+  camera_ = camera;
+  const Tensor image = camera_image(camera);
+  int h = cam.height, w = cam.width;
+  const Tensor pooled = stem_and_max_pool(p, image, h, w);
+  const Tensor features = residual_stages(p, pooled, h, w);
+  return image_projection(p, features, h, w, first_row);
 }
 
 ValueId ActNetwork::ffn(const std::string& prefix, int rows, ValueId x, ValueId residual, const std::string& out_name) {

@@ -135,6 +135,13 @@ class ActNetwork {
   /// Camera `camera`'s backbone and input projection, whose output is rows [first_row, first_row +
   /// h * w) of the encoder's input tokens (a row view: written in place).
   ValueId backbone(size_t camera, int first_row);
+  /// backbone()'s steps: the camera's input (float, or int8 codes for a static int8 stem); the
+  /// stem with its fused max-pool; the residual stages; the projection to tokens. h and w follow
+  /// the feature map.
+  Tensor camera_image(size_t camera);
+  Tensor stem_and_max_pool(const std::string& p, const Tensor& image, int& h, int& w);
+  Tensor residual_stages(const std::string& p, Tensor x, int& h, int& w);
+  ValueId image_projection(const std::string& p, const Tensor& x, int h, int w, int first_row);
   /// The input that takes an external backbone's output for `camera` (its tokens, [h * w, D]).
   ValueId external_features(size_t camera);
   /// [LayerNorm1 (pre-norm)] -> fused qkv projection -> attention -> out projection + residual x

@@ -89,12 +89,6 @@ void RowCodes::write(const RunContext& ctx, const float* x, size_t ldx, int r0, 
   kernels::quantize_rows_dynamic_f32_s8(quant, rows, cols, x, ldx, y, ldy, ctx.data(scale) + row, ctx.data_s32(zero_point) + row);
 }
 
-double Graph::total_macs() const {
-  double total = 0;
-  for (const auto& op : ops_) total += op->macs();
-  return total;
-}
-
 void Graph::plan(int threads, bool keep_all_values) {
   // Lifetimes.
   for (auto& v : values_) {

@@ -192,7 +192,6 @@ class Graph {
   ValueId find(const std::string& name) const;
   const std::vector<std::unique_ptr<Op>>& ops() const { return ops_; }
   size_t arena_bytes() const { return arena_floats_ * sizeof(float); }
-  double total_macs() const;
 
  private:
   std::vector<Value> values_;

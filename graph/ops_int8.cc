@@ -173,6 +173,62 @@ double ConvS8Op::macs() const {
   return static_cast<double>(spec_.shape.out_h) * spec_.shape.out_w * spec_.shape.out_c * spec_.shape.patch_size();
 }
 
+// How a convolution's output is cut into tasks: pixel tiles times blocks of output channels.
+struct ConvS8Op::Tasks {
+  EvenSplit pixel_split;
+  size_t n = 0;  // output channels
+  size_t pixel_tiles = 0, channels_per_block = 0, channel_blocks = 0;
+  bool channel_major = false;  // all pixel tiles of a channel block, then the next block
+
+  struct Tile {
+    int p0, count;
+    kernels::ConvChannels channels;
+  };
+  size_t count() const { return pixel_tiles * channel_blocks; }
+  Tile tile(size_t task) const {
+    const size_t pixel_tile = channel_major ? task % pixel_tiles : task / channel_blocks;
+    const size_t channel_block = channel_major ? task / pixel_tiles : task % channel_blocks;
+    int p0, p1;
+    pixel_split.range(static_cast<int>(pixel_tile), p0, p1);
+    const size_t c0 = channel_block * channels_per_block;
+    const int c1 = static_cast<int>(std::min(n, c0 + channels_per_block));
+    return Tile{p0, p1 - p0, {static_cast<int>(std::min(c0, n)), c1}};
+  }
+};
+
+ConvS8Op::Tasks ConvS8Op::plan_tasks(const RunContext& ctx) const {
+  Tasks t;
+  t.n = static_cast<size_t>(spec_.shape.out_c);
+  const size_t n = t.n;
+  // Tiles start on whole row tiles of this variant's MR (6 on VNNI), not on the lcm of every MR
+  // (12): layer4's 300 pixels are 50 row tiles, 25 per thread, where 25 quanta of 12 split 12 / 13.
+  t.pixel_split = split_evenly(spec_.shape.out_h * spec_.shape.out_w, ctx.kernels().gemm_s8.mr, tile_pixels_,
+                               ctx.pool().threads());
+  // Few pixel tiles (the deep layers): split the output channels too, in blocks of 64, so every
+  // thread gets work without each one streaming all the weights.
+  t.pixel_tiles = static_cast<size_t>(t.pixel_split.parts);
+  const size_t wanted = 4 * static_cast<size_t>(ctx.pool().threads());
+  const size_t bytes_per_channel = static_cast<size_t>(spec_.shape.patch_size());  // int8 weights
+  // Weights past L2 (layer4's convs, 1.2-2.4 MB): blocks of output channels (64 times a power of
+  // two, as even as the channels allow) whose weights fit half of L2, in channel-major task order,
+  // so that a thread runs all pixel tiles of a block while its weights stay in its L2 (each pixel
+  // tile streamed all of them from L3).
+  t.channel_major = bytes_per_channel * n > kL2WeightBytes;
+  t.channels_per_block = kChannelBlock;
+  if (t.channel_major) {
+    while (2 * t.channels_per_block < n && 2 * t.channels_per_block * bytes_per_channel <= kL2WeightBytes / 2) {
+      t.channels_per_block *= 2;
+    }
+  } else if (t.pixel_tiles < wanted) {
+    const size_t blocks = std::min(ceil_div(wanted, t.pixel_tiles), ceil_div(n, kChannelBlock));
+    t.channels_per_block = ceil_div(ceil_div(n, blocks), kChannelBlock) * kChannelBlock;
+  } else {
+    t.channels_per_block = n;
+  }
+  t.channel_blocks = ceil_div(n, t.channels_per_block);
+  return t;
+}
+
 void ConvS8Op::run(const RunContext& ctx) const {
   kernels::QuantS8 in_q = spec_.input_q;
   if (spec_.input_params != kNoValue) {
@@ -183,103 +239,76 @@ void ConvS8Op::run(const RunContext& ctx) const {
   const auto pad = static_cast<int8_t>(spec_.unsigned_input ? in_q.zero_point ^ 0x80 : in_q.zero_point);
   const kernels::ConvS8 conv{spec_.shape, &ctx.kernels().gemm_s8, packed_.data(), pad};
   const int8_t* x = ctx.data_s8(inputs[0]);
-  const size_t n = static_cast<size_t>(spec_.shape.out_c);
-  // Tiles start on whole row tiles of this variant's MR (6 on VNNI), not on the lcm of every MR
-  // (12): layer4's 300 pixels are 50 row tiles, 25 per thread, where 25 quanta of 12 split 12 / 13.
-  const EvenSplit pixel_split = split_evenly(spec_.shape.out_h * spec_.shape.out_w, ctx.kernels().gemm_s8.mr,
-                                             tile_pixels_, ctx.pool().threads());
-  // Few pixel tiles (the deep layers): split the output channels too, in blocks of 64, so every
-  // thread gets work without each one streaming all the weights.
-  const size_t pixel_tiles = static_cast<size_t>(pixel_split.parts);
-  const size_t wanted = 4 * static_cast<size_t>(ctx.pool().threads());
-  const size_t bytes_per_channel = static_cast<size_t>(spec_.shape.patch_size());  // int8 weights
-  // Weights past L2 (layer4's convs, 1.2-2.4 MB): blocks of output channels (64 times a power of
-  // two, as even as the channels allow) whose weights fit half of L2, in channel-major task order,
-  // so that a thread runs all pixel tiles of a block while its weights stay in its L2 (each pixel
-  // tile streamed all of them from L3).
-  const bool channel_major = bytes_per_channel * n > kL2WeightBytes;
-  size_t channels_per_block = kChannelBlock;
-  if (channel_major) {
-    while (2 * channels_per_block < n && 2 * channels_per_block * bytes_per_channel <= kL2WeightBytes / 2) {
-      channels_per_block *= 2;
-    }
-  } else if (pixel_tiles < wanted) {
-    const size_t blocks = std::min(ceil_div(wanted, pixel_tiles), ceil_div(n, kChannelBlock));
-    channels_per_block = ceil_div(ceil_div(n, blocks), kChannelBlock) * kChannelBlock;
-  } else {
-    channels_per_block = n;
-  }
-  const size_t channel_blocks = ceil_div(n, channels_per_block);
-  const size_t tasks = pixel_tiles * channel_blocks;
-  struct Tile {
-    int p0, count;
-    kernels::ConvChannels channels;
-  };
-  const auto tile = [&](size_t task) {
-    const size_t pixel_tile = channel_major ? task % pixel_tiles : task / channel_blocks;
-    const size_t channel_block = channel_major ? task / pixel_tiles : task % channel_blocks;
-    int p0, p1;
-    pixel_split.range(static_cast<int>(pixel_tile), p0, p1);
-    const size_t c0 = channel_block * channels_per_block;
-    const int c1 = static_cast<int>(std::min(n, c0 + channels_per_block));
-    return Tile{p0, p1 - p0, {static_cast<int>(std::min(c0, n)), c1}};
-  };
+  const Tasks tasks = plan_tasks(ctx);
   if (spec_.s8_out) {
-    kernels::GemmS8OutS8 out;
-    out.c = ctx.data_s8(outputs[0]);
-    out.ldc = n;
-    out.scale = requant_scale_.data();
-    out.out_zero_point = spec_.output_q.zero_point;
-    out.qmin = spec_.relu ? spec_.output_q.zero_point : -128;
-    if (spec_.residual != kNoValue) {
-      out.residual = ctx.data_s8(spec_.residual);
-      out.ldr = n;
-      out.residual_zero_point = spec_.residual_q.zero_point;
-      out.residual_scale = spec_.residual_q.scale / spec_.output_q.scale;
-    }
-    const kernels::Conv2dShape& s = spec_.shape;
-    const auto pool_rows = [&](const int8_t* conv_rows, int q0, int q1, int conv_row0) {
-      max_pool_->pool_rows(ctx.kernels().maxpool_s8, s, conv_rows, ctx.data_s8(outputs[1]), q0, q1, conv_row0);
-    };
-    if (max_pool_ && !ctx.read(outputs[0])) {
-      return run_in_pooled_bands(
-          ctx.pool(), *max_pool_, s, sizeof(int8_t), kernels::kConvS8TileQuantum, tile_pixels_,
-          [&](int thread) { return reinterpret_cast<std::byte*>(ctx.scratch_s8(thread)) + band_offset(); },
-          [&](std::byte* band, int first, int count, int band_row0, int thread) {
-            kernels::GemmS8OutS8 band_out = out;
-            band_out.c = reinterpret_cast<int8_t*>(band);
-            kernels::conv_s8_s8out(conv, x, band_out, first, count, ctx.scratch_s8(thread), {}, band_row0 * s.out_w);
-          },
-          [&](const std::byte* band, int q0, int q1, int band_row0) {
-            pool_rows(reinterpret_cast<const int8_t*>(band), q0, q1, band_row0);
-          });
-    }
-    ctx.pool().parallel_for(tasks, [&](size_t task, int thread) {
-      const Tile t = tile(task);
-      if (t.channels.begin < t.channels.end) kernels::conv_s8_s8out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
-    });
-    if (max_pool_) run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) { pool_rows(out.c, q0, q1, 0); });
+    run_s8_out(ctx, conv, x, tasks);
   } else {
-    kernels::GemmS8OutF32 out;
-    out.c = ctx.data(outputs[0]);
-    out.ldc = n;
-    out.w_scale = spec_.w_scale;
-    out.a_scale = in_q.scale;
-    out.bias = spec_.bias;
-    if (spec_.residual != kNoValue) {
-      out.residual = ctx.data(spec_.residual);
-      out.ldr = n;
-    }
-    out.relu = spec_.relu;
-    ctx.pool().parallel_for(tasks, [&](size_t task, int thread) {
-      const Tile t = tile(task);
-      if (t.channels.begin < t.channels.end) kernels::conv_s8_f32out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
+    run_f32_out(ctx, conv, x, in_q.scale, tasks);
+  }
+}
+
+// Requantized int8 output, with a fused max-pool either over bands in scratch (nothing else reads
+// the conv's output) or after the whole conv.
+void ConvS8Op::run_s8_out(const RunContext& ctx, const kernels::ConvS8& conv, const int8_t* x, const Tasks& tasks) const {
+  const size_t n = tasks.n;
+  kernels::GemmS8OutS8 out;
+  out.c = ctx.data_s8(outputs[0]);
+  out.ldc = n;
+  out.scale = requant_scale_.data();
+  out.out_zero_point = spec_.output_q.zero_point;
+  out.qmin = spec_.relu ? spec_.output_q.zero_point : -128;
+  if (spec_.residual != kNoValue) {
+    out.residual = ctx.data_s8(spec_.residual);
+    out.ldr = n;
+    out.residual_zero_point = spec_.residual_q.zero_point;
+    out.residual_scale = spec_.residual_q.scale / spec_.output_q.scale;
+  }
+  const kernels::Conv2dShape& s = spec_.shape;
+  const auto pool_rows = [&](const int8_t* conv_rows, int q0, int q1, int conv_row0) {
+    max_pool_->pool_rows(ctx.kernels().maxpool_s8, s, conv_rows, ctx.data_s8(outputs[1]), q0, q1, conv_row0);
+  };
+  if (max_pool_ && !ctx.read(outputs[0])) {
+    return run_in_pooled_bands(
+        ctx.pool(), *max_pool_, s, sizeof(int8_t), kernels::kConvS8TileQuantum, tile_pixels_,
+        [&](int thread) { return reinterpret_cast<std::byte*>(ctx.scratch_s8(thread)) + band_offset(); },
+        [&](std::byte* band, int first, int count, int band_row0, int thread) {
+          kernels::GemmS8OutS8 band_out = out;
+          band_out.c = reinterpret_cast<int8_t*>(band);
+          kernels::conv_s8_s8out(conv, x, band_out, first, count, ctx.scratch_s8(thread), {}, band_row0 * s.out_w);
+        },
+        [&](const std::byte* band, int q0, int q1, int band_row0) {
+          pool_rows(reinterpret_cast<const int8_t*>(band), q0, q1, band_row0);
+        });
+  }
+  ctx.pool().parallel_for(tasks.count(), [&](size_t task, int thread) {
+    const Tasks::Tile t = tasks.tile(task);
+    if (t.channels.begin < t.channels.end) kernels::conv_s8_s8out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
+  });
+  if (max_pool_) run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) { pool_rows(out.c, q0, q1, 0); });
+}
+
+// Float output (dequantized with the input's scale `a_scale`), a fused max-pool after the whole conv.
+void ConvS8Op::run_f32_out(const RunContext& ctx, const kernels::ConvS8& conv, const int8_t* x, float a_scale,
+                           const Tasks& tasks) const {
+  kernels::GemmS8OutF32 out;
+  out.c = ctx.data(outputs[0]);
+  out.ldc = tasks.n;
+  out.w_scale = spec_.w_scale;
+  out.a_scale = a_scale;
+  out.bias = spec_.bias;
+  if (spec_.residual != kNoValue) {
+    out.residual = ctx.data(spec_.residual);
+    out.ldr = tasks.n;
+  }
+  out.relu = spec_.relu;
+  ctx.pool().parallel_for(tasks.count(), [&](size_t task, int thread) {
+    const Tasks::Tile t = tasks.tile(task);
+    if (t.channels.begin < t.channels.end) kernels::conv_s8_f32out(conv, x, out, t.p0, t.count, ctx.scratch_s8(thread), t.channels);
+  });
+  if (max_pool_) {
+    run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) {
+      max_pool_->pool_rows(ctx.kernels().elementwise, spec_.shape, out.c, ctx.data(outputs[1]), q0, q1, 0);
     });
-    if (max_pool_) {
-      run_pool_in_row_tasks(ctx.pool(), *max_pool_, [&](int q0, int q1) {
-        max_pool_->pool_rows(ctx.kernels().elementwise, spec_.shape, out.c, ctx.data(outputs[1]), q0, q1, 0);
-      });
-    }
   }
 }
 
@@ -578,23 +607,20 @@ AttentionS8Op::AttentionS8Op(const kernels::GemmS8Kernels& kernels, int nq, int 
 
 size_t AttentionS8Op::scratch_per_thread() const { return ceil_div(layout_.scratch_bytes, sizeof(float)); }
 
-void AttentionS8Op::run(const RunContext& ctx) const {
-  const float* q = q_.resolve(ctx);
-  const float* k = k_.resolve(ctx);
-  const float* v = v_.resolve(ctx);
-  float* out = ctx.data(outputs[0]);
+void* AttentionS8Op::head_at(size_t head, size_t offset) const {
+  return static_cast<void*>(keys_values_.data() + head * layout_.head_bytes + offset);
+}
+
+// Stage 1a, tasks of key rows (the row bands of the linear that wrote them, so that a thread
+// reads rows in its own cache; a task per head read every row, half of them from the other
+// core's: encoder attention 2-5 %, the decoder's cross attention 9 % faster on two threads):
+// each key quantized per head, one int8 row per token, the 1 / sqrt(d) of the scores folded into
+// its scale.
+void AttentionS8Op::quantize_keys(const RunContext& ctx, const float* k) const {
   const kernels::KernelConfig& kc = ctx.kernels();
   const int hd = dim_ / heads_;
   const float inv_sqrt_hd = 1.0f / std::sqrt(static_cast<float>(hd));
-  const size_t n_keys = static_cast<size_t>(nk_), head_dim = static_cast<size_t>(hd);
-  uint8_t* keys_values = keys_values_.data();
-  const auto head_at = [&](size_t head, size_t offset) { return static_cast<void*>(keys_values + head * layout_.head_bytes + offset); };
-
-  // Stage 1a, tasks of key rows (the row bands of the linear that wrote them, so that a thread
-  // reads rows in its own cache; a task per head read every row, half of them from the other
-  // core's: encoder attention 2-5 %, the decoder's cross attention 9 % faster on two threads):
-  // each key quantized per head, one int8 row per token, the 1 / sqrt(d) of the scores folded into
-  // its scale.
+  const size_t head_dim = static_cast<size_t>(hd);
   const EvenSplit key_rows = gemm_tiling(nk_, dim_, kc.gemm_s8.mr, kc.gemm_s8.nr, ctx.pool().threads()).rows;
   ctx.pool().parallel_for(static_cast<size_t>(key_rows.parts), [&](size_t task, int) {
     int r0, r1;
@@ -607,9 +633,14 @@ void AttentionS8Op::run(const RunContext& ctx) const {
       for (int j = 0; j < r1 - r0; ++j) k_scale[j] *= inv_sqrt_hd;
     }
   });
+}
 
-  // Stage 1b, a task per head: its int8 keys, and its values quantized, packed as the GEMM's
-  // weight side.
+// Stage 1b, a task per head: its int8 keys, and its values quantized, packed as the GEMM's
+// weight side.
+void AttentionS8Op::pack_keys_and_values(const RunContext& ctx, const float* v) const {
+  const kernels::KernelConfig& kc = ctx.kernels();
+  const int hd = dim_ / heads_;
+  const size_t head_dim = static_cast<size_t>(hd);
   ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t head, int thread) {
     uint8_t* scratch = aligned_scratch(ctx, thread);
     int8_t* v_s8 = reinterpret_cast<int8_t*>(scratch + layout_.v_s8);
@@ -625,15 +656,20 @@ void AttentionS8Op::run(const RunContext& ctx) const {
     kc.gemm_s8.pack_transposed(hd, nk_, v_s8, head_dim, nullptr, kernels::kSoftmaxS8ZeroPoint,
                                head_at(head, layout_.packed_v));
   });
+}
 
-  // Stage 2, a task per (head, block of query rows): scores = q k^T / sqrt(d), softmax, then p v;
-  // both GEMMs [rows x n] = A [rows x k] times a packed operand.
-  // Blocks of whole micro-tiles of rows, as even as they can be (the decoder's 100 queries in blocks
-  // of 48 left a 4-row block per head).
-  // Tasks in block-major order when there are two blocks per thread or more (the encoder's 7): the
-  // pool gives each thread a contiguous range of tasks, so a thread reads the query rows and writes
-  // the output rows that it produced and that it reads next (the other core's L2 otherwise; encoder
-  // attention 2-4 % faster on two threads). The decoder's 3 blocks stay head-major (1.005x).
+// Stage 2, a task per (head, block of query rows): scores = q k^T / sqrt(d), softmax, then p v;
+// both GEMMs [rows x n] = A [rows x k] times a packed operand.
+// Blocks of whole micro-tiles of rows, as even as they can be (the decoder's 100 queries in blocks
+// of 48 left a 4-row block per head).
+// Tasks in block-major order when there are two blocks per thread or more (the encoder's 7): the
+// pool gives each thread a contiguous range of tasks, so a thread reads the query rows and writes
+// the output rows that it produced and that it reads next (the other core's L2 otherwise; encoder
+// attention 2-4 % faster on two threads). The decoder's 3 blocks stay head-major (1.005x).
+void AttentionS8Op::attend(const RunContext& ctx, const float* q, float* out) const {
+  const kernels::KernelConfig& kc = ctx.kernels();
+  const int hd = dim_ / heads_;
+  const size_t n_keys = static_cast<size_t>(nk_), head_dim = static_cast<size_t>(hd);
   const EvenSplit blocks = split_evenly(nq_, kc.gemm_s8.mr, kAttentionS8BlockRows, 1);
   const size_t heads = static_cast<size_t>(heads_), n_blocks = static_cast<size_t>(blocks.parts);
   const bool block_major = n_blocks >= 2 * static_cast<size_t>(ctx.pool().threads());
@@ -667,5 +703,11 @@ void AttentionS8Op::run(const RunContext& ctx) const {
   });
 }
 
-}  // namespace act::graph
+void AttentionS8Op::run(const RunContext& ctx) const {
+  // The keys of every head must be quantized before any head's are packed.
+  quantize_keys(ctx, k_.resolve(ctx));
+  pack_keys_and_values(ctx, v_.resolve(ctx));
+  attend(ctx, q_.resolve(ctx), ctx.data(outputs[0]));
+}
 
+}  // namespace act::graph

@@ -125,7 +125,12 @@ class ConvS8Op : public Op {
   const std::optional<FusedMaxPool>& max_pool() const { return max_pool_; }
 
  private:
+  struct Tasks;
   size_t band_offset() const;  // a fused max-pool's band in a thread's scratch, after the conv's own
+  Tasks plan_tasks(const RunContext& ctx) const;
+  void run_s8_out(const RunContext& ctx, const kernels::ConvS8& conv, const int8_t* x, const Tasks& tasks) const;
+  void run_f32_out(const RunContext& ctx, const kernels::ConvS8& conv, const int8_t* x, float a_scale,
+                   const Tasks& tasks) const;
 
   ConvS8Spec spec_;
   int tile_pixels_;
@@ -188,9 +193,8 @@ class LinearS8Op : public Op, public RowCodesWriter {
   size_t weight_bytes() const { return static_cast<size_t>(in_) * static_cast<size_t>(out_); }
   const int8_t* weight() const { return weight_; }  ///< [out, in], unpacked (in the blob)
   const float* w_scale() const { return w_scale_; }
-  /// The per-tensor parameters of the input codes and of the output codes, when they are.
+  /// The per-tensor parameters of the input codes, when they are.
   std::optional<kernels::QuantS8> input_quant() const { return x_codes_.fixed; }
-  std::optional<kernels::QuantS8> output_quant() const { return y_codes_.fixed; }
 
  private:
   /// True when the GEMM writes the output codes itself (requantizing, see above).
@@ -251,6 +255,10 @@ class AttentionS8Op : public Op {
     size_t q_s8, q_scale, scores, p_s8, p_scale;                    // stage 2
     size_t scratch_bytes;
   };
+  void* head_at(size_t head, size_t offset) const;  // in keys_values_
+  void quantize_keys(const RunContext& ctx, const float* k) const;
+  void pack_keys_and_values(const RunContext& ctx, const float* v) const;
+  void attend(const RunContext& ctx, const float* q, float* out) const;
   int nq_, nk_, dim_, heads_;
   MatrixRef q_, k_, v_;
   Layout layout_;

@@ -350,6 +350,59 @@ struct StreamSlot {
   std::atomic<int>& open_;
 };
 
+// Names this server answers to besides IP literals and localhost: the configured address and this
+// machine's name (also as NAME.local). Anything else in Host is a DNS-rebinding page's name.
+std::vector<std::string> own_host_names(const std::string& address) {
+  std::vector<std::string> names{lower(address)};
+  char hostname[256] = "";
+  if (::gethostname(hostname, sizeof hostname - 1) == 0 && hostname[0] != '\0') {
+    names.push_back(lower(hostname));
+    names.push_back(lower(hostname) + ".local");
+  }
+  return names;
+}
+
+// May this command act? It needs the run's token, and it must not be late.
+bool command_allowed(const std::string& token, Clock::time_point started, const httplib::Request& req,
+                     httplib::Response& res) {
+  const std::string given = req.has_header("X-Act-Token") ? req.get_header_value("X-Act-Token") : req.get_param_value("token");
+  if (given != token) {
+    reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
+    return false;
+  }
+  // A command that is served late never acts: timed from when its first byte reached this server
+  // and, when it says when it was issued (X-Act-Issued, the page: ms on this server's clock as
+  // /stats gives it in server_ms), from then, so a command that waited in the network is late too.
+  const auto now = Clock::now();
+  double age_ms = t_connection ? ms_between(t_connection->received(), now) : 0;
+  std::string since = "reached this server";
+  if (req.has_header("X-Act-Issued")) {
+    const std::string text = req.get_header_value("X-Act-Issued");
+    double issued = 0;
+    const auto [stop, error] = std::from_chars(text.data(), text.data() + text.size(), issued);
+    if (error != std::errc() || stop != text.data() + text.size() || !std::isfinite(issued)) {
+      reply_json(res, 400, {{"error", "X-Act-Issued '" + text + "' is not a time in ms on this server's clock (server_ms in /stats)"}});
+      return false;
+    }
+    const double issued_age = ms_between(started, now) - issued;
+    if (issued_age < -static_cast<double>(kStaleAfter.count())) {
+      reply_json(res, 408, {{"error", "X-Act-Issued is " + std::to_string(std::lround(-issued_age)) + " ms ahead of this server's "
+                                      "clock (a page from before act_drive restarted? reload it): refused"}});
+      return false;
+    }
+    if (issued_age > age_ms) {
+      age_ms = issued_age;
+      since = "was issued";
+    }
+  }
+  if (age_ms > static_cast<double>(kStaleAfter.count())) {
+    reply_json(res, 408, {{"error", "this request " + since + " " + std::to_string(std::lround(age_ms)) + " ms ago (over " +
+                                    std::to_string(kStaleAfter.count()) + " ms): refused, it would move the car late"}});
+    return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 struct LiveView::Server {
@@ -377,15 +430,15 @@ void parse_http_address(const std::string& text, LiveViewOptions& options) {
 
 LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource& frames)
     : options_(std::move(options)), token_(random_token()), server_(std::make_unique<Server>()) {
+  add_guards(cockpit);
+  add_view_routes(cockpit, frames);
+  add_control_routes(cockpit);
+  listen();
+}
+
+void LiveView::add_guards(Cockpit& cockpit) {
   HttpServer& http = server_->http;
-  // Names this server answers to besides IP literals and localhost: the configured address and this
-  // machine's name (also as NAME.local). Anything else in Host is a DNS-rebinding page's name.
-  std::vector<std::string> names{lower(options_.address)};
-  char hostname[256] = "";
-  if (::gethostname(hostname, sizeof hostname - 1) == 0 && hostname[0] != '\0') {
-    names.push_back(lower(hostname));
-    names.push_back(lower(hostname) + ".local");
-  }
+  const std::vector<std::string> names = own_host_names(options_.address);
   const auto host_allowed = [names](const std::string& host) {
     return is_ip_literal(host) || host == "localhost" || (host.size() > 10 && host.ends_with(".localhost")) ||
            std::find(names.begin(), names.end(), host) != names.end();
@@ -441,44 +494,10 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     reply_json(res, res.status, {{"error", why}});
     return Handled::Handled;
   }));
-  const auto authorized = [this](const httplib::Request& req, httplib::Response& res) {
-    const std::string given = req.has_header("X-Act-Token") ? req.get_header_value("X-Act-Token") : req.get_param_value("token");
-    if (given != token_) {
-      reply_json(res, 403, {{"error", "this moves the car: it needs the token act_drive printed at start-up"}});
-      return false;
-    }
-    // A command that is served late never acts: timed from when its first byte reached this server
-    // and, when it says when it was issued (X-Act-Issued, the page: ms on this server's clock as
-    // /stats gives it in server_ms), from then, so a command that waited in the network is late too.
-    const auto now = Clock::now();
-    double age_ms = t_connection ? ms_between(t_connection->received(), now) : 0;
-    std::string since = "reached this server";
-    if (req.has_header("X-Act-Issued")) {
-      const std::string text = req.get_header_value("X-Act-Issued");
-      double issued = 0;
-      const auto [stop, error] = std::from_chars(text.data(), text.data() + text.size(), issued);
-      if (error != std::errc() || stop != text.data() + text.size() || !std::isfinite(issued)) {
-        reply_json(res, 400, {{"error", "X-Act-Issued '" + text + "' is not a time in ms on this server's clock (server_ms in /stats)"}});
-        return false;
-      }
-      const double issued_age = ms_between(server_->started, now) - issued;
-      if (issued_age < -static_cast<double>(kStaleAfter.count())) {
-        reply_json(res, 408, {{"error", "X-Act-Issued is " + std::to_string(std::lround(-issued_age)) + " ms ahead of this server's "
-                                        "clock (a page from before act_drive restarted? reload it): refused"}});
-        return false;
-      }
-      if (issued_age > age_ms) {
-        age_ms = issued_age;
-        since = "was issued";
-      }
-    }
-    if (age_ms > static_cast<double>(kStaleAfter.count())) {
-      reply_json(res, 408, {{"error", "this request " + since + " " + std::to_string(std::lround(age_ms)) + " ms ago (over " +
-                                      std::to_string(kStaleAfter.count()) + " ms): refused, it would move the car late"}});
-      return false;
-    }
-    return true;
-  };
+}
+
+void LiveView::add_view_routes(Cockpit& cockpit, const FrameSource& frames) {
+  HttpServer& http = server_->http;
   // The newest frame as the model sees it (after preprocessing), JPEG-encoded; empty before the first.
   const auto model_view_jpeg = [this, &frames] {
     std::vector<uchar> jpeg;
@@ -525,21 +544,25 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
       return true;
     });
   });
+}
+
+void LiveView::add_control_routes(Cockpit& cockpit) {
+  HttpServer& http = server_->http;
   // POST /estop: the pre-routing handler above.
-  http.Post("/resume", [&cockpit, authorized](const httplib::Request& req, httplib::Response& res) {
-    if (!authorized(req, res)) return;
+  http.Post("/resume", [this, &cockpit](const httplib::Request& req, httplib::Response& res) {
+    if (!command_allowed(token_, server_->started, req, res)) return;
     cockpit.resume();
     reply_json(res, 200, {{"ok", "resumed"}});
   });
-  http.Post("/mode", [&cockpit, authorized](const httplib::Request& req, httplib::Response& res) {
-    if (!authorized(req, res)) return;
+  http.Post("/mode", [this, &cockpit](const httplib::Request& req, httplib::Response& res) {
+    if (!command_allowed(token_, server_->started, req, res)) return;
     const std::optional<DriveMode> mode = parse_mode(req.get_param_value("mode"));
     if (!mode) return reply_json(res, 400, {{"error", "mode must be ai, manual or ai-steer"}});
     cockpit.set_mode(*mode);
     reply_json(res, 200, {{"ok", std::string("mode ") + mode_name(*mode)}});
   });
-  http.Post("/manual", [&cockpit, authorized](const httplib::Request& req, httplib::Response& res) {
-    if (!authorized(req, res)) return;
+  http.Post("/manual", [this, &cockpit](const httplib::Request& req, httplib::Response& res) {
+    if (!command_allowed(token_, server_->started, req, res)) return;
     const std::optional<double> steering = parse_position(req.get_param_value("steering"));
     const std::optional<double> throttle = parse_position(req.get_param_value("throttle"));
     if (!steering || !throttle) {
@@ -550,7 +573,10 @@ LiveView::LiveView(LiveViewOptions options, Cockpit& cockpit, const FrameSource&
     cockpit.manual(*steering, *throttle);
     reply_json(res, 200, {{"ok", "manual"}});
   });
+}
 
+void LiveView::listen() {
+  HttpServer& http = server_->http;
   if (options_.port == 0) {
     port_ = http.bind_to_any_port(options_.address);
   } else {

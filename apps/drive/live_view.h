@@ -54,6 +54,15 @@ class LiveView {
 
  private:
   struct Server;
+  /// Before routing, so before any body is read: the e-stop (open to all, on its request line and
+  /// headers alone), then the Host and Origin checks; and httplib's own refusals with a reason.
+  void add_guards(Cockpit& cockpit);
+  /// The page, the stats and the model's view (frame and MJPEG stream): anyone may read them.
+  void add_view_routes(Cockpit& cockpit, const FrameSource& frames);
+  /// Resume, mode and manual driving: the token only, and never late (the e-stop is a guard).
+  void add_control_routes(Cockpit& cockpit);
+  /// Binds options_'s address and serves on a thread of its own.
+  void listen();
   LiveViewOptions options_;
   std::string token_;
   int port_ = 0;

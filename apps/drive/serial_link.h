@@ -25,7 +25,6 @@ class SerialPort {
 
   void open(const std::string& path, int baud);
   void close();
-  bool is_open() const { return fd_ >= 0; }
   int fd() const { return fd_; }
   /// Writes every byte, waiting at most `timeout` for the port to accept them. False and `error`
   /// set on failure (a vanished device, a full buffer that does not drain).
@@ -86,11 +85,6 @@ class SerialLink : public ActuatorLink {
   std::string summary() const override;
 
   bool ready() const { return state_ == State::kReady; }
-  uint64_t commands_sent() const { return commands_sent_; }
-  uint64_t acks() const { return acks_; }
-  uint64_t rejected() const { return rejected_; }
-  uint64_t reconnects() const { return reconnects_; }
-  uint64_t watchdog_notices() const { return watchdog_notices_; }
   uint64_t ack_timeouts() const { return ack_timeouts_; }
 
  private:

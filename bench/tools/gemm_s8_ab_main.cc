@@ -95,6 +95,45 @@ struct AlignedFree {
   void operator()(void* p) const { std::free(p); }
 };
 
+// The shape as the output line names it.
+std::string shape_label(const Shape& s) {
+  const act::kernels::Conv2dShape& cs = s.conv_shape;
+  char label[96];
+  if (s.conv) {
+    std::snprintf(label, sizeof label, "conv:%dx%dx%d:%d:%d:%d (M %d K %d)", cs.in_h, cs.in_w, cs.in_c, cs.out_c,
+                  cs.kernel_h, cs.stride, s.m, s.k);
+  } else {
+    const char* kinds[] = {"s8", "f32", "s32"};
+    std::snprintf(label, sizeof label, "%dx%dx%d:%s%s", s.m, s.n, s.k, kinds[static_cast<int>(s.out)],
+                  s.row_zero_points ? "+zp" : "");
+  }
+  return label;
+}
+
+// `rounds` rounds of A's and B's best of 3 calls of run_once (by thread CPU time): their times
+// and the rounds' B/A ratios.
+template <class RunOnce>
+void time_alternating(const RunOnce& run_once, const GemmS8Kernels& a, const GemmS8Kernels& b, int rounds,
+                      std::vector<double>& ta, std::vector<double>& tb, std::vector<double>& ratio) {
+  const auto best_of_3 = [&](const GemmS8Kernels& v) {
+    double best = 1e30;
+    for (int i = 0; i < 3; ++i) {
+      const double t0 = thread_cpu_seconds();
+      run_once(v);
+      best = std::min(best, thread_cpu_seconds() - t0);
+    }
+    return best;
+  };
+  for (int r = 0; r < rounds; ++r) {
+    // Which goes first alternates, so neither always runs on caches the other warmed.
+    const bool a_first = r % 2 == 0;
+    const double first = best_of_3(a_first ? a : b), second = best_of_3(a_first ? b : a);
+    ta.push_back(a_first ? first : second);
+    tb.push_back(a_first ? second : first);
+    ratio.push_back(tb.back() / ta.back());
+  }
+}
+
 // Runs both variants on one shape and prints the line.
 void compare(const GemmS8Kernels& a, const GemmS8Kernels& b, const Shape& s, int rounds) {
   std::mt19937 rng(7);
@@ -153,34 +192,9 @@ void compare(const GemmS8Kernels& a, const GemmS8Kernels& b, const Shape& s, int
       case Out::kS32: v.s32out(g, o32, 0, s.m, 0, s.n); break;
     }
   };
-  const auto best_of_3 = [&](const GemmS8Kernels& v) {
-    double best = 1e30;
-    for (int i = 0; i < 3; ++i) {
-      const double t0 = thread_cpu_seconds();
-      run_once(v);
-      best = std::min(best, thread_cpu_seconds() - t0);
-    }
-    return best;
-  };
   std::vector<double> ta, tb, ratio;
-  for (int r = 0; r < rounds; ++r) {
-    // Which goes first alternates, so neither always runs on caches the other warmed.
-    const bool a_first = r % 2 == 0;
-    const double first = best_of_3(a_first ? a : b), second = best_of_3(a_first ? b : a);
-    ta.push_back(a_first ? first : second);
-    tb.push_back(a_first ? second : first);
-    ratio.push_back(tb.back() / ta.back());
-  }
-  char label[96];
-  if (s.conv) {
-    std::snprintf(label, sizeof label, "conv:%dx%dx%d:%d:%d:%d (M %d K %d)", cs.in_h, cs.in_w, cs.in_c, cs.out_c,
-                  cs.kernel_h, cs.stride, s.m, s.k);
-  } else {
-    const char* kinds[] = {"s8", "f32", "s32"};
-    std::snprintf(label, sizeof label, "%dx%dx%d:%s%s", s.m, s.n, s.k, kinds[static_cast<int>(s.out)],
-                  s.row_zero_points ? "+zp" : "");
-  }
-  std::printf("%s  A %.4f ms  B %.4f ms  B/A %.3f (10-90 %%: %.3f-%.3f)\n", label, 1e3 * percentile(ta, 0.5),
+  time_alternating(run_once, a, b, rounds, ta, tb, ratio);
+  std::printf("%s  A %.4f ms  B %.4f ms  B/A %.3f (10-90 %%: %.3f-%.3f)\n", shape_label(s).c_str(), 1e3 * percentile(ta, 0.5),
               1e3 * percentile(tb, 0.5), percentile(ratio, 0.5), percentile(ratio, 0.1), percentile(ratio, 0.9));
 }
 

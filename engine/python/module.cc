@@ -316,11 +316,8 @@ py::dict convert(const ConvertArgs& a) {
   return result;
 }
 
-void define_module(py::module_& m) {
-  m.doc() = "actengine: run a converted LeRobot ACT policy (.actb) on the CPU, and convert checkpoints";
-  m.attr("__version__") = version();
-  py::register_exception<EngineError>(m, "Error", PyExc_RuntimeError);
-
+// CameraInfo and ModelInfo: what a loaded model expects and produces.
+void define_model_info(py::module_& m) {
   py::class_<CameraInfo>(m, "CameraInfo", "One camera input: its LeRobot feature key and image size.")
       .def_readonly("key", &CameraInfo::key)
       .def_readonly("height", &CameraInfo::height)
@@ -348,7 +345,10 @@ void define_module(py::module_& m) {
       .def_readonly("kernels", &ModelInfo::kernels)
       .def_readonly("summary", &ModelInfo::summary)
       .def("__repr__", [](const ModelInfo& i) { return "ModelInfo(" + i.summary + ", " + i.precision + ")"; });
+}
 
+// Engine, Policy and ChunkScheduler: running a model.
+void define_runtime(py::module_& m) {
   py::class_<PyEngine, std::shared_ptr<PyEngine>>(m, "Engine", R"(A converted ACT policy (.actb) ready to run.
 
 Engine(path, threads=0, isa="auto"): threads 0 = one per online core; isa "auto" (or ACT_ISA) picks the
@@ -380,7 +380,10 @@ robot that keeps acting while the next chunk is inferred (actengine/scheduler.h)
       .def("wants_inference", &PyChunkScheduler::wants_inference, py::arg("tick"), py::arg("lead_ticks") = 0,
            "True when the next inference should start at tick (lead_ticks: its latency in ticks plus a margin).")
       .def("clear", &PyChunkScheduler::clear, "Forgets every chunk (a new episode, or a fault).");
+}
 
+// convert(): act_convert's conversion, with its options as keyword arguments.
+void define_convert(py::module_& m) {
   m.def(
       "convert",
       [](const std::filesystem::path& checkpoint, const std::filesystem::path& output, const std::string& precision,
@@ -440,6 +443,16 @@ accuracy report against FP32 (report: act_convert --report's JSON). Nothing is w
       py::arg("activation") = py::none(), py::arg("cameras") = std::vector<std::string>{},
       py::arg("lerobot_defaults") = false, py::arg("no_normalization") = false,
       py::arg("state_dict_key") = py::none());
+}
+
+void define_module(py::module_& m) {
+  m.doc() = "actengine: run a converted LeRobot ACT policy (.actb) on the CPU, and convert checkpoints";
+  m.attr("__version__") = version();
+  py::register_exception<EngineError>(m, "Error", PyExc_RuntimeError);
+
+  define_model_info(m);
+  define_runtime(m);
+  define_convert(m);
 }
 
 }  // namespace

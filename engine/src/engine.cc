@@ -5,17 +5,15 @@
 #include <cstdlib>
 #include <new>
 
-#include "actengine/status.h"
 #include "engine/src/engine_impl.h"
 #include "weights/blob/blob_names.h"
+#include "actengine/status.h"
 
 namespace act {
 
 namespace bn = blob_names;
 
-// ACT_VERSION: the project VERSION of the top-level CMakeLists.txt, the one version number of the
-// library, the tools and the Python wheel (setup.py reads it there too).
-const char* version() { return ACT_VERSION; }
+const char* version() { return "0.1.0"; }
 
 // ---------------------------------------------------------------------------------------- Impl
 
@@ -175,63 +173,74 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
   }
   if (image.data == nullptr) fail(StatusCode::kInvalidArgument, what + " has no data");
   if (image.height != cam.height || image.width != cam.width) {
-    fail(StatusCode::kInvalidArgument,
-         what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) + ", the model expects " +
-             std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
+    fail(StatusCode::kInvalidArgument, what + " is " + std::to_string(image.height) + "x" + std::to_string(image.width) +
+         ", the model expects " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width)");
   }
-  const InputNorm& norm = camera_norm_[camera];
-  // A static INT8 stem takes int8 codes (ActNetwork::camera_input_s8): the same quantize kernel the
-  // graph would run on the normalised float image, applied to a 256-entry table for uint8 pixels,
-  // so the codes are bit-identical and no float image is written.
-  int8_t* dst_s8 = network_->camera_input_s8(camera);
+  if (image.format == ImageView::Format::kRgbU8Hwc) return load_rgb_u8(camera, image, what);
+  load_float_chw(camera, image, what);
+}
+
+// A static INT8 stem takes int8 codes (ActNetwork::camera_input_s8): the same quantize kernel the
+// graph would run on the normalised float image, so the codes are bit-identical and no float image
+// is written; stored unsigned (XOR 0x80) where the stem's kernels read them so.
+void Engine::Impl::quantize_camera_codes(size_t camera, size_t n, const float* x, int8_t* y) const {
   const kernels::QuantS8 q = network_->camera_input_quant(camera);
-  // The codes, stored unsigned (XOR 0x80) where the stem's kernels read them so.
   const auto sign_flip = static_cast<int8_t>(network_->camera_input_unsigned(camera) ? 0x80 : 0);
-  const auto quantize = [&](size_t n, const float* x, int8_t* y) {
-    kernels_.quant.quantize(n, x, 1.0f / q.scale, q.zero_point, y);
-    if (sign_flip != 0) {
-      for (size_t i = 0; i < n; ++i) y[i] = static_cast<int8_t>(y[i] ^ sign_flip);
-    }
-  };
-  const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
-  if (image.format == ImageView::Format::kRgbU8Hwc) {
-    const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;
-    if (stride < w * 3) fail(StatusCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
-    // uint8 -> [0, 1] by a float32 division, as LeRobot does (255 -> exactly 1.0); then normalise.
-    float lut[3][256];
-    for (size_t c = 0; c < 3; ++c) {
-      for (int v = 0; v < 256; ++v) lut[c][v] = norm.apply(static_cast<float>(v) / 255.0f, c);
-    }
-    // Each pixel's channel value through its channel's table, into the network's input (float or int8),
-    // in bands of rows over the pool: the first parallel section of a run, it also wakes the workers
-    // while this thread maps its share.
-    const auto map_pixels = [&](auto* dst, const auto& table) {
-      constexpr size_t kBandRows = 8;
-      const auto* src = static_cast<const uint8_t*>(image.data);
-      pool_.parallel_for((h + kBandRows - 1) / kBandRows, [&](size_t band, int) {
-        // Locals, not the captures: an int8 store may alias anything in memory, which would reload
-        // every captured value after each store.
-        const auto* tables = &table[0];
-        const size_t width = w, row_stride = stride, end = std::min(h, (band + 1) * kBandRows);
-        for (size_t y = band * kBandRows; y < end; ++y) {
-          const uint8_t* row = src + y * row_stride;
-          auto* out = dst + y * width * 3;
-          for (size_t x = 0; x < width; ++x) {
-            for (size_t c = 0; c < 3; ++c) out[3 * x + c] = tables[c][row[3 * x + c]];
-          }
-        }
-      });
-    };
-    if (dst_s8 != nullptr) {
-      int8_t lut_s8[3][256];
-      for (size_t c = 0; c < 3; ++c) quantize(256, lut[c], lut_s8[c]);
-      map_pixels(dst_s8, lut_s8);
-    } else {
-      map_pixels(network_->camera_input(camera), lut);
-    }
-    return;
+  kernels_.quant.quantize(n, x, 1.0f / q.scale, q.zero_point, y);
+  if (sign_flip != 0) {
+    for (size_t i = 0; i < n; ++i) y[i] = static_cast<int8_t>(y[i] ^ sign_flip);
   }
-  // Float CHW in [0, 1]: normalised into the float input, or into a scratch image then quantized.
+}
+
+// uint8 RGB HWC: each channel value through a 256-entry table (normalised, and quantized for an
+// int8 stem).
+void Engine::Impl::load_rgb_u8(size_t camera, const ImageView& image, const std::string& what) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const InputNorm& norm = camera_norm_[camera];
+  int8_t* dst_s8 = network_->camera_input_s8(camera);
+  const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
+  const size_t stride = image.row_stride == 0 ? w * 3 : image.row_stride;
+  if (stride < w * 3) fail(StatusCode::kInvalidArgument, what + ": row stride " + std::to_string(stride) + " < width * 3");
+  // uint8 -> [0, 1] by a float32 division, as LeRobot does (255 -> exactly 1.0); then normalise.
+  float lut[3][256];
+  for (size_t c = 0; c < 3; ++c) {
+    for (int v = 0; v < 256; ++v) lut[c][v] = norm.apply(static_cast<float>(v) / 255.0f, c);
+  }
+  // Each pixel's channel value through its channel's table, into the network's input (float or int8),
+  // in bands of rows over the pool: the first parallel section of a run, it also wakes the workers
+  // while this thread maps its share.
+  const auto map_pixels = [&](auto* dst, const auto& table) {
+    constexpr size_t kBandRows = 8;
+    const auto* src = static_cast<const uint8_t*>(image.data);
+    pool_.parallel_for((h + kBandRows - 1) / kBandRows, [&](size_t band, int) {
+      // Locals, not the captures: an int8 store may alias anything in memory, which would reload
+      // every captured value after each store.
+      const auto* tables = &table[0];
+      const size_t width = w, row_stride = stride, end = std::min(h, (band + 1) * kBandRows);
+      for (size_t y = band * kBandRows; y < end; ++y) {
+        const uint8_t* row = src + y * row_stride;
+        auto* out = dst + y * width * 3;
+        for (size_t x = 0; x < width; ++x) {
+          for (size_t c = 0; c < 3; ++c) out[3 * x + c] = tables[c][row[3 * x + c]];
+        }
+      }
+    });
+  };
+  if (dst_s8 != nullptr) {
+    int8_t lut_s8[3][256];
+    for (size_t c = 0; c < 3; ++c) quantize_camera_codes(camera, 256, lut[c], lut_s8[c]);
+    map_pixels(dst_s8, lut_s8);
+  } else {
+    map_pixels(network_->camera_input(camera), lut);
+  }
+}
+
+// Float CHW in [0, 1]: normalised into the float input, or into a scratch image then quantized.
+void Engine::Impl::load_float_chw(size_t camera, const ImageView& image, const std::string& what) {
+  const CameraConfig& cam = config_.cameras[camera];
+  const InputNorm& norm = camera_norm_[camera];
+  int8_t* dst_s8 = network_->camera_input_s8(camera);
+  const size_t h = static_cast<size_t>(cam.height), w = static_cast<size_t>(cam.width);
   if (dst_s8 != nullptr) float_image_.resize(h * w * 3);
   float* dst = dst_s8 != nullptr ? float_image_.data() : network_->camera_input(camera);
   const auto* src = static_cast<const float*>(image.data);
@@ -247,7 +256,7 @@ void Engine::Impl::load_image(size_t camera, const ImageView& image) {
       dst[i * 3 + c] = norm.apply(v, c);
     }
   }
-  if (dst_s8 != nullptr) quantize(h * w * 3, dst, dst_s8);
+  if (dst_s8 != nullptr) quantize_camera_codes(camera, h * w * 3, dst, dst_s8);
 }
 
 void Engine::Impl::load_vector(const char* what, std::span<const float> values, size_t expected, const InputNorm& norm,

@@ -63,6 +63,11 @@ class Engine::Impl {
   /// The statistics of input feature `key` (`size` values), read at open.
   InputNorm input_norm(const std::string& key, size_t size);
   void load_image(size_t camera, const ImageView& image);
+  /// load_image()'s two formats, after its checks; `what` names the image in messages.
+  void load_rgb_u8(size_t camera, const ImageView& image, const std::string& what);
+  void load_float_chw(size_t camera, const ImageView& image, const std::string& what);
+  /// An int8 stem's input codes from normalised floats.
+  void quantize_camera_codes(size_t camera, size_t n, const float* x, int8_t* y) const;
   /// Profiling: turns last_run_ into the stage timings and adds it to the op sums.
   void record_profile(std::chrono::steady_clock::time_point preprocess_start,
                       std::chrono::steady_clock::time_point preprocess_end);

@@ -61,8 +61,7 @@ struct GemmS8PackedHeader {
   int32_t n, k;
   int32_t nr, kr, kp;    ///< panel width, k-group, K rounded up to kr
   int32_t a_zero_point;  ///< the per-tensor activation zero point folded into kbias
-  int32_t a_shift;       ///< a shift folded into kbias with a_zero_point; 0 in every current layout
-  int32_t reserved0;
+  int32_t reserved0[2];  ///< zero
   uint64_t panel_bytes;  ///< panel size, a multiple of 64
   uint8_t reserved[16];
 };

@@ -181,7 +181,6 @@ GemmS8PackedHeader gemm_s8_packed_header(GemmS8Layout layout, int n, int k, int3
   h.kr = d.kr;
   h.kp = static_cast<int32_t>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
   h.a_zero_point = a_zero_point;
-  h.a_shift = 0;
   h.panel_bytes = panel_bytes(d, k);
   return h;
 }

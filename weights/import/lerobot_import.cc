@@ -13,9 +13,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "actengine/status.h"
 #include "weights/blob/actb.h"
 #include "weights/blob/blob_names.h"
+#include "actengine/status.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"
 
@@ -137,10 +137,9 @@ struct ParsedConfig {
   int latent_dim = 32;
 };
 
-// `path` names where the config came from in messages.
-ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vector<std::string>& notes) {
+// Refuses configs that are not a current LeRobot ACT policy with one observation step.
+void check_act_policy(const OrderedJson& j, const ConfigReader& cfg, const fs::path& path) {
   if (!j.is_object()) fail(StatusCode::kDataLoss, path.string() + ": expected a JSON object");
-  ConfigReader cfg(j, path.string());
   if (j.contains("input_shapes") && !j.contains("input_features")) {
     fail(StatusCode::kUnimplemented, path.string() +
          ": this is a pre-2025 LeRobot config (input_shapes / input_normalization_modes); re-save it with a "
@@ -152,9 +151,17 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   if (j.contains("n_obs_steps") && cfg.get_int("n_obs_steps") != 1) {
     fail(StatusCode::kUnimplemented, path.string() + ": n_obs_steps must be 1 for ACT");
   }
+}
 
-  ParsedConfig pc;
-  ModelConfig& m = pc.model;
+Activation parse_activation(const std::string& act, const fs::path& path) {
+  if (act == "relu") return Activation::kRelu;
+  if (act == "gelu") return Activation::kGelu;
+  if (act == "glu") return Activation::kGlu;
+  fail(StatusCode::kUnimplemented, path.string() + ": feedforward_activation \"" + act + "\" is not supported (relu, gelu, glu)");
+}
+
+// The network's shape: backbone, transformer sizes, chunking.
+void read_architecture(const OrderedJson& j, const ConfigReader& cfg, const fs::path& path, ModelConfig& m) {
   const std::string backbone = cfg.get_string("vision_backbone");
   const ResNetArchitecture* resnet = find_resnet(backbone);
   if (resnet == nullptr) {
@@ -169,16 +176,7 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   m.dim_model = cfg.get_int("dim_model");
   m.n_heads = cfg.get_int("n_heads");
   m.dim_feedforward = cfg.get_int("dim_feedforward");
-  const std::string act = cfg.get_string("feedforward_activation");
-  if (act == "relu") {
-    m.activation = Activation::kRelu;
-  } else if (act == "gelu") {
-    m.activation = Activation::kGelu;
-  } else if (act == "glu") {
-    m.activation = Activation::kGlu;
-  } else {
-    fail(StatusCode::kUnimplemented, path.string() + ": feedforward_activation \"" + act + "\" is not supported (relu, gelu, glu)");
-  }
+  m.activation = parse_activation(cfg.get_string("feedforward_activation"), path);
   m.n_encoder_layers = cfg.get_int("n_encoder_layers");
   m.n_decoder_layers = cfg.get_int("n_decoder_layers");
   m.chunk_size = cfg.get_int("chunk_size");
@@ -189,20 +187,26 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
     }
     m.temporal_ensemble_coeff = j.at("temporal_ensemble_coeff").get<double>();
   }
-  if (j.contains("latent_dim")) pc.latent_dim = cfg.get_int("latent_dim");
+}
 
-  // Normalisation mapping: feature type -> mode; a type missing from it means IDENTITY.
+// Normalisation mapping: feature type -> mode; a type missing from it means IDENTITY.
+std::map<std::string, LeRobotMode> read_normalization_mapping(const ConfigReader& cfg, const fs::path& path) {
+  std::map<std::string, LeRobotMode> out;
   const auto& mapping = cfg.at("normalization_mapping");
   if (!mapping.is_object()) fail(StatusCode::kDataLoss, path.string() + ": normalization_mapping must be an object");
   for (const auto& [type, mode] : mapping.items()) {
     if (!mode.is_string()) fail(StatusCode::kDataLoss, path.string() + ": normalization_mapping[" + type + "] must be a string");
-    pc.mapping[type] = parse_mode(mode.get<std::string>(), path.string());
+    out[type] = parse_mode(mode.get<std::string>(), path.string());
   }
+  return out;
+}
 
-  // Features.
-  pc.inputs = read_features(cfg, "input_features");
+// The input features into `m`: cameras, observation.state and the first ENV feature.
+std::vector<Feature> read_input_features(const ConfigReader& cfg, const fs::path& path, ModelConfig& m,
+                                         std::vector<std::string>& notes) {
+  std::vector<Feature> inputs = read_features(cfg, "input_features");
   bool have_env = false;
-  for (const auto& f : pc.inputs) {
+  for (const auto& f : inputs) {
     if (f.type == "VISUAL") {
       if (f.shape.size() != 3 || f.shape[0] != 3) {
         fail(StatusCode::kInvalidArgument, path.string() + ": camera \"" + f.key + "\" must have shape [3, H, W]");
@@ -233,6 +237,11 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
   if (m.state_dim == 0) {
     notes.push_back("the config has no observation.state; LeRobot's own eval code requires it, actengine runs without it");
   }
+  return inputs;
+}
+
+// The one output feature ACT has, the action vector, into m.action_dim.
+void read_action_feature(const ConfigReader& cfg, const fs::path& path, ModelConfig& m) {
   bool have_action = false;
   for (const auto& f : read_features(cfg, "output_features")) {
     if (f.key == "action" && f.type == "ACTION") {
@@ -244,6 +253,18 @@ ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vecto
     }
   }
   if (!have_action) fail(StatusCode::kInvalidArgument, path.string() + ": output_features has no \"action\"");
+}
+
+// `path` names where the config came from in messages.
+ParsedConfig parse_config(const OrderedJson& j, const fs::path& path, std::vector<std::string>& notes) {
+  ConfigReader cfg(j, path.string());
+  check_act_policy(j, cfg, path);
+  ParsedConfig pc;
+  read_architecture(j, cfg, path, pc.model);
+  if (j.contains("latent_dim")) pc.latent_dim = cfg.get_int("latent_dim");
+  pc.mapping = read_normalization_mapping(cfg, path);
+  pc.inputs = read_input_features(cfg, path, pc.model, notes);
+  read_action_feature(cfg, path, pc.model);
   return pc;
 }
 
@@ -351,8 +372,8 @@ class Weights {
            ", the config implies " + shape_string(shape));
     }
     if (t->dtype != DType::kF32 && t->dtype != DType::kF16 && t->dtype != DType::kBF16) {
-      fail(StatusCode::kInvalidArgument,
-           file_.origin() + ": tensor \"" + name + "\" has dtype " + dtype_name(t->dtype) + "; expected F32, F16 or BF16");
+      fail(StatusCode::kInvalidArgument, file_.origin() + ": tensor \"" + name + "\" has dtype " + dtype_name(t->dtype) +
+           "; expected F32, F16 or BF16");
     }
     used_.insert(name);
     std::vector<float> v = t->to_f32();
@@ -530,119 +551,143 @@ class Importer {
   }
 
   // ---- normalisation
-  void import_normalisation(ParsedConfig& pc, const TensorSet& weights_file, Weights& w) {
-    ModelConfig& m = pc.model;
-    const bool legacy = out_.layout == "legacy";
+  // Where each direction's statistics come from (inputs: the preprocessor, the action: the
+  // postprocessor), with its eps and the mode of each feature type. The lookups may point into
+  // in_file and out_file, so a StatSources stays where it was made.
+  struct StatSources {
+    StatSources() = default;
+    StatSources(const StatSources&) = delete;
+    StatSources& operator=(const StatSources&) = delete;
+
     float eps_in = kLegacyEps, eps_out = kLegacyEps;
-    std::map<std::string, LeRobotMode> map_in = pc.mapping, map_out = pc.mapping;
+    std::map<std::string, LeRobotMode> map_in, map_out;
     StatLookup in_lookup, out_lookup;
     std::optional<SafetensorsFile> in_file, out_file;
     std::string in_where, out_where;
+  };
 
-    if (legacy) {
-      for (LeRobotMode mode : [&] { std::vector<LeRobotMode> v; for (auto& [t, md] : pc.mapping) v.push_back(md); return v; }()) {
-        if (mode == LeRobotMode::kQuantiles || mode == LeRobotMode::kQuantile10) {
-          fail(StatusCode::kInvalidArgument, "legacy checkpoint uses QUANTILES normalisation, which only the current layout has");
-        }
+  static LeRobotMode mode_of(const std::map<std::string, LeRobotMode>& modes, const std::string& type) {
+    const auto it = modes.find(type);
+    return it == modes.end() ? LeRobotMode::kIdentity : it->second;
+  }
+
+  // Legacy layout: the statistics are buffers in the weights file itself.
+  static void legacy_stat_sources(const ParsedConfig& pc, const TensorSet& weights_file, Weights& w, StatSources& s) {
+    for (LeRobotMode mode : [&] { std::vector<LeRobotMode> v; for (auto& [t, md] : pc.mapping) v.push_back(md); return v; }()) {
+      if (mode == LeRobotMode::kQuantiles || mode == LeRobotMode::kQuantile10) {
+        fail(StatusCode::kInvalidArgument, "legacy checkpoint uses QUANTILES normalisation, which only the current layout has");
       }
-      in_lookup = [&](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
-        std::string flat = key;
-        for (char& c : flat) {
-          if (c == '.') c = '_';
-        }
-        const std::string name = "normalize_inputs.buffer_" + flat + "." + stat;
-        if (!weights_file.contains(name)) return std::nullopt;
-        w.mark_used(name);
-        return weights_file.get(name).to_f32();
-      };
-      out_lookup = [&](const std::string&, const std::string& stat) -> std::optional<std::vector<float>> {
-        // If the buffers shared memory when saved, safetensors kept only normalize_targets.* (spec §10.2).
-        for (const std::string prefix : {"unnormalize_outputs.buffer_action.", "normalize_targets.buffer_action."}) {
-          if (weights_file.contains(prefix + stat)) {
-            w.mark_used(prefix + stat);
-            return weights_file.get(prefix + stat).to_f32();
-          }
-        }
-        return std::nullopt;
-      };
-      in_where = out_where = weights_file.origin();
-    } else if (external_stats_) {
-      in_lookup = out_lookup = [this](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
-        const SafetensorsTensor* t = external_stats_->find(key + "." + stat);
-        if (!t) return std::nullopt;
-        return t->to_f32();
-      };
-      in_where = out_where = external_stats_->origin();
-    } else {
-      auto step = [&](const std::string& pipeline_file, const std::string& registry_name, float& eps,
-                      std::map<std::string, LeRobotMode>& modes, std::optional<SafetensorsFile>& state,
-                      std::string& where) {
-        const fs::path path = dir_ / pipeline_file;
-        const ProcessorStep parsed = parse_processor_step(detail::read_json_file(path.string()), registry_name, path.string());
-        if (parsed.eps) eps = *parsed.eps;
-        if (parsed.norm_map) {
-          modes.clear();  // the step's own map is what LeRobot runs
-          for (const auto& [type, mode] : *parsed.norm_map) modes[type] = parse_mode(mode, path.string());
-        }
-        const fs::path state_path = dir_ / parsed.state_file;
-        if (!fs::exists(state_path)) fail(StatusCode::kNotFound, "missing normalisation statistics " + state_path.string());
-        state.emplace(SafetensorsFile::open(state_path.string()));
-        where = state_path.string();
-      };
-      if (!fs::exists(dir_ / "policy_postprocessor.json")) {
-        fail(StatusCode::kNotFound, (dir_ / "policy_postprocessor.json").string() + " is missing (current-layout checkpoint)");
-      }
-      step("policy_preprocessor.json", "normalizer_processor", eps_in, map_in, in_file, in_where);
-      step("policy_postprocessor.json", "unnormalizer_processor", eps_out, map_out, out_file, out_where);
-      auto from_file = [](const std::optional<SafetensorsFile>& f) {
-        return [&f](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
-          const std::string name = key + "." + stat;
-          if (!f->contains(name)) return std::nullopt;
-          return f->get(name).to_f32();
-        };
-      };
-      in_lookup = from_file(in_file);
-      out_lookup = from_file(out_file);
     }
-
-    auto mode_of = [](const std::map<std::string, LeRobotMode>& modes, const std::string& type) {
-      const auto it = modes.find(type);
-      return it == modes.end() ? LeRobotMode::kIdentity : it->second;
+    const TensorSet* file = &weights_file;
+    Weights* used = &w;
+    s.in_lookup = [file, used](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
+      std::string flat = key;
+      for (char& c : flat) {
+        if (c == '.') c = '_';
+      }
+      const std::string name = "normalize_inputs.buffer_" + flat + "." + stat;
+      if (!file->contains(name)) return std::nullopt;
+      used->mark_used(name);
+      return file->get(name).to_f32();
     };
+    s.out_lookup = [file, used](const std::string&, const std::string& stat) -> std::optional<std::vector<float>> {
+      // If the buffers shared memory when saved, safetensors kept only normalize_targets.* (spec §10.2).
+      for (const std::string prefix : {"unnormalize_outputs.buffer_action.", "normalize_targets.buffer_action."}) {
+        if (file->contains(prefix + stat)) {
+          used->mark_used(prefix + stat);
+          return file->get(prefix + stat).to_f32();
+        }
+      }
+      return std::nullopt;
+    };
+    s.in_where = s.out_where = weights_file.origin();
+  }
 
+  // Statistics given apart from the checkpoint (a .pth import's --stats), one set for both directions.
+  void external_stat_sources(StatSources& s) const {
+    s.in_lookup = s.out_lookup = [this](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
+      const SafetensorsTensor* t = external_stats_->find(key + "." + stat);
+      if (!t) return std::nullopt;
+      return t->to_f32();
+    };
+    s.in_where = s.out_where = external_stats_->origin();
+  }
+
+  // Reads one processor pipeline's normaliser step: its eps, its own mode map if it has one, and
+  // its state file.
+  void read_processor_step(const std::string& pipeline_file, const std::string& registry_name, float& eps,
+                           std::map<std::string, LeRobotMode>& modes, std::optional<SafetensorsFile>& state,
+                           std::string& where) const {
+    const fs::path path = dir_ / pipeline_file;
+    const ProcessorStep parsed = parse_processor_step(detail::read_json_file(path.string()), registry_name, path.string());
+    if (parsed.eps) eps = *parsed.eps;
+    if (parsed.norm_map) {
+      modes.clear();  // the step's own map is what LeRobot runs
+      for (const auto& [type, mode] : *parsed.norm_map) modes[type] = parse_mode(mode, path.string());
+    }
+    const fs::path state_path = dir_ / parsed.state_file;
+    if (!fs::exists(state_path)) fail(StatusCode::kNotFound, "missing normalisation statistics " + state_path.string());
+    state.emplace(SafetensorsFile::open(state_path.string()));
+    where = state_path.string();
+  }
+
+  // Current layout: the pre- and postprocessor pipelines name a safetensors file of statistics each.
+  void processor_stat_sources(StatSources& s) const {
+    if (!fs::exists(dir_ / "policy_postprocessor.json")) {
+      fail(StatusCode::kNotFound, (dir_ / "policy_postprocessor.json").string() + " is missing (current-layout checkpoint)");
+    }
+    read_processor_step("policy_preprocessor.json", "normalizer_processor", s.eps_in, s.map_in, s.in_file, s.in_where);
+    read_processor_step("policy_postprocessor.json", "unnormalizer_processor", s.eps_out, s.map_out, s.out_file, s.out_where);
+    auto from_file = [](const std::optional<SafetensorsFile>& f) {
+      return [&f](const std::string& key, const std::string& stat) -> std::optional<std::vector<float>> {
+        const std::string name = key + "." + stat;
+        if (!f->contains(name)) return std::nullopt;
+        return f->get(name).to_f32();
+      };
+    };
+    s.in_lookup = from_file(s.in_file);
+    s.out_lookup = from_file(s.out_file);
+  }
+
+  // Every input's normalisation, as m.input_norm and its sub/div tensors.
+  void import_input_norms(ParsedConfig& pc, const StatSources& s, bool legacy) {
+    ModelConfig& m = pc.model;
     for (const auto& f : pc.inputs) {
       if (f.type == "ENV" && f.key != m.env_state_key) continue;
-      const LeRobotMode mode = mode_of(map_in, f.type);
+      const LeRobotMode mode = mode_of(s.map_in, f.type);
       if (mode == LeRobotMode::kIdentity) {
         m.input_norm.emplace_back(f.key, NormMode::kIdentity);
         continue;
       }
       const size_t n = static_cast<size_t>(f.type == "VISUAL" ? 3 : f.shape[0]);
-      auto stats = read_stats(in_lookup, f.key, mode, n, in_where);
+      auto stats = read_stats(s.in_lookup, f.key, mode, n, s.in_where);
       if (!stats) {
-        if (legacy || external_stats_) fail(StatusCode::kNotFound, in_where + ": no normalisation statistics for \"" + f.key + "\"");
+        if (legacy || external_stats_) fail(StatusCode::kNotFound, s.in_where + ": no normalisation statistics for \"" + f.key + "\"");
         // Current layout: LeRobot passes a feature without statistics through unchanged.
-        out_.notes.push_back("no statistics for \"" + f.key + "\" in " + in_where + ": it is not normalised (as LeRobot does)");
+        out_.notes.push_back("no statistics for \"" + f.key + "\" in " + s.in_where + ": it is not normalised (as LeRobot does)");
         m.input_norm.emplace_back(f.key, NormMode::kIdentity);
         continue;
       }
-      const NormVectors nv = make_norm(mode, stats->first, stats->second, eps_in, legacy);
+      const NormVectors nv = make_norm(mode, stats->first, stats->second, s.eps_in, legacy);
       m.input_norm.emplace_back(f.key, nv.mode);
       add(bn::norm_sub(f.key), {static_cast<int64_t>(n)}, nv.sub);
       add(bn::norm_div(f.key), {static_cast<int64_t>(n)}, nv.div);
     }
+  }
 
-    const LeRobotMode action_mode = mode_of(map_out, "ACTION");
+  // The action's un-normalisation, as m.action_norm and its shift/scale/offset tensors.
+  void import_action_unnorm(ModelConfig& m, const StatSources& s, bool legacy) {
+    const LeRobotMode action_mode = mode_of(s.map_out, "ACTION");
     std::optional<std::pair<std::vector<float>, std::vector<float>>> action_stats;
     if (action_mode != LeRobotMode::kIdentity) {
-      action_stats = read_stats(out_lookup, "action", action_mode, static_cast<size_t>(m.action_dim), out_where);
+      action_stats = read_stats(s.out_lookup, "action", action_mode, static_cast<size_t>(m.action_dim), s.out_where);
       if (!action_stats) {
-        if (legacy || external_stats_) fail(StatusCode::kNotFound, out_where + ": no un-normalisation statistics for \"action\"");
-        out_.notes.push_back("no statistics for \"action\" in " + out_where + ": actions are not un-normalised (as LeRobot does)");
+        if (legacy || external_stats_) fail(StatusCode::kNotFound, s.out_where + ": no un-normalisation statistics for \"action\"");
+        out_.notes.push_back("no statistics for \"action\" in " + s.out_where + ": actions are not un-normalised (as LeRobot does)");
       }
     }
     if (action_stats) {
-      const UnnormVectors u = make_unnorm(action_mode, action_stats->first, action_stats->second, eps_out, legacy);
+      const UnnormVectors u = make_unnorm(action_mode, action_stats->first, action_stats->second, s.eps_out, legacy);
       m.action_norm = u.mode;
       const std::vector<int64_t> shape = {m.action_dim};
       add(bn::kUnnormShift, shape, u.shift);
@@ -651,7 +696,22 @@ class Importer {
     } else {
       m.action_norm = NormMode::kIdentity;
     }
-    for (const auto& [type, mode] : map_in) {
+  }
+
+  void import_normalisation(ParsedConfig& pc, const TensorSet& weights_file, Weights& w) {
+    const bool legacy = out_.layout == "legacy";
+    StatSources s;
+    s.map_in = s.map_out = pc.mapping;
+    if (legacy) {
+      legacy_stat_sources(pc, weights_file, w, s);
+    } else if (external_stats_) {
+      external_stat_sources(s);
+    } else {
+      processor_stat_sources(s);
+    }
+    import_input_norms(pc, s, legacy);
+    import_action_unnorm(pc.model, s, legacy);
+    for (const auto& [type, mode] : s.map_in) {
       if (mode == LeRobotMode::kQuantiles || mode == LeRobotMode::kQuantile10) {
         out_.notes.push_back(std::string(type) + " uses " + (mode == LeRobotMode::kQuantiles ? "QUANTILES (q01/q99)" : "QUANTILE10 (q10/q90)") +
                              ", run as MIN_MAX over those quantiles");
@@ -724,12 +784,11 @@ class Importer {
     }
   }
 
-  void import_transformer(const ParsedConfig& pc, Weights& w) {
+  // Input projections. The latent input is zero at inference, so its token is the bias alone.
+  void import_input_projections(const ParsedConfig& pc, Weights& w) {
     const ModelConfig& m = pc.model;
-    const int D = m.dim_model, T = m.chunk_size, N = m.n_tokens();
+    const int D = m.dim_model;
     const std::string p = "model.";
-
-    // Input projections. The latent input is zero at inference, so its token is the bias alone.
     w.take(p + "encoder_latent_input_proj.weight", {D, pc.latent_dim});
     add(bn::kLatentToken, {D}, w.take(p + "encoder_latent_input_proj.bias", {D}));
     add(bn::kImgProjWeight, {D, m.feature_channels()},
@@ -743,8 +802,13 @@ class Importer {
       add(bn::kEnvProjWeight, {D, m.env_state_dim}, w.take(p + "encoder_env_state_input_proj.weight", {D, m.env_state_dim}));
       add(bn::kEnvProjBias, {D}, w.take(p + "encoder_env_state_input_proj.bias", {D}));
     }
+  }
 
-    // Encoder positions P [N, D]: learned 1-D rows, then each camera's 2-D sinusoid.
+  // The encoder; returns its positions P [N, D] (learned 1-D rows, then each camera's 2-D
+  // sinusoid), which the decoder's cross-attention keys need too.
+  Mat import_encoder(const ModelConfig& m, Weights& w) {
+    const int D = m.dim_model, N = m.n_tokens();
+    const std::string p = "model.";
     const int n1d = m.n_1d_tokens();
     Mat pos = w.take(p + "encoder_1d_feature_pos_embed.weight", {n1d, D});
     for (const auto& cam : m.cameras) {
@@ -768,58 +832,78 @@ class Importer {
       add(bn::kEncoderNormWeight, {D}, w.take(p + "encoder.norm.weight", {D}));
       add(bn::kEncoderNormBias, {D}, w.take(p + "encoder.norm.bias", {D}));
     }
+    return pos;
+  }
 
-    // Decoder. Its input is zero, so layer 0's self-attention block is the same for every observation.
-    const Mat qpos = w.take(p + "decoder_pos_embed.weight", {T, D});
-    for (int l = 0; l < m.n_decoder_layers; ++l) {
-      const std::string src = p + "decoder.layers." + std::to_string(l) + ".";
-      Attn self = take_attn(w, src + "self_attn", D);
-      Attn cross = take_attn(w, src + "multihead_attn", D);
-      const Mat n1w = w.take(src + "norm1.weight", {D}), n1b = w.take(src + "norm1.bias", {D});
-      const Mat n2w = w.take(src + "norm2.weight", {D}), n2b = w.take(src + "norm2.bias", {D});
-      const Mat cross_q_w(cross.in_w.begin(), cross.in_w.begin() + static_cast<ptrdiff_t>(D) * D);
-      const Mat cross_q_b(cross.in_b.begin(), cross.in_b.begin() + D);
-      if (l == 0) {
-        // Every position's self-attention value is v = u Wv^T + bv with the same u (0 post-norm,
-        // LayerNorm1(0) = beta1 pre-norm), so attention returns v whatever the weights, and the block
-        // output y1 is one D-vector.
-        const std::vector<double> u = m.pre_norm ? to_double(n1b) : std::vector<double>(D, 0.0);
-        const std::vector<double> v = linear_d(u, 1, D, self.in_w.data() + 2 * static_cast<size_t>(D) * D,
-                                               self.in_b.data() + 2 * D, D);
-        const std::vector<double> attn_out = linear_d(v, 1, D, self.out_w.data(), self.out_b.data(), D);
-        const std::vector<double> y1 = m.pre_norm ? attn_out : layernorm_d(attn_out, n1w, n1b);
-        // Cross-attention queries: (y1 + Q) post-norm or (LayerNorm2(y1) + Q) pre-norm, projected.
-        const std::vector<double> q_base = m.pre_norm ? layernorm_d(y1, n2w, n2b) : y1;
-        std::vector<double> q_in(static_cast<size_t>(T) * D);
-        for (int t = 0; t < T; ++t) {
-          for (int c = 0; c < D; ++c) q_in[static_cast<size_t>(t) * D + c] = q_base[c] + qpos[static_cast<size_t>(t) * D + c];
-        }
-        add(bn::dec(l, "const_y"), {D}, to_float(y1));
-        add(bn::dec(l, "cross_q"), {T, D}, to_float(linear_d(q_in, T, D, cross_q_w.data(), cross_q_b.data(), D)));
-      } else {
-        add(bn::dec(l, "in_proj.bias"), {T, 3 * D}, bias_table(qpos, T, D, self.in_w, self.in_b, 3 * D, 2 * D));
-        add(bn::dec(l, "in_proj.weight"), {3 * D, D}, std::move(self.in_w));
-        add(bn::dec(l, "out_proj.weight"), {D, D}, std::move(self.out_w));
-        add(bn::dec(l, "out_proj.bias"), {D}, std::move(self.out_b));
-        add(bn::dec(l, "cross_q_proj.bias"), {T, D}, bias_table(qpos, T, D, cross_q_w, cross_q_b, D, D));
-        add(bn::dec(l, "cross_q_proj.weight"), {D, D}, cross_q_w);
-      }
-      // Cross-attention keys get the encoder positions, values the bare memory.
-      const Mat kv_w(cross.in_w.begin() + static_cast<ptrdiff_t>(D) * D, cross.in_w.end());
-      const Mat kv_b(cross.in_b.begin() + D, cross.in_b.end());
-      add(bn::dec(l, "cross_kv_proj.bias"), {N, 2 * D}, bias_table(pos, N, D, kv_w, kv_b, 2 * D, D));
-      add(bn::bias_vector(bn::dec(l, "cross_kv_proj.bias")), {2 * D}, kv_b);
-      add(bn::dec(l, "cross_kv_proj.weight"), {2 * D, D}, kv_w);
-      add(bn::dec(l, "cross_out_proj.weight"), {D, D}, std::move(cross.out_w));
-      add(bn::dec(l, "cross_out_proj.bias"), {D}, std::move(cross.out_b));
-      add(bn::dec(l, "norm1.weight"), {D}, n1w);
-      add(bn::dec(l, "norm1.bias"), {D}, n1b);
-      add(bn::dec(l, "norm2.weight"), {D}, n2w);
-      add(bn::dec(l, "norm2.bias"), {D}, n2b);
-      take_ffn_and_norms(w, src, bn::dec(l, ""), m, 0);
-      add(bn::dec(l, "norm3.weight"), {D}, w.take(src + "norm3.weight", {D}));
-      add(bn::dec(l, "norm3.bias"), {D}, w.take(src + "norm3.bias", {D}));
+  // Decoder layer 0: its input is zero, so its self-attention block is the same for every
+  // observation. Every position's self-attention value is v = u Wv^T + bv with the same u (0
+  // post-norm, LayerNorm1(0) = beta1 pre-norm), so attention returns v whatever the weights, and
+  // the block output y1 is one D-vector; stored with the cross-attention queries it implies.
+  void fold_first_decoder_self_attn(const ModelConfig& m, const Attn& self, const Mat& n1w, const Mat& n1b,
+                                    const Mat& n2w, const Mat& n2b, const Mat& qpos, const Mat& cross_q_w,
+                                    const Mat& cross_q_b) {
+    const int D = m.dim_model, T = m.chunk_size;
+    const std::vector<double> u = m.pre_norm ? to_double(n1b) : std::vector<double>(D, 0.0);
+    const std::vector<double> v = linear_d(u, 1, D, self.in_w.data() + 2 * static_cast<size_t>(D) * D,
+                                           self.in_b.data() + 2 * D, D);
+    const std::vector<double> attn_out = linear_d(v, 1, D, self.out_w.data(), self.out_b.data(), D);
+    const std::vector<double> y1 = m.pre_norm ? attn_out : layernorm_d(attn_out, n1w, n1b);
+    // Cross-attention queries: (y1 + Q) post-norm or (LayerNorm2(y1) + Q) pre-norm, projected.
+    const std::vector<double> q_base = m.pre_norm ? layernorm_d(y1, n2w, n2b) : y1;
+    std::vector<double> q_in(static_cast<size_t>(T) * D);
+    for (int t = 0; t < T; ++t) {
+      for (int c = 0; c < D; ++c) q_in[static_cast<size_t>(t) * D + c] = q_base[c] + qpos[static_cast<size_t>(t) * D + c];
     }
+    add(bn::dec(0, "const_y"), {D}, to_float(y1));
+    add(bn::dec(0, "cross_q"), {T, D}, to_float(linear_d(q_in, T, D, cross_q_w.data(), cross_q_b.data(), D)));
+  }
+
+  // Decoder layer l, its queries' positions `qpos` [T, D] folded into biases, its cross-attention
+  // keys given the encoder positions `pos`.
+  void import_decoder_layer(const ModelConfig& m, Weights& w, int l, const Mat& qpos, const Mat& pos) {
+    const int D = m.dim_model, T = m.chunk_size, N = m.n_tokens();
+    const std::string src = "model.decoder.layers." + std::to_string(l) + ".";
+    Attn self = take_attn(w, src + "self_attn", D);
+    Attn cross = take_attn(w, src + "multihead_attn", D);
+    const Mat n1w = w.take(src + "norm1.weight", {D}), n1b = w.take(src + "norm1.bias", {D});
+    const Mat n2w = w.take(src + "norm2.weight", {D}), n2b = w.take(src + "norm2.bias", {D});
+    const Mat cross_q_w(cross.in_w.begin(), cross.in_w.begin() + static_cast<ptrdiff_t>(D) * D);
+    const Mat cross_q_b(cross.in_b.begin(), cross.in_b.begin() + D);
+    if (l == 0) {
+      fold_first_decoder_self_attn(m, self, n1w, n1b, n2w, n2b, qpos, cross_q_w, cross_q_b);
+    } else {
+      add(bn::dec(l, "in_proj.bias"), {T, 3 * D}, bias_table(qpos, T, D, self.in_w, self.in_b, 3 * D, 2 * D));
+      add(bn::dec(l, "in_proj.weight"), {3 * D, D}, std::move(self.in_w));
+      add(bn::dec(l, "out_proj.weight"), {D, D}, std::move(self.out_w));
+      add(bn::dec(l, "out_proj.bias"), {D}, std::move(self.out_b));
+      add(bn::dec(l, "cross_q_proj.bias"), {T, D}, bias_table(qpos, T, D, cross_q_w, cross_q_b, D, D));
+      add(bn::dec(l, "cross_q_proj.weight"), {D, D}, cross_q_w);
+    }
+    // Cross-attention keys get the encoder positions, values the bare memory.
+    const Mat kv_w(cross.in_w.begin() + static_cast<ptrdiff_t>(D) * D, cross.in_w.end());
+    const Mat kv_b(cross.in_b.begin() + D, cross.in_b.end());
+    add(bn::dec(l, "cross_kv_proj.bias"), {N, 2 * D}, bias_table(pos, N, D, kv_w, kv_b, 2 * D, D));
+    add(bn::bias_vector(bn::dec(l, "cross_kv_proj.bias")), {2 * D}, kv_b);
+    add(bn::dec(l, "cross_kv_proj.weight"), {2 * D, D}, kv_w);
+    add(bn::dec(l, "cross_out_proj.weight"), {D, D}, std::move(cross.out_w));
+    add(bn::dec(l, "cross_out_proj.bias"), {D}, std::move(cross.out_b));
+    add(bn::dec(l, "norm1.weight"), {D}, n1w);
+    add(bn::dec(l, "norm1.bias"), {D}, n1b);
+    add(bn::dec(l, "norm2.weight"), {D}, n2w);
+    add(bn::dec(l, "norm2.bias"), {D}, n2b);
+    take_ffn_and_norms(w, src, bn::dec(l, ""), m, 0);
+    add(bn::dec(l, "norm3.weight"), {D}, w.take(src + "norm3.weight", {D}));
+    add(bn::dec(l, "norm3.bias"), {D}, w.take(src + "norm3.bias", {D}));
+  }
+
+  void import_transformer(const ParsedConfig& pc, Weights& w) {
+    const ModelConfig& m = pc.model;
+    const int D = m.dim_model, T = m.chunk_size;
+    const std::string p = "model.";
+    import_input_projections(pc, w);
+    const Mat pos = import_encoder(m, w);
+    const Mat qpos = w.take(p + "decoder_pos_embed.weight", {T, D});
+    for (int l = 0; l < m.n_decoder_layers; ++l) import_decoder_layer(m, w, l, qpos, pos);
     add(bn::kDecoderNormWeight, {D}, w.take(p + "decoder.norm.weight", {D}));
     add(bn::kDecoderNormBias, {D}, w.take(p + "decoder.norm.bias", {D}));
     add(bn::kHeadWeight, {m.action_dim, D}, w.take(p + "action_head.weight", {m.action_dim, D}));

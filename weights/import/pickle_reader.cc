@@ -386,7 +386,125 @@ class Parser {
     mutable_container(obj, Kind::kDict, "BUILD");
   }
 
+  // Opcodes that push one scalar: None, booleans, integers, floats, strings and bytes. False
+  // when `op` is not one of them.
+  bool push_scalar(uint8_t op) {
+    switch (op) {
+      case 'N': push(make(Kind::kNone)); return true;
+      case 0x88: case 0x89: {
+        MutableRef v = make(Kind::kBool);
+        v->boolean = op == 0x88;
+        push(std::move(v));
+        return true;
+      }
+      case 'J': {
+        MutableRef v = make(Kind::kInt);
+        v->integer = static_cast<int32_t>(static_cast<uint32_t>(read_le(4)));
+        push(std::move(v));
+        return true;
+      }
+      case 'K': case 'M': {
+        MutableRef v = make(Kind::kInt);
+        v->integer = static_cast<int64_t>(read_le(op == 'K' ? 1 : 2));
+        push(std::move(v));
+        return true;
+      }
+      case 0x8a: push(make_int_from_le(read_bytes(read_le(1)))); return true;  // LONG1
+      case 0x8b: {  // LONG4
+        const int64_t n = static_cast<int32_t>(static_cast<uint32_t>(read_le(4)));
+        if (n < 0) error("LONG4 with a negative length");
+        push(make_int_from_le(read_bytes(static_cast<uint64_t>(n))));
+        return true;
+      }
+      case 'G': {  // BINFLOAT: big-endian IEEE double
+        need(8);
+        uint64_t bits = 0;
+        for (int i = 0; i < 8; ++i) bits = (bits << 8) | in_[pos_ + static_cast<size_t>(i)];
+        pos_ += 8;
+        MutableRef v = make(Kind::kFloat);
+        std::memcpy(&v->real, &bits, sizeof bits);
+        push(std::move(v));
+        return true;
+      }
+      case 0x8c: case 'X': case 0x8d:  // SHORT_BINUNICODE, BINUNICODE, BINUNICODE8
+      case 'U': case 'T': {            // SHORT_BINSTRING, BINSTRING (protocol <= 2 str, read as text)
+        const size_t len_bytes = (op == 0x8c || op == 'U') ? 1 : (op == 0x8d ? 8 : 4);
+        MutableRef v = make(Kind::kString);
+        v->text = read_bytes(read_le(len_bytes));
+        push(std::move(v));
+        return true;
+      }
+      case 'C': case 'B': case 0x8e: {  // SHORT_BINBYTES, BINBYTES, BINBYTES8
+        const size_t len_bytes = op == 'C' ? 1 : (op == 'B' ? 4 : 8);
+        MutableRef v = make(Kind::kBytes);
+        v->text = read_bytes(read_le(len_bytes));
+        push(std::move(v));
+        return true;
+      }
+      default: return false;
+    }
+  }
+
+  // Opcodes that make or fill a tuple, list or dict. False when `op` is not one of them.
+  bool build_container(uint8_t op) {
+    switch (op) {
+      case ')': push(make(Kind::kTuple)); return true;
+      case 't': push(make_tuple(pop_to_mark())); return true;
+      case 0x85: case 0x86: case 0x87: {  // TUPLE1..3
+        const size_t n = static_cast<size_t>(op - 0x84);
+        std::vector<MutableRef> items(n);
+        for (size_t i = n; i-- > 0;) items[i] = pop();
+        push(make_tuple(std::move(items)));
+        return true;
+      }
+      case ']': push(make(Kind::kList)); return true;
+      case 'l': {  // LIST
+        MutableRef list = make(Kind::kList);
+        for (auto& item : pop_to_mark()) append(list, std::move(item));
+        push(std::move(list));
+        return true;
+      }
+      case 'a': {
+        MutableRef item = pop();
+        append(mutable_container(top(), Kind::kList, "APPEND"), std::move(item));
+        return true;
+      }
+      case 'e': {
+        std::vector<MutableRef> items = pop_to_mark();
+        MutableRef& list = mutable_container(top(), Kind::kList, "APPENDS");
+        for (auto& item : items) append(list, std::move(item));
+        return true;
+      }
+      case '}': push(make(Kind::kDict)); return true;
+      case 'd': {  // DICT
+        std::vector<MutableRef> items = pop_to_mark();
+        if (items.size() % 2 != 0) error("DICT with an odd number of items");
+        MutableRef dict = make(Kind::kDict);
+        for (size_t i = 0; i < items.size(); i += 2) set_item(dict, std::move(items[i]), std::move(items[i + 1]));
+        push(std::move(dict));
+        return true;
+      }
+      case 's': {
+        MutableRef value = pop();
+        MutableRef key = pop();
+        set_item(mutable_container(top(), Kind::kDict, "SETITEM"), std::move(key), std::move(value));
+        return true;
+      }
+      case 'u': {
+        std::vector<MutableRef> items = pop_to_mark();
+        if (items.size() % 2 != 0) error("SETITEMS with an odd number of items");
+        MutableRef& dict = mutable_container(top(), Kind::kDict, "SETITEMS");
+        for (size_t i = 0; i < items.size(); i += 2) set_item(dict, std::move(items[i]), std::move(items[i + 1]));
+        return true;
+      }
+      default: return false;
+    }
+  }
+
+  // Runs one opcode: scalars and containers by kind, then framing, the stack, the memo and
+  // objects (globals, calls, persistent ids) here.
   void step(uint8_t op) {
+    if (push_scalar(op) || build_container(op)) return;
     switch (op) {
       case 0x80: {  // PROTO
         const uint8_t proto = read_u8();
@@ -401,106 +519,6 @@ class Parser {
       case '0': pop(); break;
       case '1': pop_to_mark(); break;
       case '2': push(top()); break;
-      case 'N': push(make(Kind::kNone)); break;
-      case 0x88: case 0x89: {
-        MutableRef v = make(Kind::kBool);
-        v->boolean = op == 0x88;
-        push(std::move(v));
-        break;
-      }
-      case 'J': {
-        MutableRef v = make(Kind::kInt);
-        v->integer = static_cast<int32_t>(static_cast<uint32_t>(read_le(4)));
-        push(std::move(v));
-        break;
-      }
-      case 'K': case 'M': {
-        MutableRef v = make(Kind::kInt);
-        v->integer = static_cast<int64_t>(read_le(op == 'K' ? 1 : 2));
-        push(std::move(v));
-        break;
-      }
-      case 0x8a: push(make_int_from_le(read_bytes(read_le(1)))); break;  // LONG1
-      case 0x8b: {  // LONG4
-        const int64_t n = static_cast<int32_t>(static_cast<uint32_t>(read_le(4)));
-        if (n < 0) error("LONG4 with a negative length");
-        push(make_int_from_le(read_bytes(static_cast<uint64_t>(n))));
-        break;
-      }
-      case 'G': {  // BINFLOAT: big-endian IEEE double
-        need(8);
-        uint64_t bits = 0;
-        for (int i = 0; i < 8; ++i) bits = (bits << 8) | in_[pos_ + static_cast<size_t>(i)];
-        pos_ += 8;
-        MutableRef v = make(Kind::kFloat);
-        std::memcpy(&v->real, &bits, sizeof bits);
-        push(std::move(v));
-        break;
-      }
-      case 0x8c: case 'X': case 0x8d:  // SHORT_BINUNICODE, BINUNICODE, BINUNICODE8
-      case 'U': case 'T': {            // SHORT_BINSTRING, BINSTRING (protocol <= 2 str, read as text)
-        const size_t len_bytes = (op == 0x8c || op == 'U') ? 1 : (op == 0x8d ? 8 : 4);
-        MutableRef v = make(Kind::kString);
-        v->text = read_bytes(read_le(len_bytes));
-        push(std::move(v));
-        break;
-      }
-      case 'C': case 'B': case 0x8e: {  // SHORT_BINBYTES, BINBYTES, BINBYTES8
-        const size_t len_bytes = op == 'C' ? 1 : (op == 'B' ? 4 : 8);
-        MutableRef v = make(Kind::kBytes);
-        v->text = read_bytes(read_le(len_bytes));
-        push(std::move(v));
-        break;
-      }
-      case ')': push(make(Kind::kTuple)); break;
-      case 't': push(make_tuple(pop_to_mark())); break;
-      case 0x85: case 0x86: case 0x87: {  // TUPLE1..3
-        const size_t n = static_cast<size_t>(op - 0x84);
-        std::vector<MutableRef> items(n);
-        for (size_t i = n; i-- > 0;) items[i] = pop();
-        push(make_tuple(std::move(items)));
-        break;
-      }
-      case ']': push(make(Kind::kList)); break;
-      case 'l': {  // LIST
-        MutableRef list = make(Kind::kList);
-        for (auto& item : pop_to_mark()) append(list, std::move(item));
-        push(std::move(list));
-        break;
-      }
-      case 'a': {
-        MutableRef item = pop();
-        append(mutable_container(top(), Kind::kList, "APPEND"), std::move(item));
-        break;
-      }
-      case 'e': {
-        std::vector<MutableRef> items = pop_to_mark();
-        MutableRef& list = mutable_container(top(), Kind::kList, "APPENDS");
-        for (auto& item : items) append(list, std::move(item));
-        break;
-      }
-      case '}': push(make(Kind::kDict)); break;
-      case 'd': {  // DICT
-        std::vector<MutableRef> items = pop_to_mark();
-        if (items.size() % 2 != 0) error("DICT with an odd number of items");
-        MutableRef dict = make(Kind::kDict);
-        for (size_t i = 0; i < items.size(); i += 2) set_item(dict, std::move(items[i]), std::move(items[i + 1]));
-        push(std::move(dict));
-        break;
-      }
-      case 's': {
-        MutableRef value = pop();
-        MutableRef key = pop();
-        set_item(mutable_container(top(), Kind::kDict, "SETITEM"), std::move(key), std::move(value));
-        break;
-      }
-      case 'u': {
-        std::vector<MutableRef> items = pop_to_mark();
-        if (items.size() % 2 != 0) error("SETITEMS with an odd number of items");
-        MutableRef& dict = mutable_container(top(), Kind::kDict, "SETITEMS");
-        for (size_t i = 0; i < items.size(); i += 2) set_item(dict, std::move(items[i]), std::move(items[i + 1]));
-        break;
-      }
       case 'q': memo_put(read_le(1)); break;
       case 'r': memo_put(read_le(4)); break;
       case 0x94: memo_put(memo_.size()); break;  // MEMOIZE

@@ -190,76 +190,61 @@ PickleRef read_zip(const std::string& path, std::span<const uint8_t> file, std::
   return parse_pickle(zip.read(*pkl, pickle_scratch), path + ": " + pkl->name);
 }
 
-}  // namespace
-
-PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::string& state_dict_key) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) fail(StatusCode::kNotFound, "PyTorch checkpoint not found: " + path);
-  const FileMapping file = FileMapping::open(path);
-  const std::span<const uint8_t> bytes(file.data(), file.size());
-  PyTorchCheckpoint out;
-  out.state_dict = OwnedTensorSet(path);
-  std::map<std::string, std::span<const uint8_t>> storages;
-  std::vector<uint8_t> pickle_scratch;
-  PickleRef root;
-  ZipArchive zip;
-  std::string prefix;
-
-  if (ZipArchive::looks_like_zip(bytes)) {
-    out.format = "zip";
-    root = read_zip(path, bytes, pickle_scratch, zip, prefix);
-  } else if (bytes.size() >= sizeof kLegacyStart && std::memcmp(bytes.data(), kLegacyStart, sizeof kLegacyStart) == 0) {
-    out.format = "legacy";
-    size_t pos = 0;
-    auto next = [&](const char* what) {
-      size_t used = 0;
-      PickleRef v = parse_pickle(bytes.subspan(pos), path + ": " + what + " pickle at byte " + std::to_string(pos), {}, &used);
-      pos += used;
-      return v;
-    };
-    const PickleRef magic = next("magic number");
-    if (magic->kind != Kind::kBigInt || magic->text != std::string(std::begin(kLegacyMagic), std::end(kLegacyMagic))) {
-      fail(StatusCode::kDataLoss, path + ": not a PyTorch checkpoint (wrong magic number)");
-    }
-    const PickleRef version = next("protocol version");
-    if (version->kind != Kind::kInt || version->integer != kLegacyProtocolVersion) {
-      fail(StatusCode::kUnimplemented, path + ": legacy format version " + version->describe() + " (only 1001 is supported)");
-    }
-    const PickleRef sys_info = next("sys_info");
-    const PickleValue* little = sys_info->find("little_endian");
-    if (!little || little->kind != Kind::kBool || !little->boolean) {
-      fail(StatusCode::kUnimplemented, path + ": saved on a big-endian machine, or sys_info is missing little_endian");
-    }
-    root = next("main");
-    const PickleRef keys = next("storage keys");
-    if (keys->kind != Kind::kList) {
-      fail(StatusCode::kDataLoss, path + ": the storage key list is a " + keys->describe());
-    }
-    std::map<std::string, PickleStorageType> types;
-    collect_storage_types(*root, types, path);
-    for (const auto& key : keys->items) {
-      if (!key->is_string()) fail(StatusCode::kDataLoss, path + ": storage key " + key->describe() + " is not a str");
-      const auto type = types.find(key->text);
-      if (type == types.end()) fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' is used by no tensor");
-      if (bytes.size() - pos < 8) fail(StatusCode::kDataLoss, path + ": truncated before storage '" + key->text + "'");
-      uint64_t numel = 0;
-      for (int i = 7; i >= 0; --i) numel = (numel << 8) | bytes[pos + static_cast<size_t>(i)];
-      pos += 8;
-      uint64_t nbytes = 0;
-      if (!detail::checked_mul(numel, type->second.element_size, &nbytes) || nbytes > bytes.size() - pos) {
-        fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' (" + std::to_string(numel) + " elements) runs past the end of the file");
-      }
-      if (!storages.emplace(key->text, bytes.subspan(pos, static_cast<size_t>(nbytes))).second) {
-        fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' is listed twice");
-      }
-      pos += static_cast<size_t>(nbytes);
-    }
-    if (pos != bytes.size()) fail(StatusCode::kDataLoss, path + ": " + std::to_string(bytes.size() - pos) + " unexpected bytes at the end");
-  } else {
-    fail(StatusCode::kInvalidArgument, path + ": not a PyTorch checkpoint (neither torch.save's zip format nor its legacy format)");
+// The legacy format: five pickles (magic number, protocol version, sys_info, the object, the
+// storage keys) and then each storage's bytes, which go into `storages` by key. Returns the object.
+PickleRef read_legacy(const std::string& path, std::span<const uint8_t> bytes,
+                      std::map<std::string, std::span<const uint8_t>>& storages) {
+  size_t pos = 0;
+  auto next = [&](const char* what) {
+    size_t used = 0;
+    PickleRef v = parse_pickle(bytes.subspan(pos), path + ": " + what + " pickle at byte " + std::to_string(pos), {}, &used);
+    pos += used;
+    return v;
+  };
+  const PickleRef magic = next("magic number");
+  if (magic->kind != Kind::kBigInt || magic->text != std::string(std::begin(kLegacyMagic), std::end(kLegacyMagic))) {
+    fail(StatusCode::kDataLoss, path + ": not a PyTorch checkpoint (wrong magic number)");
   }
+  const PickleRef version = next("protocol version");
+  if (version->kind != Kind::kInt || version->integer != kLegacyProtocolVersion) {
+    fail(StatusCode::kUnimplemented, path + ": legacy format version " + version->describe() + " (only 1001 is supported)");
+  }
+  const PickleRef sys_info = next("sys_info");
+  const PickleValue* little = sys_info->find("little_endian");
+  if (!little || little->kind != Kind::kBool || !little->boolean) {
+    fail(StatusCode::kUnimplemented, path + ": saved on a big-endian machine, or sys_info is missing little_endian");
+  }
+  PickleRef root = next("main");
+  const PickleRef keys = next("storage keys");
+  if (keys->kind != Kind::kList) fail(StatusCode::kDataLoss, path + ": the storage key list is a " + keys->describe());
+  std::map<std::string, PickleStorageType> types;
+  collect_storage_types(*root, types, path);
+  for (const auto& key : keys->items) {
+    if (!key->is_string()) fail(StatusCode::kDataLoss, path + ": storage key " + key->describe() + " is not a str");
+    const auto type = types.find(key->text);
+    if (type == types.end()) fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' is used by no tensor");
+    if (bytes.size() - pos < 8) fail(StatusCode::kDataLoss, path + ": truncated before storage '" + key->text + "'");
+    uint64_t numel = 0;
+    for (int i = 7; i >= 0; --i) numel = (numel << 8) | bytes[pos + static_cast<size_t>(i)];
+    pos += 8;
+    uint64_t nbytes = 0;
+    if (!detail::checked_mul(numel, type->second.element_size, &nbytes) || nbytes > bytes.size() - pos) {
+      fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' (" + std::to_string(numel) + " elements) runs past the end of the file");
+    }
+    if (!storages.emplace(key->text, bytes.subspan(pos, static_cast<size_t>(nbytes))).second) {
+      fail(StatusCode::kDataLoss, path + ": storage '" + key->text + "' is listed twice");
+    }
+    pos += static_cast<size_t>(nbytes);
+  }
+  if (pos != bytes.size()) fail(StatusCode::kDataLoss, path + ": " + std::to_string(bytes.size() - pos) + " unexpected bytes at the end");
+  return root;
+}
 
-  const PickleValue& state_dict = select_state_dict(*root, path, state_dict_key, out);
+// Every tensor of `state_dict` into out.state_dict, in saved order. A zip's storages are read
+// from `zip` (under `prefix`) as tensors first need them; the legacy format's are all in `storages`.
+void read_tensors(const std::string& path, const PickleValue& state_dict,
+                  std::map<std::string, std::span<const uint8_t>>& storages, const ZipArchive& zip,
+                  const std::string& prefix, PyTorchCheckpoint& out) {
   std::map<std::string, std::vector<uint8_t>> inflated;  // deflated zip storages, by key
   for (const auto& [k, v] : state_dict.entries) {
     const PickleTensor& t = *v->tensor;
@@ -283,6 +268,33 @@ PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::st
     out.state_dict.add(k->text, *t.storage_type.dtype, t.size, std::move(data));
     out.saved_order.push_back(k->text);
   }
+}
+
+}  // namespace
+
+PyTorchCheckpoint read_pytorch_checkpoint(const std::string& path, const std::string& state_dict_key) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) fail(StatusCode::kNotFound, "PyTorch checkpoint not found: " + path);
+  const FileMapping file = FileMapping::open(path);
+  const std::span<const uint8_t> bytes(file.data(), file.size());
+  PyTorchCheckpoint out;
+  out.state_dict = OwnedTensorSet(path);
+  std::map<std::string, std::span<const uint8_t>> storages;
+  std::vector<uint8_t> pickle_scratch;
+  PickleRef root;
+  ZipArchive zip;
+  std::string prefix;
+
+  if (ZipArchive::looks_like_zip(bytes)) {
+    out.format = "zip";
+    root = read_zip(path, bytes, pickle_scratch, zip, prefix);
+  } else if (bytes.size() >= sizeof kLegacyStart && std::memcmp(bytes.data(), kLegacyStart, sizeof kLegacyStart) == 0) {
+    out.format = "legacy";
+    root = read_legacy(path, bytes, storages);
+  } else {
+    fail(StatusCode::kInvalidArgument, path + ": not a PyTorch checkpoint (neither torch.save's zip format nor its legacy format)");
+  }
+  read_tensors(path, select_state_dict(*root, path, state_dict_key, out), storages, zip, prefix, out);
   return out;
 }
 

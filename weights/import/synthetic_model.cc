@@ -87,101 +87,134 @@ nlohmann::ordered_json synthetic_config(const std::string& name) {
   return c;
 }
 
+namespace {
+
+// Writes a random state dict of LeRobot's layout for `m`, tensor by tensor, from one random
+// stream: the order of the calls fixes every value.
+class SyntheticStateDict {
+ public:
+  SyntheticStateDict(const ModelConfig& m, OwnedTensorSet& dict, Random& rng) : m_(m), dict_(dict), rng_(rng) {}
+
+  // Every convolution with its FrozenBatchNorm.
+  void add_backbone() {
+    conv_bn(m_.stem(), false);
+    for (const auto& stage : m_.backbone_stages()) {
+      for (const auto& block : stage) {
+        for (size_t i = 0; i < block.convs.size(); ++i) conv_bn(block.convs[i], i + 1 == block.convs.size());
+        if (block.has_downsample) conv_bn(block.downsample, true);
+      }
+    }
+  }
+
+  // Encoder and decoder layers, then the input projections, positions and the action head.
+  void add_transformer(int latent) {
+    const int D = m_.dim_model, T = m_.chunk_size;
+    for (int l = 0; l < m_.n_encoder_layers; ++l) {
+      const std::string e = p_ + "encoder.layers." + std::to_string(l) + ".";
+      attention(e + "self_attn");
+      ffn(e);
+      norm(e + "norm1");
+      norm(e + "norm2");
+    }
+    if (m_.pre_norm) norm(p_ + "encoder.norm");
+    for (int l = 0; l < m_.n_decoder_layers; ++l) {
+      const std::string d = p_ + "decoder.layers." + std::to_string(l) + ".";
+      attention(d + "self_attn");
+      attention(d + "multihead_attn");
+      ffn(d);
+      norm(d + "norm1");
+      norm(d + "norm2");
+      norm(d + "norm3");
+    }
+    norm(p_ + "decoder.norm");
+    linear(p_ + "encoder_latent_input_proj", D, latent);
+    if (m_.state_dim > 0) linear(p_ + "encoder_robot_state_input_proj", D, m_.state_dim);
+    if (m_.env_state_dim > 0) linear(p_ + "encoder_env_state_input_proj", D, m_.env_state_dim);
+    add(p_ + "encoder_img_feat_input_proj.weight", {D, m_.feature_channels(), 1, 1}, xavier(D, m_.feature_channels()));
+    add(p_ + "encoder_img_feat_input_proj.bias", {D}, rng_.uniform(static_cast<size_t>(D), -0.1, 0.1));
+    add(p_ + "encoder_1d_feature_pos_embed.weight", {m_.n_1d_tokens(), D},
+        rng_.normal(static_cast<size_t>(m_.n_1d_tokens()) * D, 1.0));
+    add(p_ + "decoder_pos_embed.weight", {T, D}, rng_.normal(static_cast<size_t>(T) * D, 1.0));
+    linear(p_ + "action_head", m_.action_dim, D);
+  }
+
+  // Normalisation buffers (legacy layout): ImageNet statistics for images, dataset-like ones for
+  // state and action.
+  void add_normalisation() {
+    for (const auto& cam : m_.cameras) {
+      std::string flat = cam.key;
+      for (char& ch : flat) {
+        if (ch == '.') ch = '_';
+      }
+      add("normalize_inputs.buffer_" + flat + ".mean", {3, 1, 1}, {0.485f, 0.456f, 0.406f});
+      add("normalize_inputs.buffer_" + flat + ".std", {3, 1, 1}, {0.229f, 0.224f, 0.225f});
+    }
+    const size_t state = static_cast<size_t>(m_.state_dim), action = static_cast<size_t>(m_.action_dim);
+    if (m_.state_dim > 0) {
+      add("normalize_inputs.buffer_observation_state.mean", {m_.state_dim}, rng_.normal(state, 1.0));
+      add("normalize_inputs.buffer_observation_state.std", {m_.state_dim}, rng_.uniform(state, 0.5, 2.0));
+    }
+    add("unnormalize_outputs.buffer_action.mean", {m_.action_dim}, rng_.normal(action, 1.0));
+    add("unnormalize_outputs.buffer_action.std", {m_.action_dim}, rng_.uniform(action, 0.5, 2.0));
+  }
+
+ private:
+  void add(const std::string& name, std::vector<int64_t> shape, std::vector<float> v) {
+    dict_.add_f32(name, std::move(shape), std::move(v));
+  }
+  void conv_bn(const ConvSpec& c, bool residual_branch_end) {
+    const std::vector<int64_t> shape = {c.out_c, c.in_c, c.kernel, c.kernel};
+    add(p_ + "backbone." + c.name + ".weight", shape,
+        rng_.normal(count(shape), std::sqrt(2.0 / (c.in_c * c.kernel * c.kernel))));
+    const std::string bn = p_ + "backbone." + c.bn + ".";
+    const size_t n = static_cast<size_t>(c.out_c);
+    // Damping the end of each residual branch keeps the residual stream from growing block by block.
+    add(bn + "weight", {c.out_c}, residual_branch_end ? rng_.uniform(n, 0.2, 0.4) : rng_.uniform(n, 0.7, 1.1));
+    add(bn + "bias", {c.out_c}, rng_.uniform(n, -0.1, 0.1));
+    add(bn + "running_mean", {c.out_c}, rng_.normal(n, 0.1));
+    add(bn + "running_var", {c.out_c}, rng_.uniform(n, 0.8, 1.2));
+  }
+  std::vector<float> xavier(int out, int in) {
+    const double a = std::sqrt(6.0 / (in + out));
+    return rng_.uniform(static_cast<size_t>(out) * in, -a, a);
+  }
+  void linear(const std::string& name, int out, int in) {
+    add(name + ".weight", {out, in}, xavier(out, in));
+    add(name + ".bias", {out}, rng_.uniform(static_cast<size_t>(out), -0.1, 0.1));
+  }
+  void norm(const std::string& name) {
+    const int D = m_.dim_model;
+    add(name + ".weight", {D}, rng_.uniform(static_cast<size_t>(D), 0.8, 1.2));
+    add(name + ".bias", {D}, rng_.uniform(static_cast<size_t>(D), -0.1, 0.1));
+  }
+  void attention(const std::string& name) {
+    const int D = m_.dim_model;
+    add(name + ".in_proj_weight", {3 * D, D}, xavier(3 * D, D));
+    add(name + ".in_proj_bias", {3 * D}, rng_.uniform(3 * static_cast<size_t>(D), -0.1, 0.1));
+    linear(name + ".out_proj", D, D);
+  }
+  void ffn(const std::string& prefix) {
+    const int D = m_.dim_model, F = m_.dim_feedforward;
+    linear(prefix + "linear1", F, D);
+    linear(prefix + "linear2", D, m_.activation == Activation::kGlu ? F / 2 : F);
+  }
+
+  const ModelConfig& m_;
+  OwnedTensorSet& dict_;
+  Random& rng_;
+  const std::string p_ = "model.";
+};
+
+}  // namespace
+
 OwnedTensorSet synthetic_state_dict(const nlohmann::ordered_json& config, uint32_t seed) {
   const ModelConfig m = lerobot_model_config(config, "built-in model config");
   OwnedTensorSet dict("built-in synthetic model");
   Random rng(seed);
-  const int D = m.dim_model, F = m.dim_feedforward, T = m.chunk_size;
-  const std::string p = "model.";
-
-  auto add = [&](const std::string& name, std::vector<int64_t> shape, std::vector<float> v) {
-    dict.add_f32(name, std::move(shape), std::move(v));
-  };
-  auto conv_bn = [&](const ConvSpec& c, bool residual_branch_end) {
-    const std::vector<int64_t> shape = {c.out_c, c.in_c, c.kernel, c.kernel};
-    add(p + "backbone." + c.name + ".weight", shape,
-        rng.normal(count(shape), std::sqrt(2.0 / (c.in_c * c.kernel * c.kernel))));
-    const std::string bn = p + "backbone." + c.bn + ".";
-    const size_t n = static_cast<size_t>(c.out_c);
-    // Damping the end of each residual branch keeps the residual stream from growing block by block.
-    add(bn + "weight", {c.out_c}, residual_branch_end ? rng.uniform(n, 0.2, 0.4) : rng.uniform(n, 0.7, 1.1));
-    add(bn + "bias", {c.out_c}, rng.uniform(n, -0.1, 0.1));
-    add(bn + "running_mean", {c.out_c}, rng.normal(n, 0.1));
-    add(bn + "running_var", {c.out_c}, rng.uniform(n, 0.8, 1.2));
-  };
-  conv_bn(m.stem(), false);
-  for (const auto& stage : m.backbone_stages()) {
-    for (const auto& block : stage) {
-      for (size_t i = 0; i < block.convs.size(); ++i) conv_bn(block.convs[i], i + 1 == block.convs.size());
-      if (block.has_downsample) conv_bn(block.downsample, true);
-    }
-  }
-
-  auto xavier = [&](int out, int in) {
-    const double a = std::sqrt(6.0 / (in + out));
-    return rng.uniform(static_cast<size_t>(out) * in, -a, a);
-  };
-  auto linear = [&](const std::string& name, int out, int in) {
-    add(name + ".weight", {out, in}, xavier(out, in));
-    add(name + ".bias", {out}, rng.uniform(static_cast<size_t>(out), -0.1, 0.1));
-  };
-  auto norm = [&](const std::string& name) {
-    add(name + ".weight", {D}, rng.uniform(static_cast<size_t>(D), 0.8, 1.2));
-    add(name + ".bias", {D}, rng.uniform(static_cast<size_t>(D), -0.1, 0.1));
-  };
-  auto attention = [&](const std::string& name) {
-    add(name + ".in_proj_weight", {3 * D, D}, xavier(3 * D, D));
-    add(name + ".in_proj_bias", {3 * D}, rng.uniform(3 * static_cast<size_t>(D), -0.1, 0.1));
-    linear(name + ".out_proj", D, D);
-  };
-  auto ffn = [&](const std::string& prefix) {
-    linear(prefix + "linear1", F, D);
-    linear(prefix + "linear2", D, m.activation == Activation::kGlu ? F / 2 : F);
-  };
-  for (int l = 0; l < m.n_encoder_layers; ++l) {
-    const std::string e = p + "encoder.layers." + std::to_string(l) + ".";
-    attention(e + "self_attn");
-    ffn(e);
-    norm(e + "norm1");
-    norm(e + "norm2");
-  }
-  if (m.pre_norm) norm(p + "encoder.norm");
-  for (int l = 0; l < m.n_decoder_layers; ++l) {
-    const std::string d = p + "decoder.layers." + std::to_string(l) + ".";
-    attention(d + "self_attn");
-    attention(d + "multihead_attn");
-    ffn(d);
-    norm(d + "norm1");
-    norm(d + "norm2");
-    norm(d + "norm3");
-  }
-  norm(p + "decoder.norm");
-  const int latent = config.value("latent_dim", 32);
-  linear(p + "encoder_latent_input_proj", D, latent);
-  if (m.state_dim > 0) linear(p + "encoder_robot_state_input_proj", D, m.state_dim);
-  if (m.env_state_dim > 0) linear(p + "encoder_env_state_input_proj", D, m.env_state_dim);
-  add(p + "encoder_img_feat_input_proj.weight", {D, m.feature_channels(), 1, 1}, xavier(D, m.feature_channels()));
-  add(p + "encoder_img_feat_input_proj.bias", {D}, rng.uniform(static_cast<size_t>(D), -0.1, 0.1));
-  add(p + "encoder_1d_feature_pos_embed.weight", {m.n_1d_tokens(), D}, rng.normal(static_cast<size_t>(m.n_1d_tokens()) * D, 1.0));
-  add(p + "decoder_pos_embed.weight", {T, D}, rng.normal(static_cast<size_t>(T) * D, 1.0));
-  linear(p + "action_head", m.action_dim, D);
-
-  // Normalisation buffers (legacy layout): ImageNet statistics for images, dataset-like ones for
-  // state and action.
-  for (const auto& cam : m.cameras) {
-    std::string flat = cam.key;
-    for (char& ch : flat) {
-      if (ch == '.') ch = '_';
-    }
-    add("normalize_inputs.buffer_" + flat + ".mean", {3, 1, 1}, {0.485f, 0.456f, 0.406f});
-    add("normalize_inputs.buffer_" + flat + ".std", {3, 1, 1}, {0.229f, 0.224f, 0.225f});
-  }
-  if (m.state_dim > 0) {
-    add("normalize_inputs.buffer_observation_state.mean", {m.state_dim}, rng.normal(static_cast<size_t>(m.state_dim), 1.0));
-    add("normalize_inputs.buffer_observation_state.std", {m.state_dim}, rng.uniform(static_cast<size_t>(m.state_dim), 0.5, 2.0));
-  }
-  add("unnormalize_outputs.buffer_action.mean", {m.action_dim}, rng.normal(static_cast<size_t>(m.action_dim), 1.0));
-  add("unnormalize_outputs.buffer_action.std", {m.action_dim}, rng.uniform(static_cast<size_t>(m.action_dim), 0.5, 2.0));
+  SyntheticStateDict writer(m, dict, rng);
+  writer.add_backbone();
+  writer.add_transformer(config.value("latent_dim", 32));
+  writer.add_normalisation();
   return dict;
 }
 

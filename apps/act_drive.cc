@@ -2,6 +2,9 @@
 // serial line to the Arduino (apps/arduino/act_rover), at a fixed control rate. See README "act_drive".
 #include <CLI/CLI.hpp>
 
+#include <pthread.h>
+
+#include <cerrno>
 #include <csignal>
 #include <cstdlib>
 #include <cstdio>
@@ -45,12 +48,43 @@ void neutral_then_die(int signal) {
   std::raise(signal);
 }
 
-// Ctrl-Z and friends suspend the process, and nothing drives while it sleeps: neutral first.
+// Bumped when the process is about to stop and again when it continues (Ctrl-Z then fg, SIGSTOP then
+// SIGCONT): the control loop then drops what it planned before and holds neutral until a chunk from a
+// new frame (ControlOptions::resumptions).
+std::atomic<uint64_t> g_resumptions{0};
+static_assert(std::atomic<uint64_t>::is_always_lock_free, "a signal handler bumps the count");
+
+void note_resumed(int) { g_resumptions.fetch_add(1); }
+
+void install_suspend_handler(int signal);
+
+// Ctrl-Z and friends suspend the process, and nothing drives while it sleeps: neutral first. The
+// handler runs with its signal blocked, so the signal raised here is unblocked for the stop to happen
+// now (raised while blocked it would re-pend and run this handler again as soon as it returned).
 void neutral_then_suspend(int signal) {
+  const int saved_errno = errno;
   emergency_neutral();
-  std::signal(signal, SIG_DFL);
-  std::raise(signal);                          // stops here until SIGCONT
-  std::signal(signal, neutral_then_suspend);  // resumed: the loop sends commands again
+  g_resumptions.fetch_add(1);  // a command planned before the stop is not sent after it
+  struct sigaction default_action{};
+  default_action.sa_handler = SIG_DFL;
+  sigemptyset(&default_action.sa_mask);
+  sigaction(signal, &default_action, nullptr);
+  sigset_t only;
+  sigemptyset(&only);
+  sigaddset(&only, signal);
+  pthread_sigmask(SIG_UNBLOCK, &only, nullptr);
+  raise(signal);  // stops here until SIGCONT (nothing happens in an orphaned process group)
+  pthread_sigmask(SIG_BLOCK, &only, nullptr);  // a second Ctrl-Z now waits until this handler returns
+  install_suspend_handler(signal);
+  errno = saved_errno;
+}
+
+void install_suspend_handler(int signal) {
+  struct sigaction suspend{};
+  suspend.sa_handler = neutral_then_suspend;
+  sigemptyset(&suspend.sa_mask);
+  suspend.sa_flags = SA_RESTART;  // as std::signal had it: a serial write in progress is not cut short
+  sigaction(signal, &suspend, nullptr);
 }
 
 void install_signal_handlers() {
@@ -68,7 +102,12 @@ void install_signal_handlers() {
   fatal.insert(fatal.end(), {SIGSEGV, SIGBUS});  // AddressSanitizer reports these itself
 #endif
   for (int s : fatal) std::signal(s, neutral_then_die);
-  for (int s : {SIGTSTP, SIGTTIN, SIGTTOU}) std::signal(s, neutral_then_suspend);
+  for (int s : {SIGTSTP, SIGTTIN, SIGTTOU}) install_suspend_handler(s);
+  struct sigaction resumed{};
+  resumed.sa_handler = note_resumed;
+  sigemptyset(&resumed.sa_mask);
+  resumed.sa_flags = SA_RESTART;
+  sigaction(SIGCONT, &resumed, nullptr);
 }
 
 // Sends neutral and closes the link on every way out of main (errors and exceptions included).
@@ -292,6 +331,7 @@ int drive(const Options& opt) {
   control.initial_state = initial_state;
   control.placement = {opt.control_priority, opt.control_cpus};
   control.deployment = opt.deployment;
+  control.resumptions = &g_resumptions;
   ControlLoop loop(control, calibration, camera, worker, *link, recorder ? &*recorder : nullptr, std::cerr);
   const DriveSummary summary = loop.run(g_stop);
   if (recorder) {

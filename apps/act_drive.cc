@@ -97,11 +97,15 @@ void install_signal_handlers() {
   // Every other catchable signal whose default action ends the process (SIGKILL cannot be caught:
   // the board's own watchdog covers it).
   std::vector<int> fatal{SIGQUIT, SIGABRT, SIGFPE, SIGILL, SIGTRAP, SIGSYS, SIGUSR1, SIGUSR2, SIGALRM,
-                         SIGVTALRM, SIGPROF, SIGXCPU, SIGXFSZ, SIGIO, SIGPWR, SIGSTKFLT};
+                         SIGVTALRM, SIGPROF, SIGXCPU, SIGIO, SIGPWR, SIGSTKFLT};
+  for (int s = SIGRTMIN; s <= SIGRTMAX; ++s) fatal.push_back(s);  // real-time signals end a process too
 #if !defined(__SANITIZE_ADDRESS__)
   fatal.insert(fatal.end(), {SIGSEGV, SIGBUS});  // AddressSanitizer reports these itself
 #endif
   for (int s : fatal) std::signal(s, neutral_then_die);
+  // A file grew past RLIMIT_FSIZE (--record, --overlay-video): the write fails with EFBIG instead, the
+  // recording stops with a message (Recorder) and driving goes on.
+  std::signal(SIGXFSZ, SIG_IGN);
   for (int s : {SIGTSTP, SIGTTIN, SIGTTOU}) install_suspend_handler(s);
   struct sigaction resumed{};
   resumed.sa_handler = note_resumed;
@@ -313,7 +317,7 @@ int drive(const Options& opt) {
   std::optional<Recorder> recorder;
   if (!opt.record_dir.empty()) {
     recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, input.height, input.width,
-                     record_meta(opt, info, camera, calibration));
+                     record_meta(opt, info, camera, calibration), &std::cerr);
   }
 
   std::optional<OverlayVideo> overlay;
@@ -338,6 +342,7 @@ int drive(const Options& opt) {
     recorder->close();
     std::cerr << "act_drive: recorded to " << opt.record_dir;
     if (recorder->dropped_frames() > 0) std::cerr << " (" << recorder->dropped_frames() << " frames dropped: disk too slow)";
+    if (!recorder->failure().empty()) std::cerr << " (stopped early: a write failed, see above)";
     std::cerr << "\n";
   }
   if (overlay) {

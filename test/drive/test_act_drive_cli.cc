@@ -279,6 +279,13 @@ TEST(ActDriveCli, DryRunDrivesTheRealModelUntilTheVideoEnds) {
 
 // Every signal that can end act_drive sends neutral first: the stop requests (SIGINT, SIGTERM, SIGHUP
 // when an SSH session drops) end cleanly with the summary; the others end by the signal itself.
+// "TERM", or "RTMIN", "RTMIN5", "RTMAX" for the real-time signals (sigabbrev_np names none of them).
+std::string signal_name(int signal) {
+  if (signal == SIGRTMAX) return "RTMAX";
+  if (signal >= SIGRTMIN) return signal == SIGRTMIN ? "RTMIN" : "RTMIN" + std::to_string(signal - SIGRTMIN);
+  return sigabbrev_np(signal);
+}
+
 struct SignalCase {
   int signal;
   bool clean_exit;
@@ -325,17 +332,17 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
     return command.when >= signalled && command.steering_us == 1500 && command.throttle_us == 1500;
   });
   if (neutral != commands.end()) {
-    report_fault_timing(std::string("SIG") + sigabbrev_np(c.signal),
+    report_fault_timing("SIG" + signal_name(c.signal),
                         std::chrono::duration<double, std::milli>(neutral->when - signalled).count());
   }
 }
 
 INSTANTIATE_TEST_SUITE_P(Signals, ActDriveSignal,
                          ::testing::Values(SignalCase{SIGTERM, true}, SignalCase{SIGINT, true}, SignalCase{SIGHUP, true},
-                                           SignalCase{SIGQUIT, false}, SignalCase{SIGUSR1, false}),
-                         [](const ::testing::TestParamInfo<SignalCase>& case_info) {
-                           return std::string(sigabbrev_np(case_info.param.signal));
-                         });
+                                           SignalCase{SIGQUIT, false}, SignalCase{SIGUSR1, false},
+                                           SignalCase{SIGRTMIN, false}, SignalCase{SIGRTMIN + 5, false},
+                                           SignalCase{SIGRTMAX, false}),
+                         [](const ::testing::TestParamInfo<SignalCase>& case_info) { return signal_name(case_info.param.signal); });
 
 // Polls for the end of `pid` until `limit` passes (a hang detector): its wait status, or none.
 std::optional<int> wait_for_exit(pid_t pid, std::chrono::seconds limit) {
@@ -590,6 +597,45 @@ TEST(ActDriveCli, RecordingSurvivesSigkill) {
     ++tick_rows;
   }
   EXPECT_GT(tick_rows, 0u);
+}
+
+TEST(ActDriveCli, RecordingStopsWithAMessageAtTheFileSizeLimit) {
+  // RLIMIT_FSIZE (ulimit -f 48: room for each frame, not for the 900 rows of ticks.csv) sends SIGXFSZ
+  // to the writer, which used to end the run. Now the write fails instead, the recording stops with
+  // one message, driving goes on to the end of the video (a replay, --realtime off, for speed), and
+  // what is on disk is a whole recording act_convert reads.
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 900, 30, 128, 96);
+  const std::string rec = dir + "/rec";
+  const auto r = run_command("bash -c " + q("ulimit -f 48 && exec " + kDrive + " -m " + q(blob) + " --camera " + q(video) +
+                                            " --dry-run --realtime off --threads 1 --record " + q(rec) + " > /dev/null"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("act_drive: error: --record: cannot write " + rec), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("File too large: the recording stops here ("), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n') < 40, true) << "one message, not one per write:\n" << r.output;
+  EXPECT_NE(r.output.find("end of video file " + video + " after 900 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("(stopped early: a write failed, see above)"), std::string::npos) << r.output;
+  // Whole rows only, each observation's frame on disk.
+  std::istringstream log(read_text(rec + "/log.jsonl"));
+  std::string line;
+  size_t rows = 0;
+  while (std::getline(log, line)) {
+    ASSERT_FALSE(log.eof()) << "a cut last line: " << line;
+    const auto row = nlohmann::json::parse(line, nullptr, false);
+    ASSERT_FALSE(row.is_discarded()) << line;
+    EXPECT_TRUE(fs::exists(rec + "/" + row.at("frame").get<std::string>())) << line;
+    ++rows;
+  }
+  EXPECT_GT(rows, 0u);
+  const std::string ticks = read_text(rec + "/ticks.csv");
+  ASSERT_FALSE(ticks.empty());
+  EXPECT_EQ(ticks.back(), '\n') << "ticks.csv cut mid-row";
+  EXPECT_LE(ticks.size(), 48u * 1024u);
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                   q(dir + "/int8.actb") + " --precision int8 --calib " + q(rec) + " --threads 1 -q");
+  EXPECT_EQ(convert.exit_code, 0) << convert.output;
 }
 
 TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {

@@ -15,6 +15,7 @@
 
 #include <opencv2/core/utils/logger.hpp>
 
+#include "actengine/engine.h"
 #include "apps/drive/calibrate.h"
 #include "apps/pytorch_options.h"
 #include "apps/drive/calibration.h"
@@ -453,7 +454,7 @@ int main(int argc, char** argv) {
   app.add_option("--max-frame-age", opt.max_frame_age_ms, "milliseconds; an older frame is never used (the rover holds "
                                                           "neutral instead)")->capture_default_str()->check(CLI::Range(1, 10000));
   app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0, act::kMaxThreads));
   act::add_deployment_options(app, opt.deployment);
   app.add_option("--initial-state", opt.initial_state, "observation.state before the first action and after every hold: "
                  "'mean' (the training mean from the model's statistics) or comma-separated values")->capture_default_str();

@@ -281,12 +281,15 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
     ++line_number;
     if (line.empty()) continue;
     const std::string where = at_line(log_path.string(), line_number);
-    const nlohmann::json entry = nlohmann::json::parse(line, nullptr, false);
-    if (entry.is_discarded() && log.peek() == std::char_traits<char>::eof()) {
-      ++cut_lines;  // the last line of a run that was killed while writing it
+    nlohmann::json entry;
+    try {  // a key twice in a line is refused too (nlohmann alone would keep the last)
+      entry = detail::parse_untrusted_json<nlohmann::json>(where, line.data(), line.size(), "not valid JSON");
+    } catch (const Error&) {
+      if (!log.eof()) throw;  // a whole line (it ends in a newline): not a cut one
+      ++cut_lines;  // the last line of a run that was killed while writing it (no newline)
       continue;
     }
-    if (entry.is_discarded() || !entry.is_object()) bad(where, "not a JSON object");
+    if (!entry.is_object()) bad(where, "not a JSON object");
     if (!entry.contains("frame") || !entry["frame"].is_string()) bad(where, "no \"frame\" file name");
     if (!entry.contains("tick") || !entry["tick"].is_number_integer()) bad(where, "no integer \"tick\"");
     EpisodeFrame frame;

@@ -101,6 +101,24 @@ TEST(DamagedRecording, ActEvalRefusesAMissingTickFrameAndATickThatIsNoNumber) {
   EXPECT_NE(tick.output.find("ticks.csv line 5 column 'tick': 'abc' is not a tick number"), std::string::npos) << tick.output;
 }
 
+TEST(DamagedRecording, ActEvalRefusesADuplicateKeyInAnOlderRecordingsLog) {
+  // A recording without the per-tick columns: act_eval reads the frames and states from log.jsonl.
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = tiny_blob(dir);
+  const std::string rec = dir + "/rec";
+  fs::create_directories(rec + "/frames");
+  fs::copy_file(fixture_image(0), rec + "/frames/000000.png");
+  std::ofstream(rec + "/ticks.csv") << "tick,time_s,jitter_ms,source,action.0,action.1\n0,0,0,chunk,0.1,-0.1\n1,0,0,chunk,0.1,-0.1\n";
+  std::ofstream(rec + "/log.jsonl") << R"({"frame": "frames/000000.png", "state": [0.25, -0.5], "tick": 0})" << "\n";
+  const CommandResult good = eval(blob, rec);
+  ASSERT_EQ(good.exit_code, 0) << good.output;
+  std::ofstream(rec + "/log.jsonl") << R"({"frame": "frames/000000.png", "state": [0.25, -0.5], "tick": 0, "tick": 1})" << "\n";
+  const CommandResult duplicate = eval(blob, rec);
+  EXPECT_EQ(duplicate.exit_code, 1) << duplicate.output;
+  EXPECT_NE(duplicate.output.find("log.jsonl line 1': not valid JSON: duplicate key 'tick'"), std::string::npos) << duplicate.output;
+}
+
 TEST(DamagedRecording, ActConvertRefusesAFifoFrameAtOnce) {
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
   const std::string dir = act::test::scratch_dir();

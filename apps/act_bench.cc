@@ -575,7 +575,7 @@ int main(int argc, char** argv) {
   app.add_option("--precision", opt.precision, "built-in model precision: fp32 or int8")
       ->check(CLI::IsMember({"fp32", "int8"}))
       ->capture_default_str();
-  app.add_option("-t,--threads,--num_threads", opt.threads, "threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();
+  app.add_option("-t,--threads,--num_threads", opt.threads, "threads (0 = all cores)")->check(CLI::Range(0, act::kMaxThreads))->capture_default_str();
   app.add_option("-w,--warmup_runs", opt.warmup_runs, "untimed runs after the first inference")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();

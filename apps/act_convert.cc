@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "actengine/convert.h"
+#include "actengine/engine.h"
 #include "apps/convert/calib_frames.h"
 #include "apps/convert/npy_file.h"
 #include "apps/deploy_package.h"
@@ -86,7 +87,7 @@ void add_options(CLI::App& app, Options& o) {
   int8_group->add_option("--max-mse", o.max_mse, "fail, writing nothing, when the held-out action MSE (normalised) is above this");
   int8_group->add_option("--report", o.report_path, "also write the accuracy report to this file: JSON, or a "
                          "self-contained HTML page when the name ends in .html");
-  int8_group->add_option("--threads", o.int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, 256));
+  int8_group->add_option("--threads", o.int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, act::kMaxThreads));
   app.add_flag("-q,--quiet", o.quiet, "print nothing but errors");
 #ifdef ACT_ONNX_EXPORT
   auto* onnx = app.add_option_group("ONNX", "export an ONNX model (from the blob just converted, or from an .actb given "

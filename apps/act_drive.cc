@@ -2,6 +2,9 @@
 // serial line to the Arduino (apps/arduino/act_rover), at a fixed control rate. See docs/rover.md.
 #include <CLI/CLI.hpp>
 
+#include <pthread.h>
+
+#include <cerrno>
 #include <csignal>
 #include <cstdlib>
 #include <cstdio>
@@ -12,6 +15,7 @@
 
 #include <opencv2/core/utils/logger.hpp>
 
+#include "actengine/engine.h"
 #include "actengine/status.h"
 #include "apps/drive/calibrate.h"
 #include "apps/pytorch_options.h"
@@ -45,12 +49,43 @@ void neutral_then_die(int signal) {
   std::raise(signal);
 }
 
-// Ctrl-Z and friends suspend the process, and nothing drives while it sleeps: neutral first.
+// Bumped when the process is about to stop and again when it continues (Ctrl-Z then fg, SIGSTOP then
+// SIGCONT): the control loop then drops what it planned before and holds neutral until a chunk from a
+// new frame (ControlOptions::resumptions).
+std::atomic<uint64_t> g_resumptions{0};
+static_assert(std::atomic<uint64_t>::is_always_lock_free, "a signal handler bumps the count");
+
+void note_resumed(int) { g_resumptions.fetch_add(1); }
+
+void install_suspend_handler(int signal);
+
+// Ctrl-Z and friends suspend the process, and nothing drives while it sleeps: neutral first. The
+// handler runs with its signal blocked, so the signal raised here is unblocked for the stop to happen
+// now (raised while blocked it would re-pend and run this handler again as soon as it returned).
 void neutral_then_suspend(int signal) {
+  const int saved_errno = errno;
   emergency_neutral();
-  std::signal(signal, SIG_DFL);
-  std::raise(signal);                          // stops here until SIGCONT
-  std::signal(signal, neutral_then_suspend);  // resumed: the loop sends commands again
+  g_resumptions.fetch_add(1);  // a command planned before the stop is not sent after it
+  struct sigaction default_action{};
+  default_action.sa_handler = SIG_DFL;
+  sigemptyset(&default_action.sa_mask);
+  sigaction(signal, &default_action, nullptr);
+  sigset_t only;
+  sigemptyset(&only);
+  sigaddset(&only, signal);
+  pthread_sigmask(SIG_UNBLOCK, &only, nullptr);
+  raise(signal);  // stops here until SIGCONT (nothing happens in an orphaned process group)
+  pthread_sigmask(SIG_BLOCK, &only, nullptr);  // a second Ctrl-Z now waits until this handler returns
+  install_suspend_handler(signal);
+  errno = saved_errno;
+}
+
+void install_suspend_handler(int signal) {
+  struct sigaction suspend{};
+  suspend.sa_handler = neutral_then_suspend;
+  sigemptyset(&suspend.sa_mask);
+  suspend.sa_flags = SA_RESTART;  // as std::signal had it: a serial write in progress is not cut short
+  sigaction(signal, &suspend, nullptr);
 }
 
 void install_signal_handlers() {
@@ -63,12 +98,21 @@ void install_signal_handlers() {
   // Every other catchable signal whose default action ends the process (SIGKILL cannot be caught:
   // the board's own watchdog covers it).
   std::vector<int> fatal{SIGQUIT, SIGABRT, SIGFPE, SIGILL, SIGTRAP, SIGSYS, SIGUSR1, SIGUSR2, SIGALRM,
-                         SIGVTALRM, SIGPROF, SIGXCPU, SIGXFSZ, SIGIO, SIGPWR, SIGSTKFLT};
+                         SIGVTALRM, SIGPROF, SIGXCPU, SIGIO, SIGPWR, SIGSTKFLT};
+  for (int s = SIGRTMIN; s <= SIGRTMAX; ++s) fatal.push_back(s);  // real-time signals end a process too
 #if !defined(__SANITIZE_ADDRESS__)
   fatal.insert(fatal.end(), {SIGSEGV, SIGBUS});  // AddressSanitizer reports these itself
 #endif
   for (int s : fatal) std::signal(s, neutral_then_die);
-  for (int s : {SIGTSTP, SIGTTIN, SIGTTOU}) std::signal(s, neutral_then_suspend);
+  // A file grew past RLIMIT_FSIZE (--record, --overlay-video): the write fails with EFBIG instead, the
+  // recording stops with a message (Recorder) and driving goes on.
+  std::signal(SIGXFSZ, SIG_IGN);
+  for (int s : {SIGTSTP, SIGTTIN, SIGTTOU}) install_suspend_handler(s);
+  struct sigaction resumed{};
+  resumed.sa_handler = note_resumed;
+  sigemptyset(&resumed.sa_mask);
+  resumed.sa_flags = SA_RESTART;
+  sigaction(SIGCONT, &resumed, nullptr);
 }
 
 // Sends neutral and closes the link on every way out of main (errors and exceptions included).
@@ -293,6 +337,7 @@ ControlOptions control_options_of(const Options& opt, const std::vector<float>& 
   control.initial_state = initial_state;
   control.placement = {opt.control_priority, opt.control_cpus};
   control.deployment = opt.deployment;
+  control.resumptions = &g_resumptions;
   return control;
 }
 
@@ -302,6 +347,7 @@ void close_outputs(const Options& opt, std::optional<Recorder>& recorder, std::o
     recorder->close();
     std::cerr << "act_drive: recorded to " << opt.record_dir;
     if (recorder->dropped_frames() > 0) std::cerr << " (" << recorder->dropped_frames() << " frames dropped: disk too slow)";
+    if (!recorder->failure().empty()) std::cerr << " (stopped early: a write failed, see above)";
     std::cerr << "\n";
   }
   if (overlay) {
@@ -336,7 +382,7 @@ int drive(const Options& opt) {
   std::optional<Recorder> recorder;
   if (!opt.record_dir.empty()) {
     recorder.emplace(opt.record_dir, info.state_dim, info.action_dim, input.height, input.width,
-                     record_meta(opt, info, camera, calibration));
+                     record_meta(opt, info, camera, calibration), &std::cerr);
   }
 
   std::optional<OverlayVideo> overlay;
@@ -443,7 +489,7 @@ void add_model_camera_and_board_options(CLI::App& app, Options& opt) {
   app.add_option("--max-frame-age", opt.max_frame_age_ms, "milliseconds; an older frame is never used (the rover holds "
                                                           "neutral instead)")->capture_default_str()->check(CLI::Range(1, 10000));
   app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0, act::kMaxThreads));
   act::add_deployment_options(app, opt.deployment);
   app.add_option("--initial-state", opt.initial_state, "observation.state before the first action and after every hold: "
                  "'mean' (the training mean from the model's statistics) or comma-separated values")->capture_default_str();

@@ -146,6 +146,20 @@ void write_file(const std::string& path, const std::string& text) {
   file.commit();
 }
 
+// Finite outputs but an error that is not (a demonstration of huge values: its square overflows):
+// nothing was measured, which is an error, not a pass. "" when every error is a number.
+std::string non_finite_error(const act::eval::EpisodeEvaluation& evaluation) {
+  for (size_t m = 0; m < evaluation.models.size(); ++m) {
+    const auto& d = evaluation.models[m].vs_demonstration;
+    for (const double mse : {d.chunk_normalised.mse(), d.chunk_raw.mse(), d.first_raw.mse(), d.first_normalised.mse()}) {
+      if (std::isfinite(mse)) continue;
+      return "model " + std::to_string(m + 1) + "'s MSE against the demonstration is " + fmt(mse) +
+             " although its outputs are finite: the demonstration's values are too large to compare (no error was measured)";
+    }
+  }
+  return "";
+}
+
 int run_episode(const Options& o) {
   std::vector<std::unique_ptr<act::Engine>> engines;
   for (const auto& path : o.models) {
@@ -220,6 +234,10 @@ int run_episode(const Options& o) {
     }
   }
   if (non_finite) return kExitNonFinite;
+  if (const std::string problem = non_finite_error(evaluation); !problem.empty()) {
+    std::cerr << "act_eval: error: " << problem << "\n";
+    return 1;
+  }
   return gate_missed ? kExitGateMissed : 0;
 }
 
@@ -236,7 +254,7 @@ int main(int argc, char** argv) {
   app.add_option("-o,--output", o.output_path, "write the raw action chunks as 'action' [N, chunk, action_dim]")->needs(input);
   app.add_flag("--compare", o.compare, "compare with 'output.action' from the input file; exit 1 beyond --tol")->needs(input);
   app.add_option("--tol", o.tol, "tolerance: |ours - ref| <= tol * (1 + |ref|)")->capture_default_str()->check(CLI::PositiveNumber);
-  app.add_option("-t,--threads", o.threads, "threads (0 = all cores)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("-t,--threads", o.threads, "threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, act::kMaxThreads));
   app.add_option("--images", o.images, "which image tensors to read: auto (float if present), f32, u8")->capture_default_str()
       ->check(CLI::IsMember({"auto", "f32", "u8"}));
   auto* episode = app.add_option("--episode", o.episode.episode,

@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <string>
+#include <system_error>
+
+#include "actengine/status.h"
 
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
@@ -27,13 +31,33 @@ constexpr unsigned kPureSpins = 64;
 
 int ThreadPool::hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
 
-ThreadPool::ThreadPool(int threads) : ranges_(static_cast<size_t>(threads <= 0 ? hardware_threads() : threads)) {
-  const int total = static_cast<int>(ranges_.size());
-  workers_.reserve(static_cast<size_t>(total - 1));
-  for (int i = 1; i < total; ++i) workers_.emplace_back([this, i] { worker_loop(i); });
+int ThreadPool::checked_threads(int threads) {
+  if (threads < 0) fail(StatusCode::kInvalidArgument, "threads must be >= 0 (0 = all cores), got " + std::to_string(threads));
+  if (threads > kMaxThreads) {
+    fail(StatusCode::kInvalidArgument, "threads = " + std::to_string(threads) + " is above the limit of " +
+                                          std::to_string(kMaxThreads) + " (0 = one per online core)");
+  }
+  return threads == 0 ? std::min(hardware_threads(), kMaxThreads) : threads;
 }
 
-ThreadPool::~ThreadPool() {
+ThreadPool::ThreadPool(int threads) : ranges_(static_cast<size_t>(checked_threads(threads))) {
+  const int total = static_cast<int>(ranges_.size());
+  workers_.reserve(static_cast<size_t>(total - 1));
+  try {
+    for (int i = 1; i < total; ++i) workers_.emplace_back([this, i] { worker_loop(i); });
+  } catch (const std::system_error& e) {
+    // The OS refused a thread (EAGAIN: RLIMIT_NPROC, a cgroup's pids.max, a full process table). The
+    // workers already started are stopped and joined, so nothing is left running or joinable.
+    const size_t started = workers_.size();
+    stop_workers();
+    fail(StatusCode::kIoError, "cannot start thread " + std::to_string(started + 2) + " of " + std::to_string(total) +
+                                  ": the operating system refused it (" + e.what() + "); use fewer threads");
+  }
+}
+
+ThreadPool::~ThreadPool() { stop_workers(); }
+
+void ThreadPool::stop_workers() {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     stopping_.store(true, std::memory_order_relaxed);  // published by the generation's release
@@ -41,6 +65,7 @@ ThreadPool::~ThreadPool() {
   }
   wake_.notify_all();
   for (auto& w : workers_) w.join();
+  workers_.clear();
 }
 
 template <class Done>

@@ -39,8 +39,12 @@ struct ThreadSpans {
 class ThreadPool {
  public:
   static constexpr int kSpinMicroseconds = 100;
+  /// The most threads a pool has (act::kMaxThreads in the public API: every --threads and threads=).
+  static constexpr int kMaxThreads = 256;
 
-  /// `threads` >= 1 is the total including the caller; 0 means one per online core.
+  /// `threads` in 1..kMaxThreads is the total including the caller; 0 means one per online core
+  /// (at most kMaxThreads). Throws act::Error: kInvalidArgument outside 0..kMaxThreads, kIoError when
+  /// the OS refuses a thread (the workers already started are stopped and joined first).
   explicit ThreadPool(int threads);
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;
@@ -58,8 +62,12 @@ class ThreadPool {
 
   /// Online cores of this machine (at least 1).
   static int hardware_threads();
+  /// The pool size `threads` asks for (0 = one per online core, capped at kMaxThreads); throws
+  /// act::Error(kInvalidArgument) below 0 or above kMaxThreads, naming the limit.
+  static int checked_threads(int threads);
 
  private:
+  void stop_workers();
   void worker_loop(int thread_index);
   void run_tasks(int thread_index);
   /// Spins until `done()` or kSpinMicroseconds pass; true when done() became true.

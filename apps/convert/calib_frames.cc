@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <memory>
 #include <set>
 
@@ -111,8 +112,9 @@ class Loader {
   void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
     if (files.empty()) fail(StatusCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
     for (size_t i : spread(files.size(), max_frames)) {
-      const cv::Mat image = media::read_image(files[i].string());
-      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode image " + files[i].string());
+      std::string why;
+      const cv::Mat image = media::read_image(files[i].string(), cv::IMREAD_COLOR, &why);
+      if (image.empty()) fail(StatusCode::kDataLoss, "calibration image: " + why);
       add_frame_all_cameras(image);
     }
   }
@@ -215,7 +217,7 @@ class Loader {
   // act_drive --record folder: log.jsonl lines {"frame": "<path relative to the folder>", "state": [...]}.
   void add_recording(const fs::path& dir, size_t max_frames) {
     const std::string log_path = (dir / "log.jsonl").string();
-    std::ifstream in(log_path);
+    std::istringstream in(detail::read_regular_file(log_path));  // a FIFO is refused, never waited on
     std::vector<std::pair<fs::path, std::vector<float>>> entries;
     std::string line;
     size_t line_no = 0;
@@ -230,9 +232,11 @@ class Loader {
         if (!j.contains("frame")) continue;
         if (j.contains("state") && j["state"].is_array()) state = j["state"].get<std::vector<float>>();
         frame = j["frame"].get<std::string>();
-      } catch (const std::exception&) {
-        // A recording cut off by a crash may end in a partial line: skip it, say so.
-        note(log_path + ": skipped unreadable line " + std::to_string(line_no));
+      } catch (const std::exception& e) {
+        // A recording cut off by a crash may end in a partial line (no newline): skip it, say so. Any
+        // other bad line (a duplicate key included) is an error, not a frame quietly left out.
+        if (!in.eof()) fail(StatusCode::kDataLoss, e.what());
+        note(log_path + ": skipped unreadable line " + std::to_string(line_no) + " (cut short)");
         continue;
       }
       // States of another length belong to another model: calibrating on sampled states instead would
@@ -243,10 +247,12 @@ class Loader {
       }
       entries.emplace_back(dir / frame, std::move(state));
     }
-    if (entries.empty()) return add_image_folder(dir, max_frames);
+    // Not the folder's images instead: they would calibrate without the states the recording holds.
+    if (entries.empty()) fail(StatusCode::kDataLoss, log_path + " names no frame: nothing to calibrate on in this recording");
     for (size_t i : spread(entries.size(), max_frames)) {
-      const cv::Mat image = media::read_image(entries[i].first.string());
-      if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode recorded frame " + entries[i].first.string());
+      std::string why;
+      const cv::Mat image = media::read_image(entries[i].first.string(), cv::IMREAD_COLOR, &why);
+      if (image.empty()) fail(StatusCode::kDataLoss, "recorded frame: " + why);
       add_frame_all_cameras(image, &entries[i].second);
     }
   }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <set>
 
 #include "actengine/status.h"
@@ -43,9 +44,29 @@ T get_or(const nlohmann::json& object, const char* key, T fallback, const std::s
   }
 }
 
+// An integer field: a whole number that fits an int, checked before it is narrowed (get<int>() would
+// read 2^32+1500 as 1500 and 1500.9 as 1500). Refused, naming the key, otherwise.
+int get_int_or(const nlohmann::json& object, const char* key, int fallback, const std::string& source, const std::string& where) {
+  if (!object.contains(key)) return fallback;
+  const nlohmann::json& value = object.at(key);
+  const std::string field = "'" + where + key + "' = " + value.dump();
+  constexpr int64_t kMin = std::numeric_limits<int>::min(), kMax = std::numeric_limits<int>::max();
+  if (value.is_number_unsigned()) {
+    if (value.get<uint64_t>() > static_cast<uint64_t>(kMax)) bad(source, field + " is out of range");
+    return static_cast<int>(value.get<uint64_t>());
+  }
+  if (value.is_number_integer()) {
+    const int64_t v = value.get<int64_t>();
+    if (v < kMin || v > kMax) bad(source, field + " is out of range");
+    return static_cast<int>(v);
+  }
+  if (value.is_number_float()) bad(source, field + " is not a whole number");
+  bad(source, "field '" + where + key + "' has the wrong type (" + value.dump() + ")");
+}
+
 int get_pulse(const nlohmann::json& object, const char* key, const std::string& source, const std::string& where) {
   if (!object.contains(key)) bad(source, "missing field '" + where + key + "'");
-  const int us = get_or<int>(object, key, 0, source, where);
+  const int us = get_int_or(object, key, 0, source, where);
   if (us < ROVER_PWM_MIN_US || us > ROVER_PWM_MAX_US) {
     bad(source, "'" + where + key + "' = " + std::to_string(us) + " us is outside " + std::to_string(ROVER_PWM_MIN_US) +
                     ".." + std::to_string(ROVER_PWM_MAX_US) + " us");
@@ -62,7 +83,7 @@ ChannelCalibration parse_channel(const nlohmann::json& json, const char* name, c
   if (std::string(name) == "throttle") known.insert({"max_forward", "max_reverse"});
   reject_unknown_keys(c, known, source, where);
   ChannelCalibration ch;
-  ch.action_index = get_or<int>(c, "action_index", default_index, source, where);
+  ch.action_index = get_int_or(c, "action_index", default_index, source, where);
   ch.low_us = get_pulse(c, names.low, source, where);
   ch.mid_us = get_pulse(c, names.mid, source, where);
   ch.high_us = get_pulse(c, names.high, source, where);

@@ -173,6 +173,7 @@ class ControlRun {
         break;
       }
       fault_.clear();
+      note_resumption(tick.now);
       if (!take_inference_result(tick)) break;
       const FrameSource::State source_state = frames_.state();
       check_camera(source_state, tick.now);
@@ -232,6 +233,7 @@ class ControlRun {
   bool take_inference_result(const Tick& tick) {
     std::optional<InferenceResult> result = inference_.take_result();
     if (!result) return true;
+    if (options_.realtime && resumed_at_ && result->frame_captured < *resumed_at_) return true;  // from before a suspension
     if (result->stale_frame) {
       fault_ = "stale frame (" + std::to_string(std::lround(result->frame_age_ms)) + " ms old)";
       return true;
@@ -257,6 +259,22 @@ class ControlRun {
                                        info_.cameras.front().height, info_.cameras.front().width});
     }
     return true;
+  }
+
+  // The process was suspended and continued since the last tick: what was planned before is stale.
+  void note_resumption(Clock::time_point now) {
+    if (!options_.resumptions) return;
+    const uint64_t count = options_.resumptions->load();
+    if (count == resumptions_seen_) return;
+    resumptions_seen_ = count;
+    resumed_at_ = now;
+    scheduler_.clear();
+    executing_ = false;
+    overrunning_ = false;
+    if (options_.cockpit) options_.cockpit->estop();
+    if (summary_.faults.size() < kMaxFaultEvents) summary_.faults.push_back({now, "resumed after a suspension"});
+    log_ << "act_drive: warning: resumed after a suspension: holding the safe action until a chunk from a new frame"
+         << (options_.cockpit ? "; e-stopped (resume from the live view or the gamepad)" : "") << "\n";
   }
 
   // Counts a failed inference as this tick's fault; false (after sending the safe command) when it
@@ -380,7 +398,10 @@ class ControlRun {
     return overrunning_ ? "safe:overrun" : "safe:waiting";
   }
 
-  void send(const Tick& tick, const std::string& source, const PwmCommand& command) {
+  void send(const Tick& tick, const std::string& source, const PwmCommand& chosen) {
+    // Suspended since this tick began (its command was chosen before the stop): the safe one instead.
+    const bool suspended = options_.resumptions && options_.resumptions->load() != resumptions_seen_;
+    const PwmCommand& command = suspended ? safe_ : chosen;
     const auto write_start = Clock::now();
     const bool sent = link_.send(command, write_start);
     serial_write_.add(ms_between(write_start, Clock::now()));
@@ -489,6 +510,8 @@ class ControlRun {
   bool overrunning_ = false;  // in an overrun: no action since the chunk ran out
   std::string fault_;         // why the rover holds the safe action this tick ("" = no fault)
   std::string previous_fault_;
+  uint64_t resumptions_seen_ = options_.resumptions ? options_.resumptions->load() : 0;
+  std::optional<Clock::time_point> resumed_at_;  // the latest resume after a suspension
 };
 
 }  // namespace

@@ -50,6 +50,11 @@ struct ControlOptions {
   OverlayVideo* overlay = nullptr;
   ThreadPlacement placement;  ///< for the control thread (the one calling run())
   DeploymentOptions deployment;  ///< replaces the blob's n_action_steps / temporal ensembling
+  /// Bumped (by act_drive's signal handlers) when the process stops and when it continues. When it
+  /// changes, the chunk and any inference of an older frame are dropped, the safe action is held until
+  /// a chunk from a frame captured after the resume, and the cockpit (if any) is e-stopped; a command
+  /// chosen before the change is replaced by the safe one. Null = never suspended.
+  const std::atomic<uint64_t>* resumptions = nullptr;
 };
 
 /// `info` with `deployment`'s choices in place of the blob's; throws act::Error(kInvalidArgument) when

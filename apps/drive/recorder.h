@@ -23,6 +23,7 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <ostream>
 #include <optional>
 #include <string>
 #include <thread>
@@ -63,9 +64,11 @@ struct TickRecord {
 class Recorder {
  public:
   /// Creates DIR (which must not exist or be empty) and its files; throws act::Error otherwise.
-  /// Tick frames are stored at image_height x image_width (the model's input).
+  /// Tick frames are stored at image_height x image_width (the model's input). On the first write
+  /// error (a full disk, RLIMIT_FSIZE) the recording stops: the tables are cut back to their last
+  /// whole batch, one message goes to `log` (when given) and failure() says it; driving goes on.
   Recorder(const std::string& dir, int state_dim, int action_dim, int image_height, int image_width,
-           const nlohmann::ordered_json& meta);
+           const nlohmann::ordered_json& meta, std::ostream* log = nullptr);
   ~Recorder();
   Recorder(const Recorder&) = delete;
   Recorder& operator=(const Recorder&) = delete;
@@ -75,19 +78,26 @@ class Recorder {
   /// Writes everything queued and closes the files (also done by the destructor).
   void close();
   uint64_t dropped_frames() const;
+  /// Why the recording stopped early, "" while it records.
+  std::string failure() const;
   const std::string& dir() const { return dir_; }
 
  private:
   using Item = std::variant<ObservationRecord, TickRecord>;
   void run();
-  void write(const ObservationRecord& record);
-  void write(const TickRecord& record);
+  std::string write(const ObservationRecord& record);  // "" or what failed
+  std::string write(const TickRecord& record);
+  void stop_recording(const std::string& problem);
 
   std::string dir_;
   int state_dim_, action_dim_, image_height_, image_width_;
   std::FILE* log_ = nullptr;
   std::FILE* ticks_ = nullptr;
+  std::ostream* log_stream_ = nullptr;
   uint64_t observations_written_ = 0;  // writer thread only
+  uint64_t observations_pending_ = 0, observations_kept_ = 0;  // writer thread only: lines written, flushed
+  uint64_t ticks_pending_ = 0, ticks_written_ = 0;  // writer thread only: rows written, flushed
+  long log_good_ = -1, ticks_good_ = -1;  // writer thread only: the tables' sizes after the last whole batch
   std::optional<uint64_t> last_tick_frame_;  // writer thread only: the camera index last stored
   mutable std::mutex mutex_;
   std::condition_variable wake_;
@@ -95,6 +105,7 @@ class Recorder {
   size_t queued_frames_ = 0;   // guarded by mutex_
   uint64_t dropped_frames_ = 0;  // guarded by mutex_
   bool closing_ = false;       // guarded by mutex_
+  std::string failure_;        // guarded by mutex_
   std::thread thread_;
 };
 

@@ -8,11 +8,13 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <sstream>
 
 #include <nlohmann/json.hpp>
 
 #include "actengine/status.h"
 #include "apps/convert/calib_frames.h"
+#include "weights/blob/file_util.h"
 
 namespace act::eval {
 
@@ -80,11 +82,21 @@ std::vector<std::string> split(const std::string& line) {
   return cells;
 }
 
+// The whole of an input file (read_regular_file's rules: a FIFO or a folder is refused at once, never
+// waited on); a missing one is "cannot open <what> <path>".
+std::string read_input_file(const std::string& path, const std::string& what) {
+  try {
+    return detail::read_regular_file(path);
+  } catch (const Error& e) {
+    if (e.code() == StatusCode::kNotFound) fail(StatusCode::kNotFound, "cannot open " + what + " " + path);
+    throw;
+  }
+}
+
 // `recording`: a file a killed act_drive may have cut short: a last row with too few columns is
 // dropped (and counted in `cut_rows`) instead of being an error.
 CsvTable read_csv(const std::string& path, const char* what, bool recording = false, size_t* cut_rows = nullptr) {
-  std::ifstream in(path);
-  if (!in) fail(StatusCode::kNotFound, std::string("cannot open the ") + what + " CSV " + path);
+  std::istringstream in(read_input_file(path, std::string("the ") + what + " CSV"));
   CsvTable table{path, {}, {}};
   std::string line;
   size_t number = 0;
@@ -208,11 +220,16 @@ Episode read_tick_recording(const fs::path& dir, const ModelInfo& model, const C
   const std::vector<size_t> state = indexed_columns(ticks, "state.", model.state_dim, "the model's state has");
   const std::optional<size_t> driver = column_named(ticks, "driver"), frame = column_named(ticks, "frame");
   if (!driver || !frame) bad(ticks.path, "no 'driver' and 'frame' columns beside the 'command.<i>' ones");
+  const std::optional<size_t> tick_column = column_named(ticks, "tick");
+  if (!tick_column) bad(ticks.path, "no 'tick' column");
   for (size_t c : command) ep.action_names.push_back(ticks.header[c]);
   const auto held_safe = [&](const CsvTable::Row& row) { return row.cells[*driver] == "safe"; };
   size_t safe_frames = 0;
   for (size_t r = 0; r < ticks.rows.size(); ++r) {
     const CsvTable::Row& row = ticks.rows[r];
+    if (!parse_index(row.cells[*tick_column])) {
+      bad(at_line(ticks.path, row.line) + " column 'tick'", "'" + row.cells[*tick_column] + "' is not a tick number");
+    }
     const std::string& image = row.cells[*frame];
     if (image.empty() || (r > 0 && ticks.rows[r - 1].cells[*frame] == image)) continue;  // no frame, or not a new one
     if (held_safe(row)) {
@@ -222,6 +239,7 @@ Episode read_tick_recording(const fs::path& dir, const ModelInfo& model, const C
     EpisodeFrame f;
     f.source = image;
     f.image_path = (dir / image).string();
+    f.where = at_line(ticks.path, row.line);
     for (size_t c : state) f.state.push_back(ticks.number(row, c));
     for (size_t t = r; t < ticks.rows.size() && t < r + static_cast<size_t>(model.chunk_size) && !held_safe(ticks.rows[t]); ++t) {
       for (size_t c : command) f.demonstration.push_back(ticks.number(ticks.rows[t], c));
@@ -256,25 +274,28 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
   }
   // The frames and their states, from log.jsonl.
   const fs::path log_path = dir / "log.jsonl";
-  std::ifstream log(log_path);
-  if (!log) fail(StatusCode::kNotFound, "cannot open " + log_path.string());
+  std::istringstream log(read_input_file(log_path.string(), "the recording's log"));
   std::string line;
   size_t line_number = 0, without_action = 0;
   while (std::getline(log, line)) {
     ++line_number;
     if (line.empty()) continue;
     const std::string where = at_line(log_path.string(), line_number);
-    const nlohmann::json entry = nlohmann::json::parse(line, nullptr, false);
-    if (entry.is_discarded() && log.peek() == std::char_traits<char>::eof()) {
-      ++cut_lines;  // the last line of a run that was killed while writing it
+    nlohmann::json entry;
+    try {  // a key twice in a line is refused too (nlohmann alone would keep the last)
+      entry = detail::parse_untrusted_json<nlohmann::json>(where, line.data(), line.size(), "not valid JSON");
+    } catch (const Error&) {
+      if (!log.eof()) throw;  // a whole line (it ends in a newline): not a cut one
+      ++cut_lines;  // the last line of a run that was killed while writing it (no newline)
       continue;
     }
-    if (entry.is_discarded() || !entry.is_object()) bad(where, "not a JSON object");
+    if (!entry.is_object()) bad(where, "not a JSON object");
     if (!entry.contains("frame") || !entry["frame"].is_string()) bad(where, "no \"frame\" file name");
     if (!entry.contains("tick") || !entry["tick"].is_number_integer()) bad(where, "no integer \"tick\"");
     EpisodeFrame frame;
     frame.source = entry["frame"].get<std::string>();
     frame.image_path = (dir / frame.source).string();
+    frame.where = where;
     if (model.state_dim > 0) {
       const auto& state = entry.contains("state") ? entry["state"] : nlohmann::json();
       if (!state.is_array() || state.size() != static_cast<size_t>(model.state_dim)) {
@@ -397,8 +418,9 @@ EpisodeImages::EpisodeImages(const Episode& episode) : episode_(episode) {
 cv::Mat EpisodeImages::image(size_t i) {
   const EpisodeFrame& frame = episode_.frames.at(i);
   if (!frame.image_path.empty()) {
-    cv::Mat image = media::read_image(frame.image_path);
-    if (image.empty()) fail(StatusCode::kDataLoss, "cannot decode image " + frame.image_path);
+    std::string why;
+    cv::Mat image = media::read_image(frame.image_path, cv::IMREAD_COLOR, &why);
+    if (image.empty()) fail(StatusCode::kDataLoss, frame.where.empty() ? why : frame.where + ": " + why);
     return image;
   }
   cv::Mat image;

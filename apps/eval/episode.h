@@ -26,6 +26,7 @@ namespace act::eval {
 struct EpisodeFrame {
   std::string source;        ///< where the image is, for people: "frames/000012.png" or "video.mp4 frame 12"
   std::string image_path;    ///< the image file; empty when the frame comes from the episode's video
+  std::string where;         ///< the file and line that name the frame ("ticks.csv:12"), for errors
   size_t video_index = 0;    ///< the frame's index in the video
   std::vector<float> state;  ///< raw robot state; empty when the model has none
   /// The demonstration from this frame on: steps x action_dim raw actions, row-major, at least one step.

@@ -3,9 +3,11 @@
 #include <dlfcn.h>
 
 #include <filesystem>
+#include <limits>
 
 #include "actengine/status.h"
 #include "apps/executable_dir.h"
+#include "weights/blob/file_util.h"
 
 namespace act::media {
 namespace {
@@ -37,7 +39,22 @@ const MediaIo& module() {
 
 }  // namespace
 
-cv::Mat read_image(const std::string& path, int flags) { return module().read_image(path, flags); }
+cv::Mat read_image(const std::string& path, int flags, std::string* why) {
+  std::string bytes;
+  try {
+    bytes = detail::read_regular_file(path);
+  } catch (const Error& e) {
+    if (why) *why = e.what();
+    return {};
+  }
+  if (bytes.size() > static_cast<size_t>(std::numeric_limits<int>::max())) {
+    if (why) *why = "'" + path + "' is too large for an image (" + std::to_string(bytes.size()) + " bytes)";
+    return {};
+  }
+  cv::Mat image = module().decode_image(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(), flags);
+  if (image.empty() && why) *why = "cannot decode '" + path + "' as an image (" + std::to_string(bytes.size()) + " bytes)";
+  return image;
+}
 bool write_image(const std::string& path, const cv::Mat& image) { return module().write_image(path, image); }
 bool encode_image(const std::string& extension, const cv::Mat& image, std::vector<uchar>& encoded) {
   return module().encode_image(extension, image, encoded);

@@ -39,8 +39,11 @@ class VideoWriter {
   virtual void write(const cv::Mat& bgr) = 0;
 };
 
-/// cv::imread: an empty Mat when the file cannot be read or decoded. `flags`: cv::IMREAD_*.
-cv::Mat read_image(const std::string& path, int flags = cv::IMREAD_COLOR);
+/// An image file decoded (cv::imdecode of its bytes): an empty Mat when the file cannot be read or
+/// decoded, with the reason in `why` when given. The bytes are read by act::detail::read_regular_file,
+/// so a FIFO, a folder or a device is refused at once ("not a regular file (a FIFO)"), never waited on.
+/// `flags`: cv::IMREAD_*.
+cv::Mat read_image(const std::string& path, int flags = cv::IMREAD_COLOR, std::string* why = nullptr);
 /// cv::imwrite (the extension picks the format): false when it could not.
 bool write_image(const std::string& path, const cv::Mat& image);
 /// cv::imencode, e.g. ".jpg": false when it could not.
@@ -58,7 +61,7 @@ std::unique_ptr<VideoWriter> create_video(const std::string& path, const std::st
 /// What the module exports (media_io_module.cc); the functions above load it and call it.
 class MediaIo {
  public:
-  virtual cv::Mat read_image(const std::string& path, int flags) const = 0;
+  virtual cv::Mat decode_image(const uint8_t* data, size_t size, int flags) const = 0;
   virtual bool write_image(const std::string& path, const cv::Mat& image) const = 0;
   virtual bool encode_image(const std::string& extension, const cv::Mat& image, std::vector<uchar>& encoded) const = 0;
   virtual std::unique_ptr<VideoReader> open_video(const std::string& source, int backend,

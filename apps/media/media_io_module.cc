@@ -31,7 +31,10 @@ std::unique_ptr<VideoReader> opened_or_null(std::unique_ptr<OpenCvVideoReader> r
 
 class OpenCvMediaIo final : public MediaIo {
  public:
-  cv::Mat read_image(const std::string& path, int flags) const override { return cv::imread(path, flags); }
+  cv::Mat decode_image(const uint8_t* data, size_t size, int flags) const override {
+    if (size == 0) return {};
+    return cv::imdecode(cv::Mat(1, static_cast<int>(size), CV_8UC1, const_cast<uint8_t*>(data)), flags);
+  }
   bool write_image(const std::string& path, const cv::Mat& image) const override { return cv::imwrite(path, image); }
   bool encode_image(const std::string& extension, const cv::Mat& image, std::vector<uchar>& encoded) const override {
     return cv::imencode(extension, image, encoded);

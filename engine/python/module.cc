@@ -80,9 +80,45 @@ class PyEngine {
   std::mutex mutex_;
 };
 
+/// `self` of a method, refused with a TypeError when its __init__ never ran (`T.__new__(T)` in Python):
+/// pybind11 would hand such an object over as freshly allocated, never constructed memory.
+template <class T>
+T& initialised(py::handle self, const char* type) {
+  auto* instance = reinterpret_cast<py::detail::instance*>(self.ptr());
+  const py::detail::value_and_holder v_h = instance->get_value_and_holder(py::detail::get_type_info(typeid(T)), false);
+  if (!v_h || !v_h.holder_constructed()) {
+    throw py::type_error(std::string("this actengine.") + type + " was never initialised (made by " + type +
+                         ".__new__ without __init__): create it as actengine." + type + "(...)");
+  }
+  return *v_h.value_ptr<T>();
+}
+
+/// A method of T bound for Python: an uninitialised object is a TypeError (initialised()).
+template <const char* kType, class T, class R, class... Args>
+auto checked(R (T::*method)(Args...)) {
+  return [method](py::handle self, Args... args) -> R {
+    return (initialised<T>(self, kType).*method)(std::forward<Args>(args)...);
+  };
+}
+template <const char* kType, class T, class R, class... Args>
+auto checked(R (T::*method)(Args...) const) {
+  return [method](py::handle self, Args... args) -> R {
+    return (initialised<T>(self, kType).*method)(std::forward<Args>(args)...);
+  };
+}
+constexpr char kEngineType[] = "Engine";
+constexpr char kPolicyType[] = "Policy";
+constexpr char kSchedulerType[] = "ChunkScheduler";
+
+// An Engine for Policy(engine): None (which pybind11 passes as an empty pointer) is a TypeError.
+std::shared_ptr<PyEngine> engine_given(std::shared_ptr<PyEngine> engine) {
+  if (!engine) throw py::type_error("Policy(engine): engine must be an actengine.Engine, not None");
+  return engine;
+}
+
 class PyPolicy {
  public:
-  explicit PyPolicy(std::shared_ptr<PyEngine> engine) : engine_(std::move(engine)), policy_(engine_->engine()) {}
+  explicit PyPolicy(std::shared_ptr<PyEngine> engine) : engine_(engine_given(std::move(engine))), policy_(engine_->engine()) {}
 
   py::array_t<float> select_action(const py::dict& observation) {
     const HeldObservation held = observation_from_dict(engine_->model_info(), observation);
@@ -277,6 +313,10 @@ py::dict convert(const ConvertArgs& a) {
   if (a.precision == "fp32" && (!a.calib.empty() || a.mode || a.max_mse)) {
     throw py::value_error("mode, calib and max_mse need precision='int8'");
   }
+  if (a.threads < 0 || a.threads > kMaxThreads) {
+    throw py::value_error("threads must be in 0.." + std::to_string(kMaxThreads) + " (0 = one per online core), got " +
+                          std::to_string(a.threads));
+  }
   const std::optional<Int8Options> int8 = a.precision == "int8" ? std::optional(int8_options(a)) : std::nullopt;
   std::vector<std::string> notes;
   const std::unique_ptr<ImportedCheckpoint> model = import(a, notes);
@@ -355,31 +395,31 @@ Engine(path, threads=0, isa="auto"): threads 0 = one per online core; isa "auto"
 best kernels this CPU runs. Observations are dicts keyed by LeRobot feature names.)")
       .def(py::init<const std::filesystem::path&, int, const std::string&>(), py::arg("path"), py::arg("threads") = 0,
            py::arg("isa") = "auto")
-      .def_property_readonly("model_info", &PyEngine::model_info, py::return_value_policy::reference_internal)
-      .def_property_readonly("threads", &PyEngine::threads)
-      .def("infer", [](PyEngine& e, const py::dict& obs) { return e.infer(obs, false); }, py::arg("observation"),
-           "The raw action chunk, float32 (chunk_size, action_dim), for one observation.")
-      .def("infer_normalized", [](PyEngine& e, const py::dict& obs) { return e.infer(obs, true); },
+      .def_property_readonly("model_info", checked<kEngineType>(&PyEngine::model_info), py::return_value_policy::reference_internal)
+      .def_property_readonly("threads", checked<kEngineType>(&PyEngine::threads))
+      .def("infer", [](py::handle e, const py::dict& obs) { return initialised<PyEngine>(e, kEngineType).infer(obs, false); },
+           py::arg("observation"), "The raw action chunk, float32 (chunk_size, action_dim), for one observation.")
+      .def("infer_normalized", [](py::handle e, const py::dict& obs) { return initialised<PyEngine>(e, kEngineType).infer(obs, true); },
            py::arg("observation"), "The network's normalised action chunk (before un-normalisation).");
 
   py::class_<PyPolicy>(m, "Policy", R"(LeRobot's select_action on an Engine: the n_action_steps queue, or
 temporal ensembling when the model's config asks for it. One action per call.)")
       .def(py::init<std::shared_ptr<PyEngine>>(), py::arg("engine"))
-      .def("select_action", &PyPolicy::select_action, py::arg("observation"),
+      .def("select_action", checked<kPolicyType>(&PyPolicy::select_action), py::arg("observation"),
            "The raw action (float32, action_dim) for this control step.")
-      .def("reset", &PyPolicy::reset, "Empties the queue / ensemble (call at the start of an episode).")
-      .def("will_infer_next", &PyPolicy::will_infer_next, "True when the next select_action runs the network.");
+      .def("reset", checked<kPolicyType>(&PyPolicy::reset), "Empties the queue / ensemble (call at the start of an episode).")
+      .def("will_infer_next", checked<kPolicyType>(&PyPolicy::will_infer_next), "True when the next select_action runs the network.");
 
   py::class_<PyChunkScheduler>(m, "ChunkScheduler", R"(Chunks in, one action per control tick out, for a
 robot that keeps acting while the next chunk is inferred (actengine/scheduler.h).)")
       .def(py::init<const ModelInfo&>(), py::arg("model_info"))
-      .def("add", &PyChunkScheduler::add, py::arg("chunk"), py::arg("observation_tick"),
+      .def("add", checked<kSchedulerType>(&PyChunkScheduler::add), py::arg("chunk"), py::arg("observation_tick"),
            "Adds a chunk (chunk_size, action_dim) predicted from the observation captured at observation_tick.")
-      .def("action_at", &PyChunkScheduler::action_at, py::arg("tick"),
+      .def("action_at", checked<kSchedulerType>(&PyChunkScheduler::action_at), py::arg("tick"),
            "The action for tick, or None when no chunk covers it.")
-      .def("wants_inference", &PyChunkScheduler::wants_inference, py::arg("tick"), py::arg("lead_ticks") = 0,
+      .def("wants_inference", checked<kSchedulerType>(&PyChunkScheduler::wants_inference), py::arg("tick"), py::arg("lead_ticks") = 0,
            "True when the next inference should start at tick (lead_ticks: its latency in ticks plus a margin).")
-      .def("clear", &PyChunkScheduler::clear, "Forgets every chunk (a new episode, or a fault).");
+      .def("clear", checked<kSchedulerType>(&PyChunkScheduler::clear), "Forgets every chunk (a new episode, or a fault).");
 }
 
 // convert(): act_convert's conversion, with its options as keyword arguments.

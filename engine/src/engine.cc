@@ -338,13 +338,15 @@ std::vector<float> Engine::Impl::intermediate(const std::string& name) {
 
 // -------------------------------------------------------------------------------------- Engine
 
+static_assert(kMaxThreads == ThreadPool::kMaxThreads, "the public limit is the pool's");
+
 Engine::Engine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Engine::~Engine() = default;
 
 StatusOr<std::unique_ptr<Engine>> Engine::open(const std::string& blob_path, const EngineOptions& options) {
   std::unique_ptr<Engine> engine;
   Status s = guarded([&] {
-    if (options.threads < 0) fail(StatusCode::kInvalidArgument, "threads must be >= 0 (0 = all cores)");
+    ThreadPool::checked_threads(options.threads);  // a count outside 0..kMaxThreads, before any work
     engine.reset(new Engine(std::make_unique<Impl>(blob_path, options)));
   });
   if (!s.ok()) return s;

@@ -279,6 +279,13 @@ TEST(ActDriveCli, DryRunDrivesTheRealModelUntilTheVideoEnds) {
 
 // Every signal that can end act_drive sends neutral first: the stop requests (SIGINT, SIGTERM, SIGHUP
 // when an SSH session drops) end cleanly with the summary; the others end by the signal itself.
+// "TERM", or "RTMIN", "RTMIN5", "RTMAX" for the real-time signals (sigabbrev_np names none of them).
+std::string signal_name(int signal) {
+  if (signal == SIGRTMAX) return "RTMAX";
+  if (signal >= SIGRTMIN) return signal == SIGRTMIN ? "RTMIN" : "RTMIN" + std::to_string(signal - SIGRTMIN);
+  return sigabbrev_np(signal);
+}
+
 struct SignalCase {
   int signal;
   bool clean_exit;
@@ -325,17 +332,17 @@ TEST_P(ActDriveSignal, SendsNeutralBeforeItEnds) {
     return command.when >= signalled && command.steering_us == 1500 && command.throttle_us == 1500;
   });
   if (neutral != commands.end()) {
-    report_fault_timing(std::string("SIG") + sigabbrev_np(c.signal),
+    report_fault_timing("SIG" + signal_name(c.signal),
                         std::chrono::duration<double, std::milli>(neutral->when - signalled).count());
   }
 }
 
 INSTANTIATE_TEST_SUITE_P(Signals, ActDriveSignal,
                          ::testing::Values(SignalCase{SIGTERM, true}, SignalCase{SIGINT, true}, SignalCase{SIGHUP, true},
-                                           SignalCase{SIGQUIT, false}, SignalCase{SIGUSR1, false}),
-                         [](const ::testing::TestParamInfo<SignalCase>& case_info) {
-                           return std::string(sigabbrev_np(case_info.param.signal));
-                         });
+                                           SignalCase{SIGQUIT, false}, SignalCase{SIGUSR1, false},
+                                           SignalCase{SIGRTMIN, false}, SignalCase{SIGRTMIN + 5, false},
+                                           SignalCase{SIGRTMAX, false}),
+                         [](const ::testing::TestParamInfo<SignalCase>& case_info) { return signal_name(case_info.param.signal); });
 
 // Polls for the end of `pid` until `limit` passes (a hang detector): its wait status, or none.
 std::optional<int> wait_for_exit(pid_t pid, std::chrono::seconds limit) {
@@ -347,6 +354,152 @@ std::optional<int> wait_for_exit(pid_t pid, std::chrono::seconds limit) {
   }
   return status;
 }
+
+// act_drive as a shell runs it in the foreground of a terminal: a new session on a pseudo-terminal
+// whose foreground process group is act_drive's own. The session leader (this "shell") stays outside
+// that group, so the group is not orphaned and the terminal's Ctrl-Z really stops it.
+struct TerminalJob {
+  int terminal = -1;  // the pty's master: what a user types
+  pid_t shell = -1, drive = -1;
+};
+
+TerminalJob start_act_drive_in_terminal(const std::vector<std::string>& args, const std::string& log_path) {
+  TerminalJob job;
+  job.terminal = ::posix_openpt(O_RDWR | O_NOCTTY);
+  if (job.terminal < 0 || ::grantpt(job.terminal) != 0 || ::unlockpt(job.terminal) != 0) return job;
+  const std::string slave = ::ptsname(job.terminal);
+  std::vector<char*> argv{const_cast<char*>(ACT_DRIVE_BIN)};
+  for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
+  argv.push_back(nullptr);
+  int pid_pipe[2];
+  if (::pipe(pid_pipe) != 0) return job;
+  job.shell = fork();
+  if (job.shell == 0) {  // only async-signal-safe calls from here on (the test process has threads)
+    ::setsid();
+    const int tty = ::open(slave.c_str(), O_RDWR);  // the new session's controlling terminal
+    const pid_t drive = fork();
+    if (drive == 0) {
+      ::setpgid(0, 0);
+      const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      ::dup2(tty, 0);
+      ::dup2(log, 1);
+      ::dup2(log, 2);
+      const rlimit no_core_dump{0, 0};
+      ::setrlimit(RLIMIT_CORE, &no_core_dump);
+      ::execv(ACT_DRIVE_BIN, argv.data());
+      ::_exit(127);
+    }
+    ::setpgid(drive, drive);
+    ::tcsetpgrp(tty, drive);  // act_drive in the foreground
+    if (::write(pid_pipe[1], &drive, sizeof drive) != sizeof drive) ::_exit(126);
+    int status = 0;
+    ::waitpid(drive, &status, 0);
+    ::_exit(WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status));
+  }
+  ::close(pid_pipe[1]);
+  if (::read(pid_pipe[0], &job.drive, sizeof job.drive) != sizeof job.drive) job.drive = -1;
+  ::close(pid_pipe[0]);
+  return job;
+}
+
+// From /proc/PID/stat: the state letter ('T' = stopped) and the CPU time used so far, in clock ticks.
+std::pair<char, long long> process_state(pid_t pid) {
+  const std::string line = read_text("/proc/" + std::to_string(pid) + "/stat");
+  std::string field;
+  std::vector<std::string> fields;
+  const size_t comm_end = line.rfind(')');
+  if (comm_end == std::string::npos) return {'?', 0};
+  std::istringstream rest(line.substr(comm_end + 2));
+  while (rest >> field) fields.push_back(field);
+  if (fields.size() < 13) return {'?', 0};
+  return {fields[0][0], std::stoll(fields[11]) + std::stoll(fields[12])};  // state, utime + stime
+}
+
+struct SuspendCase {
+  const char* name;
+  int signal;  // 0: Ctrl-Z typed on the terminal
+};
+
+class ActDriveSuspend : public ::testing::TestWithParam<SuspendCase> {};
+
+// Ctrl-Z (or SIGTTIN / SIGTTOU) puts neutral on the wire, then really suspends: no line and no CPU
+// while stopped. After SIGCONT (fg) the first command is neutral again (nothing planned before the
+// stop drives), the loop goes on, and Ctrl-C still ends it cleanly.
+TEST_P(ActDriveSuspend, SendsNeutralThenStopsAndResumesSafely) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const SuspendCase c = GetParam();
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 900, 30, 128, 96);
+  FakeArduino board;
+  const std::string log_path = dir + "/log.txt";
+  TerminalJob job = start_act_drive_in_terminal({"-m", blob, "--camera", video, "--serial", board.port_path(),
+                                                 "--raw-endpoints", "--threads", "1"}, log_path);
+  ASSERT_GT(job.drive, 0) << "no pseudo-terminal";
+  const auto end_job = [&] {
+    ::kill(job.drive, SIGKILL);
+    ::waitpid(job.shell, nullptr, 0);
+    ::close(job.terminal);
+  };
+  auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ASSERT_GE(board.commands().size(), 40u) << read_text(log_path);
+
+  const auto suspended = Clock::now();
+  if (c.signal == 0) {
+    ASSERT_EQ(::write(job.terminal, "\x1a", 1), 1);  // Ctrl-Z
+  } else {
+    ::kill(job.drive, c.signal);
+  }
+  deadline = Clock::now() + std::chrono::seconds(5);
+  while (process_state(job.drive).first != 'T' && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto [state, cpu_at_stop] = process_state(job.drive);
+  if (state != 'T') end_job();
+  ASSERT_EQ(state, 'T') << "act_drive did not stop within 5 s\n" << read_text(log_path);
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the board's reader thread: the last line
+  const size_t lines_at_stop = board.commands().size() + board.bad_lines().size();
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));
+  auto commands = board.commands();
+  EXPECT_EQ(commands.size() + board.bad_lines().size(), lines_at_stop) << "lines were written while stopped";
+  EXPECT_EQ(process_state(job.drive).second, cpu_at_stop) << "CPU used while stopped";
+  EXPECT_EQ(commands.back().steering_us, 1500);
+  EXPECT_EQ(commands.back().throttle_us, 1500);
+  EXPECT_TRUE(board.bad_lines().empty());
+  const auto neutral = std::find_if(commands.begin(), commands.end(), [&](const FakeArduino::Command& command) {
+    return command.when >= suspended && command.steering_us == 1500 && command.throttle_us == 1500;
+  });
+  ASSERT_NE(neutral, commands.end());
+  report_fault_timing(std::string(c.name) + " (suspend)", std::chrono::duration<double, std::milli>(neutral->when - suspended).count());
+
+  const size_t before_resume = commands.size();
+  ::kill(job.drive, SIGCONT);  // fg
+  deadline = Clock::now() + std::chrono::seconds(10);
+  while (board.commands().size() < before_resume + 30 && Clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  commands = board.commands();
+  if (commands.size() < before_resume + 30) end_job();
+  ASSERT_GE(commands.size(), before_resume + 30) << "the loop did not go on after SIGCONT\n" << read_text(log_path);
+  EXPECT_EQ(commands[before_resume].steering_us, 1500);  // the first command after the resume is neutral
+  EXPECT_EQ(commands[before_resume].throttle_us, 1500);
+
+  ASSERT_EQ(::write(job.terminal, "\x03", 1), 1);  // Ctrl-C
+  const std::optional<int> status = wait_for_exit(job.shell, std::chrono::seconds(5));
+  if (!status) end_job();
+  ::close(job.terminal);
+  const std::string log = read_text(log_path);
+  ASSERT_TRUE(status) << "act_drive did not end within 5 s of Ctrl-C\n" << log;
+  EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << log;
+  EXPECT_NE(log.find("resumed after a suspension"), std::string::npos) << log;
+  EXPECT_NE(log.find("stopped by a signal"), std::string::npos) << log;
+  EXPECT_TRUE(board.bad_lines().empty());
+}
+
+INSTANTIATE_TEST_SUITE_P(Suspend, ActDriveSuspend,
+                         ::testing::Values(SuspendCase{"CtrlZ", 0}, SuspendCase{"SIGTTIN", SIGTTIN},
+                                           SuspendCase{"SIGTTOU", SIGTTOU}),
+                         [](const ::testing::TestParamInfo<SuspendCase>& case_info) { return std::string(case_info.param.name); });
+
 
 TEST(ActDriveCli, ExitsAtOnceWhenANetworkCameraStalls) {
   // The camera streams 1.5 s of video, then stalls with its connection open. The stall is detected
@@ -444,6 +597,45 @@ TEST(ActDriveCli, RecordingSurvivesSigkill) {
     ++tick_rows;
   }
   EXPECT_GT(tick_rows, 0u);
+}
+
+TEST(ActDriveCli, RecordingStopsWithAMessageAtTheFileSizeLimit) {
+  // RLIMIT_FSIZE (ulimit -f 48: room for each frame, not for the 900 rows of ticks.csv) sends SIGXFSZ
+  // to the writer, which used to end the run. Now the write fails instead, the recording stops with
+  // one message, driving goes on to the end of the video (a replay, --realtime off, for speed), and
+  // what is on disk is a whole recording act_convert reads.
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 900, 30, 128, 96);
+  const std::string rec = dir + "/rec";
+  const auto r = run_command("bash -c " + q("ulimit -f 48 && exec " + kDrive + " -m " + q(blob) + " --camera " + q(video) +
+                                            " --dry-run --realtime off --threads 1 --record " + q(rec) + " > /dev/null"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("act_drive: error: --record: cannot write " + rec), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("File too large: the recording stops here ("), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n') < 40, true) << "one message, not one per write:\n" << r.output;
+  EXPECT_NE(r.output.find("end of video file " + video + " after 900 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("(stopped early: a write failed, see above)"), std::string::npos) << r.output;
+  // Whole rows only, each observation's frame on disk.
+  std::istringstream log(read_text(rec + "/log.jsonl"));
+  std::string line;
+  size_t rows = 0;
+  while (std::getline(log, line)) {
+    ASSERT_FALSE(log.eof()) << "a cut last line: " << line;
+    const auto row = nlohmann::json::parse(line, nullptr, false);
+    ASSERT_FALSE(row.is_discarded()) << line;
+    EXPECT_TRUE(fs::exists(rec + "/" + row.at("frame").get<std::string>())) << line;
+    ++rows;
+  }
+  EXPECT_GT(rows, 0u);
+  const std::string ticks = read_text(rec + "/ticks.csv");
+  ASSERT_FALSE(ticks.empty());
+  EXPECT_EQ(ticks.back(), '\n') << "ticks.csv cut mid-row";
+  EXPECT_LE(ticks.size(), 48u * 1024u);
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                   q(dir + "/int8.actb") + " --precision int8 --calib " + q(rec) + " --threads 1 -q");
+  EXPECT_EQ(convert.exit_code, 0) << convert.output;
 }
 
 TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {

@@ -126,6 +126,34 @@ TEST(Calibration, ErrorsNameTheField) {
   EXPECT_NE(error_of(j).find("test.json"), std::string::npos);
 }
 
+TEST(Calibration, NumbersAreRangeCheckedBeforeNarrowing) {
+  // As a file has them: 2^32 + 1500 used to be read as 1500, 2^32 + 2000 as 2000, 2^32 + 1 as 1,
+  // and 1500.9 as 1500.
+  const std::string dir = act::test::scratch_dir();
+  const auto load_error = [&](const std::string& steering, const std::string& throttle) {
+    std::ofstream(dir + "/c.json") << R"({"steering": {"left_us": 1100, "right_us": 1900, )" << steering
+                                   << R"(}, "throttle": {"reverse_us": 1300, "neutral_us": 1500, )" << throttle << "}}";
+    try {
+      Calibration::load(dir + "/c.json");
+    } catch (const act::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  std::string e = load_error(R"("center_us": 4294968796)", R"("forward_us": 1800)");
+  EXPECT_NE(e.find("'steering.center_us' = 4294968796 is out of range"), std::string::npos) << e;
+  e = load_error(R"("center_us": 1500)", R"("forward_us": 4294969296)");
+  EXPECT_NE(e.find("'throttle.forward_us' = 4294969296 is out of range"), std::string::npos) << e;
+  e = load_error(R"("center_us": 1500, "action_index": 4294967297)", R"("forward_us": 1800)");
+  EXPECT_NE(e.find("'steering.action_index' = 4294967297 is out of range"), std::string::npos) << e;
+  e = load_error(R"("center_us": 1500.9)", R"("forward_us": 1800)");
+  EXPECT_NE(e.find("'steering.center_us' = 1500.9 is not a whole number"), std::string::npos) << e;
+  e = load_error(R"("center_us": -4294965796)", R"("forward_us": 1800)");
+  EXPECT_NE(e.find("'steering.center_us' = -4294965796 is out of range"), std::string::npos) << e;
+  EXPECT_NE(e.find("c.json"), std::string::npos) << e;
+  EXPECT_EQ(load_error(R"("center_us": 1500)", R"("forward_us": 1800)"), "accepted");
+}
+
 TEST(Calibration, LoadReportsMissingAndInvalidFiles) {
   const std::string dir = act::test::scratch_dir();
   try {

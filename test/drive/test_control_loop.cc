@@ -407,6 +407,44 @@ TEST(ControlLoop, AiSteerTakesTheThrottleByHandAndEstopHoldsNeutral) {
   EXPECT_EQ(summary.manual_ticks, 0u);  // ai-steer is the policy driving
 }
 
+// Ctrl-Z then fg (act_drive's signal handlers bump the count): the chunk planned before and an
+// inference of an older frame are dropped, so nothing drives until a chunk of a frame captured after
+// the resume; with a cockpit the car stays e-stopped until someone resumes.
+TEST(ControlLoop, AfterASuspensionNothingPlannedBeforeDrives) {
+  for (const bool with_cockpit : {false, true}) {
+    SCOPED_TRACE(with_cockpit ? "with a cockpit" : "policy alone");
+    Rig rig;
+    rig.controls->delay_ms.store(150);  // an inference in flight at the resume finishes well after it
+    std::atomic<uint64_t> resumptions{0};
+    rig.options.resumptions = &resumptions;
+    Cockpit cockpit(DriveMode::kAi);
+    if (with_cockpit) rig.options.cockpit = &cockpit;
+    auto camera = video_camera(rig.dir, 150);
+    Clock::time_point resumed, released;
+    rig.run(*camera, [&] {
+      sleep_ms(1200);
+      resumptions.fetch_add(2);  // stopped and continued at once: every frame is still fresh
+      resumed = Clock::now();
+      sleep_ms(700);
+      released = Clock::now();
+      cockpit.resume();
+      sleep_ms(700);
+    });
+    const auto commands = drive_commands(*rig.board);
+    EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [&](const auto& c) { return c.when < resumed && is(c, kDriving); }))
+        << rig.log.str();
+    const auto hold_until = with_cockpit ? released : resumed + milliseconds(150);
+    for (const auto& c : commands) {
+      if (c.when > resumed + milliseconds(40) && c.when < hold_until) {
+        EXPECT_TRUE(is(c, kSafe)) << ms_between(resumed, c.when) << " ms after the resume: " << c.steering_us << "/" << c.throttle_us;
+      }
+    }
+    EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [&](const auto& c) { return c.when > released && is(c, kDriving); }))
+        << "did not drive again\n" << rig.log.str();
+    EXPECT_NE(rig.log.str().find("resumed after a suspension"), std::string::npos) << rig.log.str();
+  }
+}
+
 TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {
   std::ostringstream log;
   std::thread([&] { apply_thread_placement({0, {1000}}, "test", log); }).join();  // no CPU 1000 here

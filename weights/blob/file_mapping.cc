@@ -94,7 +94,8 @@ FileMapping FileMapping::open(const std::string& path, Mode mode) {
   }
   // Directories, FIFOs and devices open fine with O_RDONLY but cannot be mapped as weights.
   if (!S_ISREG(st.st_mode)) {
-    fail(StatusCode::kIoError, "cannot map '" + path + "': not a regular file (" + file_kind(st.st_mode) + ")");
+    fail(StatusCode::kIoError, std::string(mode == Mode::kMap ? "cannot map '" : "cannot read '") + path +
+                                  "': not a regular file (" + file_kind(st.st_mode) + ")");
   }
   if (st.st_size < 0 || static_cast<uint64_t>(st.st_size) > std::numeric_limits<size_t>::max()) {
     fail(StatusCode::kIoError, "cannot map '" + path + "': file size " + std::to_string(st.st_size) +

@@ -25,8 +25,13 @@
 
 namespace act {
 
+/// The most threads an Engine runs on (and what every --threads / threads= accepts): a larger count
+/// is refused with an error naming this limit instead of starting that many OS threads.
+inline constexpr int kMaxThreads = 256;
+
 struct EngineOptions {
-  /// Worker threads for one inference; 0 = one per online core.
+  /// Worker threads for one inference, 0..kMaxThreads; 0 = one per online core (at most kMaxThreads).
+  /// A thread the OS refuses makes Engine::open fail with a Status saying so (never a hang).
   int threads = 0;
   /// Verify the blob's checksum at open (reads the whole file once).
   bool verify_checksum = true;

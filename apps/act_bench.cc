@@ -26,6 +26,7 @@
 #include "apps/op_profile_report.h"
 #include "apps/progress.h"
 #include "apps/status_error.h"
+#include "apps/version.h"
 #include "graph/aligned_buffer.h"
 #include "graph/peak_together.h"
 #include "kernels/fp32/gemm_f32.h"
@@ -601,6 +602,7 @@ int main(int argc, char** argv) {
                "(also in --json)");
   app.add_option("--trace", opt.trace_path, "write the last timed inference as a Chrome trace (ui.perfetto.dev), a lane per thread");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
+  app.set_version_flag("--version", act::version_line("act_bench"));
   CLI11_PARSE(app, argc, argv);
   if (const long cores = ::sysconf(_SC_NPROCESSORS_ONLN); cores > 0 && opt.threads > cores) {
     std::cerr << "act_bench: warning: --threads " << opt.threads << " is more than the " << cores

@@ -20,6 +20,7 @@
 #include "apps/progress.h"
 #include "apps/pytorch_options.h"
 #include "apps/status_error.h"
+#include "apps/version.h"
 #ifdef ACT_ONNX_EXPORT
 #include "actengine/onnx_export.h"
 #endif
@@ -390,6 +391,7 @@ int main(int argc, char** argv) {
                "state dict, into an .actb blob that libactengine runs."};
   Options o;
   add_options(app, o);
+  app.set_version_flag("--version", act::version_line("act_convert"));
   CLI11_PARSE(app, argc, argv);
 
   // No signal handling needed: every file (blob, intermediate blobs, report) is written as an unnamed

@@ -25,6 +25,7 @@
 #include "apps/drive/pwm_link.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
+#include "apps/version.h"
 #include "weights/blob/error.h"
 #include "weights/blob/file_kind.h"
 
@@ -452,6 +453,7 @@ int main(int argc, char** argv) {
                                    "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "
                                    "if act_drive dies");
   app.add_option("--pwm-sysfs-root", opt.pwm_sysfs_root, "where the PWM chips are (a test and expert knob)")->capture_default_str();
+  app.set_version_flag("--version", act::version_line("act_drive"));
   CLI11_PARSE(app, argc, argv);
 
   install_signal_handlers();

@@ -19,6 +19,7 @@
 #include "apps/eval/metrics.h"
 #include "apps/observation_file.h"
 #include "apps/status_error.h"
+#include "apps/version.h"
 #include "weights/blob/error.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"
@@ -253,6 +254,7 @@ int main(int argc, char** argv) {
                  "is above this fraction of the first model's own (normalised)")->needs(episode)->check(CLI::PositiveNumber);
   app.footer("Exit codes: 0 pass; 1 an error (unreadable model or input) or, with --compare, beyond --tol; with "
              "--episode 2 a gate (--max-mse, --max-added-error) missed, 3 a model gave NaN or infinite actions.");
+  app.set_version_flag("--version", act::version_line("act_eval"));
   CLI11_PARSE(app, argc, argv);
 
   try {

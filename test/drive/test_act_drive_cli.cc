@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/engine.h"
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
 #include "apps/media/media_io.h"
@@ -45,6 +46,15 @@ TEST(ActDriveCli, HelpListsTheOptions) {
                            "--record", "--dry-run", "--calibrate", "--state", "--duration", "--initial-state",
                            "--raw-endpoints", "--list-cameras", "--list-ports"}) {
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
+  }
+}
+
+TEST(ActDriveCli, VersionPrintsTheProjectVersion) {
+  for (const std::string tool : {kDrive, std::string(ACT_PWM_WATCHDOG_BIN)}) {
+    const auto r = run_command(tool + " --version");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    const std::string name = fs::path(tool).filename().string();
+    EXPECT_EQ(r.output, name + " " + act::version() + "\n");
   }
 }
 
@@ -203,8 +213,10 @@ TEST(ActDriveCli, RealtimeOffReplaysAFileTheSameEveryTime) {
   const std::vector<std::string> first = commands_of("first"), second = commands_of("second");
   EXPECT_EQ(first, second);
   const std::string log = read_text(dir + "/first.log");
-  // Frames 0..89 one per tick, the first tick waiting for the first chunk, one more seeing the end.
-  EXPECT_NE(log.find(": 91 ticks (89 driving, 2 safe, 0 missed)"), std::string::npos) << log;
+  // Frames 0..89 one per tick, the first tick waiting for the first chunk, one more seeing the end
+  // (held safe as a fault: no frame).
+  EXPECT_NE(log.find(": 91 ticks (89 driving, 2 safe: 0 e-stop, 1 waiting for a chunk, 1 fault, 0 overrun; 0 missed)"),
+            std::string::npos) << log;
   // Only for a file, only in a dry run.
   auto r = run_command(replay);
   EXPECT_EQ(r.exit_code, 1);

@@ -446,8 +446,9 @@ int main(int argc, char** argv) {
                                              "each inference waited for (with --dry-run, e.g. for --overlay-video)")
       ->capture_default_str()->check(CLI::IsMember({"on", "off"}));
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
-  app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
-                                             "calibration file to edit), then write --calibration");
+  app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial, then write --calibration; "
+                                             "without --serial, write a calibration file to edit to --calibration FILE "
+                                             "(kept if it exists; printed without -c)");
   // The Pi's own PWM pins instead of the Arduino (docs/rover.md, "On the Pi's own PWM pins").
   app.add_option("--pwm", opt.pwm, "drive the servo and ESC from Linux PWM channels CHIP:STEERING,THROTTLE, e.g. "
                                    "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "

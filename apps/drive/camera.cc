@@ -120,7 +120,8 @@ Camera::Camera(CameraOptions options) {
     const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) && !std::filesystem::exists(source);
     fail(ErrorCode::kNotFound, "cannot open camera '" + source + "'" + (missing ? ": no such file" : "") +
                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
-                                    "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
+                                    "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink; act_drive --list-cameras "
+                                    "lists the cameras found)");
   }
   cv::Mat first;
   if (!video->read(first) || first.empty()) {

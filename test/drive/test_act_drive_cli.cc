@@ -68,6 +68,7 @@ TEST(ActDriveCli, ClearErrorsForMissingInputs) {
   r = run_command(kDrive + " -m m.actb --camera " + q(dir + "/no-such-video.avi") + " --dry-run");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("cannot open camera"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("act_drive --list-cameras lists the cameras found"), std::string::npos) << r.output;
   std::ofstream(dir + "/cal.json") << R"({"steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
                                           "throttle": {"reverse_us": 1300, "neutral_us": 1900, "forward_us": 1800}})";
   r = run_command(kDrive + " -m m.actb --camera 0 --dry-run -c " + q(dir + "/cal.json"));
@@ -86,6 +87,7 @@ TEST(ActDriveCli, ClearErrorsForModelAndSerialPort) {
   r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE") + " --raw-endpoints");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("cannot open serial port " + dir + "/ttyNONE"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("act_drive --list-ports lists the serial ports found"), std::string::npos) << r.output;
   FakeArduino silent_board;
   silent_board.set_silent(true);
   r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(silent_board.port_path()) +
@@ -470,6 +472,33 @@ TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {
   const auto check = run_command(kDrive + " -m m.actb --camera " + q(dir + "/none.avi") + " --dry-run -c " + q(dir + "/cal.json"));
   EXPECT_EQ(check.output.find("calibration"), std::string::npos) << check.output;
   EXPECT_NE(check.output.find("cannot open camera"), std::string::npos) << check.output;
+}
+
+// --help says --calibrate writes --calibration: without a port, the template goes to that file
+// (never over one that exists, which may hold measured endpoints).
+TEST(ActDriveCli, CalibrateWithoutAPortWritesTheTemplateToTheFileGiven) {
+  const std::string dir = act::test::scratch_dir();
+  const std::string path = dir + "/calibration.json";
+  auto r = run_command(kDrive + " --calibrate -c " + q(path));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("wrote a calibration template to " + path), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Edit the pulse widths"), std::string::npos) << r.output;
+  ASSERT_TRUE(fs::exists(path)) << r.output;
+  const Calibration written = Calibration::load(path);
+  EXPECT_EQ(written.max_forward, 0.3);
+  EXPECT_EQ(written.steering.mid_us, 1500);
+  // Edited, then --calibrate again without a port: the file is kept.
+  nlohmann::json edited = nlohmann::json::parse(read_text(path));
+  edited["steering"]["center_us"] = 1480;
+  std::ofstream(path) << edited.dump(2);
+  r = run_command(kDrive + " --calibrate -c " + q(path));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find(path + " exists: left as it is"), std::string::npos) << r.output;
+  EXPECT_EQ(Calibration::load(path).steering.mid_us, 1480);
+  // A folder that is not there is an error, not a silent success.
+  r = run_command(kDrive + " --calibrate -c " + q(dir + "/missing/cal.json"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot write " + dir + "/missing/cal.json"), std::string::npos) << r.output;
 }
 
 TEST(ActDriveCli, ThePackagesCalibrationTemplateIsAValidCalibrationFile) {

@@ -41,7 +41,19 @@ struct Options {
   act::eval::EpisodeSources episode;
   std::string json_path, report_path;
   double max_mse = 0, max_added_error = 0;
+  std::string state;  // --state last-action|mean|zeros|FILE
 };
+
+// --state: a way to make the states (as act_drive feeds them) or a states CSV, like --states.
+void apply_state_option(Options& o) {
+  if (o.state.empty()) return;
+  if (!o.episode.states_csv.empty()) act::fail(act::ErrorCode::kInvalidArgument, "give --states FILE or --state, not both");
+  if (o.state == "last-action" || o.state == "mean" || o.state == "zeros") {
+    o.episode.state = o.state;
+  } else {
+    o.episode.states_csv = o.state;
+  }
+}
 
 std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   auto engine = act::Engine::open(path, {.threads = threads});
@@ -244,8 +256,13 @@ int main(int argc, char** argv) {
                                  "a recorded episode: an act_drive --record folder, or a folder of images or a video "
                                  "with --actions (and --states)")->excludes(input);
   app.add_option("--actions", o.episode.actions_csv, "CSV of the demonstrated actions: a frame (image file name or index) "
-                 "then named values, one action per row or a chunk as NAME@STEP columns (README)")->needs(episode);
-  app.add_option("--states", o.episode.states_csv, "CSV of the robot states: a frame, then the named state values")->needs(episode);
+                 "then named values, one action per row or a chunk as NAME@STEP columns; or only the values, one row per "
+                 "frame in frame order; or the long form file,chunk_index,NAME...,is_pad (docs)")->needs(episode);
+  app.add_option("--states", o.episode.states_csv, "CSV of the robot states: a frame, then the named state values (or "
+                 "only the values, one row per frame in frame order)")->needs(episode);
+  app.add_option("--state", o.state, "the robot states without a states CSV, as act_drive feeds them: last-action (the "
+                 "action demonstrated at the frame before; the first frame gets the training mean), mean (the training "
+                 "mean), zeros; or a states CSV FILE (as --states)")->needs(episode);
   app.add_option("--json", o.json_path, "write every metric, per model, dimension and frame, as JSON")->needs(episode);
   app.add_option("--report", o.report_path, "write a self-contained HTML report (charts, per-frame errors)")->needs(episode);
   app.add_option("--max-mse", o.max_mse, "gate: exit 2 when a model's chunk MSE against the demonstration (normalised) "
@@ -258,6 +275,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
+    apply_state_option(o);
     if (o.input_path.empty() && o.episode.episode.empty()) {
       act::fail(act::ErrorCode::kInvalidArgument, "give --input OBS.safetensors or --episode PATH");
     }

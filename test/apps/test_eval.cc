@@ -257,6 +257,110 @@ TEST(EvalEpisode, OneActionPerRowBuildsChunksFromTheRowsThatFollow) {
   EXPECT_NEAR(j["models"][0]["vs_demonstration"]["chunk"]["raw"]["mse"].get<double>(), sum / static_cast<double>(count), 1e-12);
 }
 
+// The demonstrations as users have them, through act_eval: the long form (a chunk over rows, its
+// padding left out) and one action per row without a frame column, in frame order.
+TEST(ActEvalEpisodeCli, ReadsTheLongChunkFormAndCsvsWithoutAFrameColumn) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = convert_tiny(dir, "fp32");
+  const auto chunks = chunks_in_process(blob);
+  const ImageEpisode ep = write_image_episode(dir);
+  // file,chunk_index,steering,throttle,is_pad: the model's own chunks, the last frame's steps 6..9
+  // padded with values that would count if the padding were not respected.
+  std::string csv = "file,chunk_index,steering,throttle,is_pad\n";
+  for (size_t i = 0; i < 4; ++i) {
+    for (size_t k = 0; k < 10; ++k) {
+      const bool pad = i == 3 && k >= 6;
+      csv += ep.keys[i] + "," + std::to_string(k) + "," + (pad ? "99" : exact(chunks[i][2 * k])) + "," +
+             (pad ? "-99" : exact(chunks[i][2 * k + 1])) + "," + (pad ? "1" : "0") + "\n";
+    }
+  }
+  write_text(dir + "/long.csv", csv);
+  const std::string eval = std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -t 1 --episode " + q(ep.frames);
+  CommandResult r = run_command(eval + " --actions " + q(dir + "/long.csv") + " --states " + q(ep.states) + " --json " +
+                                q(dir + "/long.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json j = read_json(dir + "/long.json");
+  EXPECT_EQ(j["action_names"], nlohmann::json({"steering", "throttle"}));
+  EXPECT_EQ(j["frames"], 4);
+  EXPECT_LT(j["models"][0]["vs_demonstration"]["chunk"]["raw"]["max_abs"].get<double>(), 1e-6) << r.output;
+  // Steps out of order are an error naming the line.
+  write_text(dir + "/bad_long.csv", "file,chunk_index,steering,throttle\n" + ep.keys[0] + ",1,0,0\n");
+  r = run_command(eval + " --actions " + q(dir + "/bad_long.csv") + " --states " + q(ep.states));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("bad_long.csv line 2 column 'chunk_index': step 1 where 0 comes next"), std::string::npos) << r.output;
+
+  // steering,throttle: no frame column, row i is frame i (the sorted images); states likewise.
+  std::string per_frame = "steering,throttle\n", states = "a,b\n";
+  for (size_t i = 0; i < 4; ++i) {
+    per_frame += exact(chunks[i][0]) + "," + exact(chunks[i][1]) + "\n";
+    states += exact(kStates[i][0]) + "," + exact(kStates[i][1]) + "\n";
+  }
+  write_text(dir + "/per_frame.csv", per_frame);
+  write_text(dir + "/states_in_order.csv", states);
+  r = run_command(eval + " --actions " + q(dir + "/per_frame.csv") + " --states " + q(dir + "/states_in_order.csv") +
+                  " --json " + q(dir + "/per_frame.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("per_frame.csv has no frame column: its rows are the frames in order"), std::string::npos) << r.output;
+  j = read_json(dir + "/per_frame.json");
+  EXPECT_EQ(j["frames"], 4);
+  EXPECT_EQ(j["models"][0]["vs_demonstration"]["first_action"]["raw"]["mse"].get<double>(), 0.0) << r.output;
+}
+
+// A CSV of another shape names every form act_eval reads, with an example.
+TEST(ActEvalEpisodeCli, AMismatchNamesEveryAcceptedForm) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = convert_tiny(dir, "fp32");
+  const ImageEpisode ep = write_image_episode(dir);
+  write_text(dir + "/four.csv", "frame,a,b,c,d\n" + ep.keys[0] + ",1,2,3,4\n");
+  const CommandResult r = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " --episode " + q(ep.frames) +
+                                      " --actions " + q(dir + "/four.csv") + " --states " + q(ep.states));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  for (const char* form : {"4 action columns (a, b, c, d; one per dimension) after the frame column 'frame' but the model's "
+                           "actions have 2 values",
+                           "after a frame column (an image name or a 0-based frame index): frame,a0,a1",
+                           "no frame column (row 1 is frame 0, in frame order): a0,a1",
+                           "NAME@STEP columns: frame,a0@0,a1@0,", "file,chunk_index,a0,a1,is_pad"}) {
+    EXPECT_NE(r.output.find(form), std::string::npos) << form << "\n" << r.output;
+  }
+}
+
+// --state last-action|mean|zeros: a video or images with actions only, as act_drive feeds states.
+TEST(ActEvalEpisodeCli, StatesFromTheActionsTheMeanOrZeros) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = convert_tiny(dir, "fp32");
+  const ImageEpisode ep = write_image_episode(dir);
+  write_text(dir + "/actions.csv", "frame,steer,throttle\n" + ep.keys[0] + ",0.1,0.2\n" + ep.keys[1] + ",0.3,0.4\n" +
+                                       ep.keys[2] + ",0.5,0.6\n" + ep.keys[3] + ",0.7,0.8\n");
+  const std::string eval = std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -t 1 --episode " + q(ep.frames) + " --actions " +
+                           q(dir + "/actions.csv");
+  CommandResult r = run_command(eval);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("give --states FILE.csv, or --state last-action|mean|zeros"), std::string::npos) << r.output;
+  for (const std::string how : {"last-action", "mean", "zeros"}) {
+    r = run_command(eval + " --state " + how);
+    EXPECT_EQ(r.exit_code, 0) << how << "\n" << r.output;
+    EXPECT_NE(r.output.find("--state " + how), std::string::npos) << r.output;  // the note says where the states came from
+  }
+  r = run_command(eval + " --state " + q(ep.states));  // a file, as --states
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  // last-action: each frame's state is the action demonstrated at the frame before (the first, the training mean).
+  act::ModelInfo info = tiny_info();
+  info.state_low = {-1, 0};
+  info.state_high = {1, 4};
+  act::eval::EpisodeSources sources{ep.frames, dir + "/actions.csv", ""};
+  sources.state = "last-action";
+  const act::eval::Episode last = act::eval::read_episode(sources, info);
+  ASSERT_EQ(last.frames.size(), 4u);
+  EXPECT_EQ(last.frames[0].state, (std::vector<float>{0, 2}));
+  EXPECT_EQ(last.frames[1].state, (std::vector<float>{0.1f, 0.2f}));
+  EXPECT_EQ(last.frames[3].state, (std::vector<float>{0.5f, 0.6f}));
+  sources.state = "zeros";
+  EXPECT_EQ(act::eval::read_episode(sources, info).frames[2].state, (std::vector<float>{0, 0}));
+}
+
 TEST(EvalEpisode, ActDriveRecordingByColumnNames) {
   // Today's recorder columns plus ones it may add; a safe tick (no action) ends a chunk.
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));

@@ -126,6 +126,29 @@ std::string fmt(double v) {
   return std::isfinite(v) ? buf : "non-finite";
 }
 
+std::string percent(double fraction) { return std::isfinite(fraction) ? fmt(100 * fraction) + " %" : "non-finite"; }
+
+// The baselines beside the policy's error, and whether it beats them.
+void print_baselines(const act::eval::EpisodeEvaluation& e) {
+  if (e.baselines.empty() || e.models.empty()) return;
+  const double own = e.models[0].vs_demonstration.chunk_normalised.mse();
+  std::cout << "baselines    chunk MSE against the demonstration (normalised), no policy: ";
+  const act::eval::BaselineEvaluation* best = nullptr;
+  for (const auto& b : e.baselines) {
+    const double mse = b.vs_demonstration.chunk_normalised.mse();
+    std::cout << (&b == &e.baselines.front() ? "" : ", ") << b.name << " " << fmt(mse);
+    if (!best || mse < best->vs_demonstration.chunk_normalised.mse()) best = &b;
+  }
+  std::cout << "; model 1 " << fmt(own) << "\n";
+  const double bar = best->vs_demonstration.chunk_normalised.mse();
+  if (own < bar) {
+    std::cout << "  model 1 beats every baseline (the best, " << best->name << ", " << fmt(bar) << ")\n";
+  } else {
+    std::cout << "  warning: model 1's chunk MSE " << fmt(own) << " is not below the " << best->name << " baseline's " << fmt(bar)
+              << ": on this episode the policy does no better than one that " << best->description << "\n";
+  }
+}
+
 void print_summary(const act::eval::EpisodeEvaluation& e, const act::eval::Episode& episode) {
   std::cout << "episode      " << episode.path << " (" << episode.kind << "), " << e.frame_sources.size() << " frames\n";
   for (const auto& note : episode.notes) std::cout << "note: " << note << "\n";
@@ -145,7 +168,7 @@ void print_summary(const act::eval::EpisodeEvaluation& e, const act::eval::Episo
       const auto& r = model.vs_reference;
       std::cout << "  vs model 1        chunk MSE " << fmt(r.chunk_raw.mse()) << " raw, " << fmt(r.chunk_normalised.mse())
                 << " normalised; max |err| " << fmt(r.chunk_raw.max_abs()) << " raw\n"
-                << "  added error       " << fmt(e.added_error(m))
+                << "  added error       " << percent(e.added_error(m))
                 << " of model 1's own error (chunk MSE, normalised)\n";
     }
     if (model.non_finite_outputs > 0) {
@@ -216,6 +239,17 @@ int run_episode(const Options& o) {
     write_file(o.report_path, act::eval::render_html_report({{"title", "act_eval: " + episode.path}, {"episode", json}}));
   }
   print_summary(evaluation, episode);
+  print_baselines(evaluation);
+  for (size_t m = 1; m < evaluation.models.size(); ++m) {
+    const double added = evaluation.added_error(m);
+    std::cout << "verdict      model " << m + 1 << " adds " << percent(added) << " to model 1's error";
+    if (o.max_added_error > 0) {
+      std::cout << (added <= o.max_added_error ? ": within" : ": above") << " --max-added-error " << fmt(o.max_added_error)
+                << " (" << percent(o.max_added_error) << "), " << (added <= o.max_added_error ? "PASS" : "FAIL") << "\n";
+    } else {
+      std::cout << " (no gate given: --max-added-error 0.1 fails it above 10 %)\n";
+    }
+  }
 
   bool non_finite = false, gate_missed = false;
   for (size_t m = 0; m < evaluation.models.size(); ++m) {
@@ -227,8 +261,9 @@ int run_episode(const Options& o) {
       gate_missed = true;
     }
     if (m > 0 && o.max_added_error > 0 && !(evaluation.added_error(m) <= o.max_added_error)) {
-      std::cout << "FAIL: model " << m + 1 << " adds " << fmt(evaluation.added_error(m))
-                << " of model 1's own error, above --max-added-error " << fmt(o.max_added_error) << "\n";
+      std::cout << "FAIL: model " << m + 1 << " adds " << percent(evaluation.added_error(m))
+                << " of model 1's own error, above --max-added-error " << fmt(o.max_added_error) << " ("
+                << percent(o.max_added_error) << ")\n";
       gate_missed = true;
     }
   }

@@ -169,14 +169,28 @@ void episode_section(std::ostringstream& out, const Json& r) {
 
   out << "<h2>Error against the demonstration</h2><table><tr><th>model</th><th>first action MSE (raw)</th>"
          "<th>first action max |err| (raw)</th><th>chunk MSE (normalised)</th><th>chunk max |err| (normalised)</th>"
-         "<th>against the first model: chunk MSE (normalised)</th><th>error added, as a fraction of the first model's own</th></tr>";
+         "<th>against the first model: chunk MSE (normalised)</th><th>error added, % of the first model's own</th></tr>";
   for (const auto& m : models) {
     const Json& demo = m["vs_demonstration"];
     out << "<tr><td>" << escape(model_label(m)) << "</td><td>" << num(demo["first_action"]["raw"]["mse"]) << "</td><td>"
         << num(demo["first_action"]["raw"]["max_abs"]) << "</td><td>" << num(demo["chunk"]["normalised"]["mse"]) << "</td><td>"
         << num(demo["chunk"]["normalised"]["max_abs"]) << "</td><td>"
         << (m.contains("vs_reference") ? num(m["vs_reference"]["chunk"]["normalised"]["mse"]) : "(reference)") << "</td><td>"
-        << (m.contains("added_error_fraction") ? num(m["added_error_fraction"]) : "") << "</td></tr>";
+        << (m.contains("added_error_fraction") ? (m["added_error_fraction"].is_number()
+                                                   ? num(100 * m["added_error_fraction"].get<double>()) + " %"
+                                                   : num(m["added_error_fraction"]))
+                                                : "")
+        << "</td></tr>";
+  }
+  if (r.contains("baselines") && !models.empty()) {
+    out << "</table><h3>Baselines (no policy), beside the first model</h3><table><tr><th>baseline</th>"
+           "<th>chunk MSE (normalised)</th><th>first action MSE (raw)</th><th>the first model's chunk MSE (normalised)</th></tr>";
+    for (const auto& b : r["baselines"]) {
+      out << "<tr><td>" << escape(b["name"].get<std::string>()) << " (" << escape(b["description"].get<std::string>())
+          << ")</td><td>" << num(b["vs_demonstration"]["chunk"]["normalised"]["mse"]) << "</td><td>"
+          << num(b["vs_demonstration"]["first_action"]["raw"]["mse"]) << "</td><td>"
+          << num(models[0]["vs_demonstration"]["chunk"]["normalised"]["mse"]) << "</td></tr>";
+    }
   }
   out << "</table><h3>Per action dimension (first action, raw MSE against the demonstration)</h3><table><tr><th>model</th>";
   for (const auto& name : names) out << "<th>" << escape(name) << "</th>";

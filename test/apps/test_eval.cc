@@ -152,6 +152,17 @@ TEST(EvalMetrics, MatchHandComputedValues) {
   // Added error: b-vs-a chunk MSE over a's own, both normalised.
   const double own = (0.0625 + 0 + 0.25 + 0 + 1 + 1) / 6;
   EXPECT_DOUBLE_EQ(e.added_error(1), (0.25 / 8) / own);
+  // Baselines: mean action (1, 1), the centre of the scale; the last action held (frame 0: the mean;
+  // frame 1: frame 0's demonstrated (1, 1)); zero. Normalised errors over the steps compared:
+  // mean and hold: frame 0 (0, 0), (-0.5, -1), frame 1 (0.5, 1); zero: (-0.5, -1), (-1, -2), (0, 0).
+  ASSERT_EQ(e.baselines.size(), 3u);
+  EXPECT_EQ(e.baselines[0].name, "hold last action");
+  EXPECT_DOUBLE_EQ(e.baselines[0].vs_demonstration.chunk_normalised.mse(), 2.5 / 6);
+  EXPECT_EQ(e.baselines[1].name, "mean action");
+  EXPECT_DOUBLE_EQ(e.baselines[1].vs_demonstration.chunk_normalised.mse(), 2.5 / 6);
+  EXPECT_EQ(e.baselines[2].name, "zero");
+  EXPECT_DOUBLE_EQ(e.baselines[2].vs_demonstration.chunk_normalised.mse(), 6.25 / 6);
+  EXPECT_DOUBLE_EQ(e.baselines[2].vs_demonstration.first_raw.mse(), (1 + 1 + 0 + 0) / 4.0);
   // Per-frame error of model a: normalised first-action MSE.
   ASSERT_EQ(e.models[0].frame_error.size(), 2u);
   EXPECT_DOUBLE_EQ(e.models[0].frame_error[0], 0.0625 / 2);
@@ -534,6 +545,18 @@ TEST(ActEvalEpisodeCli, GatesExitCodes) {
   EXPECT_GT(added, 0.0);
   EXPECT_NEAR(added, j["models"][1]["vs_reference"]["chunk"]["normalised"]["mse"].get<double>() / own, 1e-12 * added);
   EXPECT_NE(pass.output.find("added error"), std::string::npos) << pass.output;
+  // The added error as a percentage, a verdict line, and the baselines beside the policy's error.
+  EXPECT_NEAR(j["models"][1]["added_error_percent"].get<double>(), 100 * added, 1e-9 * added);
+  EXPECT_NE(pass.output.find("% of model 1's own error"), std::string::npos) << pass.output;
+  EXPECT_NE(pass.output.find("verdict      model 2 adds "), std::string::npos) << pass.output;
+  EXPECT_NE(pass.output.find("baselines    chunk MSE against the demonstration (normalised), no policy: hold last action "),
+            std::string::npos) << pass.output;
+  ASSERT_EQ(j["baselines"].size(), 3u);
+  EXPECT_EQ(j["baselines"][1]["name"], "mean action");
+  EXPECT_TRUE(j["baselines"][2]["vs_demonstration"]["chunk"]["normalised"]["mse"].is_number());
+  const CommandResult within = run_command(base + " --max-added-error " + std::to_string(added * 2));
+  EXPECT_NE(within.output.find(": within --max-added-error"), std::string::npos) << within.output;
+  EXPECT_NE(within.output.find("PASS"), std::string::npos) << within.output;
 
   EXPECT_EQ(run_command(base + " --max-mse " + std::to_string(own * 2) + " --max-added-error " + std::to_string(added * 2)).exit_code, 0);
   const CommandResult mse = run_command(base + " --max-mse " + std::to_string(own / 2));
@@ -592,7 +615,9 @@ TEST(ActEvalEpisodeCli, HtmlReportHoldsTheEpisode) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::vector<uint8_t> bytes = act::test::read_file(html);
   const std::string text(bytes.begin(), bytes.end());
-  for (const char* part : {"<h3>steer</h3>", "<h3>throttle</h3>", "Error histogram", ep.keys[0].c_str(), "class='chart actions'"}) {
+  for (const char* part : {"<h3>steer</h3>", "<h3>throttle</h3>", "Error histogram", ep.keys[0].c_str(), "class='chart actions'",
+                           "Baselines (no policy), beside the first model", "<td>hold last action (",
+                           "<td>mean action (", "<td>zero ("}) {
     EXPECT_NE(text.find(part), std::string::npos) << part;
   }
   EXPECT_EQ(text.find("http"), std::string::npos);

@@ -89,7 +89,9 @@ std::string legend(const std::vector<Series>& series) {
   return s.str();
 }
 
-// Lines over the index (a non-finite value breaks its line).
+// Lines over the index (a non-finite value breaks its line). The first series is drawn on top: the
+// series are drawn last to first, each wider and paler than the one before it, so the demonstration
+// and the reference model (FP32) stay visible over the models that follow it (INT8).
 std::string line_chart(const std::vector<Series>& series, const std::string& x_label, const std::string& css_class) {
   const auto [lo, hi] = bounds(series);
   size_t n = 0;
@@ -98,8 +100,12 @@ std::string line_chart(const std::vector<Series>& series, const std::string& x_l
   std::ostringstream s;
   s << "<svg class='chart " << css_class << "' width='" << kWidth << "' height='" << kHeight << "' viewBox='0 0 " << kWidth
     << " " << kHeight << "'>" << axes(lo, hi, x_label);
-  for (const auto& item : series) {
-    s << "<path fill='none' stroke-width='1.5' stroke='" << item.colour << "' d='";
+  for (size_t k = series.size(); k-- > 0;) {
+    const Series& item = series[k];
+    char style[96];
+    std::snprintf(style, sizeof style, "stroke-width='%.1f' stroke-opacity='%.2f'", 1.5 + 2.0 * static_cast<double>(k),
+                  k == 0 ? 1.0 : 0.7);
+    s << "<path fill='none' " << style << " stroke='" << item.colour << "' d='";
     bool pen_down = false;
     for (size_t i = 0; i < item.values.size(); ++i) {
       const double v = item.values[i];

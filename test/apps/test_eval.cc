@@ -621,6 +621,22 @@ TEST(ActEvalEpisodeCli, HtmlReportHoldsTheEpisode) {
     EXPECT_NE(text.find(part), std::string::npos) << part;
   }
   EXPECT_EQ(text.find("http"), std::string::npos);
+  // With FP32 then INT8, the actions chart draws INT8 first, wider, and FP32 over it, so both show.
+  const std::string int8 = convert_tiny(dir, "int8", int8_flags());
+  const CommandResult two = run_command(std::string(ACT_EVAL_BIN) + " --episode " + q(ep.frames) + " --actions " +
+                                        q(dir + "/actions.csv") + " --states " + q(ep.states) + " -m " + q(fp32) + " -m " +
+                                        q(int8) + " --report " + q(html));
+  ASSERT_EQ(two.exit_code, 0) << two.output;
+  const std::vector<uint8_t> page_bytes = act::test::read_file(html);
+  const std::string page(page_bytes.begin(), page_bytes.end());
+  const size_t chart = page.find("class='chart actions'");
+  ASSERT_NE(chart, std::string::npos);
+  const size_t fp32_line = page.find("stroke='#1f77b4'", chart), int8_line = page.find("stroke='#d62728'", chart);
+  ASSERT_NE(fp32_line, std::string::npos);
+  ASSERT_NE(int8_line, std::string::npos);
+  EXPECT_LT(int8_line, fp32_line) << "INT8 is drawn over FP32";
+  EXPECT_NE(page.find("stroke-width='5.5' stroke-opacity='0.70' stroke='#d62728'", chart), std::string::npos);
+  EXPECT_NE(page.find("stroke-width='3.5' stroke-opacity='0.70' stroke='#1f77b4'", chart), std::string::npos);
 }
 
 TEST(ActConvertCli, KeepFloatAndHtmlReportUseOneLayerNaming) {

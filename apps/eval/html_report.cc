@@ -269,7 +269,23 @@ void int8_section(std::ostringstream& out, const Json& r) {
       << "<tr><th>size</th><td>fp32 " << r.value("fp32_bytes", 0) << " bytes, int8 " << r.value("int8_bytes", 0) << " bytes</td></tr>";
   const Json& e = r["action_error"];
   out << "<tr><th>held-out error (INT8 against FP32)</th><td>normalised MSE " << num(e["mse"]) << ", max |err| " << num(e["max_abs"])
-      << "; raw MSE " << num(e["mse_physical"]) << ", max |err| " << num(e["max_abs_physical"]) << "</td></tr></table>";
+      << "; raw MSE " << num(e["mse_physical"]) << ", max |err| " << num(e["max_abs_physical"]) << "</td></tr>";
+  if (r.contains("verdict")) out << "<tr><th>verdict</th><td>" << escape(r["verdict"].get<std::string>()) << "</td></tr>";
+  out << "</table>";
+  // Per action dimension, named when act_convert was given --action-names.
+  const std::vector<double> dim_mse = e.value("per_dim_mse", std::vector<double>());
+  const std::vector<std::string> names = r.value("action_names", std::vector<std::string>());
+  if (!dim_mse.empty()) {
+    out << "<h3>Held-out error per action dimension (INT8 against FP32)</h3><table><tr><th>action</th>"
+           "<th>MSE (normalised)</th><th>max |err| (normalised)</th><th>MSE (raw)</th><th>max |err| (raw)</th></tr>";
+    for (size_t a = 0; a < dim_mse.size(); ++a) {
+      const auto cell = [&](const char* key) { return e.contains(key) && a < e[key].size() ? num(e[key][a]) : std::string(); };
+      out << "<tr><td>" << escape(a < names.size() ? names[a] : "[" + std::to_string(a) + "]") << "</td><td>"
+          << cell("per_dim_mse") << "</td><td>" << cell("per_dim_max_abs") << "</td><td>" << cell("per_dim_mse_physical")
+          << "</td><td>" << cell("per_dim_max_abs_physical") << "</td></tr>";
+    }
+    out << "</table>";
+  }
   for (const auto& note : r.value("notes", std::vector<std::string>())) out << "<p class='note'>" << escape(note) << "</p>";
 
   const std::vector<std::string> float_layers = r.value("float_layers", std::vector<std::string>());

@@ -137,9 +137,9 @@ void check_options(const CLI::App& app, Options& o) {
   }
   if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
                                 app.count("--report") || app.count("--attention") || app.count("--keep-float") ||
-                                app.count("--linear-inputs"))) {
-    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse and "
-              "--report need --precision int8");
+                                app.count("--linear-inputs") || app.count("--action-names"))) {
+    act::fail(act::ErrorCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse, "
+              "--action-names and --report need --precision int8");
   }
   if (!o.package.empty()) {
     if (!o.output.empty()) act::fail(act::ErrorCode::kInvalidArgument, "give either -o or --package (which writes " +

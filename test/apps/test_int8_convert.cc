@@ -243,6 +243,10 @@ TEST(ActConvertInt8, Fp32WithInt8FlagsIsAUsageError) {
   const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/f.actb") + " --calib " + q(src));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("--precision int8"), std::string::npos) << r.output;
+  const CommandResult names = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/f.actb") +
+                                          " --action-names steering,throttle");
+  EXPECT_EQ(names.exit_code, 1) << names.output;
+  EXPECT_NE(names.output.find("--action-names and --report need --precision int8"), std::string::npos) << names.output;
 }
 
 // --linear-inputs as a user gives it: per tensor makes every FFN hidden activation per tensor in

@@ -26,6 +26,7 @@
 #include "apps/observation_file.h"
 #include "apps/op_profile_report.h"
 #include "apps/progress.h"
+#include "apps/version.h"
 #include "bench/probes/bench_probes.h"
 #include "weights/blob/file_util.h"
 
@@ -48,7 +49,29 @@ struct Options {
   bool op_profiling = false;
   std::string trace_path;
   uint32_t seed = 1;
+  bool portrait = false;
 };
+
+// --config HxW is height first, as every other tool's sizes (act_drive --camera-size, the model's
+// cameras); act_bench once took WxH. A size higher than wide is what the old order wrote for a
+// landscape camera, so it needs --portrait to say it is meant.
+void check_builtin_config(const Options& opt) {
+  const size_t x = opt.config.find('x');
+  const auto digits = [](const std::string& part) {
+    return !part.empty() && part.size() <= 5 && part.find_first_not_of("0123456789") == std::string::npos;
+  };
+  if (x == std::string::npos || !digits(opt.config.substr(0, x)) || !digits(opt.config.substr(x + 1))) {
+    if (opt.portrait) act::fail(act::StatusCode::kInvalidArgument, "--portrait goes with --config HxW");
+    return;  // a preset name, or something the import refuses with its own message
+  }
+  const int height = std::stoi(opt.config.substr(0, x)), width = std::stoi(opt.config.substr(x + 1));
+  if (height <= width || opt.portrait) return;
+  act::fail(act::StatusCode::kInvalidArgument,
+            "--config " + opt.config + " is HxW (height first, as act_drive --camera-size and act_convert): a portrait camera " +
+                std::to_string(height) + " high and " + std::to_string(width) + " wide. For a camera " + std::to_string(height) +
+                " wide and " + std::to_string(width) + " high give --config " + std::to_string(width) + "x" +
+                std::to_string(height) + "; for a portrait camera add --portrait");
+}
 
 double ms_since(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
 
@@ -570,8 +593,10 @@ int main(int argc, char** argv) {
   Options opt;
   // TFLite benchmark_model's names are aliases: --graph, --num_threads (--num_runs, --warmup_runs are ours too).
   app.add_option("-m,--model,--graph", opt.model, "an .actb blob (from act_convert); default: a built-in model");
-  app.add_option("--config", opt.config, "built-in model: default, rover (360x640, 2-dim state/action), or WxH")
+  app.add_option("--config", opt.config, "built-in model: default (480x640), rover (360x640, 2-dim state/action), or HxW: "
+                 "height first, as every tool's sizes (120x160 = 120 high, 160 wide); a size higher than wide needs --portrait")
       ->capture_default_str();
+  app.add_flag("--portrait", opt.portrait, "with --config HxW: the camera is higher than wide indeed");
   app.add_option("--precision", opt.precision, "built-in model precision: fp32 or int8")
       ->check(CLI::IsMember({"fp32", "int8"}))
       ->capture_default_str();
@@ -593,6 +618,7 @@ int main(int argc, char** argv) {
                "(also in --json)");
   app.add_option("--trace", opt.trace_path, "write the last timed inference as a Chrome trace (ui.perfetto.dev), a lane per thread");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
+  app.set_version_flag("--version", act::version_line("act_bench"));
   CLI11_PARSE(app, argc, argv);
   if (const long cores = ::sysconf(_SC_NPROCESSORS_ONLN); cores > 0 && opt.threads > cores) {
     std::cerr << "act_bench: warning: --threads " << opt.threads << " is more than the " << cores
@@ -600,6 +626,7 @@ int main(int argc, char** argv) {
                  "(slower, not faster); use --threads " << cores << " or fewer\n";
   }
   try {
+    if (opt.model.empty()) check_builtin_config(opt);
     return Benchmark(opt).run();
   } catch (const std::exception& e) {
     std::cerr << "act_bench: error: " << e.what() << "\n";

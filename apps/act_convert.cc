@@ -20,6 +20,7 @@
 #include "apps/eval/html_report.h"
 #include "apps/progress.h"
 #include "apps/pytorch_options.h"
+#include "apps/version.h"
 #ifdef ACT_ONNX_EXPORT
 #include "actengine/onnx_export.h"
 #endif
@@ -40,6 +41,7 @@ struct Options {
   size_t holdout = 0;
   std::string onnx_path, onnx_part = "full", onnx_normalization = "in";
   std::string calib_npy;
+  std::vector<std::string> action_names;  // --action-names, for the report
 };
 
 bool is_blob(const std::string& path) { return std::filesystem::path(path).extension() == ".actb"; }
@@ -87,6 +89,8 @@ void add_options(CLI::App& app, Options& o) {
   int8_group->add_option("--max-mse", o.max_mse, "fail, writing nothing, when the held-out action MSE (normalised) is above this");
   int8_group->add_option("--report", o.report_path, "also write the accuracy report to this file: JSON, or a "
                          "self-contained HTML page when the name ends in .html");
+  int8_group->add_option("--action-names", o.action_names, "names of the action dimensions for the report, "
+                         "comma-separated, e.g. steering,throttle (default [0], [1], ...)")->delimiter(',');
   int8_group->add_option("--threads", o.int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, act::kMaxThreads));
   app.add_flag("-q,--quiet", o.quiet, "print nothing but errors");
 #ifdef ACT_ONNX_EXPORT
@@ -136,9 +140,9 @@ void check_options(const CLI::App& app, Options& o) {
   }
   if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
                                 app.count("--report") || app.count("--attention") || app.count("--keep-float") ||
-                                app.count("--linear-inputs"))) {
-    act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse and "
-              "--report need --precision int8");
+                                app.count("--linear-inputs") || app.count("--action-names"))) {
+    act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse, "
+              "--action-names and --report need --precision int8");
   }
   if (!o.package.empty()) {
     if (!o.output.empty()) act::fail(act::StatusCode::kInvalidArgument, "give either -o or --package (which writes " +
@@ -207,11 +211,60 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   return std::move(model).value();
 }
 
+// Whether the held-out error is good, from the largest normalised |err| of INT8 against FP32 (a
+// normalised unit: a training standard deviation, or half the range). 0.05 is what static
+// calibration with --calib-method mse reaches on the checkpoints docs/int8.md lists.
+std::string int8_verdict(const act::ActionError& e) {
+  char text[512];
+  if (e.max_abs <= 0.05) {
+    std::snprintf(text, sizeof text, "good: INT8's held-out actions are within %.3g of FP32's (max |err|, normalised; "
+                  "0.05 or less is good); confirm on an episode: act_eval --episode ... -m fp32.actb -m int8.actb", e.max_abs);
+  } else if (e.max_abs <= 0.2) {
+    std::snprintf(text, sizeof text, "check: max |err| %.3g normalised is above 0.05: compare on an episode with act_eval "
+                  "--episode (--max-added-error), or try --mode mixed --target-mse", e.max_abs);
+  } else {
+    std::snprintf(text, sizeof text, "poor: max |err| %.3g normalised (above 0.2): try more calibration frames from the "
+                  "robot's camera, --mode mixed --target-mse, or --precision fp32", e.max_abs);
+  }
+  return text;
+}
+
+// The report as JSON, with the action names and the verdict.
+nlohmann::ordered_json report_json(const act::Int8Report& report, const Options& o) {
+  nlohmann::ordered_json int8 = nlohmann::ordered_json::parse(report.to_json());
+  if (!o.action_names.empty()) int8["action_names"] = o.action_names;
+  int8["verdict"] = int8_verdict(report.action_error);
+  return int8;
+}
+
+// The printed report with the action dimensions named ("  [0] " -> "  steering ") and the verdict.
+std::string report_text(const act::Int8Report& report, const Options& o) {
+  std::string text = report.to_text();
+  for (size_t a = 0; a < o.action_names.size(); ++a) {
+    const std::string label = "\n  [" + std::to_string(a) + "] ";
+    if (const size_t at = text.find(label); at != std::string::npos) text.replace(at, label.size(), "\n  " + o.action_names[a] + " ");
+  }
+  return text + "verdict        " + int8_verdict(report.action_error) + "\n";
+}
+
 // --report FILE.html: the conversion report as a page (the one renderer act_eval's reports use too).
 std::string html_report(const act::Int8Report& report, const Options& o) {
-  nlohmann::ordered_json int8 = nlohmann::ordered_json::parse(report.to_json());
+  nlohmann::ordered_json int8 = report_json(report, o);
   int8["calibration_sources"] = o.calib_sources;
   return act::eval::render_html_report({{"title", "act_convert: " + o.checkpoint + " -> " + o.output}, {"int8", int8}});
+}
+
+// What the calibration used of the frames given, first among the report's notes: "128 frames given,
+// 64 used for calibration, 16 held out, 48 left out (--calib-samples 64 sets how many are used)".
+std::string frames_used_note(size_t given, const act::Int8Report& report, size_t calib_samples) {
+  const size_t used = report.calibration_frames + report.holdout_frames;
+  std::string note = std::to_string(given) + " frames given, " + std::to_string(report.calibration_frames) +
+                     " used for calibration, " + std::to_string(report.holdout_frames) + " held out";
+  if (given > used) {
+    note += ", " + std::to_string(given - used) + " left out (--calib-samples " + std::to_string(calib_samples) +
+            " sets how many are used)";
+  }
+  return note;
 }
 
 // Writes the blob (INT8: calibrated on the --calib frames, its report printed). Returns its size.
@@ -220,6 +273,10 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
     auto bytes = model.write_fp32(o.output);
     if (!bytes.ok()) throw act::Error(bytes.status());
     return *bytes;
+  }
+  if (!o.action_names.empty() && o.action_names.size() != static_cast<size_t>(model.summary().model.action_dim)) {
+    act::fail(act::StatusCode::kInvalidArgument, "--action-names gives " + std::to_string(o.action_names.size()) +
+              " names but the model's actions have " + std::to_string(model.summary().model.action_dim) + " values");
   }
   std::optional<act::ProgressLine> progress;
   act::Int8Options int8 = o.int8;
@@ -234,9 +291,11 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
     };
   }
   act::CalibrationSet frames;
+  size_t frames_given = 0;
   if (!o.calib_sources.empty()) {
     if (progress) progress->message("reading calibration frames from " + std::to_string(o.calib_sources.size()) + " source(s) ...");
-    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(int8));
+    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(int8),
+                                          &frames_given);
     if (progress) {
       for (const auto& note : frames.notes) progress->message(note.rfind("warning: ", 0) == 0 ? note : "note: " + note);
     }
@@ -252,12 +311,13 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
               << *o.int8.max_mse << ", more calibration frames, or another --calib-method.\n";
   }
   if (!report.ok()) throw act::Error(report.status());
+  if (frames_given > 0) report->notes.insert(report->notes.begin(), frames_used_note(frames_given, *report, int8.calib_samples));
   if (report_file) {
     report_file->write(std::filesystem::path(o.report_path).extension() == ".html" ? html_report(*report, o)
-                                                                                  : report->to_json() + "\n");
+                                                                                  : report_json(*report, o).dump(2) + "\n");
     report_file->commit();
   }
-  if (!o.quiet) std::cout << report->to_text();
+  if (!o.quiet) std::cout << report_text(*report, o);
   return report->int8_bytes;
 }
 
@@ -393,6 +453,7 @@ int main(int argc, char** argv) {
                "state dict, into an .actb blob that libactengine runs."};
   Options o;
   add_options(app, o);
+  app.set_version_flag("--version", act::version_line("act_convert"));
   CLI11_PARSE(app, argc, argv);
 
   // No signal handling needed: every file (blob, intermediate blobs, report) is written as an unnamed

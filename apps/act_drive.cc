@@ -30,6 +30,7 @@
 #include "apps/drive/pwm_link.h"
 #include "apps/drive/recorder.h"
 #include "apps/drive/serial_link.h"
+#include "apps/version.h"
 #include "weights/blob/file_kind.h"
 
 namespace {
@@ -534,8 +535,9 @@ void add_output_and_manual_options(CLI::App& app, Options& opt) {
                                              "each inference waited for (with --dry-run, e.g. for --overlay-video)")
       ->capture_default_str()->check(CLI::IsMember({"on", "off"}));
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
-  app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial (or, without it, print a "
-                                             "calibration file to edit), then write --calibration");
+  app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial, then write --calibration; "
+                                             "without --serial, write a calibration file to edit to --calibration FILE "
+                                             "(kept if it exists; printed without -c)");
   // The Pi's own PWM pins instead of the Arduino (docs/rover.md, "On the Pi's own PWM pins").
   app.add_option("--pwm", opt.pwm, "drive the servo and ESC from Linux PWM channels CHIP:STEERING,THROTTLE, e.g. "
                                    "pwmchip0:0,1 (Raspberry Pi: dtoverlay=pwm-2chan); act_pwm_watchdog holds neutral "
@@ -550,6 +552,7 @@ int main(int argc, char** argv) {
                "over serial to the Arduino sketch apps/arduino/act_rover, at a fixed control rate. Holds neutral "
                "whenever something is wrong (stale frames, inference errors, serial errors, signals)."};
   Options opt;
+  app.set_version_flag("--version", act::version_line("act_drive"));
   add_model_camera_and_board_options(app, opt);
   add_loop_options(app, opt);
   add_output_and_manual_options(app, opt);

@@ -19,6 +19,7 @@
 #include "apps/eval/html_report.h"
 #include "apps/eval/metrics.h"
 #include "apps/observation_file.h"
+#include "apps/version.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"
 
@@ -39,7 +40,19 @@ struct Options {
   act::eval::EpisodeSources episode;
   std::string json_path, report_path;
   double max_mse = 0, max_added_error = 0;
+  std::string state;  // --state last-action|mean|zeros|FILE
 };
+
+// --state: a way to make the states (as act_drive feeds them) or a states CSV, like --states.
+void apply_state_option(Options& o) {
+  if (o.state.empty()) return;
+  if (!o.episode.states_csv.empty()) act::fail(act::StatusCode::kInvalidArgument, "give --states FILE or --state, not both");
+  if (o.state == "last-action" || o.state == "mean" || o.state == "zeros") {
+    o.episode.state = o.state;
+  } else {
+    o.episode.states_csv = o.state;
+  }
+}
 
 std::unique_ptr<act::Engine> open_engine(const std::string& path, int threads) {
   auto engine = act::Engine::open(path, {.threads = threads});
@@ -112,6 +125,29 @@ std::string fmt(double v) {
   return std::isfinite(v) ? buf : "non-finite";
 }
 
+std::string percent(double fraction) { return std::isfinite(fraction) ? fmt(100 * fraction) + " %" : "non-finite"; }
+
+// The baselines beside the policy's error, and whether it beats them.
+void print_baselines(const act::eval::EpisodeEvaluation& e) {
+  if (e.baselines.empty() || e.models.empty()) return;
+  const double own = e.models[0].vs_demonstration.chunk_normalised.mse();
+  std::cout << "baselines    chunk MSE against the demonstration (normalised), no policy: ";
+  const act::eval::BaselineEvaluation* best = nullptr;
+  for (const auto& b : e.baselines) {
+    const double mse = b.vs_demonstration.chunk_normalised.mse();
+    std::cout << (&b == &e.baselines.front() ? "" : ", ") << b.name << " " << fmt(mse);
+    if (!best || mse < best->vs_demonstration.chunk_normalised.mse()) best = &b;
+  }
+  std::cout << "; model 1 " << fmt(own) << "\n";
+  const double bar = best->vs_demonstration.chunk_normalised.mse();
+  if (own < bar) {
+    std::cout << "  model 1 beats every baseline (the best, " << best->name << ", " << fmt(bar) << ")\n";
+  } else {
+    std::cout << "  warning: model 1's chunk MSE " << fmt(own) << " is not below the " << best->name << " baseline's " << fmt(bar)
+              << ": on this episode the policy does no better than one that " << best->description << "\n";
+  }
+}
+
 void print_summary(const act::eval::EpisodeEvaluation& e, const act::eval::Episode& episode) {
   std::cout << "episode      " << episode.path << " (" << episode.kind << "), " << e.frame_sources.size() << " frames\n";
   for (const auto& note : episode.notes) std::cout << "note: " << note << "\n";
@@ -131,7 +167,7 @@ void print_summary(const act::eval::EpisodeEvaluation& e, const act::eval::Episo
       const auto& r = model.vs_reference;
       std::cout << "  vs model 1        chunk MSE " << fmt(r.chunk_raw.mse()) << " raw, " << fmt(r.chunk_normalised.mse())
                 << " normalised; max |err| " << fmt(r.chunk_raw.max_abs()) << " raw\n"
-                << "  added error       " << fmt(e.added_error(m))
+                << "  added error       " << percent(e.added_error(m))
                 << " of model 1's own error (chunk MSE, normalised)\n";
     }
     if (model.non_finite_outputs > 0) {
@@ -217,6 +253,17 @@ int run_episode(const Options& o) {
     write_file(o.report_path, act::eval::render_html_report({{"title", "act_eval: " + episode.path}, {"episode", json}}));
   }
   print_summary(evaluation, episode);
+  print_baselines(evaluation);
+  for (size_t m = 1; m < evaluation.models.size(); ++m) {
+    const double added = evaluation.added_error(m);
+    std::cout << "verdict      model " << m + 1 << " adds " << percent(added) << " to model 1's error";
+    if (o.max_added_error > 0) {
+      std::cout << (added <= o.max_added_error ? ": within" : ": above") << " --max-added-error " << fmt(o.max_added_error)
+                << " (" << percent(o.max_added_error) << "), " << (added <= o.max_added_error ? "PASS" : "FAIL") << "\n";
+    } else {
+      std::cout << " (no gate given: --max-added-error 0.1 fails it above 10 %)\n";
+    }
+  }
 
   bool non_finite = false, gate_missed = false;
   for (size_t m = 0; m < evaluation.models.size(); ++m) {
@@ -228,8 +275,9 @@ int run_episode(const Options& o) {
       gate_missed = true;
     }
     if (m > 0 && o.max_added_error > 0 && !(evaluation.added_error(m) <= o.max_added_error)) {
-      std::cout << "FAIL: model " << m + 1 << " adds " << fmt(evaluation.added_error(m))
-                << " of model 1's own error, above --max-added-error " << fmt(o.max_added_error) << "\n";
+      std::cout << "FAIL: model " << m + 1 << " adds " << percent(evaluation.added_error(m))
+                << " of model 1's own error, above --max-added-error " << fmt(o.max_added_error) << " ("
+                << percent(o.max_added_error) << ")\n";
       gate_missed = true;
     }
   }
@@ -261,8 +309,13 @@ int main(int argc, char** argv) {
                                  "a recorded episode: an act_drive --record folder, or a folder of images or a video "
                                  "with --actions (and --states)")->excludes(input);
   app.add_option("--actions", o.episode.actions_csv, "CSV of the demonstrated actions: a frame (image file name or index) "
-                 "then named values, one action per row or a chunk as NAME@STEP columns (README)")->needs(episode);
-  app.add_option("--states", o.episode.states_csv, "CSV of the robot states: a frame, then the named state values")->needs(episode);
+                 "then named values, one action per row or a chunk as NAME@STEP columns; or only the values, one row per "
+                 "frame in frame order; or the long form file,chunk_index,NAME...,is_pad (docs)")->needs(episode);
+  app.add_option("--states", o.episode.states_csv, "CSV of the robot states: a frame, then the named state values (or "
+                 "only the values, one row per frame in frame order)")->needs(episode);
+  app.add_option("--state", o.state, "the robot states without a states CSV, as act_drive feeds them: last-action (the "
+                 "action demonstrated at the frame before; the first frame gets the training mean), mean (the training "
+                 "mean), zeros; or a states CSV FILE (as --states)")->needs(episode);
   app.add_option("--json", o.json_path, "write every metric, per model, dimension and frame, as JSON")->needs(episode);
   app.add_option("--report", o.report_path, "write a self-contained HTML report (charts, per-frame errors)")->needs(episode);
   app.add_option("--max-mse", o.max_mse, "gate: exit 2 when a model's chunk MSE against the demonstration (normalised) "
@@ -271,9 +324,11 @@ int main(int argc, char** argv) {
                  "is above this fraction of the first model's own (normalised)")->needs(episode)->check(CLI::PositiveNumber);
   app.footer("Exit codes: 0 pass; 1 an error (unreadable model or input) or, with --compare, beyond --tol; with "
              "--episode 2 a gate (--max-mse, --max-added-error) missed, 3 a model gave NaN or infinite actions.");
+  app.set_version_flag("--version", act::version_line("act_eval"));
   CLI11_PARSE(app, argc, argv);
 
   try {
+    apply_state_option(o);
     if (o.input_path.empty() && o.episode.episode.empty()) {
       act::fail(act::StatusCode::kInvalidArgument, "give --input OBS.safetensors or --episode PATH");
     }

@@ -19,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "apps/version.h"
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -60,6 +62,7 @@ int main(int argc, char** argv) {
   app.add_option("--stale-ms", stale_ms, "write neutral after this long without a beat")->capture_default_str()
       ->check(CLI::Range(10, 10000));
   app.add_option("--neutral", neutral_specs, "DUTY_CYCLE_FILE=NANOSECONDS, once per channel")->required();
+  app.set_version_flag("--version", act::version_line("act_pwm_watchdog"));
   CLI11_PARSE(app, argc, argv);
 
   for (const std::string& spec : neutral_specs) {

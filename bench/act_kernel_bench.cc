@@ -44,6 +44,7 @@
 #include <string>
 #include <vector>
 
+#include "actengine/engine.h"
 #include "graph/gemm_tiling.h"
 #include "graph/graph.h"
 #include "graph/ops_int8.h"
@@ -790,6 +791,13 @@ void register_thread_pool(const BenchPlan& plan) {
 
 int main(int argc, char** argv) {
   using namespace act;
+  // Google Benchmark owns the other flags; --version as every tool has it (the library's version).
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--version") == 0) {
+      std::cout << "act_kernel_bench " << act::version() << "\n";
+      return 0;
+    }
+  }
   benchmark::Initialize(&argc, argv);
   bench::BenchPlan plan;
   const char* shapes_env = std::getenv("ACT_BENCH_SHAPES");

@@ -13,6 +13,7 @@
 
 #include "actengine/engine.h"
 #include "apps/bench_support.h"
+#include "apps/version.h"
 
 namespace {
 
@@ -32,6 +33,7 @@ int main(int argc, char** argv) {
   app.add_option("--sample-every", sample_every, "RSS sampling period, in inferences")->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "engine threads")->check(CLI::PositiveNumber);
   app.add_option("--tolerance-kb", tolerance_kb, "allowed RSS growth after warm-up")->check(CLI::NonNegativeNumber);
+  app.set_version_flag("--version", act::version_line("act_soak"));
   CLI11_PARSE(app, argc, argv);
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // each sample shows at once, also when logged to a file
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -48,6 +49,8 @@ class Loader {
 
   CalibrationSet take() { return std::move(set_); }
   size_t frames() const { return set_.frames.size(); }
+  /// The frames the sources hold, read or not.
+  size_t given() const { return given_; }
 
   void add_source(const std::string& source, size_t max_frames) {
     const fs::path p(source);
@@ -91,6 +94,17 @@ class Loader {
            " are stretched to the model's " + std::to_string(cam.height) + "x" + std::to_string(cam.width) + " (height x width, " +
            cam.key + "): another aspect ratio than training's; use frames from the robot's camera at its training setting");
     }
+    // Frames much smaller than the model's input are blown up: less detail than the camera the model
+    // was trained on gave it, which the calibration then measures.
+    const double upscale = std::max(static_cast<double>(cam.height) / image.rows, static_cast<double>(cam.width) / image.cols);
+    if (upscale >= 2.0) {
+      char factor[32];
+      std::snprintf(factor, sizeof factor, "%.3g", upscale);
+      note("warning: calibration frames of " + std::to_string(image.rows) + "x" + std::to_string(image.cols) +
+           " are upscaled " + factor + "x to the model's " + std::to_string(cam.height) + "x" + std::to_string(cam.width) +
+           " (height x width, " + cam.key + "): they hold less detail than the model's input; use frames from the "
+           "robot's camera at its training size");
+    }
     const Status converted = frame_to_model_rgb(image, cam.height, cam.width, rgb);
     if (!converted.ok()) throw Error(converted);
   }
@@ -111,6 +125,7 @@ class Loader {
 
   void add_images(const std::vector<fs::path>& files, size_t max_frames, const std::string& source) {
     if (files.empty()) fail(StatusCode::kNotFound, "calibration folder " + source + " has no images (png, jpg, jpeg, bmp)");
+    given_ += files.size();
     for (size_t i : spread(files.size(), max_frames)) {
       std::string why;
       const cv::Mat image = media::read_image(files[i].string(), cv::IMREAD_COLOR, &why);
@@ -160,6 +175,7 @@ class Loader {
   void add_video(const fs::path& p, size_t max_frames) {
     const size_t n = video_length(p);
     if (n == 0) fail(StatusCode::kDataLoss, "video " + p.string() + " has no frames");
+    given_ += n;
     const std::vector<size_t> wanted = spread(n, max_frames);
     const std::vector<cv::Mat> frames = video_frames(p, wanted);
     if (frames.empty()) fail(StatusCode::kDataLoss, "could not decode any frame of " + p.string());
@@ -190,9 +206,12 @@ class Loader {
     }
     const size_t n_files = per_camera[0].size();
     const size_t per_file = std::max<size_t>(1, (max_frames + n_files - 1) / n_files);
+    std::vector<size_t> lengths;
+    for (const fs::path& file : per_camera[0]) lengths.push_back(video_length(file));
+    for (size_t length : lengths) given_ += length;
     size_t added = 0;
     for (size_t f = 0; f < n_files && added < max_frames; ++f) {
-      const std::vector<size_t> wanted = spread(video_length(per_camera[0][f]), per_file);
+      const std::vector<size_t> wanted = spread(lengths[f], per_file);
       std::vector<std::vector<cv::Mat>> frames;
       for (const auto& files : per_camera) frames.push_back(video_frames(files[f], wanted));
       for (size_t i = 0; i < wanted.size(); ++i) {
@@ -249,6 +268,7 @@ class Loader {
     }
     // Not the folder's images instead: they would calibrate without the states the recording holds.
     if (entries.empty()) fail(StatusCode::kDataLoss, log_path + " names no frame: nothing to calibrate on in this recording");
+    given_ += entries.size();
     for (size_t i : spread(entries.size(), max_frames)) {
       std::string why;
       const cv::Mat image = media::read_image(entries[i].first.string(), cv::IMREAD_COLOR, &why);
@@ -259,6 +279,7 @@ class Loader {
 
   void add_observation_file(const fs::path& p, size_t max_frames) {
     const ObservationBatch batch = ObservationBatch::read(p.string(), model_);
+    given_ += batch.size();
     for (size_t i : spread(batch.size(), max_frames)) {
       const Observation obs = batch.at(i);
       CalibrationFrame f;
@@ -289,6 +310,7 @@ class Loader {
  private:
   const ModelInfo& model_;
   CalibrationSet set_;
+  size_t given_ = 0;
 };
 
 }  // namespace
@@ -305,7 +327,8 @@ std::vector<fs::path> files_in(const fs::path& dir, bool (*pick)(const fs::path&
   return out;
 }
 
-CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames) {
+CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames,
+                                       size_t* given) {
   if (sources.empty()) fail(StatusCode::kInvalidArgument, "no calibration sources given");
   Loader loader(model);
   // Every source contributes its share of the frames.
@@ -318,6 +341,7 @@ CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, 
       short_sources.push_back(s + " gave only " + std::to_string(loader.frames() - before) + " (its share: " + std::to_string(share) + ")");
     }
   }
+  if (given) *given = loader.given();
   CalibrationSet set = loader.take();
   if (set.frames.size() > max_frames) set.frames.resize(max_frames);
   if (set.frames.size() < max_frames) {

@@ -26,7 +26,10 @@ bool is_video_file(const std::filesystem::path& p);
 std::vector<std::filesystem::path> files_in(const std::filesystem::path& dir, bool (*pick)(const std::filesystem::path&));
 
 /// Reads up to `max_frames` frames from the sources, spread evenly over what they hold, at the
-/// model's input size. Throws act::Error naming the source on anything unreadable or empty.
-CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames);
+/// model's input size; `given` (if not null) gets how many frames the sources hold in all. A
+/// warning note says when frames are stretched to another aspect ratio or upscaled 2x or more.
+/// Throws act::Error naming the source on anything unreadable or empty.
+CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames,
+                                       size_t* given = nullptr);
 
 }  // namespace act

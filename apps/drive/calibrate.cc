@@ -69,18 +69,37 @@ class CommandKeeper {
   std::thread thread_;
 };
 
+// Without a port: the template (or the file being edited) printed, or with -c FILE written to FILE
+// when there is none yet (an existing file is left as it is: it may hold measured values).
+int print_or_write_template(const Calibration& calibration, const std::string& path, bool existed, std::ostream& out,
+                            std::ostream& log) {
+  if (path.empty()) {
+    out << calibration.to_json().dump(2) << "\n";
+    log << kTemplateNotes;
+    return 0;
+  }
+  if (existed) {
+    log << "act_drive --calibrate: " << path << " exists: left as it is (edit it, or measure the endpoints with "
+        << "act_drive --calibrate --serial PORT -c " << path << "; act_drive --list-ports lists the ports)\n";
+    return 0;
+  }
+  std::ofstream file(path);
+  file << calibration.to_json().dump(2) << "\n";
+  file.close();
+  if (!file) fail(StatusCode::kIoError, "--calibrate: cannot write " + path);
+  log << "act_drive --calibrate: wrote a calibration template to " << path << "\n" << kTemplateNotes;
+  return 0;
+}
+
 }  // namespace
 
 int run_calibration(const CalibrateOptions& options, const std::atomic<bool>& stop, std::istream& in, std::ostream& out,
                     std::ostream& log) {
   const std::string output = options.output_path.empty() ? "calibration.json" : options.output_path;
   // Start from the file being edited, so one channel can be re-measured without losing the other.
-  Calibration calibration = std::filesystem::exists(output) ? Calibration::load(output) : Calibration::starting_template();
-  if (options.serial.empty()) {
-    out << calibration.to_json().dump(2) << "\n";
-    log << kTemplateNotes;
-    return 0;
-  }
+  const bool existed = std::filesystem::exists(output);
+  Calibration calibration = existed ? Calibration::load(output) : Calibration::starting_template();
+  if (options.serial.empty()) return print_or_write_template(calibration, options.output_path, existed, out, log);
   SerialLinkOptions serial_options;
   serial_options.path = options.serial;
   serial_options.baud = options.baud;

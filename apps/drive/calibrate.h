@@ -1,5 +1,5 @@
 // act_drive --calibrate: find the servo and ESC endpoints by hand over the serial link, or (without a
-// port) print a calibration file to edit.
+// port) write a calibration file to edit to -c FILE (print it without -c).
 #pragma once
 
 #include <atomic>
@@ -10,7 +10,7 @@
 namespace act::drive {
 
 struct CalibrateOptions {
-  std::string serial;       ///< empty: print a template instead of talking to the board
+  std::string serial;       ///< empty: write (or print) a template instead of talking to the board
   int baud = 115200;
   std::string output_path;  ///< the file edited: its values are the start, "save" writes it (default calibration.json)
 };

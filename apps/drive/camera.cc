@@ -119,8 +119,9 @@ Camera::Camera(CameraOptions options) {
   if (!video) {
     const bool missing = (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) && !std::filesystem::exists(source);
     fail(StatusCode::kNotFound, "cannot open camera '" + source + "'" + (missing ? ": no such file" : "") +
-                                     " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
-                                    "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink)");
+                                    " (an index like 0, a device like /dev/video0, a video file, an image sequence like "
+                                    "frames/%06d.png, a URL or a GStreamer pipeline ending in appsink; act_drive --list-cameras "
+                                    "lists the cameras found)");
   }
   cv::Mat first;
   if (!video->read(first) || first.empty()) {

@@ -72,12 +72,14 @@ std::string DriveSummary::to_string() const {
   std::ostringstream s;
   char line[1024];
   std::snprintf(line, sizeof line,
-                "act_drive: %s after %.1f s: %llu ticks (%llu driving, %llu safe, %llu missed), %llu overrun ticks in %llu overruns, "
+                "act_drive: %s after %.1f s: %llu ticks (%llu driving, %llu safe: %llu e-stop, %llu waiting for a chunk, "
+                "%llu fault, %llu overrun; %llu missed), %llu overruns, "
                 "%llu inferences, %llu inference errors, %llu stale-frame ticks, %llu ticks with the link down\n",
                 end_reason.c_str(), elapsed_s, static_cast<unsigned long long>(ticks),
                 static_cast<unsigned long long>(driving_ticks), static_cast<unsigned long long>(safe_ticks),
-                static_cast<unsigned long long>(missed_ticks),
-                static_cast<unsigned long long>(overrun_ticks), static_cast<unsigned long long>(overrun_events),
+                static_cast<unsigned long long>(estop_ticks), static_cast<unsigned long long>(waiting_ticks),
+                static_cast<unsigned long long>(fault_ticks), static_cast<unsigned long long>(overrun_ticks),
+                static_cast<unsigned long long>(missed_ticks), static_cast<unsigned long long>(overrun_events),
                 static_cast<unsigned long long>(inferences), static_cast<unsigned long long>(inference_errors),
                 static_cast<unsigned long long>(stale_frames), static_cast<unsigned long long>(link_down_ticks));
   s << line;
@@ -341,12 +343,20 @@ class ControlRun {
       overrunning_ = overrunning_ && fault_.empty();
       limiter_.reset(safe_);
       state_ = initial_state_;
-      ++summary_.safe_ticks;
+      count_safe_tick(source);
     } else {
       overrunning_ = false;
     }
     previous_fault_ = fault_;
     return source;
+  }
+
+  // A safe tick, counted by its reason (overrun ticks are counted where the overrun is seen).
+  void count_safe_tick(const std::string& source) {
+    ++summary_.safe_ticks;
+    if (source == "safe:e-stop") ++summary_.estop_ticks;
+    if (source == "safe:waiting") ++summary_.waiting_ticks;
+    if (source == "safe:fault") ++summary_.fault_ticks;
   }
 
   // With --state last-action the executed action becomes the next state (its first state_dim values,

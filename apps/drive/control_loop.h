@@ -71,6 +71,9 @@ struct DriveSummary {
   int exit_code = 0;
   std::string end_reason;
   uint64_t ticks = 0, driving_ticks = 0, safe_ticks = 0;
+  /// The safe ticks by reason (with overrun_ticks they add up to safe_ticks): the e-stop held, no
+  /// chunk yet (after start, an e-stop or a fault), a fault (stale frame, inference error, ...).
+  uint64_t estop_ticks = 0, waiting_ticks = 0, fault_ticks = 0;
   uint64_t manual_ticks = 0;  ///< ticks a human drove (part of neither of the two above)
   uint64_t missed_ticks = 0;  ///< ticks skipped because the loop woke up a whole period late
   uint64_t overrun_ticks = 0, overrun_events = 0;  ///< the chunk ran out before the next was ready

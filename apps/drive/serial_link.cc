@@ -65,7 +65,7 @@ void SerialPort::open(const std::string& path, int baud) {
   if (fd < 0) {
     const int err = errno;
     std::string hint;
-    if (err == ENOENT) hint = " (is the Arduino plugged in? see ls /dev/ttyUSB* /dev/ttyACM*)";
+    if (err == ENOENT) hint = " (is the Arduino plugged in? act_drive --list-ports lists the serial ports found)";
     if (err == EACCES) hint = " (permission: add the user to the 'dialout' group)";
     if (err == EBUSY) hint = " (another program has it open)";
     fail(err == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError,

@@ -135,11 +135,37 @@ struct ActionColumns {
   std::vector<std::vector<size_t>> column;  // [step][dimension]
 };
 
-ActionColumns action_columns(const CsvTable& table, int action_dim) {
+// Every form of actions CSV act_eval reads, with an example for a model of `action_dim` values:
+// what a mismatch error lists.
+std::string accepted_action_forms(int action_dim) {
+  std::string names, chunk;
+  for (int d = 0; d < action_dim; ++d) names += (d ? "," : "") + std::string("a") + std::to_string(d);
+  for (int d = 0; d < action_dim; ++d) chunk += (d ? "," : "") + std::string("a") + std::to_string(d) + "@0";
+  return "act_eval reads these forms of actions CSV (the value names are yours; " + std::to_string(action_dim) +
+         " per action here):\n"
+         "  one action per row, after a frame column (an image name or a 0-based frame index): frame," + names + "\n"
+         "  one action per row, no frame column (row 1 is frame 0, in frame order): " + names + "\n"
+         "  a chunk per row, NAME@STEP columns: frame," + chunk + ",...@1,...\n"
+         "  a chunk over rows (long form; is_pad optional, padded steps are not compared): file,chunk_index," + names +
+         ",is_pad";
+}
+
+// The frame column's usual names: a first column named otherwise may be a value (no frame column).
+bool is_frame_column_name(std::string name) {
+  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  for (const char* n : {"frame", "file", "filename", "file_name", "image", "image_path", "path", "index", "frame_index"}) {
+    if (name == n) return true;
+  }
+  return false;
+}
+
+// The value columns from `first` on, without `skip` (the long form's chunk_index and is_pad).
+ActionColumns action_columns(const CsvTable& table, int action_dim, size_t first = 1, const std::vector<size_t>& skip = {}) {
   ActionColumns out;
   std::map<std::string, std::map<size_t, size_t>> chunked;  // name -> step -> column
   bool any_chunked = false;
-  for (size_t c = 1; c < table.header.size(); ++c) {
+  for (size_t c = first; c < table.header.size(); ++c) {
+    if (std::find(skip.begin(), skip.end(), c) != skip.end()) continue;
     const std::string& h = table.header[c];
     const size_t at = h.rfind('@');
     const std::optional<size_t> step = at == std::string::npos ? std::nullopt : parse_index(h.substr(at + 1));
@@ -149,8 +175,12 @@ ActionColumns action_columns(const CsvTable& table, int action_dim) {
     if (!chunked[name].emplace(step.value_or(0), c).second) bad(table.path, "column '" + h + "' appears twice");
   }
   if (out.names.size() != static_cast<size_t>(action_dim)) {
-    bad(table.path, std::to_string(out.names.size()) + " action columns (" + std::string(any_chunked ? "NAME@STEP counted once per NAME" : "one per dimension") +
-        ") but the model's actions have " + std::to_string(action_dim) + " values");
+    std::string listed;
+    for (const auto& n : out.names) listed += (listed.empty() ? "" : ", ") + n;
+    bad(table.path, std::to_string(out.names.size()) + " action columns (" + listed + "; " +
+        std::string(any_chunked ? "NAME@STEP counted once per NAME" : "one per dimension") + ") after the frame column '" +
+        table.header[0] + "' but the model's actions have " + std::to_string(action_dim) + " values.\n" +
+        accepted_action_forms(action_dim));
   }
   size_t steps = 0;
   for (const auto& [name, by_step] : chunked) steps = std::max(steps, by_step.size());
@@ -326,6 +356,122 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
   return ep;
 }
 
+// An actions CSV's rows as frames: the frame column's text (or, without one, the row's 0-based
+// index), where it is, and the demonstration from that frame on (steps x action_dim).
+struct DemonstrationRow {
+  std::string key, where;
+  std::vector<float> demonstration;
+};
+struct DemonstrationRows {
+  std::vector<DemonstrationRow> rows;
+  bool one_action_per_row = false;  ///< each row one action: a frame's chunk is the rows that follow
+};
+
+bool is_true(const std::string& cell) { return cell == "1" || cell == "true" || cell == "True" || cell == "TRUE"; }
+
+// The long form, a chunk over rows: "file,chunk_index,steering,throttle,is_pad", chunk_index
+// 0, 1, ... for each frame's rows, padded steps (is_pad true: past the episode's end) left out.
+DemonstrationRows long_form_rows(const CsvTable& table, size_t step_column, const ModelInfo& model,
+                                 std::vector<std::string>& names) {
+  const std::optional<size_t> pad_column = column_named(table, "is_pad");
+  std::vector<size_t> skip{step_column};
+  if (pad_column) skip.push_back(*pad_column);
+  if (step_column == 0) bad(table.path, "the first column is the frame's ('file' or 'frame'), then chunk_index");
+  const ActionColumns columns = action_columns(table, model.action_dim, 1, skip);
+  if (columns.column.size() != 1) bad(table.path, "a long-form CSV (chunk_index) holds one step per row: no NAME@STEP columns");
+  names = columns.names;
+  DemonstrationRows out;
+  std::map<std::string, size_t> seen;  // frame -> its index in out.rows
+  size_t expected_step = 0;
+  bool padded = false;
+  for (const auto& row : table.rows) {
+    const std::string where = at_line(table.path, row.line);
+    const std::string& key = row.cells[0];
+    const std::optional<size_t> step = parse_index(row.cells[step_column]);
+    if (!step) bad(where + " column 'chunk_index'", "'" + row.cells[step_column] + "' is not a step number");
+    if (out.rows.empty() || out.rows.back().key != key) {
+      if (seen.count(key)) bad(where, "frame '" + key + "' appears again after other frames (its rows must be together)");
+      seen[key] = out.rows.size();
+      out.rows.push_back({key, where, {}});
+      expected_step = 0;
+      padded = false;
+    }
+    if (*step != expected_step) {
+      bad(where + " column 'chunk_index'", "step " + row.cells[step_column] + " where " + std::to_string(expected_step) +
+          " comes next (each frame's rows run 0, 1, 2, ...)");
+    }
+    ++expected_step;
+    padded |= pad_column && is_true(row.cells[*pad_column]);
+    if (padded) continue;  // past the episode's end: nothing to compare with
+    for (size_t c : columns.column[0]) out.rows.back().demonstration.push_back(table.number(row, c));
+  }
+  for (const auto& r : out.rows) {
+    if (r.demonstration.empty()) bad(r.where, "frame '" + r.key + "' has only padded steps (is_pad at chunk_index 0)");
+  }
+  return out;
+}
+
+DemonstrationRows demonstration_rows(const CsvTable& table, const ModelInfo& model, std::vector<std::string>& names,
+                                     std::vector<std::string>& notes) {
+  if (const std::optional<size_t> step = column_named(table, "chunk_index")) return long_form_rows(table, *step, model, names);
+  // Without a frame column: every column a value, in frame order.
+  size_t first = 1;
+  if (!is_frame_column_name(table.header[0])) {
+    std::vector<std::string> all;
+    for (const auto& h : table.header) {
+      const std::string name = h.substr(0, h.rfind('@'));
+      if (std::find(all.begin(), all.end(), name) == all.end()) all.push_back(name);
+    }
+    if (all.size() == static_cast<size_t>(model.action_dim)) {
+      first = 0;
+      notes.push_back(table.path + " has no frame column: its rows are the frames in order");
+    }
+  }
+  const ActionColumns columns = action_columns(table, model.action_dim, first);
+  names = columns.names;
+  DemonstrationRows out;
+  out.one_action_per_row = columns.column.size() == 1;
+  for (size_t r = 0; r < table.rows.size(); ++r) {
+    const auto& row = table.rows[r];
+    DemonstrationRow d{first == 0 ? std::to_string(r) : row.cells[0], at_line(table.path, row.line), {}};
+    for (const auto& step : columns.column) {
+      for (size_t c : step) d.demonstration.push_back(table.number(row, c));
+    }
+    out.rows.push_back(std::move(d));
+  }
+  return out;
+}
+
+// --state last-action|mean|zeros: the states an episode without a states CSV gets, as act_drive
+// would feed them (last-action: the action demonstrated at the frame before; the first frame, and
+// mean: the training statistics' middle).
+void fill_states(Episode& ep, const ModelInfo& model, const std::string& how) {
+  const size_t dim = static_cast<size_t>(model.state_dim);
+  std::vector<float> mean(dim);
+  for (size_t i = 0; i < dim && i < model.state_low.size() && i < model.state_high.size(); ++i) {
+    mean[i] = (model.state_low[i] + model.state_high[i]) / 2.0f;
+  }
+  if (how == "last-action" && dim > static_cast<size_t>(model.action_dim)) {
+    bad(ep.path, "--state last-action: the model's state has " + std::to_string(dim) + " values but its action only " +
+        std::to_string(model.action_dim) + " (use --state mean, zeros or a states CSV)");
+  }
+  for (size_t f = 0; f < ep.frames.size(); ++f) {
+    std::vector<float>& state = ep.frames[f].state;
+    if (how == "zeros") {
+      state.assign(dim, 0.0f);
+    } else if (how == "mean" || f == 0) {
+      state = mean;
+    } else {
+      const std::vector<float>& before = ep.frames[f - 1].demonstration;
+      state.assign(before.begin(), before.begin() + static_cast<std::ptrdiff_t>(dim));
+    }
+  }
+  ep.notes.push_back(how == "last-action" ? "states: the action demonstrated at the frame before (the first frame: the "
+                                            "training mean), --state last-action"
+                     : how == "mean"      ? "states: the training mean for every frame, --state mean"
+                                          : "states: zeros for every frame, --state zeros");
+}
+
 Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& model) {
   const fs::path p(sources.episode);
   const bool is_video = !fs::is_directory(p);
@@ -335,34 +481,40 @@ Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& mode
   Episode ep{p.string(), is_video ? "video + CSV" : "image folder + CSV", is_video ? p.string() : "", {}, {}, {}};
   check_state_model(model, ep.path);
   if (sources.actions_csv.empty()) bad(ep.path, "an image folder or a video needs --actions FILE.csv (the demonstration)");
-  if (model.state_dim > 0 && sources.states_csv.empty()) {
-    bad(ep.path, "the model takes a robot state of " + std::to_string(model.state_dim) + " values: give --states FILE.csv");
+  if (model.state_dim > 0 && sources.states_csv.empty() && sources.state.empty()) {
+    bad(ep.path, "the model takes a robot state of " + std::to_string(model.state_dim) + " values: give --states FILE.csv, "
+        "or --state last-action|mean|zeros (as act_drive feeds it)");
   }
   const std::vector<fs::path> images = is_video ? std::vector<fs::path>{} : files_in(p, is_image_file);
   if (!is_video && images.empty()) bad(ep.path, "the folder has no images (png, jpg, jpeg, bmp)");
 
   const CsvTable actions = read_csv(sources.actions_csv, "actions");
-  const ActionColumns columns = action_columns(actions, model.action_dim);
-  ep.action_names = columns.names;
-  std::map<std::string, std::vector<float>> states;  // by the frame column's text
-  if (model.state_dim > 0) {
+  const DemonstrationRows demonstrations = demonstration_rows(actions, model, ep.action_names, ep.notes);
+  const bool states_from_csv = model.state_dim > 0 && sources.state.empty();
+  std::map<std::string, std::vector<float>> states;  // by the frame column's text (in frame order: the 0-based index)
+  if (states_from_csv) {
     const CsvTable table = read_csv(sources.states_csv, "states");
-    if (table.header.size() - 1 != static_cast<size_t>(model.state_dim)) {
-      bad(table.path, std::to_string(table.header.size() - 1) + " state columns but the model's state has " +
-          std::to_string(model.state_dim) + " values");
+    // Without a frame column (its first column's name is not a frame's and every column is a value): in frame order.
+    const bool in_frame_order = !is_frame_column_name(table.header[0]) && table.header.size() == static_cast<size_t>(model.state_dim);
+    const size_t first = in_frame_order ? 0 : 1;
+    if (table.header.size() - first != static_cast<size_t>(model.state_dim)) {
+      bad(table.path, std::to_string(table.header.size() - first) + " state columns after the frame column '" + table.header[0] +
+          "' but the model's state has " + std::to_string(model.state_dim) + " values (a states CSV is a frame column then "
+          "the values, or only the values, one row per frame in frame order)");
     }
-    for (const auto& row : table.rows) {
+    if (in_frame_order) ep.notes.push_back(table.path + " has no frame column: its rows are the frames in order");
+    for (size_t r = 0; r < table.rows.size(); ++r) {
+      const auto& row = table.rows[r];
       std::vector<float> values;
-      for (size_t c = 1; c < row.cells.size(); ++c) values.push_back(table.number(row, c));
-      if (!states.emplace(row.cells[0], std::move(values)).second) {
+      for (size_t c = first; c < row.cells.size(); ++c) values.push_back(table.number(row, c));
+      const std::string key = in_frame_order ? std::to_string(r) : row.cells[0];
+      if (!states.emplace(key, std::move(values)).second) {
         bad(at_line(table.path, row.line), "frame '" + row.cells[0] + "' appears twice");
       }
     }
   }
   std::optional<size_t> previous_video_index;
-  for (const auto& row : actions.rows) {
-    const std::string where = at_line(actions.path, row.line);
-    const std::string& key = row.cells[0];
+  for (const auto& [key, where, demonstration] : demonstrations.rows) {
     EpisodeFrame frame;
     if (is_video) {
       const std::optional<size_t> index = parse_index(key);
@@ -380,17 +532,20 @@ Episode read_frames_and_csv(const EpisodeSources& sources, const ModelInfo& mode
       bad(where + " column 1", "'" + key + "' is neither an image in " + ep.path + " nor an index below its " +
           std::to_string(images.size()) + " images");
     }
-    if (model.state_dim > 0) {
-      const auto it = states.find(key);
+    if (states_from_csv) {
+      auto it = states.find(key);
+      if (it == states.end()) {  // a states CSV in frame order, actions by image name
+        const auto image = std::find(images.begin(), images.end(), fs::path(frame.image_path));
+        if (image != images.end()) it = states.find(std::to_string(image - images.begin()));
+      }
       if (it == states.end()) bad(where, "frame '" + key + "' has no row in " + sources.states_csv);
       frame.state = it->second;
     }
-    for (const auto& step : columns.column) {
-      for (size_t c : step) frame.demonstration.push_back(actions.number(row, c));
-    }
+    frame.demonstration = demonstration;
     ep.frames.push_back(std::move(frame));
   }
-  if (columns.column.size() == 1) extend_demonstrations(ep.frames, model);
+  if (demonstrations.one_action_per_row) extend_demonstrations(ep.frames, model);
+  if (model.state_dim > 0 && !sources.state.empty()) fill_states(ep, model, sources.state);
   return ep;
 }
 

@@ -7,7 +7,11 @@
 //       first column: a frame (an image's path in the folder, or a 0-based index of the folder's images,
 //       subfolders included, sorted by path, or of the video's frames), then one named column per value. An actions row holds either one
 //       action ("steer,throttle") or a chunk of future actions, its columns named NAME@K with K the
-//       steps ahead of the frame ("steer@0,throttle@0,steer@1,throttle@1,...").
+//       steps ahead of the frame ("steer@0,throttle@0,steer@1,throttle@1,...");
+//       without a frame column (the first column's name is not a frame's, e.g. "frame" or "file", and
+//       every column is a value) the rows are the frames in order;
+//       or the long form, a chunk over rows: "file,chunk_index,steer,throttle,is_pad" (is_pad
+//       optional; padded steps are left out of the demonstration).
 // With one action per row, a frame's demonstrated chunk is the actions of the rows that follow it.
 #pragma once
 
@@ -45,6 +49,9 @@ struct Episode {
 /// What a user names: the episode (recording folder, image folder or video) and, for the latter two, the CSVs.
 struct EpisodeSources {
   std::string episode, actions_csv, states_csv;
+  /// Instead of states_csv: "last-action" (the action demonstrated at the frame before), "mean"
+  /// (the training mean) or "zeros"; empty: from states_csv.
+  std::string state = {};
 };
 
 /// Reads and checks everything against the model (action and state sizes). Throws act::Error

@@ -89,7 +89,9 @@ std::string legend(const std::vector<Series>& series) {
   return s.str();
 }
 
-// Lines over the index (a non-finite value breaks its line).
+// Lines over the index (a non-finite value breaks its line). The first series is drawn on top: the
+// series are drawn last to first, each wider and paler than the one before it, so the demonstration
+// and the reference model (FP32) stay visible over the models that follow it (INT8).
 std::string line_chart(const std::vector<Series>& series, const std::string& x_label, const std::string& css_class) {
   const auto [lo, hi] = bounds(series);
   size_t n = 0;
@@ -98,8 +100,12 @@ std::string line_chart(const std::vector<Series>& series, const std::string& x_l
   std::ostringstream s;
   s << "<svg class='chart " << css_class << "' width='" << kWidth << "' height='" << kHeight << "' viewBox='0 0 " << kWidth
     << " " << kHeight << "'>" << axes(lo, hi, x_label);
-  for (const auto& item : series) {
-    s << "<path fill='none' stroke-width='1.5' stroke='" << item.colour << "' d='";
+  for (size_t k = series.size(); k-- > 0;) {
+    const Series& item = series[k];
+    char style[96];
+    std::snprintf(style, sizeof style, "stroke-width='%.1f' stroke-opacity='%.2f'", 1.5 + 2.0 * static_cast<double>(k),
+                  k == 0 ? 1.0 : 0.7);
+    s << "<path fill='none' " << style << " stroke='" << item.colour << "' d='";
     bool pen_down = false;
     for (size_t i = 0; i < item.values.size(); ++i) {
       const double v = item.values[i];
@@ -169,14 +175,28 @@ void episode_section(std::ostringstream& out, const Json& r) {
 
   out << "<h2>Error against the demonstration</h2><table><tr><th>model</th><th>first action MSE (raw)</th>"
          "<th>first action max |err| (raw)</th><th>chunk MSE (normalised)</th><th>chunk max |err| (normalised)</th>"
-         "<th>against the first model: chunk MSE (normalised)</th><th>error added, as a fraction of the first model's own</th></tr>";
+         "<th>against the first model: chunk MSE (normalised)</th><th>error added, % of the first model's own</th></tr>";
   for (const auto& m : models) {
     const Json& demo = m["vs_demonstration"];
     out << "<tr><td>" << escape(model_label(m)) << "</td><td>" << num(demo["first_action"]["raw"]["mse"]) << "</td><td>"
         << num(demo["first_action"]["raw"]["max_abs"]) << "</td><td>" << num(demo["chunk"]["normalised"]["mse"]) << "</td><td>"
         << num(demo["chunk"]["normalised"]["max_abs"]) << "</td><td>"
         << (m.contains("vs_reference") ? num(m["vs_reference"]["chunk"]["normalised"]["mse"]) : "(reference)") << "</td><td>"
-        << (m.contains("added_error_fraction") ? num(m["added_error_fraction"]) : "") << "</td></tr>";
+        << (m.contains("added_error_fraction") ? (m["added_error_fraction"].is_number()
+                                                   ? num(100 * m["added_error_fraction"].get<double>()) + " %"
+                                                   : num(m["added_error_fraction"]))
+                                                : "")
+        << "</td></tr>";
+  }
+  if (r.contains("baselines") && !models.empty()) {
+    out << "</table><h3>Baselines (no policy), beside the first model</h3><table><tr><th>baseline</th>"
+           "<th>chunk MSE (normalised)</th><th>first action MSE (raw)</th><th>the first model's chunk MSE (normalised)</th></tr>";
+    for (const auto& b : r["baselines"]) {
+      out << "<tr><td>" << escape(b["name"].get<std::string>()) << " (" << escape(b["description"].get<std::string>())
+          << ")</td><td>" << num(b["vs_demonstration"]["chunk"]["normalised"]["mse"]) << "</td><td>"
+          << num(b["vs_demonstration"]["first_action"]["raw"]["mse"]) << "</td><td>"
+          << num(models[0]["vs_demonstration"]["chunk"]["normalised"]["mse"]) << "</td></tr>";
+    }
   }
   out << "</table><h3>Per action dimension (first action, raw MSE against the demonstration)</h3><table><tr><th>model</th>";
   for (const auto& name : names) out << "<th>" << escape(name) << "</th>";
@@ -249,7 +269,23 @@ void int8_section(std::ostringstream& out, const Json& r) {
       << "<tr><th>size</th><td>fp32 " << r.value("fp32_bytes", 0) << " bytes, int8 " << r.value("int8_bytes", 0) << " bytes</td></tr>";
   const Json& e = r["action_error"];
   out << "<tr><th>held-out error (INT8 against FP32)</th><td>normalised MSE " << num(e["mse"]) << ", max |err| " << num(e["max_abs"])
-      << "; raw MSE " << num(e["mse_physical"]) << ", max |err| " << num(e["max_abs_physical"]) << "</td></tr></table>";
+      << "; raw MSE " << num(e["mse_physical"]) << ", max |err| " << num(e["max_abs_physical"]) << "</td></tr>";
+  if (r.contains("verdict")) out << "<tr><th>verdict</th><td>" << escape(r["verdict"].get<std::string>()) << "</td></tr>";
+  out << "</table>";
+  // Per action dimension, named when act_convert was given --action-names.
+  const std::vector<double> dim_mse = e.value("per_dim_mse", std::vector<double>());
+  const std::vector<std::string> names = r.value("action_names", std::vector<std::string>());
+  if (!dim_mse.empty()) {
+    out << "<h3>Held-out error per action dimension (INT8 against FP32)</h3><table><tr><th>action</th>"
+           "<th>MSE (normalised)</th><th>max |err| (normalised)</th><th>MSE (raw)</th><th>max |err| (raw)</th></tr>";
+    for (size_t a = 0; a < dim_mse.size(); ++a) {
+      const auto cell = [&](const char* key) { return e.contains(key) && a < e[key].size() ? num(e[key][a]) : std::string(); };
+      out << "<tr><td>" << escape(a < names.size() ? names[a] : "[" + std::to_string(a) + "]") << "</td><td>"
+          << cell("per_dim_mse") << "</td><td>" << cell("per_dim_max_abs") << "</td><td>" << cell("per_dim_mse_physical")
+          << "</td><td>" << cell("per_dim_max_abs_physical") << "</td></tr>";
+    }
+    out << "</table>";
+  }
   for (const auto& note : r.value("notes", std::vector<std::string>())) out << "<p class='note'>" << escape(note) << "</p>";
 
   const std::vector<std::string> float_layers = r.value("float_layers", std::vector<std::string>());

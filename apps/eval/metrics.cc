@@ -77,6 +77,7 @@ void compare_chunks(std::span<const float> ours, std::span<const float> theirs, 
 void EpisodeEvaluation::add_frame(const std::string& source, std::span<const float> demonstration,
                                   const std::vector<std::vector<float>>& chunks) {
   const size_t dims = action_names.size();
+  add_baselines(demonstration, chunks.empty() ? demonstration.size() : chunks[0].size());
   frame_sources.push_back(source);
   demonstration_first.insert(demonstration_first.end(), demonstration.begin(), demonstration.begin() + static_cast<std::ptrdiff_t>(dims));
   for (size_t m = 0; m < models.size(); ++m) {
@@ -93,6 +94,30 @@ void EpisodeEvaluation::add_frame(const std::string& source, std::span<const flo
       sum_sq += e * e;
     }
     model.frame_error.push_back(sum_sq / static_cast<double>(dims));
+  }
+}
+
+void EpisodeEvaluation::add_baselines(std::span<const float> demonstration, size_t chunk_values) {
+  const size_t dims = action_names.size();
+  if (baselines.empty()) {
+    baselines.emplace_back("hold last action", "repeats the last demonstrated action", dims);
+    baselines.emplace_back("mean action", "always gives the training mean action", dims);
+    baselines.emplace_back("zero", "always gives zero", dims);
+  }
+  std::vector<float> mean(dims, 0.0f), last(dims), zero(dims, 0.0f);
+  for (size_t d = 0; d < dims && d < scale.low.size() && d < scale.high.size(); ++d) mean[d] = (scale.low[d] + scale.high[d]) / 2;
+  // The previous frame's demonstrated action (this frame's is not in demonstration_first yet).
+  if (demonstration_first.size() >= dims) {
+    last.assign(demonstration_first.end() - static_cast<std::ptrdiff_t>(dims), demonstration_first.end());
+  } else {
+    last = mean;
+  }
+  const size_t steps = std::min(demonstration.size(), chunk_values) / dims;
+  const std::vector<float>* actions[] = {&last, &mean, &zero};
+  for (size_t b = 0; b < baselines.size(); ++b) {
+    std::vector<float> chunk;
+    for (size_t s = 0; s < steps; ++s) chunk.insert(chunk.end(), actions[b]->begin(), actions[b]->end());
+    compare_chunks(chunk, demonstration, steps, scale, baselines[b].vs_demonstration);
   }
 }
 
@@ -128,8 +153,14 @@ nlohmann::ordered_json EpisodeEvaluation::to_json() const {
     if (m > 0) {
       mj["vs_reference"] = model.vs_reference.to_json(action_names);
       mj["added_error_fraction"] = added_error(m);
+      mj["added_error_percent"] = 100 * added_error(m);
     }
     j["models"].push_back(std::move(mj));
+  }
+  j["baselines"] = nlohmann::ordered_json::array();
+  for (const auto& b : baselines) {
+    j["baselines"].push_back({{"name", b.name}, {"description", b.description},
+                              {"vs_demonstration", b.vs_demonstration.to_json(action_names)}});
   }
   nlohmann::ordered_json per_frame = {{"source", frame_sources}, {"demonstration", rows(demonstration_first)}};
   per_frame["models"] = nlohmann::ordered_json::array();

@@ -49,6 +49,16 @@ struct ActionScale {
 void compare_chunks(std::span<const float> ours, std::span<const float> theirs, size_t steps, const ActionScale& scale,
                     ChunkComparison& c);
 
+/// A chunk made without the policy, a bar it should clear: the last demonstrated action held, the
+/// training mean action (the centre of the action scale) or zero, repeated over the chunk.
+struct BaselineEvaluation {
+  BaselineEvaluation(std::string baseline_name, std::string what, size_t dims)
+      : name(std::move(baseline_name)), description(std::move(what)), vs_demonstration(dims) {}
+  std::string name;         ///< "hold last action", "mean action", "zero"
+  std::string description;  ///< what it does, for a verdict ("repeats the last demonstrated action")
+  ChunkComparison vs_demonstration;
+};
+
 struct ModelEvaluation {
   ModelEvaluation(std::string model_path, std::string model_precision, size_t dims)
       : path(std::move(model_path)), precision(std::move(model_precision)), vs_demonstration(dims), vs_reference(dims) {}
@@ -68,11 +78,16 @@ struct EpisodeEvaluation {
   std::vector<std::string> frame_sources;
   std::vector<float> demonstration_first;  ///< frames x dims: each frame's demonstrated action (raw)
   std::vector<ModelEvaluation> models;     ///< the first is the reference
+  /// Hold last action, mean action, zero against the demonstration, over the steps model 1's chunks
+  /// are compared on (filled by add_frame; the first frame's "last action" is the mean action).
+  std::vector<BaselineEvaluation> baselines;
 
   /// One frame: the demonstration from it on (steps x dims) and each model's chunk, in `models` order.
   void add_frame(const std::string& source, std::span<const float> demonstration,
                  const std::vector<std::vector<float>>& chunks);
 
+  /// The baselines' chunks for one frame (add_frame calls it): `chunk_values` is model 1's chunk size.
+  void add_baselines(std::span<const float> demonstration, size_t chunk_values);
   /// The error model m adds to the reference, as a fraction of the reference's own error: whole-chunk
   /// normalised MSE of m against the reference over the reference's against the demonstration.
   double added_error(size_t m) const;

@@ -13,7 +13,7 @@ namespace act {
 
 namespace bn = blob_names;
 
-const char* version() { return "0.1.0"; }
+const char* version() { return ACT_VERSION; }  // engine/CMakeLists.txt defines it
 
 // ---------------------------------------------------------------------------------------- Impl
 

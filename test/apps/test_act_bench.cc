@@ -42,7 +42,7 @@ void expect_consistent_summary(const nlohmann::json& s, size_t runs, const std::
 
 TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   const std::string dir = test::scratch_dir();
-  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 -n 4 -w 1 -t 1 --json " + q(dir + "/b.json") +
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 64x96 -n 4 -w 1 -t 1 --json " + q(dir + "/b.json") +
                              " --csv " + q(dir + "/b.csv"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("p99"), std::string::npos);
@@ -50,7 +50,7 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
   const nlohmann::json j = nlohmann::json::parse(in);
 
   // The MAC count is the model's.
-  const double expected_gmac = lerobot_model_config(synthetic_config("96x64"), "test").macs().total() / 1e9;
+  const double expected_gmac = lerobot_model_config(synthetic_config("64x96"), "test").macs().total() / 1e9;
   EXPECT_NEAR(j["model"]["gmac"]["total"].get<double>(), expected_gmac, 1e-9 * expected_gmac);
   double parts = 0;
   for (const char* p : {"backbone", "projections", "encoder", "decoder", "head"}) parts += j["model"]["gmac"][p].get<double>();
@@ -138,7 +138,7 @@ TEST(ActBench, BuiltInModelJsonIsCompleteAndConsistent) {
 
 TEST(ActBench, BuiltInInt8AndCompare) {
   const std::string dir = test::scratch_dir();
-  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 --precision int8 --compare -n 3 -w 0 -t 1 --json " +
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 64x96 --precision int8 --compare -n 3 -w 0 -t 1 --json " +
                              q(dir + "/c.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("the speed of fp32"), std::string::npos) << r.output;
@@ -160,7 +160,7 @@ TEST(ActBench, BuiltInInt8AndCompare) {
 // JSON; --trace: a Chrome trace with a lane per thread. (--enable_op_profiling is TFLite's name.)
 TEST(ActBench, OpProfileAndTrace) {
   const std::string dir = test::scratch_dir();
-  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 --precision int8 -n 2 -w 0 -t 2 " +
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 64x96 --precision int8 -n 2 -w 0 -t 2 " +
                              "--enable_op_profiling --json " + q(dir + "/p.json") + " --trace " + q(dir + "/t.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* section : {"op profile", "top 10 ops by median time", "by kind", "gemm_s8"}) {
@@ -254,6 +254,29 @@ TEST(ActBench, BlobWithRealObservations) {
   const nlohmann::json j = nlohmann::json::parse(in);
   EXPECT_EQ(j["model"]["source"], "blob");
   EXPECT_NEAR(j["model"]["gmac"]["total"].get<double>(), 0.446056832, 1e-9);
+}
+
+// --config is HxW, height first, as every other tool; a size higher than wide was act_bench's old
+// WxH order for a landscape camera, so it is refused with the fix unless --portrait says it is meant.
+TEST(ActBench, ConfigIsHeightByWidthAndRefusesTheTransposedForm) {
+  const std::string dir = test::scratch_dir();
+  auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 160x120 -n 1");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--config 160x120 is HxW (height first"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("For a camera 160 wide and 120 high give --config 120x160; for a portrait camera add --portrait"),
+            std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("stage (ms)"), std::string::npos) << "benchmarked:\n" << r.output;
+  r = run_command(std::string(ACT_BENCH_BIN) + " --config 96x64 --portrait -n 1 -w 0 -t 1 --json " + q(dir + "/p.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream in(dir + "/p.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["model"]["config"]["cameras"][0]["height"], 96);
+  EXPECT_EQ(j["model"]["config"]["cameras"][0]["width"], 64);
+  r = run_command(std::string(ACT_BENCH_BIN) + " --help");
+  EXPECT_NE(r.output.find("120x160 = 120 high, 160 wide"), std::string::npos) << r.output;
+  r = run_command(std::string(ACT_BENCH_BIN) + " --config rover --portrait -n 1");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--portrait goes with --config HxW"), std::string::npos) << r.output;
 }
 
 TEST(ActBench, BadArgumentsAreClearErrors) {

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "actengine/engine.h"
 #include "support/act_test_util.h"
 #include "support/command.h"
 #include "support/test_paths.h"
@@ -25,6 +26,22 @@ TEST(ActConvertCli, HelpDescribesUsage) {
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_NE(r.output.find("checkpoint"), std::string::npos);
   EXPECT_NE(r.output.find("--output"), std::string::npos);
+}
+
+// One version, the project's (the top CMakeLists.txt), on every tool and in the library.
+TEST(ToolsCli, VersionPrintsTheToolAndTheProjectVersion) {
+  const std::string version = act::version();
+  ASSERT_FALSE(version.empty());
+  EXPECT_EQ(version.find_first_not_of("0123456789."), std::string::npos) << version;
+  std::vector<std::string> tools{ACT_CONVERT_BIN, ACT_EVAL_BIN, ACT_BENCH_BIN};
+#ifdef ACT_DRIVE_BIN
+  tools.push_back(ACT_DRIVE_BIN);
+#endif
+  for (const std::string& tool : tools) {
+    const CommandResult r = run_command(q(tool) + " --version");
+    EXPECT_EQ(r.exit_code, 0) << tool << ": " << r.output;
+    EXPECT_EQ(r.output, fs::path(tool).filename().string() + " " + version + "\n");
+  }
 }
 
 TEST(ActConvertCli, MissingArgumentsIsAUsageError) {

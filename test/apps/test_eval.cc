@@ -152,6 +152,17 @@ TEST(EvalMetrics, MatchHandComputedValues) {
   // Added error: b-vs-a chunk MSE over a's own, both normalised.
   const double own = (0.0625 + 0 + 0.25 + 0 + 1 + 1) / 6;
   EXPECT_DOUBLE_EQ(e.added_error(1), (0.25 / 8) / own);
+  // Baselines: mean action (1, 1), the centre of the scale; the last action held (frame 0: the mean;
+  // frame 1: frame 0's demonstrated (1, 1)); zero. Normalised errors over the steps compared:
+  // mean and hold: frame 0 (0, 0), (-0.5, -1), frame 1 (0.5, 1); zero: (-0.5, -1), (-1, -2), (0, 0).
+  ASSERT_EQ(e.baselines.size(), 3u);
+  EXPECT_EQ(e.baselines[0].name, "hold last action");
+  EXPECT_DOUBLE_EQ(e.baselines[0].vs_demonstration.chunk_normalised.mse(), 2.5 / 6);
+  EXPECT_EQ(e.baselines[1].name, "mean action");
+  EXPECT_DOUBLE_EQ(e.baselines[1].vs_demonstration.chunk_normalised.mse(), 2.5 / 6);
+  EXPECT_EQ(e.baselines[2].name, "zero");
+  EXPECT_DOUBLE_EQ(e.baselines[2].vs_demonstration.chunk_normalised.mse(), 6.25 / 6);
+  EXPECT_DOUBLE_EQ(e.baselines[2].vs_demonstration.first_raw.mse(), (1 + 1 + 0 + 0) / 4.0);
   // Per-frame error of model a: normalised first-action MSE.
   ASSERT_EQ(e.models[0].frame_error.size(), 2u);
   EXPECT_DOUBLE_EQ(e.models[0].frame_error[0], 0.0625 / 2);
@@ -255,6 +266,110 @@ TEST(EvalEpisode, OneActionPerRowBuildsChunksFromTheRowsThatFollow) {
   const nlohmann::json j = read_json(dir + "/eval.json");
   EXPECT_EQ(j["models"][0]["vs_demonstration"]["first_action"]["raw"]["mse"].get<double>(), 0.0);
   EXPECT_NEAR(j["models"][0]["vs_demonstration"]["chunk"]["raw"]["mse"].get<double>(), sum / static_cast<double>(count), 1e-12);
+}
+
+// The demonstrations as users have them, through act_eval: the long form (a chunk over rows, its
+// padding left out) and one action per row without a frame column, in frame order.
+TEST(ActEvalEpisodeCli, ReadsTheLongChunkFormAndCsvsWithoutAFrameColumn) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = convert_tiny(dir, "fp32");
+  const auto chunks = chunks_in_process(blob);
+  const ImageEpisode ep = write_image_episode(dir);
+  // file,chunk_index,steering,throttle,is_pad: the model's own chunks, the last frame's steps 6..9
+  // padded with values that would count if the padding were not respected.
+  std::string csv = "file,chunk_index,steering,throttle,is_pad\n";
+  for (size_t i = 0; i < 4; ++i) {
+    for (size_t k = 0; k < 10; ++k) {
+      const bool pad = i == 3 && k >= 6;
+      csv += ep.keys[i] + "," + std::to_string(k) + "," + (pad ? "99" : exact(chunks[i][2 * k])) + "," +
+             (pad ? "-99" : exact(chunks[i][2 * k + 1])) + "," + (pad ? "1" : "0") + "\n";
+    }
+  }
+  write_text(dir + "/long.csv", csv);
+  const std::string eval = std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -t 1 --episode " + q(ep.frames);
+  CommandResult r = run_command(eval + " --actions " + q(dir + "/long.csv") + " --states " + q(ep.states) + " --json " +
+                                q(dir + "/long.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json j = read_json(dir + "/long.json");
+  EXPECT_EQ(j["action_names"], nlohmann::json({"steering", "throttle"}));
+  EXPECT_EQ(j["frames"], 4);
+  EXPECT_LT(j["models"][0]["vs_demonstration"]["chunk"]["raw"]["max_abs"].get<double>(), 1e-6) << r.output;
+  // Steps out of order are an error naming the line.
+  write_text(dir + "/bad_long.csv", "file,chunk_index,steering,throttle\n" + ep.keys[0] + ",1,0,0\n");
+  r = run_command(eval + " --actions " + q(dir + "/bad_long.csv") + " --states " + q(ep.states));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("bad_long.csv line 2 column 'chunk_index': step 1 where 0 comes next"), std::string::npos) << r.output;
+
+  // steering,throttle: no frame column, row i is frame i (the sorted images); states likewise.
+  std::string per_frame = "steering,throttle\n", states = "a,b\n";
+  for (size_t i = 0; i < 4; ++i) {
+    per_frame += exact(chunks[i][0]) + "," + exact(chunks[i][1]) + "\n";
+    states += exact(kStates[i][0]) + "," + exact(kStates[i][1]) + "\n";
+  }
+  write_text(dir + "/per_frame.csv", per_frame);
+  write_text(dir + "/states_in_order.csv", states);
+  r = run_command(eval + " --actions " + q(dir + "/per_frame.csv") + " --states " + q(dir + "/states_in_order.csv") +
+                  " --json " + q(dir + "/per_frame.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("per_frame.csv has no frame column: its rows are the frames in order"), std::string::npos) << r.output;
+  j = read_json(dir + "/per_frame.json");
+  EXPECT_EQ(j["frames"], 4);
+  EXPECT_EQ(j["models"][0]["vs_demonstration"]["first_action"]["raw"]["mse"].get<double>(), 0.0) << r.output;
+}
+
+// A CSV of another shape names every form act_eval reads, with an example.
+TEST(ActEvalEpisodeCli, AMismatchNamesEveryAcceptedForm) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = convert_tiny(dir, "fp32");
+  const ImageEpisode ep = write_image_episode(dir);
+  write_text(dir + "/four.csv", "frame,a,b,c,d\n" + ep.keys[0] + ",1,2,3,4\n");
+  const CommandResult r = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " --episode " + q(ep.frames) +
+                                      " --actions " + q(dir + "/four.csv") + " --states " + q(ep.states));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  for (const char* form : {"4 action columns (a, b, c, d; one per dimension) after the frame column 'frame' but the model's "
+                           "actions have 2 values",
+                           "after a frame column (an image name or a 0-based frame index): frame,a0,a1",
+                           "no frame column (row 1 is frame 0, in frame order): a0,a1",
+                           "NAME@STEP columns: frame,a0@0,a1@0,", "file,chunk_index,a0,a1,is_pad"}) {
+    EXPECT_NE(r.output.find(form), std::string::npos) << form << "\n" << r.output;
+  }
+}
+
+// --state last-action|mean|zeros: a video or images with actions only, as act_drive feeds states.
+TEST(ActEvalEpisodeCli, StatesFromTheActionsTheMeanOrZeros) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = convert_tiny(dir, "fp32");
+  const ImageEpisode ep = write_image_episode(dir);
+  write_text(dir + "/actions.csv", "frame,steer,throttle\n" + ep.keys[0] + ",0.1,0.2\n" + ep.keys[1] + ",0.3,0.4\n" +
+                                       ep.keys[2] + ",0.5,0.6\n" + ep.keys[3] + ",0.7,0.8\n");
+  const std::string eval = std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -t 1 --episode " + q(ep.frames) + " --actions " +
+                           q(dir + "/actions.csv");
+  CommandResult r = run_command(eval);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("give --states FILE.csv, or --state last-action|mean|zeros"), std::string::npos) << r.output;
+  for (const std::string how : {"last-action", "mean", "zeros"}) {
+    r = run_command(eval + " --state " + how);
+    EXPECT_EQ(r.exit_code, 0) << how << "\n" << r.output;
+    EXPECT_NE(r.output.find("--state " + how), std::string::npos) << r.output;  // the note says where the states came from
+  }
+  r = run_command(eval + " --state " + q(ep.states));  // a file, as --states
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  // last-action: each frame's state is the action demonstrated at the frame before (the first, the training mean).
+  act::ModelInfo info = tiny_info();
+  info.state_low = {-1, 0};
+  info.state_high = {1, 4};
+  act::eval::EpisodeSources sources{ep.frames, dir + "/actions.csv", ""};
+  sources.state = "last-action";
+  const act::eval::Episode last = act::eval::read_episode(sources, info);
+  ASSERT_EQ(last.frames.size(), 4u);
+  EXPECT_EQ(last.frames[0].state, (std::vector<float>{0, 2}));
+  EXPECT_EQ(last.frames[1].state, (std::vector<float>{0.1f, 0.2f}));
+  EXPECT_EQ(last.frames[3].state, (std::vector<float>{0.5f, 0.6f}));
+  sources.state = "zeros";
+  EXPECT_EQ(act::eval::read_episode(sources, info).frames[2].state, (std::vector<float>{0, 0}));
 }
 
 TEST(EvalEpisode, ActDriveRecordingByColumnNames) {
@@ -430,6 +545,18 @@ TEST(ActEvalEpisodeCli, GatesExitCodes) {
   EXPECT_GT(added, 0.0);
   EXPECT_NEAR(added, j["models"][1]["vs_reference"]["chunk"]["normalised"]["mse"].get<double>() / own, 1e-12 * added);
   EXPECT_NE(pass.output.find("added error"), std::string::npos) << pass.output;
+  // The added error as a percentage, a verdict line, and the baselines beside the policy's error.
+  EXPECT_NEAR(j["models"][1]["added_error_percent"].get<double>(), 100 * added, 1e-9 * added);
+  EXPECT_NE(pass.output.find("% of model 1's own error"), std::string::npos) << pass.output;
+  EXPECT_NE(pass.output.find("verdict      model 2 adds "), std::string::npos) << pass.output;
+  EXPECT_NE(pass.output.find("baselines    chunk MSE against the demonstration (normalised), no policy: hold last action "),
+            std::string::npos) << pass.output;
+  ASSERT_EQ(j["baselines"].size(), 3u);
+  EXPECT_EQ(j["baselines"][1]["name"], "mean action");
+  EXPECT_TRUE(j["baselines"][2]["vs_demonstration"]["chunk"]["normalised"]["mse"].is_number());
+  const CommandResult within = run_command(base + " --max-added-error " + std::to_string(added * 2));
+  EXPECT_NE(within.output.find(": within --max-added-error"), std::string::npos) << within.output;
+  EXPECT_NE(within.output.find("PASS"), std::string::npos) << within.output;
 
   EXPECT_EQ(run_command(base + " --max-mse " + std::to_string(own * 2) + " --max-added-error " + std::to_string(added * 2)).exit_code, 0);
   const CommandResult mse = run_command(base + " --max-mse " + std::to_string(own / 2));
@@ -488,10 +615,28 @@ TEST(ActEvalEpisodeCli, HtmlReportHoldsTheEpisode) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::vector<uint8_t> bytes = act::test::read_file(html);
   const std::string text(bytes.begin(), bytes.end());
-  for (const char* part : {"<h3>steer</h3>", "<h3>throttle</h3>", "Error histogram", ep.keys[0].c_str(), "class='chart actions'"}) {
+  for (const char* part : {"<h3>steer</h3>", "<h3>throttle</h3>", "Error histogram", ep.keys[0].c_str(), "class='chart actions'",
+                           "Baselines (no policy), beside the first model", "<td>hold last action (",
+                           "<td>mean action (", "<td>zero ("}) {
     EXPECT_NE(text.find(part), std::string::npos) << part;
   }
   EXPECT_EQ(text.find("http"), std::string::npos);
+  // With FP32 then INT8, the actions chart draws INT8 first, wider, and FP32 over it, so both show.
+  const std::string int8 = convert_tiny(dir, "int8", int8_flags());
+  const CommandResult two = run_command(std::string(ACT_EVAL_BIN) + " --episode " + q(ep.frames) + " --actions " +
+                                        q(dir + "/actions.csv") + " --states " + q(ep.states) + " -m " + q(fp32) + " -m " +
+                                        q(int8) + " --report " + q(html));
+  ASSERT_EQ(two.exit_code, 0) << two.output;
+  const std::vector<uint8_t> page_bytes = act::test::read_file(html);
+  const std::string page(page_bytes.begin(), page_bytes.end());
+  const size_t chart = page.find("class='chart actions'");
+  ASSERT_NE(chart, std::string::npos);
+  const size_t fp32_line = page.find("stroke='#1f77b4'", chart), int8_line = page.find("stroke='#d62728'", chart);
+  ASSERT_NE(fp32_line, std::string::npos);
+  ASSERT_NE(int8_line, std::string::npos);
+  EXPECT_LT(int8_line, fp32_line) << "INT8 is drawn over FP32";
+  EXPECT_NE(page.find("stroke-width='5.5' stroke-opacity='0.70' stroke='#d62728'", chart), std::string::npos);
+  EXPECT_NE(page.find("stroke-width='3.5' stroke-opacity='0.70' stroke='#1f77b4'", chart), std::string::npos);
 }
 
 TEST(ActConvertCli, KeepFloatAndHtmlReportUseOneLayerNaming) {

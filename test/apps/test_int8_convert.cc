@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <utility>
 
 #include <nlohmann/json.hpp>
@@ -80,6 +81,39 @@ TEST(ActConvertInt8, StaticMeetsTheAccuracyAndSizeTargets) {
                                         q(src + "/reference.safetensors") + " --compare --tol 0.2");
     EXPECT_EQ(e.exit_code, 0) << e.output;
   }
+}
+
+// The report names the action dimensions (--action-names), gives the per-dimension table in every
+// form, and says whether the result is good.
+TEST(ActConvertInt8, ReportNamesTheActionsAndGivesAVerdict) {
+  const std::string src = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(src);
+  const std::string dir = test::scratch_dir();
+  const Converted c = convert_int8("act-tiny", dir + "/n.actb", "--calib " + q(src) + " --calib-samples 3 --holdout 1 "
+                                   "--action-names steering,throttle");
+  ASSERT_EQ(c.result.exit_code, 0) << c.result.output;
+  EXPECT_NE(c.result.output.find("\n  steering "), std::string::npos) << c.result.output;
+  EXPECT_NE(c.result.output.find("\n  throttle "), std::string::npos) << c.result.output;
+  EXPECT_EQ(c.result.output.find("\n  [0] "), std::string::npos) << c.result.output;
+  // act-tiny's static INT8 is within 0.05 of FP32 (about 0.02, normalised).
+  EXPECT_NE(c.result.output.find("verdict        good: INT8's held-out actions are within"), std::string::npos) << c.result.output;
+  EXPECT_EQ(c.report["action_names"], nlohmann::json({"steering", "throttle"}));
+  EXPECT_EQ(c.report["verdict"].get<std::string>().rfind("good: ", 0), 0u) << c.report["verdict"];
+  const CommandResult html = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/h.actb") +
+                                         " --precision int8 -q --calib " + q(src) + " --calib-samples 3 --holdout 1 "
+                                         "--action-names steering,throttle --report " + q(dir + "/r.html"));
+  ASSERT_EQ(html.exit_code, 0) << html.output;
+  std::ifstream in(dir + "/r.html");
+  const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(page.find("Held-out error per action dimension"), std::string::npos);
+  EXPECT_NE(page.find("<td>steering</td>"), std::string::npos);
+  EXPECT_NE(page.find("<th>verdict</th><td>good: "), std::string::npos);
+  const CommandResult wrong = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/w.actb") +
+                                          " --precision int8 --calib " + q(src) + " --action-names steering");
+  EXPECT_EQ(wrong.exit_code, 1) << wrong.output;
+  EXPECT_NE(wrong.output.find("--action-names gives 1 names but the model's actions have 2 values"), std::string::npos)
+      << wrong.output;
+  EXPECT_FALSE(fs::exists(dir + "/w.actb"));
 }
 
 TEST(ActConvertInt8, DynamicNeedsNoCalibration) {
@@ -209,6 +243,10 @@ TEST(ActConvertInt8, Fp32WithInt8FlagsIsAUsageError) {
   const CommandResult r = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/f.actb") + " --calib " + q(src));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("--precision int8"), std::string::npos) << r.output;
+  const CommandResult names = run_command(std::string(ACT_CONVERT_BIN) + " " + q(src) + " -o " + q(dir + "/f.actb") +
+                                          " --action-names steering,throttle");
+  EXPECT_EQ(names.exit_code, 1) << names.output;
+  EXPECT_NE(names.output.find("--action-names and --report need --precision int8"), std::string::npos) << names.output;
 }
 
 // --linear-inputs as a user gives it: per tensor makes every FFN hidden activation per tensor in

@@ -4,6 +4,8 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 
 
@@ -129,6 +131,43 @@ TEST_F(CalibrationMessages, FramesOfAnotherAspectRatioAreAWarning) {
   // Frames of the model's own shape get no warning.
   const CommandResult same = run_command(convert(dir_ + "/frames"));
   EXPECT_EQ(same.output.find("stretched"), std::string::npos) << same.output;
+}
+
+// "128 frames given, 64 used for calibration, 16 held out, 48 left out": the frames not used are
+// said, in the printed report and in the report file.
+TEST_F(CalibrationMessages, SaysHowManyFramesWereUsedHeldOutAndLeftOut) {
+  fs::create_directories(dir_ + "/ten");
+  for (int i = 0; i < 10; ++i) {
+    fs::copy_file(fixture_ + "/sample" + std::to_string(i % 4) + ".observation.images.front.png",
+                  dir_ + "/ten/f" + std::to_string(i) + ".png");
+  }
+  const CommandResult r = run_command(convert(dir_ + "/ten", "--calib-samples 4 --holdout 2 --report " + q(dir_ + "/r.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string note = "10 frames given, 4 used for calibration, 2 held out, 4 left out (--calib-samples 4 sets how many "
+                           "are used)";
+  EXPECT_NE(r.output.find("note: " + note), std::string::npos) << r.output;
+  std::ifstream in(dir_ + "/r.json");
+  const std::string report((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(report.find(note), std::string::npos) << report;
+  // All of them used: nothing left out.
+  const CommandResult all = run_command(convert(dir_ + "/ten", "--calib-samples 8 --holdout 2"));
+  ASSERT_EQ(all.exit_code, 0) << all.output;
+  EXPECT_NE(all.output.find("note: 10 frames given, 8 used for calibration, 2 held out\n"), std::string::npos) << all.output;
+}
+
+TEST_F(CalibrationMessages, UpscaledFramesAreAWarningNamingBothSizes) {
+  // 48x64 frames for the model's 96x128 camera: blown up 2x, the same aspect ratio.
+  fs::create_directories(dir_ + "/small");
+  act::media::write_image(dir_ + "/small/f0.png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(40, 90, 160)));
+  act::media::write_image(dir_ + "/small/f1.png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(200, 30, 60)));
+  const CommandResult r = run_command(convert(dir_ + "/small"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string warning = "warning: calibration frames of 48x64 are upscaled 2x to the model's 96x128 (height x width";
+  EXPECT_NE(r.output.find("act_convert: " + warning), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\n" + warning), std::string::npos) << r.output;  // in the report
+  EXPECT_EQ(r.output.find("stretched"), std::string::npos) << r.output;
+  const CommandResult same = run_command(convert(dir_ + "/frames"));
+  EXPECT_EQ(same.output.find("upscaled"), std::string::npos) << same.output;
 }
 
 }  // namespace

@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/engine.h"
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
 #include "apps/media/media_io.h"
@@ -48,6 +49,15 @@ TEST(ActDriveCli, HelpListsTheOptions) {
   }
 }
 
+TEST(ActDriveCli, VersionPrintsTheProjectVersion) {
+  for (const std::string tool : {kDrive, std::string(ACT_PWM_WATCHDOG_BIN)}) {
+    const auto r = run_command(tool + " --version");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    const std::string name = fs::path(tool).filename().string();
+    EXPECT_EQ(r.output, name + " " + act::version() + "\n");
+  }
+}
+
 TEST(ActDriveCli, ClearErrorsForMissingInputs) {
   const std::string dir = act::test::scratch_dir();
   auto r = run_command(kDrive + " --camera 0 --dry-run");
@@ -58,6 +68,7 @@ TEST(ActDriveCli, ClearErrorsForMissingInputs) {
   r = run_command(kDrive + " -m m.actb --camera " + q(dir + "/no-such-video.avi") + " --dry-run");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("cannot open camera"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("act_drive --list-cameras lists the cameras found"), std::string::npos) << r.output;
   std::ofstream(dir + "/cal.json") << R"({"steering": {"left_us": 1100, "center_us": 1500, "right_us": 1900},
                                           "throttle": {"reverse_us": 1300, "neutral_us": 1900, "forward_us": 1800}})";
   r = run_command(kDrive + " -m m.actb --camera 0 --dry-run -c " + q(dir + "/cal.json"));
@@ -76,6 +87,7 @@ TEST(ActDriveCli, ClearErrorsForModelAndSerialPort) {
   r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(dir + "/ttyNONE") + " --raw-endpoints");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("cannot open serial port " + dir + "/ttyNONE"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("act_drive --list-ports lists the serial ports found"), std::string::npos) << r.output;
   FakeArduino silent_board;
   silent_board.set_silent(true);
   r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --serial " + q(silent_board.port_path()) +
@@ -203,8 +215,10 @@ TEST(ActDriveCli, RealtimeOffReplaysAFileTheSameEveryTime) {
   const std::vector<std::string> first = commands_of("first"), second = commands_of("second");
   EXPECT_EQ(first, second);
   const std::string log = read_text(dir + "/first.log");
-  // Frames 0..89 one per tick, the first tick waiting for the first chunk, one more seeing the end.
-  EXPECT_NE(log.find(": 91 ticks (89 driving, 2 safe, 0 missed)"), std::string::npos) << log;
+  // Frames 0..89 one per tick, the first tick waiting for the first chunk, one more seeing the end
+  // (held safe as a fault: no frame).
+  EXPECT_NE(log.find(": 91 ticks (89 driving, 2 safe: 0 e-stop, 1 waiting for a chunk, 1 fault, 0 overrun; 0 missed)"),
+            std::string::npos) << log;
   // Only for a file, only in a dry run.
   auto r = run_command(replay);
   EXPECT_EQ(r.exit_code, 1);
@@ -650,6 +664,33 @@ TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {
   const auto check = run_command(kDrive + " -m m.actb --camera " + q(dir + "/none.avi") + " --dry-run -c " + q(dir + "/cal.json"));
   EXPECT_EQ(check.output.find("calibration"), std::string::npos) << check.output;
   EXPECT_NE(check.output.find("cannot open camera"), std::string::npos) << check.output;
+}
+
+// --help says --calibrate writes --calibration: without a port, the template goes to that file
+// (never over one that exists, which may hold measured endpoints).
+TEST(ActDriveCli, CalibrateWithoutAPortWritesTheTemplateToTheFileGiven) {
+  const std::string dir = act::test::scratch_dir();
+  const std::string path = dir + "/calibration.json";
+  auto r = run_command(kDrive + " --calibrate -c " + q(path));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("wrote a calibration template to " + path), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Edit the pulse widths"), std::string::npos) << r.output;
+  ASSERT_TRUE(fs::exists(path)) << r.output;
+  const Calibration written = Calibration::load(path);
+  EXPECT_EQ(written.max_forward, 0.3);
+  EXPECT_EQ(written.steering.mid_us, 1500);
+  // Edited, then --calibrate again without a port: the file is kept.
+  nlohmann::json edited = nlohmann::json::parse(read_text(path));
+  edited["steering"]["center_us"] = 1480;
+  std::ofstream(path) << edited.dump(2);
+  r = run_command(kDrive + " --calibrate -c " + q(path));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find(path + " exists: left as it is"), std::string::npos) << r.output;
+  EXPECT_EQ(Calibration::load(path).steering.mid_us, 1480);
+  // A folder that is not there is an error, not a silent success.
+  r = run_command(kDrive + " --calibrate -c " + q(dir + "/missing/cal.json"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot write " + dir + "/missing/cal.json"), std::string::npos) << r.output;
 }
 
 TEST(ActDriveCli, ThePackagesCalibrationTemplateIsAValidCalibrationFile) {

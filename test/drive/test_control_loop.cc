@@ -405,6 +405,11 @@ TEST(ControlLoop, AiSteerTakesTheThrottleByHandAndEstopHoldsNeutral) {
   }
   EXPECT_GT(steered, 15u) << rig.log.str();
   EXPECT_EQ(summary.manual_ticks, 0u);  // ai-steer is the policy driving
+  // The summary tells the e-stop's ticks (about 5 at 10 Hz) from the others held safe.
+  EXPECT_GE(summary.estop_ticks, 3u) << summary.to_string();
+  EXPECT_EQ(summary.safe_ticks, summary.estop_ticks + summary.waiting_ticks + summary.fault_ticks + summary.overrun_ticks);
+  EXPECT_NE(summary.to_string().find(" safe: " + std::to_string(summary.estop_ticks) + " e-stop, "), std::string::npos)
+      << summary.to_string();
 }
 
 // Ctrl-Z then fg (act_drive's signal handlers bump the count): the chunk planned before and an

@@ -17,9 +17,9 @@ TEST(SyntheticModel, ConfigsAndErrors) {
   EXPECT_EQ(rover.cameras[0].height, 360);
   EXPECT_EQ(rover.cameras[0].width, 640);
   EXPECT_EQ(rover.action_dim, 2);
-  const ModelConfig custom = lerobot_model_config(synthetic_config("320x240"), "x");
+  const ModelConfig custom = lerobot_model_config(synthetic_config("240x320"), "x");
+  EXPECT_EQ(custom.cameras[0].height, 240);  // HxW: height first
   EXPECT_EQ(custom.cameras[0].width, 320);
-  EXPECT_EQ(custom.cameras[0].height, 240);
   for (const char* bad : {"huge", "10x10", "320x", "99999x480"}) {
     try {
       synthetic_config(bad);

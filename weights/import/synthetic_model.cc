@@ -34,15 +34,15 @@ class Random {
   std::mt19937 engine_;
 };
 
-// "WxH" with 1-5 digits each.
-bool parse_size(const std::string& s, int* width, int* height) {
+// "HxW" (height first, as the cameras' [3, H, W] shapes) with 1-5 digits each.
+bool parse_size(const std::string& s, int* height, int* width) {
   const size_t x = s.find('x');
   auto digits = [](const std::string& part) {
     return !part.empty() && part.size() <= 5 && part.find_first_not_of("0123456789") == std::string::npos;
   };
   if (x == std::string::npos || !digits(s.substr(0, x)) || !digits(s.substr(x + 1))) return false;
-  *width = std::stoi(s.substr(0, x));
-  *height = std::stoi(s.substr(x + 1));
+  *height = std::stoi(s.substr(0, x));
+  *width = std::stoi(s.substr(x + 1));
   return true;
 }
 
@@ -56,12 +56,12 @@ nlohmann::ordered_json synthetic_config(const std::string& name) {
   } else if (name == "rover") {
     height = 360;
     state = action = 2;
-  } else if (parse_size(name, &width, &height)) {
+  } else if (parse_size(name, &height, &width)) {
     if (width < 32 || height < 32 || width > 4096 || height > 4096) {
-      fail(StatusCode::kInvalidArgument, "built-in model size " + name + ": width and height must be in [32, 4096]");
+      fail(StatusCode::kInvalidArgument, "built-in model size " + name + " (height x width): both must be in [32, 4096]");
     }
   } else {
-    fail(StatusCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or WxH such as 640x480)");
+    fail(StatusCode::kInvalidArgument, "unknown built-in model \"" + name + "\" (default, rover, or HxW such as 480x640: height first)");
   }
   nlohmann::ordered_json c;
   c["type"] = "act";

@@ -17,7 +17,8 @@ namespace act {
 ///  - "default": LeRobot's default ACT (resnet18, D 512, 8 heads, FFN 3200, 4+1 layers, chunk 100),
 ///    one 480x640 camera, state 6, action 6;
 ///  - "rover":   the same network on one 360x640 camera, state 2, action 2 (steering, throttle);
-///  - "WxH" (e.g. "320x240"): the default network on one camera of that size.
+///  - "HxW" (e.g. "240x320": 240 high, 320 wide; height first, as everywhere): the default network on
+///    one camera of that size.
 /// Throws act::Error(kInvalidArgument) for anything else.
 nlohmann::ordered_json synthetic_config(const std::string& name);
 

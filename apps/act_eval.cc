@@ -196,19 +196,10 @@ std::string non_finite_error(const act::eval::EpisodeEvaluation& evaluation) {
   return "";
 }
 
-int run_episode(const Options& o) {
-  std::vector<std::unique_ptr<act::Engine>> engines;
-  for (const auto& path : o.models) {
-    engines.push_back(open_engine(path, o.threads));
-    check_same_interface(engines[0]->model_info(), engines.back()->model_info(), o.models[0], path);
-  }
+// Every model on every frame of the episode (each camera given the frame), against the demonstration.
+act::eval::EpisodeEvaluation evaluate_episode(const Options& o, const std::vector<std::unique_ptr<act::Engine>>& engines,
+                                              const act::eval::Episode& episode) {
   const act::ModelInfo& info = engines[0]->model_info();
-  act::eval::Episode episode = act::eval::read_episode(o.episode, info);
-  if (info.cameras.size() > 1) {
-    episode.notes.push_back("single-view episode: each of the model's " + std::to_string(info.cameras.size()) +
-                            " cameras was given the same frame");
-  }
-
   act::eval::EpisodeEvaluation evaluation;
   evaluation.action_names = episode.action_names;
   evaluation.scale = {info.action_low, info.action_high};
@@ -244,16 +235,11 @@ int run_episode(const Options& o) {
     evaluation.add_frame(frame.source, frame.demonstration, chunks);
   }
 
-  nlohmann::ordered_json json = evaluation.to_json();
-  json["episode_path"] = episode.path;
-  json["episode_kind"] = episode.kind;
-  json["notes"] = episode.notes;
-  if (!o.json_path.empty()) write_file(o.json_path, json.dump(2) + "\n");
-  if (!o.report_path.empty()) {
-    write_file(o.report_path, act::eval::render_html_report({{"title", "act_eval: " + episode.path}, {"episode", json}}));
-  }
-  print_summary(evaluation, episode);
-  print_baselines(evaluation);
+  return evaluation;
+}
+
+// One verdict line per model after the first: the error it adds, against --max-added-error.
+void print_verdicts(const Options& o, const act::eval::EpisodeEvaluation& evaluation) {
   for (size_t m = 1; m < evaluation.models.size(); ++m) {
     const double added = evaluation.added_error(m);
     std::cout << "verdict      model " << m + 1 << " adds " << percent(added) << " to model 1's error";
@@ -265,6 +251,10 @@ int run_episode(const Options& o) {
     }
   }
 
+}
+
+// The exit code: non-finite outputs, an error that could not be measured, or a gate missed.
+int episode_exit_code(const Options& o, const act::eval::EpisodeEvaluation& evaluation) {
   bool non_finite = false, gate_missed = false;
   for (size_t m = 0; m < evaluation.models.size(); ++m) {
     non_finite |= evaluation.models[m].non_finite_outputs > 0;
@@ -287,6 +277,34 @@ int run_episode(const Options& o) {
     return 1;
   }
   return gate_missed ? kExitGateMissed : 0;
+}
+
+int run_episode(const Options& o) {
+  std::vector<std::unique_ptr<act::Engine>> engines;
+  for (const auto& path : o.models) {
+    engines.push_back(open_engine(path, o.threads));
+    check_same_interface(engines[0]->model_info(), engines.back()->model_info(), o.models[0], path);
+  }
+  const act::ModelInfo& info = engines[0]->model_info();
+  act::eval::Episode episode = act::eval::read_episode(o.episode, info);
+  if (info.cameras.size() > 1) {
+    episode.notes.push_back("single-view episode: each of the model's " + std::to_string(info.cameras.size()) +
+                            " cameras was given the same frame");
+  }
+
+  const act::eval::EpisodeEvaluation evaluation = evaluate_episode(o, engines, episode);
+  nlohmann::ordered_json json = evaluation.to_json();
+  json["episode_path"] = episode.path;
+  json["episode_kind"] = episode.kind;
+  json["notes"] = episode.notes;
+  if (!o.json_path.empty()) write_file(o.json_path, json.dump(2) + "\n");
+  if (!o.report_path.empty()) {
+    write_file(o.report_path, act::eval::render_html_report({{"title", "act_eval: " + episode.path}, {"episode", json}}));
+  }
+  print_summary(evaluation, episode);
+  print_baselines(evaluation);
+  print_verdicts(o, evaluation);
+  return episode_exit_code(o, evaluation);
 }
 
 }  // namespace

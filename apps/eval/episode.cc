@@ -139,8 +139,11 @@ struct ActionColumns {
 // what a mismatch error lists.
 std::string accepted_action_forms(int action_dim) {
   std::string names, chunk;
-  for (int d = 0; d < action_dim; ++d) names += (d ? "," : "") + std::string("a") + std::to_string(d);
-  for (int d = 0; d < action_dim; ++d) chunk += (d ? "," : "") + std::string("a") + std::to_string(d) + "@0";
+  for (int d = 0; d < action_dim; ++d) {
+    const std::string sep = d ? "," : "";
+    names.append(sep).append("a").append(std::to_string(d));
+    chunk.append(sep).append("a").append(std::to_string(d)).append("@0");
+  }
   return "act_eval reads these forms of actions CSV (the value names are yours; " + std::to_string(action_dim) +
          " per action here):\n"
          "  one action per row, after a frame column (an image name or a 0-based frame index): frame," + names + "\n"

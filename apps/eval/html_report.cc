@@ -162,17 +162,11 @@ std::string model_label(const Json& model) {
   return model.value("precision", std::string()) + " (" + model.value("path", std::string()) + ")";
 }
 
-void episode_section(std::ostringstream& out, const Json& r) {
+// Each model's error against the demonstration (and the first model's), the baselines beside the
+// first model, and the per-dimension errors.
+void error_tables(std::ostringstream& out, const Json& r) {
   const std::vector<std::string> names = r["action_names"];
-  const std::vector<double> low = r["action_low"], high = r["action_high"];
   const Json& models = r["models"];
-  const Json& per_frame = r["per_frame"];
-  out << "<h2>Episode</h2><table>"
-      << "<tr><th>episode</th><td>" << escape(r.value("episode_path", std::string())) << " ("
-      << escape(r.value("episode_kind", std::string())) << ")</td></tr>"
-      << "<tr><th>frames</th><td>" << r["frames"].get<size_t>() << "</td></tr></table>";
-  for (const auto& note : r.value("notes", std::vector<std::string>())) out << "<p class='note'>note: " << escape(note) << "</p>";
-
   out << "<h2>Error against the demonstration</h2><table><tr><th>model</th><th>first action MSE (raw)</th>"
          "<th>first action max |err| (raw)</th><th>chunk MSE (normalised)</th><th>chunk max |err| (normalised)</th>"
          "<th>against the first model: chunk MSE (normalised)</th><th>error added, % of the first model's own</th></tr>";
@@ -207,7 +201,15 @@ void episode_section(std::ostringstream& out, const Json& r) {
     out << "</tr>";
   }
   out << "</table>";
+}
 
+// The first actions over time against the demonstration, per dimension; then the errors' histogram
+// and their course over the frames.
+void action_and_error_charts(std::ostringstream& out, const Json& r) {
+  const std::vector<std::string> names = r["action_names"];
+  const std::vector<double> low = r["action_low"], high = r["action_high"];
+  const Json& models = r["models"];
+  const Json& per_frame = r["per_frame"];
   out << "<h2>Actions over time (first action of each chunk, raw units)</h2>";
   const Json& demonstration = per_frame["demonstration"];
   for (size_t d = 0; d < names.size(); ++d) {
@@ -237,7 +239,11 @@ void episode_section(std::ostringstream& out, const Json& r) {
   out << "<h2>Error histogram (first action minus demonstration, normalised units)</h2>"
       << histogram(errors, "error") << "<h2>Error per frame (first action MSE, normalised)</h2>"
       << line_chart(frame_errors, "frame", "frame-errors");
+}
 
+void worst_frames(std::ostringstream& out, const Json& r) {
+  const Json& models = r["models"];
+  const Json& per_frame = r["per_frame"];
   // The worst frames of the first model, with their sources, so a person can look at them.
   const Json& first_errors = per_frame["models"][0]["error"];
   std::vector<size_t> order(first_errors.size());
@@ -254,6 +260,18 @@ void episode_section(std::ostringstream& out, const Json& r) {
     out << "</tr>";
   }
   out << "</table>";
+}
+
+void episode_section(std::ostringstream& out, const Json& r) {
+  out << "<h2>Episode</h2><table>"
+      << "<tr><th>episode</th><td>" << escape(r.value("episode_path", std::string())) << " ("
+      << escape(r.value("episode_kind", std::string())) << ")</td></tr>"
+      << "<tr><th>frames</th><td>" << r["frames"].get<size_t>() << "</td></tr></table>";
+  for (const auto& note : r.value("notes", std::vector<std::string>())) out << "<p class='note'>note: " << escape(note) << "</p>";
+
+  error_tables(out, r);
+  action_and_error_charts(out, r);
+  worst_frames(out, r);
 }
 
 void int8_section(std::ostringstream& out, const Json& r) {
@@ -280,7 +298,9 @@ void int8_section(std::ostringstream& out, const Json& r) {
            "<th>MSE (normalised)</th><th>max |err| (normalised)</th><th>MSE (raw)</th><th>max |err| (raw)</th></tr>";
     for (size_t a = 0; a < dim_mse.size(); ++a) {
       const auto cell = [&](const char* key) { return e.contains(key) && a < e[key].size() ? num(e[key][a]) : std::string(); };
-      out << "<tr><td>" << escape(a < names.size() ? names[a] : "[" + std::to_string(a) + "]") << "</td><td>"
+      // (appended, not "[" + ...: GCC 12's -Wrestrict misreads the inlined insert of operator+)
+      const std::string name = a < names.size() ? names[a] : std::string("[").append(std::to_string(a)).append("]");
+      out << "<tr><td>" << escape(name) << "</td><td>"
           << cell("per_dim_mse") << "</td><td>" << cell("per_dim_max_abs") << "</td><td>" << cell("per_dim_mse_physical")
           << "</td><td>" << cell("per_dim_max_abs_physical") << "</td></tr>";
     }

@@ -50,7 +50,7 @@ TEST(ActDriveCli, HelpListsTheOptions) {
 }
 
 TEST(ActDriveCli, VersionPrintsTheProjectVersion) {
-  for (const std::string tool : {kDrive, std::string(ACT_PWM_WATCHDOG_BIN)}) {
+  for (const std::string& tool : {kDrive, std::string(ACT_PWM_WATCHDOG_BIN)}) {
     const auto r = run_command(tool + " --version");
     EXPECT_EQ(r.exit_code, 0) << r.output;
     const std::string name = fs::path(tool).filename().string();

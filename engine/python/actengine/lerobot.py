@@ -22,6 +22,17 @@ from ._actengine import Engine, Policy
 STATE_KEY = "observation.state"
 
 
+def model_input_keys(info):
+    """The observation keys a model takes, in its order: each camera's, then the state's and the
+    environment state's when it has them (ModelInfo: engine.model_info)."""
+    keys = [camera.key for camera in info.cameras]
+    if info.state_dim:
+        keys.append(STATE_KEY)
+    if info.env_state_dim:
+        keys.append(info.env_state_key)
+    return keys
+
+
 class ACTPolicy:
     """LeRobot's ACTPolicy with its pre- and post-processors, running an .actb blob.
 
@@ -33,12 +44,7 @@ class ACTPolicy:
     def __init__(self, blob, threads=0, isa="auto"):
         self.engine = Engine(blob, threads=threads, isa=isa)
         self._policy = Policy(self.engine)
-        info = self.engine.model_info
-        self._input_keys = [camera.key for camera in info.cameras]
-        if info.state_dim:
-            self._input_keys.append(STATE_KEY)
-        if info.env_state_dim:
-            self._input_keys.append(info.env_state_key)
+        self._input_keys = model_input_keys(self.engine.model_info)
         try:
             import torch
         except ImportError:

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 import actengine
+from actengine.lerobot import model_input_keys
 from lerobot.configs.types import FeatureType
 from lerobot.policies.pretrained import PreTrainedPolicy
 
@@ -69,12 +70,7 @@ class ActenginePolicy(PreTrainedPolicy):
                                "act_convert needs a newer actengine: pip install --upgrade actengine)") from error
         check_features(self.config, self.engine.model_info, blob)
         self._policy = actengine.Policy(self.engine)
-        info = self.engine.model_info
-        self._input_keys = [camera.key for camera in info.cameras]
-        if info.state_dim:
-            self._input_keys.append(STATE_KEY)
-        if info.env_state_dim:
-            self._input_keys.append(info.env_state_key)
+        self._input_keys = model_input_keys(self.engine.model_info)
 
     def _require_engine(self):
         if self._policy is None:

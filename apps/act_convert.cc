@@ -211,40 +211,21 @@ std::unique_ptr<act::ImportedCheckpoint> import(const Options& o, int& exit_code
   return std::move(model).value();
 }
 
-// Whether the held-out error is good, from the largest normalised |err| of INT8 against FP32 (a
-// normalised unit: a training standard deviation, or half the range). 0.05 is what static
-// calibration with --calib-method mse reaches on the checkpoints docs/int8.md lists.
-std::string int8_verdict(const act::ActionError& e) {
-  char text[512];
-  if (e.max_abs <= 0.05) {
-    std::snprintf(text, sizeof text, "good: INT8's held-out actions are within %.3g of FP32's (max |err|, normalised; "
-                  "0.05 or less is good); confirm on an episode: act_eval --episode ... -m fp32.actb -m int8.actb", e.max_abs);
-  } else if (e.max_abs <= 0.2) {
-    std::snprintf(text, sizeof text, "check: max |err| %.3g normalised is above 0.05: compare on an episode with act_eval "
-                  "--episode (--max-added-error), or try --mode mixed --target-mse", e.max_abs);
-  } else {
-    std::snprintf(text, sizeof text, "poor: max |err| %.3g normalised (above 0.2): try more calibration frames from the "
-                  "robot's camera, --mode mixed --target-mse, or --precision fp32", e.max_abs);
-  }
-  return text;
-}
-
-// The report as JSON, with the action names and the verdict.
+// The report as JSON, with the action names.
 nlohmann::ordered_json report_json(const act::Int8Report& report, const Options& o) {
   nlohmann::ordered_json int8 = nlohmann::ordered_json::parse(report.to_json());
   if (!o.action_names.empty()) int8["action_names"] = o.action_names;
-  int8["verdict"] = int8_verdict(report.action_error);
   return int8;
 }
 
-// The printed report with the action dimensions named ("  [0] " -> "  steering ") and the verdict.
+// The printed report with the action dimensions named ("  [0] " -> "  steering ").
 std::string report_text(const act::Int8Report& report, const Options& o) {
   std::string text = report.to_text();
   for (size_t a = 0; a < o.action_names.size(); ++a) {
     const std::string label = "\n  [" + std::to_string(a) + "] ";
     if (const size_t at = text.find(label); at != std::string::npos) text.replace(at, label.size(), "\n  " + o.action_names[a] + " ");
   }
-  return text + "verdict        " + int8_verdict(report.action_error) + "\n";
+  return text;
 }
 
 // --report FILE.html: the conversion report as a page (the one renderer act_eval's reports use too).

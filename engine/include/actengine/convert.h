@@ -286,6 +286,9 @@ struct Int8Report {
   std::string to_json() const;
   /// The human report act_convert prints.
   std::string to_text() const;
+  /// Whether the held-out error is good (max |err| normalised: 0.05 or less "good", up to 0.2
+  /// "check", above "poor"), with what to do next; in to_json() and to_text() too.
+  std::string verdict() const;
 };
 
 // --------------------------------------------------------------------------------------- the model

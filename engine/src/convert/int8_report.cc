@@ -31,6 +31,25 @@ nlohmann::json action_error_json(const ActionError& e) {
 
 }  // namespace
 
+// Whether the held-out error is good, from the largest normalised |err| of INT8 against FP32 (a
+// normalised unit: a training standard deviation, or half the range). 0.05 is what static
+// calibration with --calib-method mse reaches on the checkpoints docs/int8.md lists.
+std::string Int8Report::verdict() const {
+  const ActionError& e = action_error;
+  char text[512];
+  if (e.max_abs <= 0.05) {
+    std::snprintf(text, sizeof text, "good: INT8's held-out actions are within %.3g of FP32's (max |err|, normalised; "
+                  "0.05 or less is good); confirm on an episode: act_eval --episode ... -m fp32.actb -m int8.actb", e.max_abs);
+  } else if (e.max_abs <= 0.2) {
+    std::snprintf(text, sizeof text, "check: max |err| %.3g normalised is above 0.05: compare on an episode with act_eval "
+                  "--episode (--max-added-error), or try --mode mixed --target-mse", e.max_abs);
+  } else {
+    std::snprintf(text, sizeof text, "poor: max |err| %.3g normalised (above 0.2): try more calibration frames from the "
+                  "robot's camera, --mode mixed --target-mse, or --precision fp32", e.max_abs);
+  }
+  return text;
+}
+
 std::string Int8Report::to_json() const {
   nlohmann::json r;
   r["mode"] = int8_mode_name(mode);
@@ -76,6 +95,7 @@ std::string Int8Report::to_json() const {
                                 {"quantized_range", {a.quantized_min(), a.quantized_max()}},
                                 {"observed_range", {a.observed_min, a.observed_max}}});
   }
+  r["verdict"] = verdict();
   r["seconds"] = seconds;
   return r.dump(2);
 }
@@ -130,6 +150,7 @@ std::string Int8Report::to_text() const {
       << (l.kept_float ? ", kept in float" : "") << ")\n";
   }
   for (const auto& n : notes) s << (n.rfind("warning: ", 0) == 0 ? "" : "note: ") << n << "\n";
+  s << "verdict        " << verdict() << "\n";
   return s.str();
 }
 

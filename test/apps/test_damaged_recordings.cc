@@ -19,9 +19,7 @@ using act::test::CommandResult;
 using act::test::q;
 using act::test::run_command;
 
-std::string fixture_image(int i) {
-  return act::test::fixture_dir("act-tiny") + "/sample" + std::to_string(i) + ".observation.images.front.png";
-}
+using act::test::fixture_image;
 
 // An act_drive recording of 8 ticks driven by hand, a new camera frame every other tick, and the
 // log.jsonl of the 4 frames the policy would have seen. `tick_3` replaces the fourth tick's number.

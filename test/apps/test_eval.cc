@@ -35,9 +35,7 @@ nlohmann::json read_json(const std::string& path) {
   return nlohmann::json::parse(in);
 }
 
-std::string fixture_image(int i) {
-  return act::test::fixture_dir("act-tiny") + "/sample" + std::to_string(i) + ".observation.images.front.png";
-}
+using act::test::fixture_image;
 
 // %.9g: a float written so that it reads back exactly.
 std::string exact(float v) {

@@ -30,6 +30,10 @@ std::string fixture_dir(const std::string& name) {
   return (fs::path(ACT_SHARED_DIR) / "fixtures" / name).string();
 }
 
+std::string fixture_image(int i) {
+  return fixture_dir("act-tiny") + "/sample" + std::to_string(i) + ".observation.images.front.png";
+}
+
 std::string generated_checkpoint_dir(const std::string& name) {
   return (fs::path(ACT_TEST_DATA_DIR) / name).string();
 }

@@ -7,15 +7,35 @@
 #include <asm/hwcap.h>
 #include <sys/auxv.h>
 #endif
+#if defined(__linux__) && defined(__x86_64__)
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <cerrno>
+#endif
 
 namespace act::kernels {
 
 namespace {
 
-constexpr const char* kIsaNames[kIsaCount] = {"ref", "avx2", "avx512", "avx512vnni", "neon", "neondot"};
+constexpr const char* kIsaNames[kIsaCount] = {"ref", "avx2", "avx512", "avx512vnni", "neon", "neondot", "avxvnni", "amx"};
 
 // Best first: the highest level of either chain that the CPU supports wins.
-constexpr Isa kPreference[] = {Isa::kAvx512Vnni, Isa::kAvx512, Isa::kAvx2, Isa::kNeonDot, Isa::kNeon, Isa::kRef};
+constexpr Isa kPreference[] = {Isa::kAmx,    Isa::kAvx512Vnni, Isa::kAvx512, Isa::kAvxVnni,
+                               Isa::kAvx2,   Isa::kNeonDot,    Isa::kNeon,   Isa::kRef};
+
+#if defined(__x86_64__) && defined(__linux__)
+// Linux keeps AMX's 8 KiB tile state off until a process asks for it (arch/x86/include/uapi/asm/prctl.h).
+constexpr int kArchReqXcompPerm = 0x1023;
+constexpr int kXfeatureXtiledata = 18;
+
+// Asks once per process for the tile data state; nullptr when granted, else why not.
+const char* request_amx_permission() {
+  if (syscall(SYS_arch_prctl, kArchReqXcompPerm, kXfeatureXtiledata) == 0) return nullptr;
+  return errno == EPERM ? "the OS refused AMX tile state (arch_prctl ARCH_REQ_XCOMP_PERM: EPERM)"
+                        : "the OS does not offer AMX tile state (arch_prctl ARCH_REQ_XCOMP_PERM failed)";
+}
+#endif
 
 CpuFeatures detect() {
   CpuFeatures f;
@@ -55,6 +75,17 @@ CpuFeatures detect() {
     f.avx512bw = __builtin_cpu_supports("avx512bw");
     f.avx512vl = __builtin_cpu_supports("avx512vl");
     f.avx512vnni = __builtin_cpu_supports("avx512vnni");
+  }
+  // Debian 12's cpuinfo knows neither AVX-VNNI nor AMX: GCC's indicator (CPUID and XCR0) does.
+  __builtin_cpu_init();
+  f.avxvnni = __builtin_cpu_supports("avxvnni");
+  if (__builtin_cpu_supports("amx-tile") && __builtin_cpu_supports("amx-int8")) {
+#if defined(__linux__)
+    f.amx_refused = request_amx_permission();
+#else
+    f.amx_refused = "AMX tile state is only requested on Linux";
+#endif
+    f.amx = f.amx_refused == nullptr;
   }
 #elif defined(__aarch64__)
   f.neon = true;  // Advanced SIMD is mandatory in AArch64.
@@ -105,8 +136,10 @@ std::optional<Isa> isa_below(Isa isa) {
   switch (isa) {
     case Isa::kRef: return std::nullopt;
     case Isa::kAvx2: return Isa::kRef;
-    case Isa::kAvx512: return Isa::kAvx2;
+    case Isa::kAvxVnni: return Isa::kAvx2;
+    case Isa::kAvx512: return Isa::kAvxVnni;
     case Isa::kAvx512Vnni: return Isa::kAvx512;
+    case Isa::kAmx: return Isa::kAvx512Vnni;
     case Isa::kNeon: return Isa::kRef;
     case Isa::kNeonDot: return Isa::kNeon;
   }
@@ -120,8 +153,10 @@ bool cpu_supports(Isa isa) {
   switch (isa) {
     case Isa::kRef: return true;
     case Isa::kAvx2: return avx2;
+    case Isa::kAvxVnni: return avx2 && f.avxvnni;
     case Isa::kAvx512: return avx512;
     case Isa::kAvx512Vnni: return avx512 && f.avx512vnni;
+    case Isa::kAmx: return avx512 && f.avx512vnni && f.amx;
     case Isa::kNeon: return f.neon;
     case Isa::kNeonDot: return f.neon && f.dotprod;
   }

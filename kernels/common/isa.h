@@ -11,33 +11,52 @@
 
 namespace act::kernels {
 
-/// Instruction-set levels, one chain per architecture, each level a superset of the one below:
-///   x86-64   ref < avx2 (AVX2 + FMA) < avx512 (AVX-512 F/BW/VL) < avx512vnni (+ VNNI)
+/// Instruction-set levels, one chain per architecture, ordered as the hardware adds them:
+///   x86-64   ref < avx2 (AVX2 + FMA) < avxvnni (+ AVX-VNNI: VEX vpdpbusd on ymm, Intel's small
+///            cores) < avx512 (AVX-512 F/BW/VL) < avx512vnni (+ VNNI) < amx (+ AMX-TILE/INT8)
 ///   AArch64  ref < neon (Advanced SIMD) < neondot (+ the ARMv8.2 dot product)
-/// A kernel variant is named by the level it needs; a family's variant for a level is its best
-/// variant at or below it (kernels/config/kernel_config.h). kRef is the portable scalar reference.
-enum class Isa : uint8_t { kRef = 0, kAvx2 = 1, kAvx512 = 2, kAvx512Vnni = 3, kNeon = 4, kNeonDot = 5 };
-inline constexpr int kIsaCount = 6;
+/// A level needs every feature of the levels below it with one exception: avxvnni is not implied
+/// by avx512 (Zen 4 and Ice Lake have AVX-512 VNNI but no AVX-VNNI), so a CPU can run a level and
+/// not one below it. A kernel variant is named by the level it needs; a family's variant for a
+/// level is its best variant at or below it that the CPU runs (kernels/config/kernel_config.h).
+/// kRef is the portable scalar reference. The values are stable (masks, covered paths).
+enum class Isa : uint8_t {
+  kRef = 0,
+  kAvx2 = 1,
+  kAvx512 = 2,
+  kAvx512Vnni = 3,
+  kNeon = 4,
+  kNeonDot = 5,
+  kAvxVnni = 6,
+  kAmx = 7,
+};
+inline constexpr int kIsaCount = 8;
 
 /// A set of Isa values: bit i stands for Isa(i).
 using IsaMask = uint32_t;
 constexpr IsaMask isa_bit(Isa isa) { return IsaMask{1} << static_cast<unsigned>(isa); }
 
-/// "ref", "avx2", "avx512", "avx512vnni", "neon" or "neondot" (the spelling EngineOptions::isa,
+/// "ref", "avx2", "avxvnni", "avx512", "avx512vnni", "amx", "neon" or "neondot" (the spelling EngineOptions::isa,
 /// ACT_ISA and kernel names use).
 const char* isa_name(Isa isa);
 /// The inverse of isa_name; nullopt for anything else (case-sensitive).
 std::optional<Isa> parse_isa(std::string_view name);
 /// Comma-separated names of the set, in Isa order, e.g. "ref, avx2".
 std::string isa_mask_names(IsaMask mask);
-/// The level directly below `isa` in its chain (avx512vnni -> avx512 -> avx2 -> ref,
-/// neondot -> neon -> ref); nullopt for kRef.
+/// The level directly below `isa` in its chain (amx -> avx512vnni -> avx512 -> avxvnni -> avx2 ->
+/// ref, neondot -> neon -> ref); nullopt for kRef.
 std::optional<Isa> isa_below(Isa isa);
 
 /// What this CPU (and its OS) supports, detected once per process.
 struct CpuFeatures {
   bool avx2 = false, fma = false;                                       // x86-64
   bool avx512f = false, avx512bw = false, avx512vl = false, avx512vnni = false;
+  bool avxvnni = false;
+  /// AMX-TILE and AMX-INT8 in CPUID, and Linux granted this process the tile data state
+  /// (arch_prctl(ARCH_REQ_XCOMP_PERM), asked once at detection). amx_refused says why not when
+  /// the CPU has AMX but the OS refused it (then the kernels fall back to the levels below).
+  bool amx = false;
+  const char* amx_refused = nullptr;
   bool neon = false, dotprod = false;                                   // AArch64
   /// An AMD family 19h core with AVX-512: Zen 4 (Zen 3, the same family, has no AVX-512). From
   /// cpuinfo's CPUID signature (Debian 12's cpuinfo names no Zen 4 uarch); false without cpuinfo.
@@ -48,9 +67,10 @@ struct CpuFeatures {
 };
 const CpuFeatures& cpu_features();
 
-/// True when the CPU can run `isa` (which implies every level below it): avx2 needs AVX2 + FMA;
-/// avx512 needs that and AVX-512 F/BW/VL; avx512vnni also AVX-512 VNNI; neon needs Advanced SIMD;
-/// neondot also the dot-product extension. kRef is always supported.
+/// True when the CPU can run `isa`: avx2 needs AVX2 + FMA; avxvnni that and AVX-VNNI; avx512 AVX2,
+/// FMA and AVX-512 F/BW/VL; avx512vnni also AVX-512 VNNI; amx also AMX-TILE/INT8 with the OS's
+/// permission; neon needs Advanced SIMD; neondot also the dot-product extension. kRef is always
+/// supported.
 bool cpu_supports(Isa isa);
 /// The set of ISAs cpu_supports() accepts.
 IsaMask cpu_isa_mask();

@@ -20,6 +20,9 @@ IsaTables isa_tables(Isa isa) {
               maxpool_s8_table_avx512()};
     case Isa::kAvx512Vnni:
       return {gemm_s8_table_avx512vnni(), nullptr, nullptr, nullptr, nullptr};
+    case Isa::kAvxVnni:
+    case Isa::kAmx:
+      return {};
     case Isa::kNeon:
       return {nullptr, gemm_f32_table_neon(), quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
     case Isa::kNeonDot:

@@ -32,11 +32,13 @@ struct IsaTables {
 };
 IsaTables isa_tables(Isa isa);
 
-/// A family's variant for `level`: its table for the highest ISA at or below `level` (every family
-/// has a reference, so there always is one). E.g. variant_for(Isa::kAvx512, &IsaTables::gemm_s8).
+/// A family's variant for `level`: its table for the highest ISA at or below `level` that the CPU
+/// runs (a level below may be missing: avx512 does not imply avxvnni; every family has a reference,
+/// so there always is one). E.g. variant_for(Isa::kAvx512, &IsaTables::gemm_s8).
 template <class Table>
 const Table& variant_for(Isa level, const Table* IsaTables::*family) {
   for (std::optional<Isa> isa = level; isa; isa = isa_below(*isa)) {
+    if (*isa != level && !cpu_supports(*isa)) continue;
     if (const Table* t = isa_tables(*isa).*family) return *t;
   }
   return *(isa_tables(Isa::kRef).*family);

@@ -84,6 +84,7 @@ endfunction()
 # act_set_isa_flags(source...): per-file instruction-set flags, chosen by the file name's suffix
 # (the kernel naming grammar's ISA suffix: the level the code needs, kernels/common/isa.h):
 #   *_avx2.cc        -mavx2 -mfma                                              (x86-64 targets)
+#   *_avxvnni.cc     -mavx2 -mfma -mavxvnni                                    (x86-64 targets)
 #   *_avx512.cc      -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl              (x86-64 targets)
 #   *_avx512vnni.cc  -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl -mavx512vnni (x86-64 targets)
 #   *_neon.cc        none: Advanced SIMD is part of the AArch64 baseline
@@ -102,6 +103,8 @@ function(act_set_isa_flags)
   foreach(src ${ARGN})
     if(act_x86 AND src MATCHES "_avx2\\.cc$")
       set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-mavx2;-mfma")
+    elseif(act_x86 AND src MATCHES "_avxvnni\\.cc$")
+      set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-mavx2;-mfma;-mavxvnni")
     elseif(act_x86 AND src MATCHES "_avx512\\.cc$")
       set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-mavx2;-mfma;-mavx512f;-mavx512bw;-mavx512vl")
     elseif(act_x86 AND src MATCHES "_avx512vnni\\.cc$")

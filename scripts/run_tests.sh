@@ -76,6 +76,7 @@ flags=$(grep -m1 -E '^(flags|Features)' /proc/cpuinfo || true)
 has() { for f in "$@"; do [[ " $flags " == *" $f "* ]] || return 1; done; }
 required=()
 has avx2 fma && required+=(avx2)
+has avx2 fma avx_vnni && required+=(avxvnni)
 has avx2 fma avx512f avx512bw avx512vl && required+=(avx512)
 has avx2 fma avx512f avx512bw avx512vl avx512_vnni && required+=(avx512vnni)
 has asimd && required+=(neon)

@@ -21,6 +21,7 @@ IsaTables isa_tables(Isa isa) {
     case Isa::kAvx512Vnni:
       return {gemm_s8_table_avx512vnni(), nullptr, nullptr, nullptr, nullptr};
     case Isa::kAvxVnni:
+      return {gemm_s8_table_avxvnni(), nullptr, nullptr, nullptr, nullptr};
     case Isa::kAmx:
       return {};
     case Isa::kNeon:

@@ -3,9 +3,10 @@
 // Nothing else in the library chooses a kernel; ops receive the configuration through the graph's
 // RunContext, and weights are packed for its gemm_s8 variant.
 //
-// A family's variant for a level is its best variant at or below that level (kernels/common/isa.h):
-// at avx512, gemm_s8 (which has no AVX-512 variant without VNNI) runs avx2 while quant, element-wise,
-// max-pool and the FP32 GEMM run their avx512 variants.
+// A family's variant for a level is its best variant at or below that level that the CPU runs
+// (kernels/common/isa.h): at avx512, gemm_s8 (which has no AVX-512 variant without VNNI) runs avxvnni
+// where the CPU has AVX-VNNI, else avx2, while quant, element-wise, max-pool and the FP32 GEMM run
+// their avx512 variants; at avxvnni only gemm_s8 has its own variant, the rest run avx2.
 #pragma once
 
 #include <optional>

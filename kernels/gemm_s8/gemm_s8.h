@@ -45,6 +45,7 @@ enum class GemmS8Layout : uint32_t {
   kVnni64x4 = 3,  ///< nr=64, kr=4: 64 columns x 4 bytes per k-group, weights stored + 128 (u8)
   kNeon16x4 = 4,  ///< nr=16, kr=4: 16 columns x 4 bytes per k-group
   kVnni64x4U8A = 5,  ///< as kVnni64x4 with the weights as they are (s8), for unsigned activations
+  kVnni16x4 = 6,  ///< nr=16, kr=4: kNeon16x4's order with the weights stored + 128 (u8), AVX-VNNI
 };
 
 inline constexpr uint32_t kGemmS8PackedMagic = 0x38534741u;  // "AGS8"
@@ -53,8 +54,9 @@ inline constexpr uint32_t kGemmS8PackedMagic = 0x38534741u;  // "AGS8"
 /// byte 64 + p * panel_bytes and holds int32 kbias[nr], int32 ksum[nr], then kp*nr weight bytes:
 ///   ksum[n]  = sum_k W[n][k]
 ///   kbias[n] = bias_i32[n] - a_zero_point * ksum[n]
-/// Columns past N are zero everywhere, and so are the weight bytes of k in [K, kp). (kVnni64x4
-/// stores W XOR 0x80 = W + 128 as u8 for the real weights; its kernel subtracts 128 * row sums of A.)
+/// Columns past N are zero everywhere, and so are the weight bytes of k in [K, kp). (kVnni64x4 and
+/// kVnni16x4 store W XOR 0x80 = W + 128 as u8 for the real weights; their kernels subtract 128 * row
+/// sums of A.)
 struct GemmS8PackedHeader {
   uint32_t magic;
   GemmS8Layout layout;

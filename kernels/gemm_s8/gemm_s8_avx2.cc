@@ -46,13 +46,13 @@ constexpr size_t kPanelBlockBytes = size_t{512} << 10;
 #include "kernels/gemm_s8/gemm_s8_driver.inc"
 
 template <int R>
-using TileAcc = __m256i[R];
+using TileAcc = __m256i[R][1];  // one vector of 8 columns per row
 
 // out[r] = the 8 int32 accumulators of row r (natural column order), kbias included, A walked
 // segment by segment. The accumulators are a local array (copied out once) so that GCC keeps them
 // in registers.
 template <int R>
-inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp, __m256i (&out)[R]) {
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp, __m256i (&out)[R][1]) {
   const int kgroups = kp / kKR;
   const auto* w = reinterpret_cast<const int8_t*>(panel + 8 * kNR);
   __m256i acc[R][4];
@@ -93,124 +93,11 @@ inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kp,
   for (int r = 0; r < R; ++r) {
     const __m256i h0 = _mm256_hadd_epi32(acc[r][0], acc[r][1]);  // j=0,1 | j+4=4,5, two partials each
     const __m256i h1 = _mm256_hadd_epi32(acc[r][2], acc[r][3]);
-    out[r] = _mm256_add_epi32(_mm256_hadd_epi32(h0, h1), kbias);  // [c0 c1 c2 c3 | c4 c5 c6 c7]
+    out[r][0] = _mm256_add_epi32(_mm256_hadd_epi32(h0, h1), kbias);  // [c0 c1 c2 c3 | c4 c5 c6 c7]
   }
 }
 
-__m256i lane_mask(int lo, int hi) {
-  const __m256i idx = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  return _mm256_and_si256(_mm256_cmpgt_epi32(idx, _mm256_set1_epi32(lo - 1)),
-                          _mm256_cmpgt_epi32(_mm256_set1_epi32(hi), idx));
-}
-
-// Per-column float parameters of a panel, zero outside [lo, hi) so nothing past N is read.
-__m256 load_cols(const float* p, int n, int lo, int hi) {
-  if (lo == 0 && hi == kNR) return _mm256_loadu_ps(p + n);
-  return _mm256_maskload_ps(p + n, lane_mask(lo, hi));
-}
-
-struct EpiS8 {
-  const GemmS8OutS8& o;
-  __m256 scale{}, bias{}, zo{}, qmin{}, qmax{}, rscale{};
-  __m256i rzp{};
-
-  void begin_panel(int n, int lo, int hi) {
-    scale = load_cols(o.scale, n, lo, hi);
-    if (o.bias != nullptr) bias = load_cols(o.bias, n, lo, hi);
-    zo = _mm256_set1_ps(static_cast<float>(o.out_zero_point));
-    qmin = _mm256_set1_ps(static_cast<float>(o.qmin));
-    qmax = _mm256_set1_ps(static_cast<float>(o.qmax));
-    rscale = _mm256_set1_ps(o.residual_scale);
-    rzp = _mm256_set1_epi32(o.residual_zero_point);
-  }
-  void row(int m, int n, int lo, int hi, __m256i acc) const {
-    const bool full = lo == 0 && hi == kNR;
-    const __m256 s = o.a_row_scale != nullptr ? _mm256_mul_ps(_mm256_set1_ps(o.a_row_scale[m]), scale) : scale;
-    __m256 v = _mm256_mul_ps(_mm256_cvtepi32_ps(acc), s);
-    if (o.bias != nullptr) v = _mm256_add_ps(v, bias);
-    if (o.residual != nullptr) {
-      const int8_t* rp = o.residual + static_cast<size_t>(m) * o.ldr + n;
-      int64_t bytes = 0;
-      if (full) {
-        std::memcpy(&bytes, rp, 8);
-      } else {
-        int8_t tmp[8] = {};
-        std::memcpy(tmp + lo, rp + lo, static_cast<size_t>(hi - lo));
-        std::memcpy(&bytes, tmp, 8);
-      }
-      const __m256i r = _mm256_sub_epi32(_mm256_cvtepi8_epi32(_mm_cvtsi64_si128(bytes)), rzp);
-      v = _mm256_add_ps(v, _mm256_mul_ps(_mm256_cvtepi32_ps(r), rscale));
-    }
-    v = _mm256_add_ps(v, zo);
-    v = _mm256_max_ps(v, qmin);  // v > qmin ? v : qmin, as requant_ref.h
-    v = _mm256_min_ps(v, qmax);
-    const __m256i q32 = _mm256_cvtps_epi32(v);  // round half to even (MXCSR default)
-    const __m128i q16 = _mm_packs_epi32(_mm256_castsi256_si128(q32), _mm256_extracti128_si256(q32, 1));
-    const __m128i q8 = _mm_packs_epi16(q16, q16);  // exact: values are already in [qmin, qmax]
-    int8_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
-    if (full) {
-      _mm_storel_epi64(reinterpret_cast<__m128i*>(cp), q8);
-    } else {
-      int8_t tmp[16];
-      _mm_storeu_si128(reinterpret_cast<__m128i*>(tmp), q8);
-      std::memcpy(cp + lo, tmp + lo, static_cast<size_t>(hi - lo));
-    }
-  }
-};
-
-struct EpiF32 {
-  const GemmS8OutF32& o;
-  __m256 w_scale{}, bias{};
-
-  void begin_panel(int n, int lo, int hi) {
-    w_scale = load_cols(o.w_scale, n, lo, hi);
-    bias = o.bias != nullptr ? load_cols(o.bias, n, lo, hi) : _mm256_setzero_ps();
-  }
-  void row(int m, int n, int lo, int hi, __m256i acc) const {
-    const bool full = lo == 0 && hi == kNR;
-    const __m256i mask = full ? _mm256_set1_epi32(-1) : lane_mask(lo, hi);
-    const float a_scale = o.a_row_scale != nullptr ? o.a_row_scale[m] : o.a_scale;
-    const __m256 s = _mm256_mul_ps(_mm256_set1_ps(a_scale), w_scale);
-    __m256 y = _mm256_mul_ps(_mm256_cvtepi32_ps(acc), s);
-    y = _mm256_add_ps(y, bias);
-    if (o.residual != nullptr) {
-      const float* rp = o.residual + static_cast<size_t>(m) * o.ldr + n;
-      y = _mm256_add_ps(y, full ? _mm256_loadu_ps(rp) : _mm256_maskload_ps(rp, mask));
-    }
-    if (o.relu) y = _mm256_max_ps(y, _mm256_setzero_ps());  // y > 0 ? y : 0
-    float* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
-    if (full) {
-      _mm256_storeu_ps(cp, y);
-    } else {
-      _mm256_maskstore_ps(cp, mask, y);
-    }
-  }
-};
-
-struct EpiS32 {
-  const GemmS8OutS32& o;
-  void begin_panel(int, int, int) {}
-  void row(int m, int n, int lo, int hi, __m256i acc) const {
-    int32_t* cp = o.c + static_cast<size_t>(m) * o.ldc + n;
-    if (lo == 0 && hi == kNR) {
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(cp), acc);
-    } else {
-      _mm256_maskstore_epi32(cp, lane_mask(lo, hi), acc);
-    }
-  }
-};
-
-// acc -= (z_row - z_packed) * ksum (the driver's per-row zero points).
-template <int R>
-void subtract_row_zero_points(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, int m,
-                              __m256i (&acc)[R]) {
-  const __m256i ksum = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 4 * kNR));
-  for (int r = 0; r < R; ++r) {
-    const __m256i dz = _mm256_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
-    acc[r] = _mm256_sub_epi32(acc[r], _mm256_mullo_epi32(dz, ksum));
-  }
-}
-
+#include "kernels/gemm_s8/gemm_s8_epilogue_ymm.inc"
 #include "kernels/gemm_s8/gemm_s8_tiles.inc"
 
 }  // namespace

@@ -303,47 +303,7 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr
   for (int r = 0; r < R; ++r) epi.row(m + r, n, acc[r]);
 }
 
-// The rows [m, m + R) against panels [pb, pe): the row sums once (signed A), then every panel.
-template <int R, bool kUnsignedA, class Epi>
-void row_tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int pb, int pe, int n0,
-              int n1, Epi& epi, uint32_t& paths) {
-  int32_t corr[R] = {};
-  if constexpr (!kUnsignedA) row_corrections<R>(g, m, corr);
-  // One small panel stays in L1 from row tile to row tile; several, or a large one, come from L2
-  // (or L3 on an inference's first sweep) at 256 bytes per 12 cycles on a core with two vpdpbusd
-  // ports, faster than the hardware prefetchers bring them: those are prefetched (row_block's caller
-  // sweeps blocks of panels in order, so "ahead" is what comes next).
-  const bool stream_weights = pe - pb > 1 || h.panel_bytes > kL1PanelBytes;
-  if (stream_weights) paths |= kPathStreamedWeights;
-  for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
-    tile<R, kUnsignedA>(g, h, corr, panels + static_cast<size_t>(p) * h.panel_bytes, m, n, lo, hi, epi, stream_weights);
-  });
-}
-
-template <bool kUnsignedA, class Epi>
-void row_block_of(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
-                  int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  switch (rows) {
-    case 6: row_tile<6, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 5: row_tile<5, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 4: row_tile<4, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 3: row_tile<3, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    case 2: row_tile<2, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-    default: row_tile<1, kUnsignedA>(g, h, panels, m, pb, pe, n0, n1, epi, paths); break;
-  }
-}
-
-template <class Epi>
-void row_block(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
-               int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
-  if (h.layout == kLayoutU8A) {
-    ACT_DCHECK(g.a_row_zero_point == nullptr, "unsigned activations have one zero point, in the packed weights");
-    paths |= kPathUnsignedA;
-    row_block_of<true>(g, h, panels, m, rows, pb, pe, n0, n1, epi, paths);
-  } else {
-    row_block_of<false>(g, h, panels, m, rows, pb, pe, n0, n1, epi, paths);
-  }
-}
+#include "kernels/gemm_s8/gemm_s8_vnni_rows.inc"
 
 // o[L] = lane L (128 bits) of a, of b, of c and of d, in that order: a 4 x 4 transpose of lanes.
 void transpose_lanes(const __m512i& a, const __m512i& b, const __m512i& c, const __m512i& d, __m512i& o0,

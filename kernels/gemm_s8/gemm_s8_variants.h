@@ -42,13 +42,16 @@ void pack_w_s8_8x8_goi_pair4(int n, int k, const int8_t* w, size_t ldw, const in
 /// nr=64, kr=4; weights stored as W XOR 0x80 (W + 128, the unsigned side of vpdpbusd), padding 0.
 void pack_w_s8_64x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                             void* packed);
-/// nr=16, kr=4.
+/// nr=16, kr=4 (NEON SDOT; AVX-VNNI for unsigned activations).
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed);
 /// VNNI for unsigned activations (GemmS8Kernels::pack_u8a): 64 columns x 4 bytes, W as it is.
 void pack_w_s8_64x4_goi_u8a(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                             void* packed);
-/// The same four packers reading W^T: `wt` is [k x n] (row stride ldw >= n), W[j][i] = wt[i * ldw + j];
+/// nr=16, kr=4 in pack_w_s8_16x4_goi's order, weights stored as W XOR 0x80 (AVX-VNNI), padding 0.
+void pack_w_s8_16x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed);
+/// The same five packers reading W^T: `wt` is [k x n] (row stride ldw >= n), W[j][i] = wt[i * ldw + j];
 /// each writes the bytes its pack_w_ twin writes for W. Attention packs its values this way, straight
 /// from their token-major int8 copy.
 void pack_wt_s8_1x1_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
@@ -59,6 +62,8 @@ void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const i
                              void* packed);
 void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                          void* packed);
+void pack_wt_s8_16x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed);
 
 // ---- ref (gemm_s8_ref.cc): the normative scalar definition ----------------------------------
 
@@ -76,6 +81,13 @@ const GemmS8Kernels* gemm_s8_table_ref();
 
 /// The AVX2 table, or nullptr when not built.
 const GemmS8Kernels* gemm_s8_table_avx2();
+
+// ---- AVX-VNNI (gemm_s8_avxvnni.cc, x86-64 only; -mavx2 -mfma -mavxvnni) ----------------------
+// 6x16c4 on ymm: the AVX-512 VNNI scheme with VEX vpdpbusd (W + 128 as u8 x A as s8, row sums).
+// Packed by pack_w_s8_16x4_goi_x80; or by pack_w_s8_16x4_goi for A stored unsigned. Needs
+// cpu_supports(Isa::kAvxVnni).
+
+const GemmS8Kernels* gemm_s8_table_avxvnni();
 
 // ---- AVX-512 VNNI (gemm_s8_avx512vnni.cc, x86-64 only; -mavx512f/bw/vl/vnni) ----------------
 // 6x64c4: vpdpbusd on (W + 128) as u8 x A as s8; each row tile subtracts 128 * rowsum(A).

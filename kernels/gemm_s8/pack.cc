@@ -26,6 +26,7 @@ constexpr LayoutDesc kLayouts[] = {
     {GemmS8Layout::kVnni64x4, 64, 4, false, true},
     {GemmS8Layout::kNeon16x4, 16, 4, false, false},
     {GemmS8Layout::kVnni64x4U8A, 64, 4, false, false},
+    {GemmS8Layout::kVnni16x4, 16, 4, false, true},
 };
 
 const LayoutDesc& desc_of(GemmS8Layout layout) {
@@ -216,6 +217,11 @@ void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t
   pack_generic<4>(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
+void pack_w_s8_16x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed) {
+  pack_generic<4>(desc_of(GemmS8Layout::kVnni16x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
 void pack_wt_s8_1x1_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed) {
   pack_generic<1, true>(desc_of(GemmS8Layout::kRef1x1), n, k, wt, ldw, bias, a_zero_point, packed);
@@ -234,6 +240,11 @@ void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const i
 void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                          void* packed) {
   pack_generic<4, true>(desc_of(GemmS8Layout::kNeon16x4), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_16x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed) {
+  pack_generic<4, true>(desc_of(GemmS8Layout::kVnni16x4), n, k, wt, ldw, bias, a_zero_point, packed);
 }
 
 }  // namespace act::kernels

@@ -10,6 +10,8 @@ namespace act::kernels {
 const PeakProbe kPeakProbes[] = {
     {"vpdpbusd_zmm", Isa::kAvx512Vnni, PeakKind::kInt8, peak_vpdpbusd_zmm, true},
     {"vpdpbusd_zmm_6x64_loop", Isa::kAvx512Vnni, PeakKind::kInt8, peak_vpdpbusd_zmm_6x64_loop, false},
+    {"vpdpbusd_ymm", Isa::kAvxVnni, PeakKind::kInt8, peak_vpdpbusd_ymm, true},
+    {"vpdpbusd_ymm_6x16_loop", Isa::kAvxVnni, PeakKind::kInt8, peak_vpdpbusd_ymm_6x16_loop, false},
     {"vpmaddwd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_ymm, true},
     {"vpmaddwd+vpaddd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_vpaddd_ymm, false},
     {"sdot", Isa::kNeonDot, PeakKind::kInt8, peak_sdot, true},
@@ -21,6 +23,7 @@ const int kPeakProbeCount = static_cast<int>(sizeof(kPeakProbes) / sizeof(kPeakP
 
 const PeakProbe* isa_peak_probe(Isa isa, PeakKind kind) {
   for (std::optional<Isa> level = isa; level; level = isa_below(*level)) {
+    if (*level != isa && !cpu_supports(*level)) continue;  // avx512 does not imply avxvnni
     for (const PeakProbe& p : kPeakProbes) {
       if (p.isa == *level && p.kind == kind && p.is_isa_peak) return &p;
     }

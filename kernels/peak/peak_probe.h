@@ -15,6 +15,11 @@ uint64_t peak_vpdpbusd_zmm(uint64_t iterations);
 /// The 6x64c4 kernel's inner loop with its operands in L1 (4 weight loads, 6 broadcasts, 24
 /// vpdpbusd per k-group): the ceiling of its instruction mix, below which the data's arrival lies.
 uint64_t peak_vpdpbusd_zmm_6x64_loop(uint64_t iterations);
+/// 14 independent VEX vpdpbusd ymm chains per iteration (32 int8 MACs each). AVX-VNNI.
+uint64_t peak_vpdpbusd_ymm(uint64_t iterations);
+/// The 6x16c4 AVX-VNNI kernel's inner loop with its operands in L1 (2 weight loads, 6 broadcasts,
+/// 12 vpdpbusd per k-group).
+uint64_t peak_vpdpbusd_ymm_6x16_loop(uint64_t iterations);
 /// 12 independent vpmaddwd ymm chains per iteration (16 int16 MACs each). AVX2.
 uint64_t peak_vpmaddwd_ymm(uint64_t iterations);
 /// 8 vpmaddwd + vpaddd accumulate pairs per iteration: the AVX2 kernel's actual idiom.
@@ -42,7 +47,7 @@ extern const PeakProbe kPeakProbes[];
 extern const int kPeakProbeCount;
 
 /// The probe "% of peak" refers to for kernels of `isa` and `kind`: the probe of the highest level
-/// at or below `isa` (the same rule that picks a family's variant for a level, so for an Engine's
+/// at or below `isa` that the CPU runs (the same rule that picks a family's variant for a level, so for an Engine's
 /// level it bounds the GEMM that level runs); null when there is none (the scalar reference).
 const PeakProbe* isa_peak_probe(Isa isa, PeakKind kind);
 

@@ -119,6 +119,7 @@ TEST_P(GemmS8Variant, SegmentedA) {
 TEST_P(GemmS8Variant, UnsignedActivations) {
   if (variant().pack_u8a == nullptr) {
     EXPECT_NE(GetParam(), Isa::kAvx512Vnni) << "the VNNI variant reads unsigned activations";
+    EXPECT_NE(GetParam(), Isa::kAvxVnni) << "the AVX-VNNI variant reads unsigned activations";
     return;
   }
   uint32_t seed = 1000;
@@ -378,12 +379,13 @@ GemmS8PackFn portable_packer(GemmS8Layout layout) {
     case GemmS8Layout::kVnni64x4: return pack_w_s8_64x4_goi_x80;
     case GemmS8Layout::kNeon16x4: return pack_w_s8_16x4_goi;
     case GemmS8Layout::kVnni64x4U8A: return pack_w_s8_64x4_goi_u8a;
+    case GemmS8Layout::kVnni16x4: return pack_w_s8_16x4_goi_x80;
   }
   return nullptr;
 }
 
 // The transposed packers write, byte for byte, what their twins write for the explicit transpose:
-// every layout (the packers are portable, so all four run here), ragged n and k around each
+// every layout (the packers are portable, so all of them run here), ragged n and k around each
 // panel width and k-group, a row stride wider than n, both bias forms and a zero point.
 TEST(GemmS8Pack, TransposedPackerMatchesPackOfTranspose) {
   struct Pair {
@@ -393,7 +395,8 @@ TEST(GemmS8Pack, TransposedPackerMatchesPackOfTranspose) {
   const Pair pairs[] = {{GemmS8Layout::kRef1x1, pack_w_s8_1x1_goi, pack_wt_s8_1x1_goi},
                         {GemmS8Layout::kAvx2_8x8, pack_w_s8_8x8_goi_pair4, pack_wt_s8_8x8_goi_pair4},
                         {GemmS8Layout::kVnni64x4, pack_w_s8_64x4_goi_x80, pack_wt_s8_64x4_goi_x80},
-                        {GemmS8Layout::kNeon16x4, pack_w_s8_16x4_goi, pack_wt_s8_16x4_goi}};
+                        {GemmS8Layout::kNeon16x4, pack_w_s8_16x4_goi, pack_wt_s8_16x4_goi},
+                        {GemmS8Layout::kVnni16x4, pack_w_s8_16x4_goi_x80, pack_wt_s8_16x4_goi_x80}};
   uint32_t seed = 1000;
   for (const Pair& p : pairs) {
     for (int n : {1, 7, 16, 17, 64, 65}) {
@@ -484,10 +487,10 @@ GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(GemmS8Variant);
 TEST(GemmS8Dispatch, DetectedVariantsAreBuiltAndRun) {
   const CpuFeatures& f = cpu_features();
   std::cout << "cpu features (" << f.source << "): avx2=" << f.avx2 << " fma=" << f.fma << " avx512f=" << f.avx512f
-            << " avx512bw=" << f.avx512bw << " avx512vl=" << f.avx512vl << " avx512vnni=" << f.avx512vnni
+            << " avx512bw=" << f.avx512bw << " avx512vl=" << f.avx512vl << " avx512vnni=" << f.avx512vnni << " avxvnni=" << f.avxvnni
             << " neon=" << f.neon << " dotprod=" << f.dotprod << "; runs " << isa_mask_names(cpu_isa_mask()) << "\n";
 #if defined(__x86_64__)
-  const Isa simd[] = {Isa::kAvx2, Isa::kAvx512Vnni};
+  const Isa simd[] = {Isa::kAvx2, Isa::kAvxVnni, Isa::kAvx512Vnni};
 #elif defined(__aarch64__)
   const Isa simd[] = {Isa::kNeonDot};
 #else
@@ -548,8 +551,8 @@ bool parse_tile(const std::string& s, bool with_kr, int* a, int* b, int* c) {
 // (A hand parser: std::regex trips GCC 12's -Wmaybe-uninitialized under ASan.)
 TEST(GemmS8Dispatch, KernelNamesFollowTheGrammar) {
   const std::set<std::string> isa_suffixes = {"ref", "neon", "neondot", "neoni8mm", "avx2", "avxvnni", "avx512", "avx512vnni"};
-  const GemmS8Kernels* tables[] = {gemm_s8_table_ref(), gemm_s8_table_avx2(), gemm_s8_table_avx512vnni(),
-                                   gemm_s8_table_neondot()};
+  const GemmS8Kernels* tables[] = {gemm_s8_table_ref(), gemm_s8_table_avx2(), gemm_s8_table_avxvnni(),
+                                   gemm_s8_table_avx512vnni(), gemm_s8_table_neondot()};
   int checked = 0;
   for (const GemmS8Kernels* t : tables) {
     if (t == nullptr) continue;
@@ -589,7 +592,7 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
   const int8_t w[n * k] = {1, 2, 3, 4, 5, -1, -1, -1, -1, -1, 127, -127, 0, 0, 127};
   const int32_t bias[n] = {10, 20, 30};
   for (GemmS8Layout layout : {GemmS8Layout::kRef1x1, GemmS8Layout::kAvx2_8x8, GemmS8Layout::kVnni64x4,
-                              GemmS8Layout::kNeon16x4, GemmS8Layout::kVnni64x4U8A}) {
+                              GemmS8Layout::kNeon16x4, GemmS8Layout::kVnni64x4U8A, GemmS8Layout::kVnni16x4}) {
     const size_t bytes = gemm_s8_packed_size(layout, n, k);
     const PackedBuffer p = packed_buffer(bytes, 0);
     const int za = -3;
@@ -612,10 +615,10 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
       EXPECT_EQ(ksum, sums[c]);
       EXPECT_EQ(kbias, bias[c] - za * sums[c]);
     }
-    // Weight bytes: W XOR 0x80 (W + 128 as u8) for the signed-activation VNNI layout, W itself for
-    // the unsigned one; k-padding 0.
-    if (layout == GemmS8Layout::kVnni64x4 || layout == GemmS8Layout::kVnni64x4U8A) {
-      const int flip = layout == GemmS8Layout::kVnni64x4 ? 0x80 : 0;
+    // Weight bytes of the 4-byte k-group layouts: W XOR 0x80 (W + 128 as u8) for the
+    // signed-activation VNNI layouts, W itself for the others; k-padding 0.
+    if (h.kr == 4) {
+      const int flip = layout == GemmS8Layout::kVnni64x4 || layout == GemmS8Layout::kVnni16x4 ? 0x80 : 0;
       const int8_t* wp = reinterpret_cast<const int8_t*>(p.get() + sizeof h + 8 * h.nr);
       for (int c = 0; c < n; ++c) {
         for (int kk = 0; kk < h.kp; ++kk) {

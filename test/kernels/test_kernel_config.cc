@@ -55,10 +55,11 @@ TEST(KernelConfig, EveryLevelTakesEachFamilysBestVariantAtOrBelowIt) {
 
 #if defined(__x86_64__)
 // AVX-512 without VNNI: the families that need only F/BW/VL run their AVX-512 code, gemm_s8 (whose
-// AVX-512 kernel needs VNNI) its AVX2 one.
-TEST(KernelConfig, Avx512LevelUsesAvx2GemmS8AndAvx512ForTheRest) {
+// AVX-512 kernel needs VNNI) its AVX-VNNI one where the CPU has AVX-VNNI (avx512 does not imply it),
+// else its AVX2 one.
+TEST(KernelConfig, Avx512LevelUsesAvxVnniOrAvx2GemmS8AndAvx512ForTheRest) {
   const KernelConfig k = kernel_config_for(Isa::kAvx512);
-  EXPECT_EQ(k.gemm_s8.isa, Isa::kAvx2);
+  EXPECT_EQ(k.gemm_s8.isa, cpu_supports(Isa::kAvxVnni) ? Isa::kAvxVnni : Isa::kAvx2);
   EXPECT_EQ(k.gemm_f32.isa, Isa::kAvx512);
   EXPECT_EQ(k.quant.isa, Isa::kAvx512);
   EXPECT_EQ(k.elementwise.isa, Isa::kAvx512);
@@ -66,6 +67,18 @@ TEST(KernelConfig, Avx512LevelUsesAvx2GemmS8AndAvx512ForTheRest) {
   const KernelConfig vnni = kernel_config_for(Isa::kAvx512Vnni);
   EXPECT_EQ(vnni.gemm_s8.isa, Isa::kAvx512Vnni);
   EXPECT_EQ(vnni.quant.isa, Isa::kAvx512);
+}
+
+// AVX-VNNI (Intel's cores without AVX-512): its own gemm_s8, AVX2 for every other family.
+TEST(KernelConfig, AvxVnniLevelUsesAvxVnniGemmS8AndAvx2ForTheRest) {
+  if (!cpu_supports(Isa::kAvxVnni)) GTEST_SKIP() << "this CPU has no AVX-VNNI";
+  const KernelConfig k = kernel_config_for(Isa::kAvxVnni);
+  EXPECT_EQ(k.gemm_s8.isa, Isa::kAvxVnni);
+  EXPECT_EQ(k.gemm_s8.layout, GemmS8Layout::kVnni16x4);
+  EXPECT_EQ(k.gemm_f32.isa, Isa::kAvx2);
+  EXPECT_EQ(k.quant.isa, Isa::kAvx2);
+  EXPECT_EQ(k.elementwise.isa, Isa::kAvx2);
+  EXPECT_EQ(k.maxpool_s8.isa, Isa::kAvx2);
 }
 #endif
 

@@ -1,0 +1,178 @@
+// gemm_s8 on AVX-VNNI: the 6x16c4 micro-kernel on ymm, for the cores that have the VEX-encoded
+// vpdpbusd but no AVX-512 (Intel Alder Lake, Raptor Lake, Meteor Lake and the N100 / N150 mini
+// PCs). Compiled with -mavx2 -mfma -mavxvnni on x86-64 targets only; elsewhere this file is just the
+// null table.
+//
+// The avx512vnni kernel's scheme on 16 ymm registers: the packer stores W XOR 0x80 = W + 128 as
+// vpdpbusd's unsigned operand (pack_w_s8_16x4_goi_x80, padding 0), A's signed 4-byte groups are
+// broadcast (vpbroadcastd: VEX has no embedded broadcast), and each row block subtracts
+// 128 * rowsum(A) once (gemm_s8_vnni_rows.inc; the sums 32 bytes per vpdpbusd against ones). A
+// stored unsigned (weights packed as they are by pack_w_s8_16x4_goi, the 16x4 layout NEON's
+// kernel reads) swaps the operands: no row sums.
+//
+// Tile: 6 rows x 16 columns (2 ymm of 8 int32) x k-groups of 4. One k-group step = 2 weight loads,
+// 6 broadcasts, 12 vpdpbusd; 12 accumulators + 2 weights + 1 broadcast = 15 of the 16 ymm
+// registers. The epilogues are AVX2's, two vectors per row (gemm_s8_epilogue_ymm.inc).
+//
+// Rules for ISA files (see README.md): only intrinsics and internal-linkage code here.
+#include "kernels/gemm_s8/gemm_s8_variants.h"
+
+#if defined(__x86_64__)
+
+#include <immintrin.h>
+
+#include <cstring>
+#include <type_traits>
+
+#include "kernels/common/check.h"
+
+namespace act::kernels {
+
+namespace {
+
+constexpr int kMR = 6;
+constexpr int kNR = 16;
+constexpr int kKR = 4;
+constexpr Isa kIsa = Isa::kAvxVnni;
+constexpr GemmS8Layout kLayout = GemmS8Layout::kVnni16x4;
+// Unsigned activations: the 16x4 layout with W as it is (pack_w_s8_16x4_goi), A on the u8 side.
+constexpr GemmS8Layout kLayoutU8A = GemmS8Layout::kNeon16x4;
+constexpr bool own_layout(GemmS8Layout l) { return l == kLayout || l == kLayoutU8A; }
+constexpr int kVecs = kNR / 8;
+// Weight panels kept in L2 per sweep: half of the 1-2 MB L2 of these cores (the N100's 2 MB is
+// shared by four).
+constexpr size_t kPanelBlockBytes = size_t{512} << 10;
+constexpr uint64_t kL1PanelBytes = 32 * 1024;  // a panel this small stays in L1 across row tiles
+constexpr int kWeightPrefetchBytes = 1024;     // 16 k-groups ahead
+
+#include "kernels/gemm_s8/gemm_s8_driver.inc"
+
+int32_t reduce_add(__m256i v) {
+  __m128i s = _mm_add_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  s = _mm_add_epi32(s, _mm_shuffle_epi32(s, 0x4e));
+  s = _mm_add_epi32(s, _mm_shuffle_epi32(s, 0xb1));
+  return _mm_cvtsi128_si32(s);
+}
+
+// 128 * sum_k A[r][k] for the R rows of a tile, side by side (R independent vpdpbusd chains): 32
+// bytes at a time, then 8 (a segment is a multiple of 8 bytes, so nothing past it is read); the
+// last 1-7 bytes of a plain row are read as 8 with the bytes past K masked off (inside the read
+// slack), since padding weights are 0 and A's slack must not count.
+template <int R>
+void row_corrections(const GemmS8Args& g, int m, int32_t (&corr)[R]) {
+  const __m256i ones = _mm256_set1_epi8(1);
+  __m256i sum[R];
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) sum[r] = _mm256_setzero_si256();
+  const int segments = segment_count(g), bytes = g.k / segments;
+  for (int s = 0; s < segments; ++s) {
+    const int8_t* rows[R];
+    segment_rows<R>(g, m, s, rows);
+    int i = 0;
+    for (; i + 32 <= bytes; i += 32) {
+#pragma GCC unroll 6
+      for (int r = 0; r < R; ++r) {
+        sum[r] = _mm256_dpbusd_avx_epi32(sum[r], ones, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(rows[r] + i)));
+      }
+    }
+    for (; i < bytes; i += 8) {
+      const int left = bytes - i;
+      const uint64_t keep = left >= 8 ? ~uint64_t{0} : (uint64_t{1} << (8 * left)) - 1;
+#pragma GCC unroll 6
+      for (int r = 0; r < R; ++r) {
+        uint64_t quad;
+        std::memcpy(&quad, rows[r] + i, 8);
+        const __m256i v = _mm256_zextsi128_si256(_mm_cvtsi64_si128(static_cast<int64_t>(quad & keep)));
+        sum[r] = _mm256_dpbusd_avx_epi32(sum[r], ones, v);
+      }
+    }
+  }
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) corr[r] = static_cast<int32_t>(128u * static_cast<uint32_t>(reduce_add(sum[r])));
+}
+
+// out[r][j] = kbias - corr[r] + sum over k-groups of (W + 128) x A (or A x W for unsigned A),
+// segment by segment; a local array copied out once, so that GCC keeps it in registers.
+// kStreamWeights: the panel does not stay in L1 between tiles, so its bytes are prefetched ahead.
+template <int R, bool kStreamWeights, bool kUnsignedA>
+inline void accumulate(const GemmS8Args& g, int m, const uint8_t* panel, int kgroups, const int32_t (&corr)[R],
+                       __m256i (&out)[R][kVecs]) {
+  const uint8_t* w = panel + 8 * kNR;
+  __m256i acc[R][kVecs];
+#pragma GCC unroll 2
+  for (int j = 0; j < kVecs; ++j) {
+    const __m256i kbias = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 32 * j));
+#pragma GCC unroll 6
+    for (int r = 0; r < R; ++r) acc[r][j] = kUnsignedA ? kbias : _mm256_sub_epi32(kbias, _mm256_set1_epi32(corr[r]));
+  }
+  const int segments = segment_count(g), segment_groups = kgroups / segments;
+  for (int s = 0; s < segments; ++s) {
+    const int8_t* rows[R];
+    segment_rows<R>(g, m, s, rows);
+    const uint8_t* ws = w + static_cast<size_t>(s) * static_cast<size_t>(segment_groups) * (kNR * kKR);
+    for (int gi = 0; gi < segment_groups; ++gi) {
+      const uint8_t* wg = ws + static_cast<size_t>(gi) * (kNR * kKR);
+      const __m256i w0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(wg));
+      const __m256i w1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(wg + 32));
+      if constexpr (kStreamWeights) _mm_prefetch(reinterpret_cast<const char*>(wg) + kWeightPrefetchBytes, _MM_HINT_T0);
+#pragma GCC unroll 6
+      for (int r = 0; r < R; ++r) {
+        int32_t quad;
+        std::memcpy(&quad, rows[r] + static_cast<size_t>(gi) * kKR, 4);
+        const __m256i av = _mm256_set1_epi32(quad);
+        if constexpr (kUnsignedA) {
+          acc[r][0] = _mm256_dpbusd_avx_epi32(acc[r][0], av, w0);
+          acc[r][1] = _mm256_dpbusd_avx_epi32(acc[r][1], av, w1);
+        } else {
+          acc[r][0] = _mm256_dpbusd_avx_epi32(acc[r][0], w0, av);
+          acc[r][1] = _mm256_dpbusd_avx_epi32(acc[r][1], w1, av);
+        }
+      }
+    }
+  }
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) {
+#pragma GCC unroll 2
+    for (int j = 0; j < kVecs; ++j) out[r][j] = acc[r][j];
+  }
+}
+
+#include "kernels/gemm_s8/gemm_s8_epilogue_ymm.inc"
+
+// One R x 16 micro-tile starting at row m.
+template <int R, bool kUnsignedA, class Epi>
+void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr)[R], const uint8_t* panel, int m,
+          int n, int lo, int hi, Epi& epi, bool stream_weights) {
+  __m256i acc[R][kVecs];
+  if (stream_weights) {
+    accumulate<R, true, kUnsignedA>(g, m, panel, h.kp / kKR, corr, acc);
+  } else {
+    accumulate<R, false, kUnsignedA>(g, m, panel, h.kp / kKR, corr, acc);
+  }
+  if (g.a_row_zero_point != nullptr) subtract_row_zero_points<R>(g, h, panel, m, acc);
+  epi.begin_panel(n, lo, hi);
+#pragma GCC unroll 6
+  for (int r = 0; r < R; ++r) epi.row(m + r, n, lo, hi, acc[r]);
+}
+
+#include "kernels/gemm_s8/gemm_s8_vnni_rows.inc"
+
+}  // namespace
+
+const GemmS8Kernels* gemm_s8_table_avxvnni() {
+  static constexpr GemmS8Kernels kTable = variant_table<EpiS8, EpiF32, EpiS32>(
+      {"pack_w_s8_16x4_goi_x80", "gemm_s8s8_s8out_6x16c4_avxvnni", "gemm_s8s8_f32out_6x16c4_avxvnni",
+       "gemm_s8s8_s32out_6x16c4_avxvnni"},
+      pack_w_s8_16x4_goi_x80, pack_wt_s8_16x4_goi_x80, "pack_w_s8_16x4_goi", pack_w_s8_16x4_goi);
+  return &kTable;
+}
+
+}  // namespace act::kernels
+
+#else  // not x86-64: nothing to build
+
+namespace act::kernels {
+const GemmS8Kernels* gemm_s8_table_avxvnni() { return nullptr; }
+}  // namespace act::kernels
+
+#endif

@@ -21,6 +21,7 @@
 
 #include <immintrin.h>
 
+#include <algorithm>
 #include <cstring>
 #include <type_traits>
 
@@ -157,13 +158,146 @@ void tile(const GemmS8Args& g, const GemmS8PackedHeader& h, const int32_t (&corr
 
 #include "kernels/gemm_s8/gemm_s8_vnni_rows.inc"
 
+// The byte lanes of a vector below `count` (0..32) set to 0xff.
+__m256i first_bytes(int count) {
+  const __m256i idx = _mm256_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22,
+                                       23, 24, 25, 26, 27, 28, 29, 30, 31);
+  return _mm256_cmpgt_epi8(_mm256_set1_epi8(static_cast<char>(count)), idx);
+}
+
+// `bytes` (1..32) bytes from p, XOR 0x80 (W + 128), the lanes past them 0: nothing past them is read.
+__m256i load_plus128(const int8_t* p, int bytes) {
+  const __m256i flip = _mm256_set1_epi8(static_cast<char>(0x80));
+  if (bytes >= 32) return _mm256_xor_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)), flip);
+  alignas(32) int8_t staged[32] = {};
+  std::memcpy(staged, p, static_cast<size_t>(bytes));
+  return _mm256_xor_si256(_mm256_load_si256(reinterpret_cast<const __m256i*>(staged)), _mm256_and_si256(flip, first_bytes(bytes)));
+}
+
+// Eight vectors of 8 int32 transposed in registers: afterwards v[c] holds element c of each input.
+void transpose8x8_epi32(__m256i (&v)[8]) {
+  __m256i t[8];
+  for (int i = 0; i < 8; i += 2) {
+    t[i] = _mm256_unpacklo_epi32(v[i], v[i + 1]);
+    t[i + 1] = _mm256_unpackhi_epi32(v[i], v[i + 1]);
+  }
+  __m256i u[8];
+  for (int i = 0; i < 8; i += 4) {
+    u[i] = _mm256_unpacklo_epi64(t[i], t[i + 2]);
+    u[i + 1] = _mm256_unpackhi_epi64(t[i], t[i + 2]);
+    u[i + 2] = _mm256_unpacklo_epi64(t[i + 1], t[i + 3]);
+    u[i + 3] = _mm256_unpackhi_epi64(t[i + 1], t[i + 3]);
+  }
+  for (int i = 0; i < 4; ++i) {
+    v[i] = _mm256_permute2x128_si256(u[i], u[i + 4], 0x20);
+    v[i + 4] = _mm256_permute2x128_si256(u[i], u[i + 4], 0x31);
+  }
+}
+
+// Eight columns' sums and folded bias (slot 0 or 8 of the panel) from `sums` (lane c: sum of W + 128
+// over k for column slot + c): kbias = bias - a_zero_point * sum W, modulo 2^32 as pack.cc computes
+// it; the columns past `cols` 0, their bias not read.
+void store_panel_sums(uint8_t* panel, int slot, int cols, __m256i sums, int k, const int32_t* bias, int32_t a_zero_point) {
+  const __m256i valid = _mm256_cmpgt_epi32(_mm256_set1_epi32(cols), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  const __m256i column_sums = _mm256_and_si256(valid, _mm256_sub_epi32(sums, _mm256_set1_epi32(128 * k)));
+  const __m256i b = bias != nullptr && cols > 0 ? _mm256_maskload_epi32(bias, valid) : _mm256_setzero_si256();
+  const __m256i kbias = _mm256_and_si256(valid, _mm256_sub_epi32(b, _mm256_mullo_epi32(_mm256_set1_epi32(a_zero_point), column_sums)));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(panel + 4 * slot), kbias);
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(panel + 4 * (kNR + slot)), column_sums);
+}
+
+// The packers' common start: checks the buffer, writes the header, returns it.
+GemmS8PackedHeader begin_packing(int n, int k, int32_t a_zero_point, void* packed) {
+  ACT_DCHECK(n >= 1 && k >= 1 && k <= kGemmS8MaxK, "bad weight shape");
+  ACT_DCHECK(reinterpret_cast<uintptr_t>(packed) % kGemmS8PackedAlign == 0, "packed buffer must be 64-byte aligned");
+  const GemmS8PackedHeader h = gemm_s8_packed_header(kLayout, n, k, a_zero_point);
+  std::memcpy(packed, &h, sizeof h);
+  return h;
+}
+
+uint8_t* panel_of(void* packed, const GemmS8PackedHeader& h, int c) {
+  return static_cast<uint8_t*>(packed) + sizeof h + static_cast<size_t>(c / kNR) * h.panel_bytes;
+}
+
+// pack_w_s8_16x4_goi_x80's bytes (a test compares them on ragged shapes), 8 columns by 32 bytes of
+// K at a time: the 8 rows of W loaded + 128, their 8 x 8 four-byte k-groups transposed so that each
+// k-group's 8 columns are one store, the column sums by vpdpbusd against ones. The int8 attention
+// packs every head's keys with it at every run.
+void pack_w_s8_16x4_goi_x80_avxvnni(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                                    void* packed) {
+  ACT_DCHECK(ldw >= static_cast<size_t>(k), "W's rows overlap");
+  const GemmS8PackedHeader h = begin_packing(n, k, a_zero_point, packed);
+  const int groups = h.kp / kKR;
+  const int columns = (n + kNR - 1) / kNR * kNR;  // whole panels: columns past n are written as 0
+  const __m256i ones = _mm256_set1_epi8(1);
+  for (int c0 = 0; c0 < columns; c0 += 8) {
+    uint8_t* panel = panel_of(packed, h, c0);
+    const int slot = c0 % kNR, cols = std::max(0, std::min(8, n - c0));
+    __m256i sums = _mm256_setzero_si256();
+    for (int g0 = 0; g0 < groups; g0 += 8) {
+      const int k0 = kKR * g0, bytes = std::min(32, k - k0);
+      __m256i v[8];
+      for (int i = 0; i < 8; ++i) v[i] = i < cols ? load_plus128(w + static_cast<size_t>(c0 + i) * ldw + k0, bytes) : _mm256_setzero_si256();
+      transpose8x8_epi32(v);
+      for (int g = 0; g < 8 && g0 + g < groups; ++g) {
+        sums = _mm256_dpbusd_avx_epi32(sums, v[g], ones);
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(panel + 8 * kNR + static_cast<size_t>(g0 + g) * (kNR * kKR) + 4 * slot), v[g]);
+      }
+    }
+    store_panel_sums(panel, slot, cols, sums, k, bias != nullptr ? bias + c0 : nullptr, a_zero_point);
+  }
+}
+
+// pack_wt_s8_16x4_goi_x80's bytes from W^T [k x n] (a test compares them), a panel's 16 columns by
+// one k-group at a time: the group's four rows of W^T loaded + 128 (rows past k 0), their bytes
+// interleaved column by column by unpacks, two stores, the column sums as above. The int8 attention
+// packs every head's values with it at every run.
+void pack_wt_s8_16x4_goi_x80_avxvnni(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias,
+                                     int32_t a_zero_point, void* packed) {
+  ACT_DCHECK(ldw >= static_cast<size_t>(n), "W^T's rows overlap");
+  const GemmS8PackedHeader h = begin_packing(n, k, a_zero_point, packed);
+  const int groups = h.kp / kKR;
+  const __m256i ones = _mm256_set1_epi8(1);
+  for (int c0 = 0; c0 < n; c0 += kNR) {
+    uint8_t* panel = panel_of(packed, h, c0);
+    uint8_t* data = panel + 8 * kNR;
+    const int cols = std::min(kNR, n - c0);
+    __m256i sums_low = _mm256_setzero_si256(), sums_high = _mm256_setzero_si256();
+    for (int g = 0; g < groups; ++g) {
+      __m128i row[kKR];
+      for (int r = 0; r < kKR; ++r) {
+        const int i = kKR * g + r;
+        const int8_t* src = wt + static_cast<size_t>(i) * ldw + c0;
+        if (i >= k) {
+          row[r] = _mm_setzero_si128();
+        } else if (cols == kNR) {
+          row[r] = _mm_xor_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(src)), _mm_set1_epi8(static_cast<char>(0x80)));
+        } else {
+          row[r] = _mm256_castsi256_si128(load_plus128(src, cols));
+        }
+      }
+      // Columns 0-7 then 8-15, each its four rows' bytes in order.
+      const __m128i pairs01_low = _mm_unpacklo_epi8(row[0], row[1]), pairs01_high = _mm_unpackhi_epi8(row[0], row[1]);
+      const __m128i pairs23_low = _mm_unpacklo_epi8(row[2], row[3]), pairs23_high = _mm_unpackhi_epi8(row[2], row[3]);
+      const __m256i low = _mm256_set_m128i(_mm_unpackhi_epi16(pairs01_low, pairs23_low), _mm_unpacklo_epi16(pairs01_low, pairs23_low));
+      const __m256i high = _mm256_set_m128i(_mm_unpackhi_epi16(pairs01_high, pairs23_high), _mm_unpacklo_epi16(pairs01_high, pairs23_high));
+      sums_low = _mm256_dpbusd_avx_epi32(sums_low, low, ones);
+      sums_high = _mm256_dpbusd_avx_epi32(sums_high, high, ones);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(data + static_cast<size_t>(g) * (kNR * kKR)), low);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(data + static_cast<size_t>(g) * (kNR * kKR) + 32), high);
+    }
+    store_panel_sums(panel, 0, cols, sums_low, k, bias != nullptr ? bias + c0 : nullptr, a_zero_point);
+    store_panel_sums(panel, 8, cols - 8, sums_high, k, bias != nullptr && cols > 8 ? bias + c0 + 8 : nullptr, a_zero_point);
+  }
+}
+
 }  // namespace
 
 const GemmS8Kernels* gemm_s8_table_avxvnni() {
   static constexpr GemmS8Kernels kTable = variant_table<EpiS8, EpiF32, EpiS32>(
       {"pack_w_s8_16x4_goi_x80", "gemm_s8s8_s8out_6x16c4_avxvnni", "gemm_s8s8_f32out_6x16c4_avxvnni",
        "gemm_s8s8_s32out_6x16c4_avxvnni"},
-      pack_w_s8_16x4_goi_x80, pack_wt_s8_16x4_goi_x80, "pack_w_s8_16x4_goi", pack_w_s8_16x4_goi);
+      pack_w_s8_16x4_goi_x80_avxvnni, pack_wt_s8_16x4_goi_x80_avxvnni, "pack_w_s8_16x4_goi", pack_w_s8_16x4_goi);
   return &kTable;
 }
 

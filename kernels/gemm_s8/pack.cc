@@ -1,8 +1,8 @@
 // The portable weight packers of every gemm_s8 layout, the definition of each layout's bytes. One
 // generic routine; each named packer fixes the layout (panel width nr, k-group kr, column order,
 // weight shift). Plain C++ on every architecture: it runs once at load for the weights. The AVX-512
-// VNNI variant packs with SIMD packers of the same bytes (gemm_s8_avx512vnni.cc), since attention
-// packs its keys and values at every run.
+// VNNI and AVX-VNNI variants pack with SIMD packers of the same bytes (gemm_s8_avx512vnni.cc,
+// gemm_s8_avxvnni.cc), since attention packs its keys and values at every run.
 #include <algorithm>
 #include <cstring>
 

@@ -442,7 +442,7 @@ TEST_P(GemmS8Variant, TablePairsTransposedPacker) {
 }
 
 // Each variant's packers, of W and of W^T, write what the portable packer of its layout writes for
-// W (pack.cc; AVX-512 VNNI has SIMD ones): ragged n and k around the 16-column blocks, the panels,
+// W (pack.cc; AVX-512 VNNI and AVX-VNNI have SIMD ones): ragged n and k around the 16-column blocks, the panels,
 // the 64-byte k chunks and the 4-byte k-groups, row strides wider than a row, both bias forms, a
 // zero point, every byte written.
 TEST_P(GemmS8Variant, PackerWritesThePortablePackersBytes) {

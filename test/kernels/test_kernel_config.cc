@@ -8,6 +8,7 @@
 #include <string>
 
 #include "kernels/config/kernel_config.h"
+#include "kernels/peak/peak_probe.h"
 #include "test/kernels/kernel_test_util.h"
 
 namespace act::kernels {
@@ -93,6 +94,23 @@ TEST(KernelConfig, NeonLevelUsesNeonForAllButGemmS8) {
   EXPECT_EQ(kernel_config_for(Isa::kNeonDot).gemm_s8.isa, Isa::kNeonDot);
 }
 #endif
+
+// act_bench's "% of peak" at a level is against the int8 probe of the gemm_s8 variant that level
+// runs (avx512 without VNNI: the avxvnni kernel's vpdpbusd ymm where the CPU has AVX-VNNI, else
+// vpmaddwd), a probe this CPU runs; none for the scalar reference.
+TEST(KernelConfig, EachLevelsInt8PeakIsTheProbeOfItsGemmS8) {
+  for (Isa level : cpu_isas()) {
+    const Isa gemm = variant_for(level, &IsaTables::gemm_s8).isa;
+    const PeakProbe* probe = isa_peak_probe(level, PeakKind::kInt8);
+    if (gemm == Isa::kRef) {
+      EXPECT_EQ(probe, nullptr) << isa_name(level);
+      continue;
+    }
+    ASSERT_NE(probe, nullptr) << isa_name(level);
+    EXPECT_EQ(probe->isa, gemm) << isa_name(level) << ": " << probe->name;
+    EXPECT_TRUE(cpu_supports(probe->isa)) << probe->name;
+  }
+}
 
 TEST(KernelConfig, UnknownIsaIsAnErrorListingWhatThisCpuRuns) {
   const std::string runs = "this CPU runs " + isa_mask_names(cpu_isa_mask());

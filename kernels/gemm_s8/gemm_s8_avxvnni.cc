@@ -12,7 +12,9 @@
 //
 // Tile: 6 rows x 16 columns (2 ymm of 8 int32) x k-groups of 4. One k-group step = 2 weight loads,
 // 6 broadcasts, 12 vpdpbusd; 12 accumulators + 2 weights + 1 broadcast = 15 of the 16 ymm
-// registers. The epilogues are AVX2's, two vectors per row (gemm_s8_epilogue_ymm.inc).
+// registers (4x16 ran 12-20 % slower). The epilogues are AVX2's, two vectors per row
+// (gemm_s8_epilogue_ymm.inc). The table's packers are AVX2 twins of the portable ones (the int8
+// attention packs its keys and values at every run).
 //
 // Rules for ISA files (see README.md): only intrinsics and internal-linkage code here.
 #include "kernels/gemm_s8/gemm_s8_variants.h"

@@ -233,6 +233,8 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
           {"camera_width", camera.width()},
           {"camera_height", camera.height()},
           {"control_hz", opt.control_hz},
+          // ticks.csv's action.<name> and command.<name> columns: the blob's names (empty: 0, 1, ...)
+          {"action_names", info.action_names},
           {"state", opt.state},
           {"calibration", calibration.to_json()}};
 }

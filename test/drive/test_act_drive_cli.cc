@@ -339,6 +339,46 @@ TEST(ActDriveCli, ASlowFileIsNoStaleFrameInRealTime) {
   }
 }
 
+// The blob's action names (act_convert --action-names) name a recording's action columns, and
+// act_eval's report on that recording uses them; an older blob without names keeps command.0, ...
+TEST(ActDriveCli, RecordingsAndEvalUseTheBlobsActionNames) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string named = dir + "/named.actb";
+  const auto converted = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                     q(named) + " -q --action-names steering,throttle");
+  ASSERT_EQ(converted.exit_code, 0) << converted.output;
+  const std::string video = write_test_video(dir + "/v.avi", 20, 30, 128, 96);
+  const auto first_line = [](const std::string& path) {
+    std::ifstream in(path);
+    std::string line;
+    std::getline(in, line);
+    return line;
+  };
+  for (const std::string& blob : {named, act_tiny_blob(dir)}) {
+    const bool has_names = blob == named;
+    const std::string rec = dir + (has_names ? "/rec-named" : "/rec-plain");
+    const auto r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --realtime off --threads 1 --record " +
+                               q(rec) + " >/dev/null");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const std::string header = first_line(rec + "/ticks.csv");
+    const std::string expected = has_names ? "tick,time_s,jitter_ms,source,action.steering,action.throttle,steering_us,throttle_us,"
+                                             "sent,driver,frame,state.0,state.1,command.steering,command.throttle"
+                                           : "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,"
+                                             "sent,driver,frame,state.0,state.1,command.0,command.1";
+    EXPECT_EQ(header, expected);
+    const auto eval = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -t 1 --episode " + q(rec) + " --json " +
+                                  q(rec + "/eval.json"));
+    ASSERT_EQ(eval.exit_code, 0) << eval.output;
+    std::ifstream report(rec + "/eval.json");
+    const nlohmann::json j = nlohmann::json::parse(report);
+    EXPECT_EQ(j.at("action_names"), has_names ? nlohmann::json({"steering", "throttle"}) : nlohmann::json({"command.0", "command.1"}));
+    if (has_names) {
+      EXPECT_NE(eval.output.find("steering: first action MSE"), std::string::npos) << eval.output;
+    }
+  }
+}
+
 TEST(ActDriveCli, DeploymentOptionsReplaceTheBlobs) {
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
   const std::string dir = act::test::scratch_dir();

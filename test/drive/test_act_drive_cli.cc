@@ -45,7 +45,7 @@ TEST(ActDriveCli, HelpListsTheOptions) {
   for (const char* flag : {"--model", "--camera", "--camera-size", "--serial", "--baud", "--calibration", "--control-hz",
                            "--max-frame-age", "--threads", "--control-priority", "--inference-cpus", "--stats-every",
                            "--record", "--dry-run", "--calibrate", "--state", "--duration", "--initial-state",
-                           "--raw-endpoints", "--list-cameras", "--list-ports"}) {
+                           "--raw-endpoints", "--list-cameras", "--list-ports", "--loop", "--realtime"}) {
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
   }
 }

@@ -341,7 +341,13 @@ void print_summary(const act::ImportSummary& s, const Options& o, uint64_t bytes
             << "tokens       " << s.encoder_tokens << " encoder, " << m.chunk_size << " decoder; n_action_steps "
             << m.n_action_steps;
   if (m.temporal_ensembling) std::cout << ", temporal ensembling coeff " << m.temporal_ensemble_coeff;
-  std::cout << "\n"
+  std::cout << "\n";
+  if (!m.action_names.empty()) {
+    std::cout << "actions     ";
+    for (size_t a = 0; a < m.action_names.size(); ++a) std::cout << (a ? ", " : " ") << m.action_names[a];
+    std::cout << " (stored in the blob: reports and recordings use them)\n";
+  }
+  std::cout
             << "parameters   " << millions(static_cast<double>(s.checkpoint_values)) << " in " << s.checkpoint_tensors
             << " checkpoint tensors; dropped " << millions(static_cast<double>(s.training_only_values))
             << " training-only (" << s.training_only_tensors << " tensors)\n"
@@ -473,6 +479,7 @@ int main(int argc, char** argv) {
     const std::unique_ptr<act::ImportedCheckpoint> model = import(o, exit_code);
     if (!model) return exit_code;
     name_actions(*model, o);
+    if (o.action_names.empty()) o.action_names = model->summary().model.action_names;  // the checkpoint's, for the report
     if (!o.calib_npy.empty()) export_calibration(model->summary().model, o);
     if (o.output.empty()) return 0;  // only the calibration set was asked for
     const uint64_t bytes = convert(*model, o);

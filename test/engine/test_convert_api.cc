@@ -124,6 +124,28 @@ TEST(ConvertApi, ActionNamesReachTheBlobsAndOlderBlobsHaveNone) {
   EXPECT_TRUE((*plain)->model_info().action_names.empty());
 }
 
+// A checkpoint whose action feature carries names (as a LeRobot dataset's features do) names the
+// actions; set_action_names replaces them.
+TEST(ConvertApi, ActionNamesFromTheCheckpointsFeatures) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = test::scratch_dir() + "/named";
+  fs::create_directories(dir);
+  for (const auto& entry : fs::directory_iterator(fixture)) fs::copy(entry.path(), dir / entry.path().filename());
+  nlohmann::ordered_json config = nlohmann::ordered_json::parse(std::ifstream(dir + "/config.json"));
+  config["output_features"]["action"]["names"] = {"steer", "gas"};
+  std::ofstream(dir + "/config.json") << config.dump(2);
+  auto model = import_checkpoint(dir);
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  EXPECT_EQ((*model)->summary().model.action_names, (std::vector<std::string>{"steer", "gas"}));
+  ASSERT_TRUE((*model)->write_fp32(dir + "/m.actb").ok());
+  auto engine = Engine::open(dir + "/m.actb");
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  EXPECT_EQ((*engine)->model_info().action_names, (std::vector<std::string>{"steer", "gas"}));
+  ASSERT_TRUE((*model)->set_action_names({"steering", "throttle"}).ok());
+  EXPECT_EQ((*model)->summary().model.action_names, (std::vector<std::string>{"steering", "throttle"}));
+}
+
 TEST(ConvertApi, DeploymentOptionsReplaceTheFoldersAndReachTheBlob) {
   const std::string fixture = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);

@@ -25,6 +25,7 @@
 #include "apps/diff_stats.h"
 #include "apps/observation_file.h"
 #include "apps/op_profile_report.h"
+#include "apps/pi5_estimate.h"
 #include "apps/progress.h"
 #include "apps/version.h"
 #include "bench/probes/bench_probes.h"
@@ -50,6 +51,7 @@ struct Options {
   std::string trace_path;
   uint32_t seed = 1;
   bool portrait = false;
+  std::string target = "here";  // here: measure (the Pi 5 estimate beside); pi5: only the estimate
 };
 
 // --config HxW is height first, as every other tool's sizes (act_drive --camera-size, the model's
@@ -276,6 +278,15 @@ class Benchmark {
     choose_model();
     blob_.emplace(act::bench::BlobFacts::open(blob_path_));
     open_engines();
+    estimate_pi5();
+    if (opt_.target == "pi5") {  // nothing is timed: the model, its compute and the estimate
+      macs_ = blob_->macs();
+      gmac_ = macs_.total() / 1e9;
+      print_model();
+      print_pi5_estimate();
+      if (json_file_) write_pi5_json();
+      return 0;
+    }
     time_runs(Observations(opt_.input_path, engine_->model_info()));
     summarize_runs();
     print_report();
@@ -429,7 +440,56 @@ class Benchmark {
 
   const act::LatencySummary& total() const { return stages_.back().second; }
 
-  void print_report() const {
+  // The Pi 5 estimate from the engine's ops (their kinds and MACs: nothing runs for it).
+  void estimate_pi5() {
+    const nlohmann::json config = blob_->config_json();
+    const int heads = config.value("n_heads", 0);
+    pi5_ = act::Pi5Estimate::of(engine_->op_profile(), heads > 0 ? config.value("dim_model", 0) / heads : 0);
+  }
+
+  void print_pi5_estimate() const {
+    std::printf("%s %s on a Raspberry Pi 5 (4x Cortex-A76, %.1f GHz), ESTIMATED:", opt_.target == "pi5" ? "pi5         " : "\npi5 estimate",
+                engine_->model_info().precision.c_str(), act::pi5_rates().clock_ghz);
+    for (size_t c = 0; c < pi5_.latency_ms.size(); ++c) {
+      std::printf("%s %zu core%s %.1f ms", c ? "," : "", c + 1, c ? "s" : "", pi5_.latency_ms[c]);
+    }
+    std::printf(" (%.1f inferences/s on 4)\n             %s\n", 1e3 / pi5_.latency_ms.back(), act::Pi5Estimate::method().c_str());
+  }
+
+  // --target pi5 --json: the estimate as a record scripts/perf_table.py puts in the numbers table.
+  void write_pi5_json() {
+    nlohmann::ordered_json j;
+    j["actengine_version"] = act::version();
+    j["model"] = model_json();
+    j["engine"] = {{"threads", static_cast<int>(pi5_.latency_ms.size())}, {"kernels", "neondot (projected)"}};
+    j["latency_ms"] = {{"total", {{"p50", pi5_.latency_ms.back()}}}};
+    j["peak"] = {{"percent_of_peak_p50", nullptr}};
+    j["machine_label"] = "Raspberry Pi 5, 4x Cortex-A76";
+    j["estimate"] = true;
+    j["note"] = "Projected by act_bench --target pi5 from the model's MACs per op kind and the NEON kernels' inner loops "
+                "(llvm-mca -mcpu=cortex-a76), not measured: docs/arm.md.";
+    j["pi5_estimate"] = pi5_.to_json();
+    json_file_->write(j.dump(2) + "\n");
+    json_file_->commit();
+  }
+
+  nlohmann::ordered_json model_json() const {
+    return {{"source", opt_.model.empty() ? "built-in" : "blob"},
+            {"name", model_label_},
+            {"summary", blob_->summary()},
+            {"config", blob_->config_json()},
+            {"precision", engine_->model_info().precision},
+            {"weight_bytes", blob_->file_size()},
+            {"gmac", {{"total", gmac_},
+                      {"backbone", macs_.backbone / 1e9},
+                      {"projections", macs_.projections / 1e9},
+                      {"encoder", macs_.encoder / 1e9},
+                      {"decoder", macs_.decoder / 1e9},
+                      {"head", macs_.head / 1e9}}}};
+  }
+
+  // The model, its compute and its engine.
+  void print_model() const {
     const act::ModelInfo& info = engine_->model_info();
     std::printf("actengine act_bench %s\n", act::version());
     std::printf("model        %s\n             %s\n", model_label_.c_str(), blob_->summary().c_str());
@@ -438,6 +498,10 @@ class Benchmark {
     std::printf("engine       %s, weights %.1f MB, %d threads\nkernels      %s\n", info.precision.c_str(),
                 static_cast<double>(blob_->file_size()) / 1e6, engine_->threads(), info.kernels.c_str());
     if (!builtin_.int8_note.empty()) std::printf("int8         %s\n", builtin_.int8_note.c_str());
+  }
+
+  void print_report() const {
+    print_model();
     std::printf("machine      %s\n", machine_.one_line().c_str());
     if (!machine_.emulation.empty()) {
       std::printf("EMULATED     every time below is the emulator's, not a CPU's (%s)\n", machine_.emulation.c_str());
@@ -476,12 +540,13 @@ class Benchmark {
     }
     std::printf("peak RSS     %.1f MB; %.1f MB of the engine's weights and values in huge pages\n",
                 static_cast<double>(rss_) / 1e6, static_cast<double>(huge_page_bytes_) / 1e6);
+    print_pi5_estimate();
     if (op_table_) op_table_->print(stdout, 10);
     if (comparison_) {
       const Comparison& c = *comparison_;
       std::printf("\ncompare      %s: mean %.2f ms, p50 %.2f ms (interleaved with the runs above)\n", c.other_precision.c_str(),
                   c.other_total.mean, c.other_total.p50);
-      std::printf("             %s is %.2fx the speed of %s\n", info.precision.c_str(), c.speed_ratio, c.other_precision.c_str());
+      std::printf("             %s is %.2fx the speed of %s\n", engine_->model_info().precision.c_str(), c.speed_ratio, c.other_precision.c_str());
       const act::DiffStats& d = c.action_diff;
       if (d.non_finite > 0) {
         std::printf("             action difference: %zu of %zu values NaN or infinite in one of the two (no MSE)\n",
@@ -498,18 +563,7 @@ class Benchmark {
     nlohmann::ordered_json j;
     j["actengine_version"] = act::version();
     j["emulated"] = !machine_.emulation.empty();  // then every time is the emulator's (machine.emulation says why)
-    j["model"] = {{"source", opt_.model.empty() ? "built-in" : "blob"},
-                  {"name", model_label_},
-                  {"summary", blob_->summary()},
-                  {"config", blob_->config_json()},
-                  {"precision", info.precision},
-                  {"weight_bytes", blob_->file_size()},
-                  {"gmac", {{"total", gmac_},
-                            {"backbone", macs_.backbone / 1e9},
-                            {"projections", macs_.projections / 1e9},
-                            {"encoder", macs_.encoder / 1e9},
-                            {"decoder", macs_.decoder / 1e9},
-                            {"head", macs_.head / 1e9}}}};
+    j["model"] = model_json();
     j["engine"] = {{"threads", engine_->threads()}, {"kernels", info.kernels}};
     if (comparison_) j["compare"] = comparison_->to_json();
     j["machine"] = machine_.to_json();
@@ -530,6 +584,7 @@ class Benchmark {
     j["peak_rss_bytes"] = rss_;
     j["huge_page_bytes"] = huge_page_bytes_;
     if (op_table_) j["op_profile"] = op_table_->to_json();
+    j["pi5_estimate"] = pi5_.to_json();
     json_file_->write(j.dump(2) + "\n");
     json_file_->commit();
   }
@@ -576,6 +631,7 @@ class Benchmark {
   std::optional<act::OpProfileTable> op_table_;
   std::vector<double> op_totals_;  // --op_profiling: each op's summed time after the last run
   act::MachineInfo machine_;
+  act::Pi5Estimate pi5_;
   Peak peak_;
   double pct_peak_ = 0, pct_peak_p50_ = 0;  // at the mean run, at the median run
   size_t rss_ = 0;
@@ -618,8 +674,21 @@ int main(int argc, char** argv) {
                "(also in --json)");
   app.add_option("--trace", opt.trace_path, "write the last timed inference as a Chrome trace (ui.perfetto.dev), a lane per thread");
   app.add_option("--seed", opt.seed, "seed of the built-in model's weights")->capture_default_str();
+  app.add_option("--target", opt.target, "here: time the model on this machine (a Raspberry Pi 5 estimate is printed "
+                 "beside); pi5: only the Pi 5 estimate (nothing timed; a built-in model is then INT8 unless --precision "
+                 "says otherwise)")->check(CLI::IsMember({"here", "pi5"}))->capture_default_str();
   app.set_version_flag("--version", act::version_line("act_bench"));
   CLI11_PARSE(app, argc, argv);
+  if (opt.target == "pi5") {
+    if (opt.model.empty() && !app.count("--precision")) opt.precision = "int8";  // what a Pi runs
+    for (const char* timed : {"--compare", "--compare-with", "--csv", "--trace", "--input", "--op_profiling"}) {
+      if (app.count(timed)) {
+        std::cerr << "act_bench: error: " << timed << " needs timed runs; --target pi5 times nothing (it estimates the "
+                     "Pi 5 from the model's MACs): drop --target pi5, or " << timed << "\n";
+        return 1;
+      }
+    }
+  }
   if (const long cores = ::sysconf(_SC_NPROCESSORS_ONLN); cores > 0 && opt.threads > cores) {
     std::cerr << "act_bench: warning: --threads " << opt.threads << " is more than the " << cores
               << " online cores: threads then take turns on a core and every parallel op waits for the last one "

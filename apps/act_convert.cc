@@ -41,7 +41,7 @@ struct Options {
   size_t holdout = 0;
   std::string onnx_path, onnx_part = "full", onnx_normalization = "in";
   std::string calib_npy;
-  std::vector<std::string> action_names;  // --action-names, for the report
+  std::vector<std::string> action_names;  // --action-names: stored in the blob, used by the report
 };
 
 bool is_blob(const std::string& path) { return std::filesystem::path(path).extension() == ".actb"; }
@@ -89,8 +89,9 @@ void add_options(CLI::App& app, Options& o) {
   int8_group->add_option("--max-mse", o.max_mse, "fail, writing nothing, when the held-out action MSE (normalised) is above this");
   int8_group->add_option("--report", o.report_path, "also write the accuracy report to this file: JSON, or a "
                          "self-contained HTML page when the name ends in .html");
-  int8_group->add_option("--action-names", o.action_names, "names of the action dimensions for the report, "
-                         "comma-separated, e.g. steering,throttle (default [0], [1], ...)")->delimiter(',');
+  app.add_option("--action-names", o.action_names, "names of the action dimensions, comma-separated, e.g. "
+                 "steering,throttle: stored in the blob for the INT8 report, act_eval's reports and act_drive's "
+                 "recordings (default [0], [1], ...; recordings action.0, command.0, ...)")->delimiter(',');
   int8_group->add_option("--threads", o.int8.threads, "threads for calibration and evaluation (0 = all cores)")->check(CLI::Range(0, act::kMaxThreads));
   app.add_flag("-q,--quiet", o.quiet, "print nothing but errors");
 #ifdef ACT_ONNX_EXPORT
@@ -140,9 +141,9 @@ void check_options(const CLI::App& app, Options& o) {
   }
   if (o.precision == "fp32" && ((!o.calib_sources.empty() && o.calib_npy.empty()) || app.count("--mode") || app.count("--max-mse") ||
                                 app.count("--report") || app.count("--attention") || app.count("--keep-float") ||
-                                app.count("--linear-inputs") || app.count("--action-names"))) {
-    act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse, "
-              "--action-names and --report need --precision int8");
+                                app.count("--linear-inputs"))) {
+    act::fail(act::StatusCode::kInvalidArgument, "--mode, --calib, --attention, --linear-inputs, --keep-float, --max-mse "
+              "and --report need --precision int8");
   }
   if (!o.package.empty()) {
     if (!o.output.empty()) act::fail(act::StatusCode::kInvalidArgument, "give either -o or --package (which writes " +
@@ -248,16 +249,25 @@ std::string frames_used_note(size_t given, const act::Int8Report& report, size_t
   return note;
 }
 
+// --action-names into the model, so that the blobs written carry them.
+void name_actions(act::ImportedCheckpoint& model, const Options& o) {
+  if (o.action_names.empty()) return;
+  const int action_dim = model.summary().model.action_dim;
+  if (o.action_names.size() != static_cast<size_t>(action_dim)) {
+    act::fail(act::StatusCode::kInvalidArgument, "--action-names gives " + std::to_string(o.action_names.size()) +
+              " names but the model's actions have " + std::to_string(action_dim) + " values");
+  }
+  if (const act::Status named = model.set_action_names(o.action_names); !named.ok()) {
+    act::fail(act::StatusCode::kInvalidArgument, "--action-names: " + named.message());
+  }
+}
+
 // Writes the blob (INT8: calibrated on the --calib frames, its report printed). Returns its size.
 uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
   if (o.precision != "int8") {
     auto bytes = model.write_fp32(o.output);
     if (!bytes.ok()) throw act::Error(bytes.status());
     return *bytes;
-  }
-  if (!o.action_names.empty() && o.action_names.size() != static_cast<size_t>(model.summary().model.action_dim)) {
-    act::fail(act::StatusCode::kInvalidArgument, "--action-names gives " + std::to_string(o.action_names.size()) +
-              " names but the model's actions have " + std::to_string(model.summary().model.action_dim) + " values");
   }
   std::optional<act::ProgressLine> progress;
   act::Int8Options int8 = o.int8;
@@ -331,7 +341,13 @@ void print_summary(const act::ImportSummary& s, const Options& o, uint64_t bytes
             << "tokens       " << s.encoder_tokens << " encoder, " << m.chunk_size << " decoder; n_action_steps "
             << m.n_action_steps;
   if (m.temporal_ensembling) std::cout << ", temporal ensembling coeff " << m.temporal_ensemble_coeff;
-  std::cout << "\n"
+  std::cout << "\n";
+  if (!m.action_names.empty()) {
+    std::cout << "actions     ";
+    for (size_t a = 0; a < m.action_names.size(); ++a) std::cout << (a ? ", " : " ") << m.action_names[a];
+    std::cout << " (stored in the blob: reports and recordings use them)\n";
+  }
+  std::cout
             << "parameters   " << millions(static_cast<double>(s.checkpoint_values)) << " in " << s.checkpoint_tensors
             << " checkpoint tensors; dropped " << millions(static_cast<double>(s.training_only_values))
             << " training-only (" << s.training_only_tensors << " tensors)\n"
@@ -462,6 +478,8 @@ int main(int argc, char** argv) {
     int exit_code = 0;
     const std::unique_ptr<act::ImportedCheckpoint> model = import(o, exit_code);
     if (!model) return exit_code;
+    name_actions(*model, o);
+    if (o.action_names.empty()) o.action_names = model->summary().model.action_names;  // the checkpoint's, for the report
     if (!o.calib_npy.empty()) export_calibration(model->summary().model, o);
     if (o.output.empty()) return 0;  // only the calibration set was asked for
     const uint64_t bytes = convert(*model, o);

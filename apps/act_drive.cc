@@ -190,7 +190,7 @@ struct Options {
   int max_frame_age_ms = 200, threads = 0, baud = 115200;
   int control_priority = 0, inference_priority = 0;
   std::vector<int> control_cpus, inference_cpus;
-  bool dry_run = false, calibrate = false;
+  bool dry_run = false, calibrate = false, loop = false;
   std::string pwm, pwm_sysfs_root = kPwmSysfsRoot;
   act::DeploymentOptions deployment;
 };
@@ -233,6 +233,8 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
           {"camera_width", camera.width()},
           {"camera_height", camera.height()},
           {"control_hz", opt.control_hz},
+          // ticks.csv's action.<name> and command.<name> columns: the blob's names (empty: 0, 1, ...)
+          {"action_names", info.action_names},
           {"state", opt.state},
           {"calibration", calibration.to_json()}};
 }
@@ -240,6 +242,7 @@ nlohmann::ordered_json record_meta(const Options& opt, const act::ModelInfo& inf
 CameraOptions camera_options_of(const Options& opt) {
   CameraOptions camera_options{opt.camera, 0, 0, opt.camera_fps};
   camera_options.stepped = opt.realtime == "off";
+  camera_options.loop = opt.loop;
   if (!opt.camera_size.empty() && !parse_size(opt.camera_size, camera_options.height, camera_options.width)) {
     act::fail(act::StatusCode::kInvalidArgument, "--camera-size '" + opt.camera_size + "': expected HxW, e.g. 360x640");
   }
@@ -387,7 +390,8 @@ int drive(const Options& opt) {
   }
 
   std::optional<OverlayVideo> overlay;
-  if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width);
+  // A replay (--realtime off) waits for the encoder: its video has every tick, however slow the encoder.
+  if (!opt.overlay_video.empty()) overlay.emplace(opt.overlay_video, opt.control_hz, input.height, input.width, 4, opt.realtime == "off");
 
   ControlLoop loop(control_options_of(opt, initial_state, manual, overlay), calibration, camera, worker, *link,
                    recorder ? &*recorder : nullptr, std::cerr);
@@ -439,6 +443,10 @@ int run(const Options& opt) {
     if (opt.realtime == "off" && !opt.dry_run) {
       act::fail(act::StatusCode::kInvalidArgument, "--realtime off replays a file faster than real time: only with --dry-run");
     }
+    if (opt.loop && opt.realtime == "off" && opt.duration <= 0) {
+      std::cerr << "act_drive: warning: --loop --realtime off without --duration replays the file over and over as fast as "
+                   "the machine allows, until Ctrl-C\n";
+    }
     if (opt.mode != "ai" && opt.http.empty() && opt.gamepad.empty()) {
       act::fail(act::StatusCode::kInvalidArgument, "--mode " + opt.mode + " needs a way to drive by hand: add --http PORT "
                 "(the page's stick and keys) or --gamepad /dev/input/eventN");
@@ -477,8 +485,8 @@ void add_model_camera_and_board_options(CLI::App& app, Options& opt) {
   app.add_option("--camera-size", opt.camera_size, "capture resolution HxW to request, height first like every size "
                                                    "here, e.g. 480x640 (default: the camera's); frames are then resized "
                                                    "to the model's input");
-  app.add_option("--camera-fps", opt.camera_fps, "capture rate to request; a video file plays at this rate "
-                                                 "(default: its own)")->check(CLI::NonNegativeNumber);
+  app.add_option("--camera-fps", opt.camera_fps, "capture rate to request; a video file or image sequence plays at "
+                                                 "this rate (default: a video's own, 30 for an image sequence)")->check(CLI::NonNegativeNumber);
   app.add_option("--serial", opt.serial, "the Arduino's serial port, e.g. /dev/ttyUSB0 or /dev/ttyACM0");
   app.add_option("--baud", opt.baud, "serial baud rate (the sketch's ROVER_BAUD)")->capture_default_str();
   app.add_option("--ready-timeout", opt.ready_timeout, "seconds to wait for the board's ready line after opening the port")
@@ -488,7 +496,8 @@ void add_model_camera_and_board_options(CLI::App& app, Options& opt) {
   app.add_option("--control-hz", opt.control_hz, "control rate: commands per second")->capture_default_str()
       ->check(CLI::Range(1.0, 500.0));
   app.add_option("--max-frame-age", opt.max_frame_age_ms, "milliseconds; an older frame is never used (the rover holds "
-                                                          "neutral instead)")->capture_default_str()->check(CLI::Range(1, 10000));
+                                                          "neutral instead); a video file's or image sequence's frame "
+                                                          "ages from when the next one is due")->capture_default_str()->check(CLI::Range(1, 10000));
   app.add_option("-t,--threads", opt.threads, "inference threads (0 = all cores)")->capture_default_str()
       ->check(CLI::Range(0, act::kMaxThreads));
   act::add_deployment_options(app, opt.deployment);
@@ -534,6 +543,8 @@ void add_output_and_manual_options(CLI::App& app, Options& opt) {
   app.add_option("--realtime", opt.realtime, "off: replay a video file or image sequence as fast as the machine allows, "
                                              "each inference waited for (with --dry-run, e.g. for --overlay-video)")
       ->capture_default_str()->check(CLI::IsMember({"on", "off"}));
+  app.add_flag("--loop", opt.loop, "a video file or image sequence camera restarts from its first frame at its end "
+                                   "(the run then ends at --duration or Ctrl-C)");
   app.add_flag("--dry-run", opt.dry_run, "print the commands instead of writing them to the serial port");
   app.add_flag("--calibrate", opt.calibrate, "find the PWM endpoints interactively on --serial, then write --calibration; "
                                              "without --serial, write a calibration file to edit to --calibration FILE "

@@ -201,7 +201,8 @@ act::eval::EpisodeEvaluation evaluate_episode(const Options& o, const std::vecto
                                               const act::eval::Episode& episode) {
   const act::ModelInfo& info = engines[0]->model_info();
   act::eval::EpisodeEvaluation evaluation;
-  evaluation.action_names = episode.action_names;
+  // The blob's names (act_convert --action-names) when it has them, else the demonstrations' columns.
+  evaluation.action_names = info.action_names.size() == episode.action_names.size() ? info.action_names : episode.action_names;
   evaluation.scale = {info.action_low, info.action_high};
   for (size_t m = 0; m < engines.size(); ++m) {
     evaluation.models.emplace_back(o.models[m], engines[m]->model_info().precision, episode.action_names.size());

@@ -1,8 +1,7 @@
 #!/usr/bin/env bash
 # act_drive soak: --dry-run on the act-tiny fixture for SECONDS (default 180) with its resident set
-# sampled every 5 s. The camera is an image sequence of the fixture's frames: act_drive reads a
-# pattern like a live camera, runs out of frames, says so and reopens it, so it loops (and the
-# reopen path is soaked too). Fails if RSS grows after the first 30 s by more than
+# sampled every 5 s. The camera is an image sequence of the fixture's frames, played at 30 fps with
+# --loop: act_drive reopens it at its end, so the reopen path is soaked too. Fails if RSS grows after the first 30 s by more than
 # ACT_SOAK_TOLERANCE_KB (default 2048), if a tick was missed, if act_drive fails, or if its last
 # command is not neutral. A benchmark (docs/reliability.md), not part of CI. Needs a built tree
 # ($ACT_BUILD_DIR, default build/). Arguments after SECONDS go to act_drive, e.g.
@@ -22,7 +21,7 @@ mkdir "$work/frames"
 frames=("$fixture"/sample*.png)
 for i in $(seq 0 299); do ln -s "${frames[$((i % ${#frames[@]}))]}" "$work/frames/$(printf %06d "$i").png"; done
 
-"$build/apps/act_drive" -m "$work/tiny.actb" --camera "$work/frames/%06d.png" --dry-run --threads 1 \
+"$build/apps/act_drive" -m "$work/tiny.actb" --camera "$work/frames/%06d.png" --loop --dry-run --threads 1 \
   --duration "$seconds" --stats-every 60 "$@" >"$work/commands.txt" 2>"$work/log.txt" &
 pid=$!
 samples=()

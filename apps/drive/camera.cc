@@ -23,7 +23,7 @@ enum class SourceKind {
   kGstreamerPipeline,  // e.g. a Pi camera: "libcamerasrc ! video/x-raw,width=640,height=480 ! videoconvert !
                        //   video/x-raw,format=BGR ! appsink"
   kUrl,                // rtsp://, http://... (may hold %-escapes, so before image sequences)
-  kImageSequence,      // frames/%06d.png, read like a camera
+  kImageSequence,      // frames/%06d.png, played like a video file
   kUnknown,            // none of these: a path that does not exist, or a folder
 };
 
@@ -32,6 +32,9 @@ namespace {
 bool is_index(const std::string& s) {
   return !s.empty() && s.size() < 4 && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
 }
+
+// A file replayed at its frame rate (not a live source): it ends, can loop and can be stepped.
+bool is_replay_kind(SourceKind kind) { return kind == SourceKind::kFile || kind == SourceKind::kImageSequence; }
 
 SourceKind source_kind(const std::string& s) {
   if (is_index(s)) return SourceKind::kIndex;
@@ -84,6 +87,8 @@ struct Camera::Shared {
 
   // The capture thread's body: reads frames until stopped or, for a file, until its end.
   void run();
+  // The next frame into `image`; a file that ended restarts from its first frame with --loop.
+  bool read_next(cv::Mat& image);
   // Waits until `deadline` or a stop request; true when stopping.
   bool wait_for_stop(Clock::time_point deadline);
   // A file played in real time: waits for start_playback(); false when stopped first.
@@ -103,6 +108,7 @@ struct Camera::Shared {
   bool playing = false;    // start_playback() was called
   uint64_t wanted = 0;     // stepped: the newest frame index advance_to asked for
   double file_fps = 30;    // a file's frame rate (its own, or CameraOptions::fps); set before run()
+  Clock::duration interval{};  // a replayed file's frame interval (Frame::interval); set before run()
 };
 
 Camera::Camera(CameraOptions options) {
@@ -110,9 +116,13 @@ Camera::Camera(CameraOptions options) {
   shared_ = std::make_shared<Shared>(std::move(options), kind);
   const std::string& source = shared_->options.source;
   is_file_ = kind == SourceKind::kFile;
-  if (shared_->options.stepped && kind != SourceKind::kFile) {
+  is_replay_ = is_replay_kind(kind);
+  if (shared_->options.stepped && !is_replay_) {
     fail(StatusCode::kInvalidArgument, "--realtime off replays a video file or an image sequence; '" + source +
                                            "' is a live source");
+  }
+  if (shared_->options.loop && !is_replay_) {
+    fail(StatusCode::kInvalidArgument, "--loop replays a video file or an image sequence; '" + source + "' is a live source");
   }
   std::unique_ptr<media::VideoReader>& video = shared_->video;
   video = open_capture(shared_->options, kind);
@@ -133,9 +143,14 @@ Camera::Camera(CameraOptions options) {
   }
   width_ = first.cols;
   height_ = first.rows;
-  shared_->latest = std::make_shared<const Frame>(Frame{first, Clock::now(), 0});
-  const double fps = shared_->options.fps > 0 ? shared_->options.fps : video->get(cv::CAP_PROP_FPS);
+  // A video's own rate, or --camera-fps; an image sequence has none (OpenCV's image reader says 1).
+  const double own_fps = kind == SourceKind::kImageSequence ? 0.0 : video->get(cv::CAP_PROP_FPS);
+  const double fps = shared_->options.fps > 0 ? shared_->options.fps : own_fps;
   if (fps > 0 && fps < 1000) shared_->file_fps = fps;
+  if (is_replay_) {
+    shared_->interval = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / shared_->file_fps));
+  }
+  shared_->latest = std::make_shared<const Frame>(Frame{first, Clock::now(), 0, shared_->interval});
   thread_ = std::thread([shared = shared_] {
     shared->run();
     std::lock_guard lock(shared->mutex);
@@ -186,8 +201,8 @@ void Camera::start_playback() const {
   if (s.playing) return;
   s.playing = true;
   // A file played in real time: its first frame counts as delivered now, when its clock starts.
-  if (is_file_ && !s.options.stepped && s.latest->index == 0) {
-    s.latest = std::make_shared<const Frame>(Frame{s.latest->bgr, Clock::now(), 0});
+  if (is_replay_ && !s.options.stepped && s.latest->index == 0) {
+    s.latest = std::make_shared<const Frame>(Frame{s.latest->bgr, Clock::now(), 0, s.interval});
   }
   s.changed.notify_all();
 }
@@ -219,10 +234,17 @@ bool Camera::Shared::wait_for_playback() {
   return !stop_requested;
 }
 
+bool Camera::Shared::read_next(cv::Mat& image) {
+  if (video && video->read(image) && !image.empty()) return true;
+  if (!options.loop || !is_replay_kind(kind)) return false;
+  video = open_capture(options, kind);  // from its first frame again
+  return video && video->read(image) && !image.empty();
+}
+
 void Camera::Shared::run() {
-  const bool is_file = kind == SourceKind::kFile;
-  // A video file plays at its own rate (or --camera-fps), not as fast as it decodes, from the
-  // control loop's start.
+  const bool is_file = is_replay_kind(kind);
+  // A video file or image sequence plays at its own rate (or --camera-fps), not as fast as it
+  // decodes, from the control loop's start.
   if (is_file && !options.stepped && !wait_for_playback()) return;
   const auto file_start = Clock::now();
   const auto file_frame_due = [&](uint64_t i) {
@@ -240,9 +262,8 @@ void Camera::Shared::run() {
   while (options.stepped ? frame_wanted(index) : !wait_for_stop(is_file ? file_frame_due(index) : Clock::time_point{})) {
     cv::Mat image;
     const auto read_start = Clock::now();
-    const bool ok = video && video->read(image) && !image.empty();
-    if (ok) {
-      auto frame = std::make_shared<const Frame>(Frame{std::move(image), Clock::now(), index++});
+    if (read_next(image)) {
+      auto frame = std::make_shared<const Frame>(Frame{std::move(image), Clock::now(), index++, interval});
       {
         std::lock_guard lock(mutex);
         latest = std::move(frame);
@@ -253,7 +274,8 @@ void Camera::Shared::run() {
       continue;
     }
     if (is_file) {
-      set_problem(State::kEnded, "end of video file " + options.source + " after " + std::to_string(index) + " frames");
+      set_problem(State::kEnded, std::string(kind == SourceKind::kFile ? "end of video file " : "end of image sequence ") +
+                                     options.source + " after " + std::to_string(index) + " frames");
       return;
     }
     // A live camera failed (unplugged, stream dropped) or stalled (no frame within read_timeout):

@@ -24,7 +24,17 @@ struct Frame {
   cv::Mat bgr;                  ///< as the camera delivered it (OpenCV's BGR order)
   Clock::time_point captured;   ///< when the capture thread received it
   uint64_t index = 0;           ///< 0, 1, 2... since the source opened
+  /// A replayed file's (video or image sequence) frame interval, 1 / its frame rate: the frame is
+  /// the file's current one until the next is due. Zero for a live source.
+  Clock::duration interval{};
 };
+
+/// How old `frame` is at `now` as --max-frame-age judges it: a live camera's frame from its capture,
+/// a replayed file's from when the next frame was due (a 5 fps file's frames each stand for 200 ms
+/// and are not stale then; they are when the file's reader falls behind its own frame rate).
+inline Clock::duration frame_age(const Frame& frame, Clock::time_point now) {
+  return now - frame.captured - frame.interval;
+}
 
 /// Where the control loop gets frames. The camera is one; tests substitute others.
 class FrameSource {
@@ -63,6 +73,9 @@ struct CameraOptions {
   /// A file's frames are read only when advance_to() asks for them, not at their rate (an offline
   /// replay, --realtime off). Refused for a live source.
   bool stepped = false;
+  /// A video file or image sequence restarts from its first frame at its end instead of ending
+  /// (--loop); frame indices go on counting. Refused for a live source.
+  bool loop = false;
 };
 
 class Camera : public FrameSource {
@@ -94,13 +107,16 @@ class Camera : public FrameSource {
   int width() const { return width_; }
   int height() const { return height_; }
   bool is_file() const { return is_file_; }
+  /// A video file or an image sequence: played at its frame rate (its own or CameraOptions::fps),
+  /// ending (or looping) at its end, and steppable (--realtime off).
+  bool is_replay() const { return is_replay_; }
 
  private:
   // The capture, the newest frame and the thread's state, owned jointly by the Camera and its
   // thread: a thread left behind by stop() never touches freed memory.
   struct Shared;
   std::shared_ptr<Shared> shared_;
-  bool is_file_ = false;
+  bool is_file_ = false, is_replay_ = false;
   int width_ = 0, height_ = 0;
   std::thread thread_;
   bool thread_left_behind_ = false;

@@ -297,9 +297,12 @@ class ControlRun {
     if (source_state != FrameSource::State::kRunning) {
       fault_ = frames_.problem();
     } else if (const auto frame = frames_.latest();
-               !frame || (options_.realtime && now - frame->captured > options_.max_frame_age)) {  // a replay's have no age
-      fault_ = "stale frame (newest is " + (frame ? std::to_string(std::lround(ms_between(frame->captured, now))) : "none") +
-               " ms old, --max-frame-age " + std::to_string(options_.max_frame_age.count()) + " ms)";
+               !frame || (options_.realtime && frame_age(*frame, now) > options_.max_frame_age)) {  // a replay's have no age
+      fault_ = "stale frame (newest is " + (frame ? std::to_string(std::lround(ms_between(frame->captured, now))) : "none") + " ms old";
+      if (frame && frame->interval > Clock::duration::zero()) {  // a file's: its age counts from its successor's due time
+        fault_ += ", " + std::to_string(std::lround(ms_between(frame->captured + frame->interval, now))) + " ms past the next frame's due time";
+      }
+      fault_ += ", --max-frame-age " + std::to_string(options_.max_frame_age.count()) + " ms)";
     }
   }
 

@@ -151,7 +151,7 @@ InferenceResult InferenceWorker::infer_once(ChunkModel& model, std::vector<float
   InferenceResult result;
   const std::shared_ptr<const Frame> frame = frames_.latest();
   const auto start = Clock::now();
-  if (!frame || start - frame->captured > options_.max_frame_age) {
+  if (!frame || frame_age(*frame, start) > options_.max_frame_age) {
     result.stale_frame = true;
     result.frame_age_ms = frame ? ms_between(frame->captured, start) : 0;
     return result;

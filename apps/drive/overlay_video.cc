@@ -41,8 +41,9 @@ void ahead(cv::Mat& image, cv::Rect area, const std::vector<float>& values, cons
 
 }  // namespace
 
-OverlayVideo::OverlayVideo(const std::string& path, double fps, int image_height, int image_width, int scale)
-    : image_height_(image_height), image_width_(image_width), scale_(scale) {
+OverlayVideo::OverlayVideo(const std::string& path, double fps, int image_height, int image_width, int scale,
+                           bool wait_for_encoder)
+    : image_height_(image_height), image_width_(image_width), scale_(scale), wait_for_encoder_(wait_for_encoder) {
   const cv::Size size(image_width * scale, image_height * scale + kBandHeight);
   writer_ = media::create_video(path, "mp4v", fps, size);
   if (!writer_) {
@@ -55,7 +56,8 @@ OverlayVideo::~OverlayVideo() { close(); }
 
 void OverlayVideo::add(LiveStatus status, std::shared_ptr<const Frame> frame) {
   {
-    std::lock_guard lock(mutex_);
+    std::unique_lock lock(mutex_);
+    if (wait_for_encoder_) room_.wait(lock, [this] { return closing_ || queue_.size() < kMaxQueued; });
     if (closing_) return;
     if (queue_.size() >= kMaxQueued) {
       ++dropped_;
@@ -72,6 +74,7 @@ void OverlayVideo::close() {
     closing_ = true;
   }
   wake_.notify_one();
+  room_.notify_all();
   if (thread_.joinable()) thread_.join();
   writer_.reset();
 }
@@ -96,6 +99,7 @@ void OverlayVideo::run() {
       tick = std::move(queue_.front());
       queue_.pop_front();
     }
+    room_.notify_all();
     writer_->write(draw(tick.first, tick.second.get()));
     std::lock_guard lock(mutex_);
     ++written_;

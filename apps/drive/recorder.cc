@@ -89,11 +89,14 @@ Recorder::Recorder(const std::string& dir, int state_dim, int action_dim, int im
   }
   log_ = open_table(fs::path(dir) / "log.jsonl");
   ticks_ = open_table(fs::path(dir) / "ticks.csv");
+  std::vector<std::string> names;  // the action columns' suffixes: the blob's names, or 0, 1, ...
+  if (meta.contains("action_names")) names = meta.at("action_names").get<std::vector<std::string>>();
+  for (int i = static_cast<int>(names.size()); i < action_dim_; ++i) names.push_back(std::to_string(i));
   std::fprintf(ticks_, "tick,time_s,jitter_ms,source");
-  for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",action.%d", i);
+  for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",action.%s", names[static_cast<size_t>(i)].c_str());
   std::fprintf(ticks_, ",steering_us,throttle_us,sent,driver,frame");
   for (int i = 0; i < state_dim_; ++i) std::fprintf(ticks_, ",state.%d", i);
-  for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",command.%d", i);
+  for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",command.%s", names[static_cast<size_t>(i)].c_str());
   std::fprintf(ticks_, "\n");
   if (const std::string problem = flush_table(ticks_, fs::path(dir) / "ticks.csv"); !problem.empty()) {
     fail(StatusCode::kIoError, "--record: " + problem);

@@ -67,6 +67,8 @@ class Recorder {
   /// Tick frames are stored at image_height x image_width (the model's input). On the first write
   /// error (a full disk, RLIMIT_FSIZE) the recording stops: the tables are cut back to their last
   /// whole batch, one message goes to `log` (when given) and failure() says it; driving goes on.
+  /// ticks.csv names the action columns action.<name> and command.<name> after meta's
+  /// "action_names" (the blob's, ModelInfo::action_names) when it has them, else action.0, ...
   Recorder(const std::string& dir, int state_dim, int action_dim, int image_height, int image_width,
            const nlohmann::ordered_json& meta, std::ostream* log = nullptr);
   ~Recorder();

@@ -52,10 +52,20 @@ def values(row, prefix, count):
     return [float(row[f"{prefix}.{i}"]) for i in range(count)]
 
 
+def command_columns(row):
+    """ticks.csv's command columns in order: command.<name> after the blob's action names, or command.0, ..."""
+    return [key for key in row if key.startswith("command.")]
+
+
 def convert(directory, repo_id, root, task, drivers, min_frames, use_videos, dataset_class, load_image):
     meta, rows = read_recording(directory)
     state_dim = sum(1 for key in rows[0] if key.startswith("state.")) if rows else 0
-    action_dim = sum(1 for key in rows[0] if key.startswith("command.")) if rows else 0
+    commands = command_columns(rows[0]) if rows else []
+    action_dim = len(commands)
+    # The dataset's action names: the recording's (steering, throttle) when the blob named them.
+    action_names = [c[len("command."):] for c in commands]
+    if all(name.isdigit() for name in action_names):
+        action_names = [f"action.{name}" for name in action_names]
     runs = episodes(rows, drivers, min_frames)
     if not runs:
         sys.exit(f"{directory}: no run of at least {min_frames} ticks driven by {', '.join(sorted(drivers))} "
@@ -65,7 +75,7 @@ def convert(directory, repo_id, root, task, drivers, min_frames, use_videos, dat
         image_key: {"dtype": "video" if use_videos else "image",
                     "shape": (meta["image_height"], meta["image_width"], 3),
                     "names": ["height", "width", "channels"]},
-        "action": {"dtype": "float32", "shape": (action_dim,), "names": [f"action.{i}" for i in range(action_dim)]},
+        "action": {"dtype": "float32", "shape": (action_dim,), "names": action_names},
     }
     if state_dim:
         features["observation.state"] = {"dtype": "float32", "shape": (state_dim,),
@@ -77,7 +87,7 @@ def convert(directory, repo_id, root, task, drivers, min_frames, use_videos, dat
     for run in runs:
         for row in run:
             frame = {image_key: load_image(os.path.join(directory, row["frame"])),
-                     "action": values(row, "command", action_dim)}
+                     "action": [float(row[c]) for c in commands]}
             if state_dim:
                 frame["observation.state"] = values(row, "state", state_dim)
             if task_argument:

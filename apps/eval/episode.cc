@@ -242,6 +242,38 @@ std::optional<size_t> column_named(const CsvTable& table, const std::string& nam
   return it == table.header.end() ? std::nullopt : std::optional<size_t>(it - table.header.begin());
 }
 
+// The action names a recording's meta.json gives its ticks.csv columns (act_drive writes the blob's),
+// or none (an older recording, or a blob without names: the columns are then numbered).
+std::vector<std::string> recording_action_names(const fs::path& dir) {
+  std::ifstream in(dir / "meta.json");
+  const nlohmann::json meta = nlohmann::json::parse(in, nullptr, false);
+  if (meta.is_discarded() || !meta.is_object() || !meta.contains("action_names") || !meta["action_names"].is_array()) return {};
+  std::vector<std::string> names;
+  for (const auto& name : meta["action_names"]) {
+    if (!name.is_string()) return {};
+    names.push_back(name.get<std::string>());
+  }
+  return names;
+}
+
+// A recording's action columns `prefix`<name> after meta.json's names, else `prefix`0, 1, ...
+std::vector<size_t> action_columns(const CsvTable& table, const std::string& prefix, const ModelInfo& model,
+                                   const std::vector<std::string>& names) {
+  if (names.size() != static_cast<size_t>(model.action_dim)) {
+    return indexed_columns(table, prefix, model.action_dim, "the model's actions have");
+  }
+  std::vector<size_t> columns;
+  for (const std::string& name : names) {
+    const std::optional<size_t> column = column_named(table, prefix + name);
+    if (!column) {
+      bad(table.path, "no '" + prefix + name + "' column (meta.json's action_names; the model's actions have " +
+                          std::to_string(model.action_dim) + " values)");
+    }
+    columns.push_back(*column);
+  }
+  return columns;
+}
+
 // A recording whose ticks.csv holds every control tick (act_drive records the command it sent, who
 // sent it, the state and the camera frame at each tick): the demonstration is what was sent, by a
 // person or a policy, so a drive by hand is evaluated as well as an autonomous one. A frame is
@@ -249,7 +281,7 @@ std::optional<size_t> column_named(const CsvTable& table, const std::string& nam
 // held safe (or the recording ends).
 Episode read_tick_recording(const fs::path& dir, const ModelInfo& model, const CsvTable& ticks, size_t cut_lines) {
   Episode ep{dir.string(), "act_drive recording (every tick)", "", {}, {}, {}};
-  const std::vector<size_t> command = indexed_columns(ticks, "command.", model.action_dim, "the model's actions have");
+  const std::vector<size_t> command = action_columns(ticks, "command.", model, recording_action_names(dir));
   const std::vector<size_t> state = indexed_columns(ticks, "state.", model.state_dim, "the model's state has");
   const std::optional<size_t> driver = column_named(ticks, "driver"), frame = column_named(ticks, "frame");
   if (!driver || !frame) bad(ticks.path, "no 'driver' and 'frame' columns beside the 'command.<i>' ones");
@@ -290,11 +322,13 @@ Episode read_recording(const fs::path& dir, const ModelInfo& model) {
   check_state_model(model, ep.path);
   size_t cut_lines = 0;
   const CsvTable ticks = read_csv((dir / "ticks.csv").string(), "ticks", true, &cut_lines);
-  if (column_named(ticks, "command.0")) return read_tick_recording(dir, model, ticks, cut_lines);
+  const bool every_tick = std::any_of(ticks.header.begin(), ticks.header.end(),
+                                      [](const std::string& h) { return h.rfind("command.", 0) == 0; });
+  if (every_tick) return read_tick_recording(dir, model, ticks, cut_lines);
   // An older recording: the frames the policy saw (log.jsonl), the actions it executed by tick (ticks.csv's action.<i>).
   const std::optional<size_t> tick_column = column_named(ticks, "tick");
   if (!tick_column) bad(ticks.path, "no 'tick' column");
-  const std::vector<size_t> action_column = indexed_columns(ticks, "action.", model.action_dim, "the model's actions have");
+  const std::vector<size_t> action_column = action_columns(ticks, "action.", model, recording_action_names(dir));
   for (size_t c : action_column) ep.action_names.push_back(ticks.header[c]);
   std::map<int64_t, std::vector<float>> executed;  // ticks whose action was the policy's (a safe action has none)
   for (const auto& row : ticks.rows) {

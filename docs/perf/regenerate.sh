@@ -1,10 +1,26 @@
 #!/usr/bin/env bash
 # Prints the numbers table of README.md and docs/performance.md from the act_bench JSON files here
 # (docs/performance.md, "The current table", says how they were measured). With --write, replaces
-# the generated block (between its two marker comments) in both files instead.
+# the generated block (between its two marker comments) in both files instead. With --pi5 ACT_BENCH,
+# first rewrites pi5-estimate.json from that act_bench's --target pi5 estimate of the built-in
+# default and rover models (INT8, nothing timed: docs/arm.md).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$here/../.."
+if [[ "${1:-}" == "--pi5" ]]; then
+  bench="${2:?--pi5 needs the act_bench to run, e.g. build/apps/act_bench}"
+  work="$(mktemp -d)"
+  trap 'rm -rf "$work"' EXIT
+  for config in default rover; do "$bench" --target pi5 --config "$config" --json "$work/$config.json" >/dev/null; done
+  python3 - "$here/pi5-estimate.json" "$work/default.json" "$work/rover.json" <<'PY'
+import json, sys
+records = [json.load(open(path)) for path in sys.argv[2:]]
+with open(sys.argv[1], "w") as f:
+    json.dump(records, f, indent=1)
+    f.write("\n")
+PY
+  shift 2
+fi
 table() {
   python3 "$root/scripts/perf_table.py" \
     "$here/zen4.json" "$here/zen5.json" \

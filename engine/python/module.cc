@@ -372,6 +372,7 @@ void define_model_info(py::module_& m) {
       .def_readonly("env_state_dim", &ModelInfo::env_state_dim)
       .def_readonly("env_state_key", &ModelInfo::env_state_key)
       .def_readonly("action_dim", &ModelInfo::action_dim)
+      .def_readonly("action_names", &ModelInfo::action_names)
       .def_readonly("chunk_size", &ModelInfo::chunk_size)
       .def_readonly("n_action_steps", &ModelInfo::n_action_steps)
       .def_readonly("action_low", &ModelInfo::action_low)

@@ -88,6 +88,7 @@ ModelInfo model_info_of(const ModelConfig& config) {
   info.env_state_dim = config.env_state_dim;
   info.env_state_key = config.env_state_key;
   info.action_dim = config.action_dim;
+  info.action_names = config.action_names;
   info.chunk_size = config.chunk_size;
   info.n_action_steps = config.n_action_steps;
   info.temporal_ensembling = config.temporal_ensemble_coeff.has_value();

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <map>
 #include <random>
 #include <set>
 
@@ -15,6 +16,7 @@
 
 #include "apps/bench_support.h"
 #include "apps/op_profile_report.h"
+#include "apps/pi5_estimate.h"
 #include "graph/thread_pool.h"
 #include "support/command.h"
 #include "support/test_paths.h"
@@ -227,6 +229,86 @@ TEST(OpProfileTable, MeansSharesRatesAndKinds) {
   EXPECT_DOUBLE_EQ(m.ops[0].mean_ms, 2.0) << "the mean stays the engine's";
   EXPECT_DOUBLE_EQ(m.ops[0].gmacs_per_s, 1e6 / 3e6);
   EXPECT_DOUBLE_EQ(m.kinds[0].p50_ms, 4.0);
+}
+
+// --target pi5: the Pi 5 estimate alone, nothing timed, INT8 for a built-in model; positive, never
+// slower on more cores, smaller for the rover's smaller image, labelled an estimate, and the JSON a
+// record of the numbers table (scripts/perf_table.py).
+// The estimate's arithmetic: each kind's MACs at its unit's projected rate (attention plus its
+// softmax per score), ops without MACs left to the overhead factor, cores by the parallel efficiency.
+TEST(Pi5Estimate, MacsPerKindAtTheProjectedRates) {
+  const std::vector<OpProfile> ops = {{"a", "conv2d_s8_s8", "k", "backbone", 2e9, 0, 0},
+                                      {"b", "conv2d_s8_s8", "k", "backbone", 1e9, 0, 0},
+                                      {"c", "linear_f32", "k", "decoder", 1e8, 0, 0},
+                                      {"d", "attention_s8", "k", "encoder", 2.0 * 64 * 1e6, 0, 0},
+                                      {"e", "layernorm_f32", "k", "encoder", 0, 0, 0}};
+  const Pi5Rates& r = pi5_rates();
+  const Pi5Estimate e = Pi5Estimate::of(ops, 64);
+  ASSERT_EQ(e.kinds.size(), 3u);  // the layer norm has no MACs
+  EXPECT_EQ(e.kinds[0].kind, "conv2d_s8_s8");
+  EXPECT_EQ(e.kinds[0].unit, "sdot");
+  const double hz = r.clock_ghz * 1e9;
+  EXPECT_NEAR(e.kinds[0].ms_one_core, 3e9 / (r.sdot_macs_per_cycle * r.sdot_efficiency) / hz * 1e3, 1e-9);
+  for (const Pi5KindCost& k : e.kinds) {
+    if (k.kind == "linear_f32") {
+      EXPECT_EQ(k.unit, "fmla");
+      EXPECT_NEAR(k.ms_one_core, 1e8 / (r.fmla_macs_per_cycle * r.fmla_efficiency) / hz * 1e3, 1e-9);
+    }
+    if (k.kind == "attention_s8") {  // 1e6 scores of 2 x 64 MACs, each with its softmax
+      EXPECT_GT(k.ms_one_core, 2.0 * 64 * 1e6 / (r.sdot_macs_per_cycle * r.sdot_efficiency) / hz * 1e3);
+    }
+  }
+  ASSERT_EQ(e.latency_ms.size(), 4u);
+  EXPECT_NEAR(e.latency_ms[0], e.kernel_ms_one_core * r.other_ops_factor, 1e-9);
+  for (size_t c = 1; c < 4; ++c) EXPECT_LT(e.latency_ms[c], e.latency_ms[c - 1]);
+  EXPECT_GT(e.latency_ms[3], e.latency_ms[0] / 4);  // never better than linear
+  EXPECT_NE(Pi5Estimate::method().find("llvm-mca -mcpu=cortex-a76"), std::string::npos);
+}
+
+TEST(ActBench, TargetPi5EstimatesTheDefaultAndRoverModels) {
+  const std::string dir = test::scratch_dir();
+  std::map<std::string, double> four_cores;
+  for (const std::string config : {"default", "rover"}) {
+    const std::string json_path = dir + "/" + config + ".json";
+    const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config " + config + " --target pi5 -t 2 --json " + q(json_path));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("int8 static on a Raspberry Pi 5 (4x Cortex-A76, 2.4 GHz), ESTIMATED: 1 core "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("estimate, not a measurement"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("llvm-mca -mcpu=cortex-a76"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("timed runs"), std::string::npos) << r.output;
+    std::ifstream in(json_path);
+    const nlohmann::json j = nlohmann::json::parse(in);
+    EXPECT_TRUE(j.at("estimate").get<bool>());
+    EXPECT_EQ(j.at("model").at("precision"), "int8 static");
+    const nlohmann::json& e = j.at("pi5_estimate");
+    EXPECT_TRUE(e.at("estimate").get<bool>());
+    double previous = 0;
+    for (const std::string cores : {"1", "2", "3", "4"}) {
+      const double ms = e.at("latency_ms_by_cores").at(cores);
+      EXPECT_GT(ms, 0) << config << " " << cores;
+      if (previous > 0) {
+        EXPECT_LT(ms, previous) << config << ": " << cores << " cores slower than fewer";
+      }
+      previous = ms;
+    }
+    EXPECT_DOUBLE_EQ(j.at("latency_ms").at("total").at("p50").get<double>(), previous);
+    EXPECT_EQ(j.at("engine").at("threads"), 4);
+    double kinds_ms = 0;
+    for (const auto& kind : e.at("kinds")) kinds_ms += kind.at("ms_one_core").get<double>();
+    EXPECT_NEAR(kinds_ms, e.at("kernel_ms_one_core").get<double>(), 1e-9 * kinds_ms);
+    four_cores[config] = previous;
+  }
+  EXPECT_LT(four_cores["rover"], four_cores["default"]);
+  // Beside the measured numbers on any machine, in the text and the JSON.
+  const auto measured = run_command(std::string(ACT_BENCH_BIN) + " --config 64x96 -n 1 -w 0 -t 1 --json " + q(dir + "/here.json"));
+  ASSERT_EQ(measured.exit_code, 0) << measured.output;
+  EXPECT_NE(measured.output.find("pi5 estimate fp32 on a Raspberry Pi 5"), std::string::npos) << measured.output;
+  std::ifstream in(dir + "/here.json");
+  EXPECT_GT(nlohmann::json::parse(in).at("pi5_estimate").at("latency_ms_by_cores").at("4").get<double>(), 0);
+  // Timed options do not go with it.
+  const auto refused = run_command(std::string(ACT_BENCH_BIN) + " --target pi5 --compare");
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_NE(refused.output.find("--compare needs timed runs; --target pi5 times nothing"), std::string::npos) << refused.output;
 }
 
 TEST(ActBench, CompareWithABlobNeedsTheOtherPrecision) {

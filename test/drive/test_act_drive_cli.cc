@@ -20,6 +20,7 @@
 #include "actengine/engine.h"
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
+#include "apps/drive/overlay_video.h"
 #include "apps/media/media_io.h"
 #include "drive/drive_cli_util.h"
 #include "drive/drive_test_util.h"
@@ -44,7 +45,7 @@ TEST(ActDriveCli, HelpListsTheOptions) {
   for (const char* flag : {"--model", "--camera", "--camera-size", "--serial", "--baud", "--calibration", "--control-hz",
                            "--max-frame-age", "--threads", "--control-priority", "--inference-cpus", "--stats-every",
                            "--record", "--dry-run", "--calibrate", "--state", "--duration", "--initial-state",
-                           "--raw-endpoints", "--list-cameras", "--list-ports"}) {
+                           "--raw-endpoints", "--list-cameras", "--list-ports", "--loop", "--realtime"}) {
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
   }
 }
@@ -226,6 +227,157 @@ TEST(ActDriveCli, RealtimeOffReplaysAFileTheSameEveryTime) {
   r = run_command(kDrive + " -m " + q(blob) + " --camera 0 --dry-run --realtime off");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("'0' is a live source"), std::string::npos) << r.output;
+}
+
+// `frames` numbered PNG frames, 128x96, in `dir`; returns their pattern for --camera.
+std::string write_test_sequence(const std::string& dir, int frames) {
+  fs::create_directories(dir);
+  for (int i = 0; i < frames; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "/%06d.png", i);
+    act::media::write_image(dir + name, cv::Mat(96, 128, CV_8UC3, cv::Scalar(10 * i, 80, 160)));
+  }
+  return dir + "/%06d.png";
+}
+
+// The summary's "N ticks (" count, or -1.
+long summary_ticks(const std::string& log) {
+  const size_t at = log.find(" s: ");
+  return at == std::string::npos ? -1 : std::strtol(log.c_str() + at + 4, nullptr, 10);
+}
+
+// A replay's overlay video has every tick: the replay waits for the encoder instead of dropping
+// ticks (a replay's ticks come as fast as the machine allows, much faster than the encoder).
+TEST(ActDriveCli, RealtimeOffOverlayVideoKeepsEveryTick) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string video = write_test_video(dir + "/v.avi", 240, 30, 128, 96);
+  const std::string blob = act_tiny_blob(dir);
+  const auto r = run_command("(" + kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --realtime off --threads 1 " +
+                             "--overlay-video " + q(dir + "/overlay.mp4") + " 2>" + q(dir + "/stderr.txt") + " >/dev/null)");
+  const std::string log = read_text(dir + "/stderr.txt");
+  ASSERT_EQ(r.exit_code, 0) << log;
+  const std::unique_ptr<act::media::VideoReader> overlay = act::media::open_video(dir + "/overlay.mp4", cv::CAP_ANY);
+  ASSERT_TRUE(overlay);
+  long frames = 0;
+  for (cv::Mat frame; overlay->read(frame);) ++frames;
+  EXPECT_EQ(frames, summary_ticks(log)) << log;
+  EXPECT_EQ(frames, 241) << log;  // the 240 frames and the tick that sees the end
+  EXPECT_NE(log.find("overlay video " + dir + "/overlay.mp4: 241 ticks\n"), std::string::npos) << log;
+  EXPECT_EQ(log.find("dropped"), std::string::npos) << log;
+}
+
+// A producer far faster than the encoder (500 ticks added at once, each a 512x504 frame to draw and
+// encode): a replay's overlay waits for the encoder and keeps every tick.
+TEST(OverlayVideo, AReplayWaitsForTheEncoderInsteadOfDropping) {
+  const std::string dir = act::test::scratch_dir();
+  auto frame = std::make_shared<const Frame>(Frame{cv::Mat(96, 128, CV_8UC3, cv::Scalar(20, 120, 220)), Clock::now(), 0, {}});
+  OverlayVideo overlay(dir + "/o.avi", 30, 96, 128, 4, /*wait_for_encoder=*/true);
+  for (int t = 0; t < 500; ++t) {
+    LiveStatus status;
+    status.tick = t;
+    overlay.add(status, frame);
+  }
+  overlay.close();
+  EXPECT_EQ(overlay.frames_written(), 500u);
+  EXPECT_EQ(overlay.dropped(), 0u);
+  const std::unique_ptr<act::media::VideoReader> video = act::media::open_video(dir + "/o.avi", cv::CAP_ANY);
+  ASSERT_TRUE(video);
+  int frames = 0;
+  for (cv::Mat image; video->read(image);) ++frames;
+  EXPECT_EQ(frames, 500);
+}
+
+// --loop: a video file and an image sequence restart at their end, so a replay longer than the file
+// runs to --duration; without it each ends with the file. An image sequence replays offline too.
+TEST(ActDriveCli, LoopRestartsAVideoFileAndAnImageSequence) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 10, 30, 128, 96);
+  const std::string sequence = write_test_sequence(dir + "/seq", 10);
+  for (const std::string& camera : {video, sequence}) {
+    const std::string replay = kDrive + " -m " + q(blob) + " --camera " + q(camera) + " --dry-run --realtime off --threads 1 ";
+    auto r = run_command("(" + replay + "--loop --duration 2 --record " + q(dir + "/rec" + std::to_string(camera.size())) +
+                         " 2>" + q(dir + "/loop.txt") + " >/dev/null)");
+    std::string log = read_text(dir + "/loop.txt");
+    ASSERT_EQ(r.exit_code, 0) << log;
+    EXPECT_NE(log.find("act_drive: --duration reached"), std::string::npos) << camera << "\n" << log;
+    EXPECT_GE(summary_ticks(log), 60) << log;  // 2 s at 30 Hz: six passes of the file
+    // The observations of the last second saw frames of the third pass (frame indices go on counting).
+    std::ifstream observations(dir + "/rec" + std::to_string(camera.size()) + "/log.jsonl");
+    uint64_t last_frame = 0;
+    for (std::string line; std::getline(observations, line);) last_frame = nlohmann::json::parse(line)["frame_index"].get<uint64_t>();
+    EXPECT_GE(last_frame, 50u) << camera;
+    r = run_command("(" + replay + "--duration 2 2>" + q(dir + "/once.txt") + " >/dev/null)");
+    log = read_text(dir + "/once.txt");
+    ASSERT_EQ(r.exit_code, 0) << log;
+    EXPECT_NE(log.find(camera == video ? "act_drive: end of video file" : "act_drive: end of image sequence"), std::string::npos) << log;
+    EXPECT_EQ(summary_ticks(log), 11) << log;
+  }
+  const auto r = run_command(kDrive + " -m " + q(blob) + " --camera 0 --dry-run --loop");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--loop replays a video file or an image sequence; '0' is a live source"), std::string::npos) << r.output;
+}
+
+// A file at 1 fps played in real time: each frame stands for 1000 ms, more than --max-frame-age 400,
+// and is no stale frame for it (a file's frame ages from when the next is due; before, every tick
+// from 400 ms into each frame was one).
+TEST(ActDriveCli, ASlowFileIsNoStaleFrameInRealTime) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 10, 1, 128, 96);
+  const std::string sequence = write_test_sequence(dir + "/seq", 10);
+  for (const std::string& camera : {video, sequence}) {
+    const auto r = run_command("(" + kDrive + " -m " + q(blob) + " --camera " + q(camera) + " --camera-fps 1 --dry-run --threads 1 " +
+                               "--duration 2 --max-frame-age 400 2>" + q(dir + "/stderr.txt") + " >/dev/null)");
+    const std::string log = read_text(dir + "/stderr.txt");
+    ASSERT_EQ(r.exit_code, 0) << log;
+    EXPECT_NE(log.find("act_drive: --duration reached"), std::string::npos) << log;
+    EXPECT_NE(log.find(" inference errors, 0 stale-frame ticks"), std::string::npos) << camera << "\n" << log;
+    EXPECT_EQ(log.find("stale frame"), std::string::npos) << log;
+  }
+}
+
+// The blob's action names (act_convert --action-names) name a recording's action columns, and
+// act_eval's report on that recording uses them; an older blob without names keeps command.0, ...
+TEST(ActDriveCli, RecordingsAndEvalUseTheBlobsActionNames) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string named = dir + "/named.actb";
+  const auto converted = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                     q(named) + " -q --action-names steering,throttle");
+  ASSERT_EQ(converted.exit_code, 0) << converted.output;
+  const std::string video = write_test_video(dir + "/v.avi", 20, 30, 128, 96);
+  const auto first_line = [](const std::string& path) {
+    std::ifstream in(path);
+    std::string line;
+    std::getline(in, line);
+    return line;
+  };
+  for (const std::string& blob : {named, act_tiny_blob(dir)}) {
+    const bool has_names = blob == named;
+    const std::string rec = dir + (has_names ? "/rec-named" : "/rec-plain");
+    const auto r = run_command(kDrive + " -m " + q(blob) + " --camera " + q(video) + " --dry-run --realtime off --threads 1 --record " +
+                               q(rec) + " >/dev/null");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const std::string header = first_line(rec + "/ticks.csv");
+    const std::string expected = has_names ? "tick,time_s,jitter_ms,source,action.steering,action.throttle,steering_us,throttle_us,"
+                                             "sent,driver,frame,state.0,state.1,command.steering,command.throttle"
+                                           : "tick,time_s,jitter_ms,source,action.0,action.1,steering_us,throttle_us,"
+                                             "sent,driver,frame,state.0,state.1,command.0,command.1";
+    EXPECT_EQ(header, expected);
+    const auto eval = run_command(std::string(ACT_EVAL_BIN) + " -m " + q(blob) + " -t 1 --episode " + q(rec) + " --json " +
+                                  q(rec + "/eval.json"));
+    ASSERT_EQ(eval.exit_code, 0) << eval.output;
+    std::ifstream report(rec + "/eval.json");
+    const nlohmann::json j = nlohmann::json::parse(report);
+    EXPECT_EQ(j.at("action_names"), has_names ? nlohmann::json({"steering", "throttle"}) : nlohmann::json({"command.0", "command.1"}));
+    if (has_names) {
+      EXPECT_NE(eval.output.find("steering: first action MSE"), std::string::npos) << eval.output;
+    }
+  }
 }
 
 TEST(ActDriveCli, DeploymentOptionsReplaceTheBlobs) {

@@ -59,6 +59,8 @@ TEST(Camera, OpensAnImageSequenceLikeACamera) {
   }
   Camera camera(CameraOptions{dir + "/frame_%03d.png", 0, 0, 0});
   EXPECT_FALSE(camera.is_file());
+  EXPECT_TRUE(camera.is_replay());  // played at its rate, like a video file
+  EXPECT_EQ(camera.latest()->interval, std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / 30)));
   EXPECT_EQ(camera.width(), 64);
   EXPECT_EQ(camera.height(), 48);
 }

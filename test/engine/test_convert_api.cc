@@ -94,6 +94,58 @@ TEST(ConvertApi, LocatesLeRobotsTrainingLayouts) {
   EXPECT_NE(blob.status().message().find("already converted"), std::string::npos) << blob.status().message();
 }
 
+// Action names reach the FP32 and INT8 blobs and their ModelInfo; a blob written without them (as
+// every blob before they were stored) has none, and its config has no "action_names" key at all.
+TEST(ConvertApi, ActionNamesReachTheBlobsAndOlderBlobsHaveNone) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = test::scratch_dir();
+  auto model = import_checkpoint(fixture);
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  ASSERT_TRUE((*model)->write_fp32(dir + "/plain.actb").ok());
+  const Status wrong = (*model)->set_action_names({"steering"});
+  EXPECT_EQ(wrong.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(wrong.message().find("1 action names for the model's 2 action values"), std::string::npos) << wrong.message();
+  EXPECT_EQ((*model)->set_action_names({"steering", "a,b"}).code(), StatusCode::kInvalidArgument);
+  ASSERT_TRUE((*model)->set_action_names({"steering", "throttle"}).ok());
+  EXPECT_EQ((*model)->summary().model.action_names, (std::vector<std::string>{"steering", "throttle"}));
+  ASSERT_TRUE((*model)->write_fp32(dir + "/named.actb").ok());
+  Int8Options int8;
+  int8.mode = Int8Mode::kDynamic;
+  int8.threads = 1;
+  ASSERT_TRUE((*model)->write_int8(dir + "/named-int8.actb", {}, int8).ok());
+  for (const char* name : {"/named.actb", "/named-int8.actb"}) {
+    auto engine = Engine::open(dir + name);
+    ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+    EXPECT_EQ((*engine)->model_info().action_names, (std::vector<std::string>{"steering", "throttle"})) << name;
+  }
+  auto plain = Engine::open(dir + "/plain.actb");
+  ASSERT_TRUE(plain.ok()) << plain.status().to_string();
+  EXPECT_TRUE((*plain)->model_info().action_names.empty());
+}
+
+// A checkpoint whose action feature carries names (as a LeRobot dataset's features do) names the
+// actions; set_action_names replaces them.
+TEST(ConvertApi, ActionNamesFromTheCheckpointsFeatures) {
+  const std::string fixture = test::fixture_dir("act-tiny");
+  ACT_REQUIRE_PATH(fixture);
+  const std::string dir = test::scratch_dir() + "/named";
+  fs::create_directories(dir);
+  for (const auto& entry : fs::directory_iterator(fixture)) fs::copy(entry.path(), dir / entry.path().filename());
+  nlohmann::ordered_json config = nlohmann::ordered_json::parse(std::ifstream(dir + "/config.json"));
+  config["output_features"]["action"]["names"] = {"steer", "gas"};
+  std::ofstream(dir + "/config.json") << config.dump(2);
+  auto model = import_checkpoint(dir);
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  EXPECT_EQ((*model)->summary().model.action_names, (std::vector<std::string>{"steer", "gas"}));
+  ASSERT_TRUE((*model)->write_fp32(dir + "/m.actb").ok());
+  auto engine = Engine::open(dir + "/m.actb");
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  EXPECT_EQ((*engine)->model_info().action_names, (std::vector<std::string>{"steer", "gas"}));
+  ASSERT_TRUE((*model)->set_action_names({"steering", "throttle"}).ok());
+  EXPECT_EQ((*model)->summary().model.action_names, (std::vector<std::string>{"steering", "throttle"}));
+}
+
 TEST(ConvertApi, DeploymentOptionsReplaceTheFoldersAndReachTheBlob) {
   const std::string fixture = test::fixture_dir("act-tiny");
   ACT_REQUIRE_PATH(fixture);

@@ -215,8 +215,28 @@ std::string ModelConfig::ensemble_coeff_problem(double coeff, int chunk_size) {
   return "";
 }
 
+std::string ModelConfig::action_names_problem(const std::vector<std::string>& names, int action_dim) {
+  if (names.size() != static_cast<size_t>(action_dim)) {
+    return std::to_string(names.size()) + " action names for the model's " + std::to_string(action_dim) + " action values";
+  }
+  for (size_t i = 0; i < names.size(); ++i) {
+    const std::string& name = names[i];
+    if (name.find_first_not_of(" \t") == std::string::npos) return "action name " + std::to_string(i) + " is empty";
+    if (name.find_first_of(",\"\r\n") != std::string::npos) {
+      return "action name '" + name + "' holds a comma, a quote or a line break (a CSV column name cannot)";
+    }
+    if (std::find(names.begin(), names.begin() + static_cast<std::ptrdiff_t>(i), name) != names.begin() + static_cast<std::ptrdiff_t>(i)) {
+      return "action name '" + name + "' is given twice";
+    }
+  }
+  return "";
+}
+
 void ModelConfig::validate() const {
   auto bad = [](const std::string& msg) { fail(StatusCode::kInvalidArgument, "invalid model config: " + msg); };
+  if (!action_names.empty()) {
+    if (const std::string problem = action_names_problem(action_names, action_dim); !problem.empty()) bad(problem);
+  }
   const ResNetArchitecture* resnet = find_resnet(backbone);
   if (resnet == nullptr) {
     bad("backbone \"" + backbone + "\" is not one this engine runs (" + resnet_names() + ")");
@@ -301,6 +321,7 @@ nlohmann::json ModelConfig::to_json() const {
   j["env_state_key"] = env_state_key;
   j["env_state_dim"] = env_state_dim;
   j["action_dim"] = action_dim;
+  if (!action_names.empty()) j["action_names"] = action_names;
   j["dim_model"] = dim_model;
   j["n_heads"] = n_heads;
   j["dim_feedforward"] = dim_feedforward;
@@ -369,6 +390,7 @@ ModelConfig ModelConfig::from_json(const nlohmann::json& j) {
     c.env_state_key = j.at("env_state_key").get<std::string>();
     c.env_state_dim = int_field(j, "env_state_dim");
     c.action_dim = int_field(j, "action_dim");
+    if (j.contains("action_names")) c.action_names = j.at("action_names").get<std::vector<std::string>>();
     c.dim_model = int_field(j, "dim_model");
     c.n_heads = int_field(j, "n_heads");
     c.dim_feedforward = int_field(j, "dim_feedforward");

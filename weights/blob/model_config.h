@@ -78,6 +78,10 @@ struct ModelConfig {
   std::string env_state_key;
   int env_state_dim = 0;  ///< 0 = no environment state
   int action_dim = 0;
+  /// The action dimensions' names (e.g. "steering", "throttle"; act_convert --action-names), for
+  /// reports and recordings: empty (a blob from before they were stored, or none given) or one per
+  /// action value. Stored in the blob only when given, so older engines read the blob unchanged.
+  std::vector<std::string> action_names;
   // Transformer.
   int dim_model = 512;
   int n_heads = 8;
@@ -128,6 +132,10 @@ struct ModelConfig {
   /// 1 <= n_action_steps <= chunk_size, ensembling needs n_action_steps == 1, ensemble_coeff_problem),
   /// or "" when they do.
   static std::string deployment_problem(int n_action_steps, std::optional<double> temporal_ensemble_coeff, int chunk_size);
+
+  /// Why `names` cannot name `action_dim` action values (their count, an empty or repeated name, a
+  /// comma, quote or line break, which a CSV header cannot hold), or "" when they can.
+  static std::string action_names_problem(const std::vector<std::string>& names, int action_dim);
 
   /// Checks every invariant (a known backbone whose blocks match its name, positive dims, D % n_heads,
   /// D % 4, n_action_steps <= chunk_size, ensembling needs n_action_steps == 1, ...). Throws

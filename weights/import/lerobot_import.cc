@@ -101,6 +101,7 @@ struct Feature {
   std::string key;
   std::string type;
   std::vector<int64_t> shape;
+  std::vector<std::string> names;  ///< "names", when the feature has a list of strings (a dataset's features do)
 };
 
 std::vector<Feature> read_features(const ConfigReader& cfg, const std::string& field) {
@@ -116,7 +117,12 @@ std::vector<Feature> read_features(const ConfigReader& cfg, const std::string& f
         !value["shape"].is_array()) {
       malformed();
     }
-    Feature feature{key, value["type"].get<std::string>(), {}};
+    Feature feature{key, value["type"].get<std::string>(), {}, {}};
+    if (value.contains("names") && value["names"].is_array()) {
+      for (const auto& n : value["names"]) {
+        if (n.is_string()) feature.names.push_back(n.get<std::string>());
+      }
+    }
     for (const auto& d : value["shape"]) {
       // Checked before converting: a float (1e300) converted to an integer is undefined behaviour, and
       // the dimensions are used as int.
@@ -247,6 +253,9 @@ void read_action_feature(const ConfigReader& cfg, const fs::path& path, ModelCon
     if (f.key == "action" && f.type == "ACTION") {
       if (f.shape.size() != 1) fail(StatusCode::kInvalidArgument, path.string() + ": action must be 1-D");
       m.action_dim = static_cast<int>(f.shape[0]);
+      // Names given with the feature (as a LeRobot dataset's features have them) name the actions,
+      // when they fit (act_convert --action-names replaces them).
+      if (ModelConfig::action_names_problem(f.names, m.action_dim).empty()) m.action_names = f.names;
       have_action = true;
     } else {
       fail(StatusCode::kUnimplemented, path.string() + ": output feature \"" + f.key + "\" is not ACT's \"action\"");

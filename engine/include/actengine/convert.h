@@ -303,6 +303,11 @@ class ImportedCheckpoint {
 
   const ImportSummary& summary() const { return summary_; }
 
+  /// Names the action dimensions (e.g. {"steering", "throttle"}), one per action value: stored in
+  /// the blobs written after this (ModelInfo::action_names), for reports and act_drive's
+  /// recordings. kInvalidArgument for a wrong count, an empty or repeated name, or a comma, quote or
+  /// line break in one.
+  Status set_action_names(std::vector<std::string> names);
   /// Writes the FP32 blob. Returns its size in bytes.
   StatusOr<uint64_t> write_fp32(const std::string& path) const;
   /// Calibrates on `calibration` (kDynamic needs no frames: synthetic ones then measure accuracy),

@@ -96,6 +96,9 @@ struct ModelInfo {
   int env_state_dim = 0;            ///< environment state values (0 = none)
   std::string env_state_key;        ///< its feature key, e.g. "observation.environment_state"
   int action_dim = 0;
+  /// The action dimensions' names stored in the blob (act_convert --action-names), one per action
+  /// value; empty for a blob without them (then tools say action.0, action.1, ...).
+  std::vector<std::string> action_names;
   int dim_model = 0;  ///< the transformer's width: channels of the backbone's output features
   int chunk_size = 0;
   int n_action_steps = 0;

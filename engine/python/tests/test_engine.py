@@ -21,6 +21,7 @@ def test_model_info_describes_the_fixture(fixture, fp32_blob):
     assert info.precision == "fp32"
     assert info.isa and info.kernels
     assert len(info.action_low) == len(info.action_high) == 2
+    assert info.action_names == []  # converted without act_convert --action-names
     assert len(info.state_low) == len(info.state_high) == 2
     assert all(lo < hi for lo, hi in zip(info.state_low, info.state_high))
 

@@ -227,6 +227,14 @@ StatusOr<std::unique_ptr<ImportedCheckpoint>> import_synthetic_model(const std::
   return out;
 }
 
+Status ImportedCheckpoint::set_action_names(std::vector<std::string> names) {
+  const std::string problem = ModelConfig::action_names_problem(names, impl_->model.config.action_dim);
+  if (!problem.empty()) return Status(StatusCode::kInvalidArgument, problem);
+  impl_->model.config.action_names = names;
+  summary_.model.action_names = std::move(names);
+  return Status::ok_status();
+}
+
 StatusOr<uint64_t> ImportedCheckpoint::write_fp32(const std::string& path) const {
   uint64_t bytes = 0;
   const Status s = guarded([&] { bytes = write_fp32_blob(impl_->model, path); });

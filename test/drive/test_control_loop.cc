@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <mutex>
+#include <optional>
 #include <sstream>
 
 
@@ -344,6 +347,61 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
 
 // The first observation gets the initial state; the executed actions follow, and the one that leaves
 // the training range (mean -/+ 3 standard deviations) is warned about once.
+// A write that fails in the middle of a batch (here: every observation frame, its folder replaced
+// by a file) once left the tables cut back to the previous batch while stdio still held the rest
+// of this one's rows, which the close then wrote past the cut: a hole of NUL bytes and a row cut in
+// two. Rows of ~20 kB (more than stdio's buffer) make that certain. Now the table holds whole rows.
+TEST(Recorder, AFailedWriteLeavesWholeRowsOnly) {
+  const std::string dir = act::test::scratch_dir() + "/rec";
+  const int state_dim = 2000;
+  std::ostringstream log;
+  Recorder recorder(dir, state_dim, 2, 48, 64, nlohmann::ordered_json{{"test", 1}}, &log);
+  fs::remove_all(dir + "/frames");
+  std::ofstream(dir + "/frames") << "not a folder";
+  for (int t = 0; t < 200; ++t) {
+    TickRecord tick;
+    tick.tick = t;
+    tick.source = "chunk";
+    tick.action = {0.25f, 0.5f};
+    tick.pwm = kDriving;
+    tick.sent = true;
+    tick.driver = "ai";
+    tick.state.assign(static_cast<size_t>(state_dim), 0.123456789f);
+    tick.command = {0.25f, 0.5f};
+    recorder.add(std::move(tick));
+  }
+  ObservationRecord observation;
+  observation.tick = 199;
+  observation.height = 48;
+  observation.width = 64;
+  observation.rgb.assign(48 * 64 * 3, 100);
+  observation.state.assign(static_cast<size_t>(state_dim), 0.5f);
+  recorder.add(std::move(observation));
+  recorder.close();
+  EXPECT_NE(recorder.failure().find("--record: cannot create " + dir + "/frames/000000.png.tmp.png: Not a directory: "
+                                    "the recording stops here ("),
+            std::string::npos) << recorder.failure();
+  const std::string text = log.str();
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1) << text;
+  std::ifstream in(dir + "/ticks.csv", std::ios::binary);
+  const std::string ticks((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(ticks.empty());
+  EXPECT_EQ(ticks.find('\0'), std::string::npos) << "NUL bytes in ticks.csv: a write past the cut";
+  EXPECT_EQ(ticks.back(), '\n') << "ticks.csv ends mid-row";
+  std::istringstream rows(ticks);
+  std::string header, row;
+  ASSERT_TRUE(std::getline(rows, header));
+  size_t count = 0;
+  while (std::getline(rows, row)) {
+    ASSERT_EQ(std::count(row.begin(), row.end(), ','), std::count(header.begin(), header.end(), ',')) << "row " << count + 1;
+    ++count;
+  }
+  EXPECT_EQ(count, 200u) << "the rows before the failed frame are whole: they are kept";
+  EXPECT_EQ(recorder.unrecorded_ticks(), 0u);
+  EXPECT_NE(recorder.failure().find("(200 ticks and 0 observations kept in "), std::string::npos) << recorder.failure();
+  EXPECT_EQ(std::ifstream(dir + "/log.jsonl").peek(), std::char_traits<char>::eof()) << "a line for a frame not on disk";
+}
+
 TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
   Rig rig;
   rig.recording = rig.dir + "/rec";

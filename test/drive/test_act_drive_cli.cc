@@ -515,6 +515,57 @@ INSTANTIATE_TEST_SUITE_P(Suspend, ActDriveSuspend,
                          [](const ::testing::TestParamInfo<SuspendCase>& case_info) { return std::string(case_info.param.name); });
 
 
+// SIGSTOP cannot be caught: nothing goes on the wire while stopped (the board's watchdog stops the
+// car after 250 ms). After SIGCONT the loop wakes up long after its tick: the first command on the
+// wire is neutral, not the rest of the chunk planned before the stop, and the run goes on.
+TEST(ActDriveCli, AfterSigstopAndSigcontTheFirstCommandIsNeutral) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 600, 30, 128, 96);
+  FakeArduino board;
+  const std::string log_path = dir + "/log.txt";
+  const pid_t pid = start_act_drive({"-m", blob, "--camera", video, "--serial", board.port_path(), "--raw-endpoints",
+                                     "--threads", "1"}, log_path);
+  ASSERT_GE(pid, 0);
+  const auto end_run = [&] {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, nullptr, 0);
+  };
+  auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(pid, SIGSTOP);
+  deadline = Clock::now() + std::chrono::seconds(5);
+  while (process_state(pid).first != 'T' && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  if (process_state(pid).first != 'T') end_run();
+  ASSERT_EQ(process_state(pid).first, 'T') << read_text(log_path);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // shorter than act-tiny's chunk of 10 ticks
+  const size_t before = board.commands().size();
+  const auto continued = Clock::now();
+  ::kill(pid, SIGCONT);
+  deadline = Clock::now() + std::chrono::seconds(10);
+  while (board.commands().size() < before + 30 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(pid, SIGTERM);
+  const std::optional<int> status = wait_for_exit(pid, std::chrono::seconds(5));
+  if (!status) end_run();
+  const std::string log = read_text(log_path);
+  ASSERT_TRUE(status) << "act_drive did not end within 5 s of SIGTERM\n" << log;
+  EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << log;
+  const auto commands = board.commands();
+  ASSERT_GE(commands.size(), before + 30) << "the loop did not go on after SIGCONT\n" << log;
+  ASSERT_GE(before, 40u) << log;
+  EXPECT_TRUE(std::any_of(commands.begin(), commands.begin() + static_cast<std::ptrdiff_t>(before),
+                          [](const FakeArduino::Command& c) { return c.steering_us != 1500 || c.throttle_us != 1500; }))
+      << "never drove before the stop\n" << log;
+  EXPECT_EQ(commands[before].type, 'C');
+  EXPECT_EQ(commands[before].steering_us, 1500) << "the first command after SIGCONT";
+  EXPECT_EQ(commands[before].throttle_us, 1500) << "the first command after SIGCONT";
+  EXPECT_NE(log.find("ticks sent neutral because the control loop ran late"), std::string::npos) << log;
+  EXPECT_TRUE(board.bad_lines().empty());
+  report_fault_timing("SIGSTOP then SIGCONT", std::chrono::duration<double, std::milli>(commands[before].when - continued).count(),
+                      "the first command (neutral) after SIGCONT");
+}
+
 TEST(ActDriveCli, ExitsAtOnceWhenANetworkCameraStalls) {
   // The camera streams 1.5 s of video, then stalls with its connection open. The stall is detected
   // (FFmpeg's read timeout) and the camera is reopened; that open blocks in FFmpeg for seconds, and

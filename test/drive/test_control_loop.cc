@@ -568,6 +568,7 @@ TEST(ControlLoop, AfterAStallTheFirstCommandIsNeutral) {
   const auto after = std::find_if(commands.begin(), commands.end(), [&](const auto& c) { return c.when >= *stall_ended; });
   ASSERT_NE(after, commands.end());
   EXPECT_TRUE(is(*after, kSafe)) << "the first command after the stall: " << after->steering_us << "/" << after->throttle_us;
+  report_fault_timing("the control loop stalled 400 ms", ms(after->when - *stall_ended), "the first command (neutral) after the stall");
   EXPECT_TRUE(std::any_of(after, commands.end(), [](const auto& c) { return is(c, kDriving); }))
       << "did not drive again\n" << rig.log.str();
   EXPECT_GE(summary.late_ticks, 1u);

@@ -111,6 +111,8 @@ Recorder::Recorder(const std::string& dir, int state_dim, int action_dim, int im
   for (int i = 0; i < action_dim_; ++i) header += ",command." + std::to_string(i);
   header += "\n";
   if (const std::string problem = append_rows(ticks_, fs::path(dir) / "ticks.csv", header, ticks_end_); !problem.empty()) {
+    ::close(log_);  // no destructor runs for a constructor that throws
+    ::close(ticks_);
     fail(StatusCode::kIoError, "--record: " + problem);
   }
   thread_ = std::thread([this] { run(); });

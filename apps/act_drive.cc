@@ -351,7 +351,9 @@ void close_outputs(const Options& opt, std::optional<Recorder>& recorder, std::o
     recorder->close();
     std::cerr << "act_drive: recorded to " << opt.record_dir;
     if (recorder->dropped_frames() > 0) std::cerr << " (" << recorder->dropped_frames() << " frames dropped: disk too slow)";
-    if (!recorder->failure().empty()) std::cerr << " (stopped early: a write failed, see above)";
+    if (!recorder->failure().empty()) {
+      std::cerr << " (stopped early: a write failed, see above; " << recorder->unrecorded_ticks() << " ticks not recorded)";
+    }
     std::cerr << "\n";
   }
   if (overlay) {

@@ -8,4 +8,4 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${ACT_BUILD_DIR:-$root/build}"
 cmake --build "$build" --target act_drive_tests act_drive -j "${ACT_JOBS:-$(nproc)}" >/dev/null
 "$build/test/act_drive_tests" \
-  --gtest_filter='ControlLoop.Neutral*:ControlLoop.SerialHangUp*:SerialLink.*:Signals/*:PwmControlLoop.*:PwmWatchdog.*:ActDrivePwm.*:LiveViewHttp.*:Loads/LiveViewEstopUnderLoad.*' | grep -F '[fault timing]'
+  --gtest_filter='ControlLoop.Neutral*:ControlLoop.SerialHangUp*:ControlLoop.AfterAStall*:ActDriveCli.AfterSigstop*:SerialLink.*:Signals/*:PwmControlLoop.*:PwmWatchdog.*:ActDrivePwm.*:LiveViewHttp.*:Loads/LiveViewEstopUnderLoad.*' | grep -F '[fault timing]'

@@ -13,7 +13,7 @@ jobs="${ACT_JOBS:-2}"
 # The tests of act_thread_tests that start threads (the rest only come along with their files).
 threaded="ThreadPool.*:PeakTogether.*:EngineApiTest.SameResultForAnyThreadCountAndMemoryPlan:EngineApiTest.TwoEnginesRunSideBySide"
 threaded+=":EngineApiTest.OneEngineHandedFromThreadToThread:EngineApiTest.EnginesOpenAndRunConcurrently"
-threaded+=":EngineApiTest.ProfilerTimesEveryOpAndTracesEveryThread:ControlLoop.*"
+threaded+=":EngineApiTest.ProfilerTimesEveryOpAndTracesEveryThread:ControlLoop.*:Recorder.*"
 # Left out: it counts the frames recorded in 1.2 s of wall time, which TSan's slowdown can miss (its
 # threads ran race-free when tried; the count assertion was what failed).
 threaded+=":-ControlLoop.RecordWritesFramesObservationsAndTicks"

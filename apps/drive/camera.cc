@@ -9,6 +9,8 @@
 #include <mutex>
 #include <vector>
 
+#include <sys/stat.h>
+
 #include "actengine/status.h"
 #include "apps/media/media_io.h"
 
@@ -44,6 +46,43 @@ SourceKind source_kind(const std::string& s) {
   if (s.find("://") != std::string::npos) return SourceKind::kUrl;
   if (s.find('%') != std::string::npos) return SourceKind::kImageSequence;
   return SourceKind::kUnknown;
+}
+
+// A FIFO or a socket where a frame file should be blocks the backend's open or its first read
+// forever: refused at once, as every other reader of files refuses one. Devices (/dev/video0) pass.
+void refuse_special_file(const std::string& path, const std::string& source) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0 || S_ISREG(st.st_mode) || S_ISCHR(st.st_mode) || S_ISDIR(st.st_mode)) return;
+  const char* kind = S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISSOCK(st.st_mode) ? "a socket" : "a block device";
+  fail(StatusCode::kInvalidArgument, "camera '" + source + "': " + (path == source ? "" : "'" + path + "' ") +
+                                         "is not a regular file (" + kind + ")");
+}
+
+// The first files an image sequence such as frames/%06d.png names (OpenCV starts at the first of
+// indices 0-4 that exists), when the pattern holds exactly one %d conversion (none otherwise).
+std::vector<std::string> first_sequence_files(const std::string& pattern) {
+  const size_t percent = pattern.find('%');
+  if (percent == std::string::npos || pattern.find('%', percent + 1) != std::string::npos) return {};
+  size_t end = percent + 1;
+  while (end < pattern.size() && std::isdigit(static_cast<unsigned char>(pattern[end]))) ++end;
+  if (end >= pattern.size() || pattern[end] != 'd' || end - percent > 4) return {};
+  const std::string spec = pattern.substr(percent + 1, end - percent - 1);  // "06" in %06d
+  const size_t width = spec.empty() ? 0 : static_cast<size_t>(std::stoi(spec));
+  std::vector<std::string> files;
+  for (int i = 0; i < 5; ++i) {
+    std::string number = std::to_string(i);
+    if (number.size() < width) number.insert(0, width - number.size(), spec[0] == '0' ? '0' : ' ');
+    files.push_back(pattern.substr(0, percent) + number + pattern.substr(end + 1));
+  }
+  return files;
+}
+
+void refuse_special_files(const std::string& source, SourceKind kind) {
+  if (kind == SourceKind::kImageSequence) {
+    for (const std::string& file : first_sequence_files(source)) refuse_special_file(file, source);
+  } else if (kind == SourceKind::kDevice || kind == SourceKind::kUnknown) {
+    refuse_special_file(source, source);
+  }
 }
 
 // Files go through FFmpeg only, as act_convert's calibration reads them (no fallback to GStreamer,
@@ -113,6 +152,7 @@ struct Camera::Shared {
 
 Camera::Camera(CameraOptions options) {
   const SourceKind kind = source_kind(options.source);
+  refuse_special_files(options.source, kind);
   shared_ = std::make_shared<Shared>(std::move(options), kind);
   const std::string& source = shared_->options.source;
   is_file_ = kind == SourceKind::kFile;

@@ -84,6 +84,9 @@ std::string DriveSummary::to_string() const {
                 static_cast<unsigned long long>(stale_frames), static_cast<unsigned long long>(link_down_ticks));
   s << line;
   if (manual_ticks > 0) s << "  " << manual_ticks << " ticks driven by hand\n";
+  if (late_ticks > 0) {
+    s << "  " << late_ticks << " ticks sent neutral because the control loop ran late (a starved CPU: give it --control-priority)\n";
+  }
   s << format_stage("capture age", capture_age_ms) << format_stage("preprocess", preprocess_ms)
     << format_stage("infer", infer_ms) << format_stage("serial write", serial_write_ms)
     << format_stage("tick jitter", jitter_ms) << "  " << link_summary << "\n";
@@ -133,10 +136,12 @@ ChunkScheduler make_scheduler(const ModelInfo& info) {
   return std::move(scheduler).value();
 }
 
-// One tick of the loop: its index, when it was due and when the loop woke up for it.
+// One tick of the loop: its index, when it was due and when the loop woke up for it, and how late
+// that was after the tick the loop waited for (before skipping the missed ones).
 struct Tick {
   int64_t index;
   Clock::time_point scheduled, now;
+  Clock::duration late{};
 };
 
 // One run of the control loop: the state that lives from the first tick to the last, and the steps
@@ -176,6 +181,7 @@ class ControlRun {
       }
       fault_.clear();
       note_resumption(tick.now);
+      note_stall(tick);
       if (!take_inference_result(tick)) break;
       const FrameSource::State source_state = frames_.state();
       check_camera(source_state, tick.now);
@@ -211,14 +217,15 @@ class ControlRun {
     Clock::time_point scheduled = start_ + period_ * index;
     std::this_thread::sleep_until(scheduled);
     const auto now = Clock::now();
-    if (now - scheduled >= period_) {
+    const Clock::duration late = now - scheduled;
+    if (late >= period_) {
       const int64_t behind = (now - scheduled) / period_;
       index += behind;
       summary_.missed_ticks += static_cast<uint64_t>(behind);
       scheduled = start_ + period_ * index;
     }
     jitter_.add(ms_between(scheduled, now));
-    return {index, scheduled, now};
+    return {index, scheduled, now, late};
   }
 
   // Why the run ends at this tick, or "" to go on.
@@ -277,6 +284,20 @@ class ControlRun {
     if (summary_.faults.size() < kMaxFaultEvents) summary_.faults.push_back({now, "resumed after a suspension"});
     log_ << "act_drive: warning: resumed after a suspension: holding the safe action until a chunk from a new frame"
          << (options_.cockpit ? "; e-stopped (resume from the live view or the gamepad)" : "") << "\n";
+  }
+
+  // The loop woke up long after the tick it waited for (the CPU starved, the process stopped): the
+  // chunk and any inference of an older frame are stale, and the board may have stopped the car by
+  // itself. The tick holds the safe action (a fault) and the policy restarts from a new frame.
+  void note_stall(const Tick& tick) {
+    if (!options_.realtime || tick.late <= options_.max_tick_lateness) return;
+    resumed_at_ = tick.now;
+    scheduler_.clear();
+    executing_ = false;
+    overrunning_ = false;
+    fault_ = "control loop late (" + std::to_string(std::lround(ms_between(tick.now - tick.late, tick.now))) +
+             " ms after its tick, over " + std::to_string(options_.max_tick_lateness.count()) +
+             " ms: a starved CPU? give it --control-priority)";
   }
 
   // Counts a failed inference as this tick's fault; false (after sending the safe command) when it
@@ -412,10 +433,14 @@ class ControlRun {
   }
 
   void send(const Tick& tick, const std::string& source, const PwmCommand& chosen) {
-    // Suspended since this tick began (its command was chosen before the stop): the safe one instead.
+    // Suspended since this tick began (its command was chosen before the stop), or too late for it
+    // (woken up late, or stalled since): the safe one instead.
     const bool suspended = options_.resumptions && options_.resumptions->load() != resumptions_seen_;
-    const PwmCommand& command = suspended ? safe_ : chosen;
     const auto write_start = Clock::now();
+    const bool late = options_.realtime && (tick.late > options_.max_tick_lateness ||
+                                            write_start - tick.scheduled > options_.max_tick_lateness);
+    if (late) ++summary_.late_ticks;
+    const PwmCommand& command = suspended || late ? safe_ : chosen;
     const bool sent = link_.send(command, write_start);
     serial_write_.add(ms_between(write_start, Clock::now()));
     if (!sent) ++summary_.link_down_ticks;

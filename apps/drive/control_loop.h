@@ -30,6 +30,11 @@ struct ControlOptions {
   double stats_every_s = 0;
   /// Stop after this many seconds (0 = until a signal or the video ends).
   double duration_s = 0;
+  /// A tick whose loop woke up or reached the wire more than this late (a starved CPU, a stopped
+  /// process) sends the safe command, drops the chunk and waits for one from a frame captured after
+  /// it: what was planned before the stall is stale (the board's own watchdog stops the car after
+  /// 250 ms without a command). Real-time runs only.
+  std::chrono::milliseconds max_tick_lateness{100};
   /// Inference failures in a row (errors, non-finite actions) that end the run.
   int max_consecutive_inference_errors = 30;
   /// What the model gets as observation.state: the last raw action executed (its first state_dim
@@ -76,6 +81,8 @@ struct DriveSummary {
   uint64_t estop_ticks = 0, waiting_ticks = 0, fault_ticks = 0;
   uint64_t manual_ticks = 0;  ///< ticks a human drove (part of neither of the two above)
   uint64_t missed_ticks = 0;  ///< ticks skipped because the loop woke up a whole period late
+  /// Ticks that sent the safe command because the loop ran more than max_tick_lateness late.
+  uint64_t late_ticks = 0;
   uint64_t overrun_ticks = 0, overrun_events = 0;  ///< the chunk ran out before the next was ready
   uint64_t inferences = 0, inference_errors = 0, stale_frames = 0, link_down_ticks = 0;
   double elapsed_s = 0;

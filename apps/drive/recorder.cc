@@ -6,6 +6,7 @@
 #include <fstream>
 #include <utility>
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <opencv2/imgproc.hpp>
@@ -22,19 +23,21 @@ namespace {
 // Frames waiting for the disk beyond this are dropped (and counted) rather than growing memory.
 constexpr size_t kMaxQueuedFrames = 64;
 
-std::FILE* open_table(const fs::path& path) {
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) fail(StatusCode::kIoError, "--record: cannot create " + path.string() + ": " + std::strerror(errno));
-  return f;
+// A table (log.jsonl, ticks.csv): rows are gathered per batch and written with one call each.
+int open_table(const fs::path& path) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) fail(StatusCode::kIoError, "--record: cannot create " + path.string() + ": " + std::strerror(errno));
+  return fd;
 }
 
 // count values as ",v0,v1...", empty for missing ones.
-void write_values(std::FILE* f, const std::vector<float>& values, size_t count) {
+void append_values(std::string& out, const std::vector<float>& values, size_t count) {
+  char text[32];
   for (size_t i = 0; i < count; ++i) {
+    out += ',';
     if (i < values.size()) {
-      std::fprintf(f, ",%.9g", static_cast<double>(values[i]));
-    } else {
-      std::fputc(',', f);
+      std::snprintf(text, sizeof text, "%.9g", static_cast<double>(values[i]));
+      out += text;
     }
   }
 }
@@ -63,10 +66,22 @@ std::string write_png(const fs::path& path, const std::vector<uint8_t>& rgb, int
   return ec ? "cannot rename " + temp_path.string() + ": " + ec.message() : "";
 }
 
-// The table's bytes so far are all on disk: "" or what failed.
-std::string flush_table(std::FILE* f, const fs::path& path) {
-  if (std::fflush(f) == 0 && !std::ferror(f)) return "";
-  return "cannot write " + path.string() + ": " + std::strerror(errno);
+// Appends `rows` (whole rows) to the table at `end`, its size: "" or what failed. A write cut short
+// (a full disk, the file-size limit) is cut back to `end`, so the table never ends mid-row.
+std::string append_rows(int fd, const fs::path& path, const std::string& rows, off_t& end) {
+  size_t done = 0;
+  while (done < rows.size()) {
+    const ssize_t n = ::pwrite(fd, rows.data() + done, rows.size() - done, end + static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int error = n < 0 ? errno : ENOSPC;
+      if (::ftruncate(fd, end) != 0) {}  // best effort: the message says the recording stopped
+      return "cannot write " + path.string() + ": " + std::strerror(error);
+    }
+    done += static_cast<size_t>(n);
+  }
+  end += static_cast<off_t>(rows.size());
+  return "";
 }
 
 }  // namespace
@@ -92,17 +107,17 @@ Recorder::Recorder(const std::string& dir, int state_dim, int action_dim, int im
   std::vector<std::string> names;  // the action columns' suffixes: the blob's names, or 0, 1, ...
   if (meta.contains("action_names")) names = meta.at("action_names").get<std::vector<std::string>>();
   for (int i = static_cast<int>(names.size()); i < action_dim_; ++i) names.push_back(std::to_string(i));
-  std::fprintf(ticks_, "tick,time_s,jitter_ms,source");
-  for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",action.%s", names[static_cast<size_t>(i)].c_str());
-  std::fprintf(ticks_, ",steering_us,throttle_us,sent,driver,frame");
-  for (int i = 0; i < state_dim_; ++i) std::fprintf(ticks_, ",state.%d", i);
-  for (int i = 0; i < action_dim_; ++i) std::fprintf(ticks_, ",command.%s", names[static_cast<size_t>(i)].c_str());
-  std::fprintf(ticks_, "\n");
-  if (const std::string problem = flush_table(ticks_, fs::path(dir) / "ticks.csv"); !problem.empty()) {
+  std::string header = "tick,time_s,jitter_ms,source";
+  for (int i = 0; i < action_dim_; ++i) header.append(",action.").append(names[static_cast<size_t>(i)]);
+  header += ",steering_us,throttle_us,sent,driver,frame";
+  for (int i = 0; i < state_dim_; ++i) header.append(",state.").append(std::to_string(i));
+  for (int i = 0; i < action_dim_; ++i) header.append(",command.").append(names[static_cast<size_t>(i)]);
+  header += "\n";
+  if (const std::string problem = append_rows(ticks_, fs::path(dir) / "ticks.csv", header, ticks_end_); !problem.empty()) {
+    ::close(log_);  // no destructor runs for a constructor that throws
+    ::close(ticks_);
     fail(StatusCode::kIoError, "--record: " + problem);
   }
-  log_good_ = std::ftell(log_);
-  ticks_good_ = std::ftell(ticks_);
   thread_ = std::thread([this] { run(); });
 }
 
@@ -125,6 +140,7 @@ void Recorder::add(ObservationRecord record) {
 void Recorder::add(TickRecord record) {
   {
     std::lock_guard lock(mutex_);
+    ++ticks_offered_;
     if (closing_ || !failure_.empty()) return;
     if (record.frame && queued_frames_ >= kMaxQueuedFrames) {
       ++dropped_frames_;
@@ -141,6 +157,11 @@ std::string Recorder::failure() const {
   return failure_;
 }
 
+uint64_t Recorder::unrecorded_ticks() const {
+  std::lock_guard lock(mutex_);
+  return thread_.joinable() ? 0 : ticks_offered_ - ticks_written_;
+}
+
 uint64_t Recorder::dropped_frames() const {
   std::lock_guard lock(mutex_);
   return dropped_frames_;
@@ -153,9 +174,9 @@ void Recorder::close() {
   }
   wake_.notify_one();
   if (thread_.joinable()) thread_.join();
-  for (std::FILE** f : {&log_, &ticks_}) {
-    if (*f) std::fclose(*f);
-    *f = nullptr;
+  for (int* fd : {&log_, &ticks_}) {
+    if (*fd >= 0) ::close(*fd);
+    *fd = -1;
   }
 }
 
@@ -177,25 +198,25 @@ void Recorder::run() {
         --queued_frames_;
       }
     }
-    // Flushed per batch: a kill loses at most the rows of the last few milliseconds.
-    if (problem.empty()) problem = flush_table(log_, fs::path(dir_) / "log.jsonl");
-    if (problem.empty()) problem = flush_table(ticks_, fs::path(dir_) / "ticks.csv");
+    // The rows gathered before a failed frame are whole and name frames on disk: they are kept.
+    std::string table_problem = append_rows(log_, fs::path(dir_) / "log.jsonl", log_rows_, log_end_);
+    if (table_problem.empty()) {
+      observations_kept_ = observations_pending_;
+      table_problem = append_rows(ticks_, fs::path(dir_) / "ticks.csv", tick_rows_, ticks_end_);
+    }
+    if (table_problem.empty()) ticks_written_ = ticks_pending_;
+    log_rows_.clear();
+    tick_rows_.clear();
+    if (problem.empty()) problem = table_problem;
     if (!problem.empty()) return stop_recording(problem);
-    log_good_ = std::ftell(log_);
-    ticks_good_ = std::ftell(ticks_);
-    ticks_written_ = ticks_pending_;
-    observations_kept_ = observations_pending_;
     if (closing) return;
   }
 }
 
-// A write failed (a full disk, the file-size limit): the tables are cut back to their last whole
-// batch, so what is on disk stays a recording that act_convert and act_eval read, and nothing more
-// is recorded. Driving goes on.
+// A write failed (a full disk, the file-size limit): the tables end with their last whole row, so
+// what is on disk stays a recording that act_convert and act_eval read, and nothing more is
+// recorded. Driving goes on.
 void Recorder::stop_recording(const std::string& problem) {
-  for (auto [f, good] : {std::pair{log_, log_good_}, std::pair{ticks_, ticks_good_}}) {
-    if (good >= 0 && ::ftruncate(::fileno(f), good) != 0) {}  // best effort: the message below says it stopped
-  }
   std::string message = "--record: " + problem + ": the recording stops here (" + std::to_string(ticks_written_) +
                         " ticks and " + std::to_string(observations_kept_) + " observations kept in " + dir_ + "); driving goes on";
   if (log_stream_) *log_stream_ << "act_drive: error: " + message + "\n" << std::flush;
@@ -218,8 +239,8 @@ std::string Recorder::write(const ObservationRecord& record) {
                                        {"time_s", record.time_s},
                                        {"frame_index", record.frame_index},
                                        {"frame_age_ms", record.frame_age_ms}};
-  std::fputs(line.dump().c_str(), log_);
-  std::fputc('\n', log_);
+  log_rows_ += line.dump();
+  log_rows_ += '\n';
   ++observations_pending_;
   return "";
 }
@@ -242,14 +263,17 @@ std::string Recorder::write(const TickRecord& record) {
       }
     }
   }
-  std::fprintf(ticks_, "%lld,%.6f,%.3f,%s", static_cast<long long>(record.tick), record.time_s, record.jitter_ms,
-               record.source.c_str());
-  write_values(ticks_, record.action, static_cast<size_t>(action_dim_));
-  std::fprintf(ticks_, ",%u,%u,%d,%s,%s", record.pwm.steering_us, record.pwm.throttle_us, record.sent ? 1 : 0,
-               record.driver.c_str(), frame.c_str());
-  write_values(ticks_, record.state, static_cast<size_t>(state_dim_));
-  write_values(ticks_, record.command, static_cast<size_t>(action_dim_));
-  std::fputc('\n', ticks_);
+  char text[96];
+  std::snprintf(text, sizeof text, "%lld,%.6f,%.3f,", static_cast<long long>(record.tick), record.time_s, record.jitter_ms);
+  tick_rows_ += text;
+  tick_rows_ += record.source;
+  append_values(tick_rows_, record.action, static_cast<size_t>(action_dim_));
+  std::snprintf(text, sizeof text, ",%u,%u,%d,", record.pwm.steering_us, record.pwm.throttle_us, record.sent ? 1 : 0);
+  tick_rows_ += text;
+  tick_rows_ += record.driver + "," + frame;
+  append_values(tick_rows_, record.state, static_cast<size_t>(state_dim_));
+  append_values(tick_rows_, record.command, static_cast<size_t>(action_dim_));
+  tick_rows_ += '\n';
   ++ticks_pending_;
   return "";
 }

@@ -12,14 +12,14 @@
 //   DIR/tick_frames/NNNNNNNN.png  each camera frame a tick saw (the camera's frame index), at the
 //                         model's input size, preprocessed as the model sees it
 //
-// A writer thread does the file work so the control loop never waits on the disk. Rows are flushed
-// after every batch and frames appear by atomic rename, so a killed or crashed run leaves complete
-// files holding everything up to its last moments.
+// A writer thread does the file work so the control loop never waits on the disk. A row is written
+// after its frame, the rows of a batch with one write per table, and frames appear by atomic
+// rename, so a killed or crashed run leaves complete files holding everything up to its last
+// moments, and a full disk leaves whole rows naming frames that exist.
 #pragma once
 
 #include <condition_variable>
 #include <cstdint>
-#include <cstdio>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -28,6 +28,8 @@
 #include <string>
 #include <thread>
 #include <variant>
+
+#include <sys/types.h>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -65,10 +67,10 @@ class Recorder {
  public:
   /// Creates DIR (which must not exist or be empty) and its files; throws act::Error otherwise.
   /// Tick frames are stored at image_height x image_width (the model's input). On the first write
-  /// error (a full disk, RLIMIT_FSIZE) the recording stops: the tables are cut back to their last
-  /// whole batch, one message goes to `log` (when given) and failure() says it; driving goes on.
-  /// ticks.csv names the action columns action.<name> and command.<name> after meta's
-  /// "action_names" (the blob's, ModelInfo::action_names) when it has them, else action.0, ...
+  /// error (a full disk, RLIMIT_FSIZE) the recording stops: the tables keep their whole rows (a
+  /// write cut short is cut back), one message goes to `log` (when given) and failure() says it;
+  /// driving goes on. ticks.csv names the action columns action.<name> and command.<name> after
+  /// meta's "action_names" (the blob's, ModelInfo::action_names) when it has them, else action.0, ...
   Recorder(const std::string& dir, int state_dim, int action_dim, int image_height, int image_width,
            const nlohmann::ordered_json& meta, std::ostream* log = nullptr);
   ~Recorder();
@@ -80,6 +82,9 @@ class Recorder {
   /// Writes everything queued and closes the files (also done by the destructor).
   void close();
   uint64_t dropped_frames() const;
+  /// After close(): the ticks given to add() whose rows are not on disk (those from the failed write
+  /// on, when failure() says the recording stopped early).
+  uint64_t unrecorded_ticks() const;
   /// Why the recording stopped early, "" while it records.
   std::string failure() const;
   const std::string& dir() const { return dir_; }
@@ -93,19 +98,20 @@ class Recorder {
 
   std::string dir_;
   int state_dim_, action_dim_, image_height_, image_width_;
-  std::FILE* log_ = nullptr;
-  std::FILE* ticks_ = nullptr;
+  int log_ = -1, ticks_ = -1;  // the tables' descriptors
   std::ostream* log_stream_ = nullptr;
   uint64_t observations_written_ = 0;  // writer thread only
-  uint64_t observations_pending_ = 0, observations_kept_ = 0;  // writer thread only: lines written, flushed
-  uint64_t ticks_pending_ = 0, ticks_written_ = 0;  // writer thread only: rows written, flushed
-  long log_good_ = -1, ticks_good_ = -1;  // writer thread only: the tables' sizes after the last whole batch
+  uint64_t observations_pending_ = 0, observations_kept_ = 0;  // writer thread only: lines made, on disk
+  uint64_t ticks_pending_ = 0, ticks_written_ = 0;  // writer thread only: rows made, on disk
+  std::string log_rows_, tick_rows_;  // writer thread only: this batch's rows, not yet written
+  off_t log_end_ = 0, ticks_end_ = 0;  // the tables' sizes: every byte before is a whole row
   std::optional<uint64_t> last_tick_frame_;  // writer thread only: the camera index last stored
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   std::deque<Item> queue_;     // guarded by mutex_
   size_t queued_frames_ = 0;   // guarded by mutex_
   uint64_t dropped_frames_ = 0;  // guarded by mutex_
+  uint64_t ticks_offered_ = 0;  // guarded by mutex_
   bool closing_ = false;       // guarded by mutex_
   std::string failure_;        // guarded by mutex_
   std::thread thread_;

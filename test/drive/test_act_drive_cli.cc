@@ -667,6 +667,57 @@ INSTANTIATE_TEST_SUITE_P(Suspend, ActDriveSuspend,
                          [](const ::testing::TestParamInfo<SuspendCase>& case_info) { return std::string(case_info.param.name); });
 
 
+// SIGSTOP cannot be caught: nothing goes on the wire while stopped (the board's watchdog stops the
+// car after 250 ms). After SIGCONT the loop wakes up long after its tick: the first command on the
+// wire is neutral, not the rest of the chunk planned before the stop, and the run goes on.
+TEST(ActDriveCli, AfterSigstopAndSigcontTheFirstCommandIsNeutral) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 600, 30, 128, 96);
+  FakeArduino board;
+  const std::string log_path = dir + "/log.txt";
+  const pid_t pid = start_act_drive({"-m", blob, "--camera", video, "--serial", board.port_path(), "--raw-endpoints",
+                                     "--threads", "1"}, log_path);
+  ASSERT_GE(pid, 0);
+  const auto end_run = [&] {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, nullptr, 0);
+  };
+  auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (board.commands().size() < 40 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(pid, SIGSTOP);
+  deadline = Clock::now() + std::chrono::seconds(5);
+  while (process_state(pid).first != 'T' && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  if (process_state(pid).first != 'T') end_run();
+  ASSERT_EQ(process_state(pid).first, 'T') << read_text(log_path);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // shorter than act-tiny's chunk of 10 ticks
+  const size_t before = board.commands().size();
+  const auto continued = Clock::now();
+  ::kill(pid, SIGCONT);
+  deadline = Clock::now() + std::chrono::seconds(10);
+  while (board.commands().size() < before + 30 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(pid, SIGTERM);
+  const std::optional<int> status = wait_for_exit(pid, std::chrono::seconds(5));
+  if (!status) end_run();
+  const std::string log = read_text(log_path);
+  ASSERT_TRUE(status) << "act_drive did not end within 5 s of SIGTERM\n" << log;
+  EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << log;
+  const auto commands = board.commands();
+  ASSERT_GE(commands.size(), before + 30) << "the loop did not go on after SIGCONT\n" << log;
+  ASSERT_GE(before, 40u) << log;
+  EXPECT_TRUE(std::any_of(commands.begin(), commands.begin() + static_cast<std::ptrdiff_t>(before),
+                          [](const FakeArduino::Command& c) { return c.steering_us != 1500 || c.throttle_us != 1500; }))
+      << "never drove before the stop\n" << log;
+  EXPECT_EQ(commands[before].type, 'C');
+  EXPECT_EQ(commands[before].steering_us, 1500) << "the first command after SIGCONT";
+  EXPECT_EQ(commands[before].throttle_us, 1500) << "the first command after SIGCONT";
+  EXPECT_NE(log.find("ticks sent neutral because the control loop ran late"), std::string::npos) << log;
+  EXPECT_TRUE(board.bad_lines().empty());
+  report_fault_timing("SIGSTOP then SIGCONT", std::chrono::duration<double, std::milli>(commands[before].when - continued).count(),
+                      "the first command (neutral) after SIGCONT");
+}
+
 TEST(ActDriveCli, ExitsAtOnceWhenANetworkCameraStalls) {
   // The camera streams 1.5 s of video, then stalls with its connection open. The stall is detected
   // (FFmpeg's read timeout) and the camera is reopened; that open blocks in FFmpeg for seconds, and
@@ -765,11 +816,66 @@ TEST(ActDriveCli, RecordingSurvivesSigkill) {
   EXPECT_GT(tick_rows, 0u);
 }
 
+// What a recording cut short by a failed write leaves: whole rows only (no row cut, no byte of a
+// failed write), each naming a frame that is on disk; act_convert --calib and act_eval --episode
+// read it.
+void expect_whole_recording(const std::string& dir, const std::string& rec, const std::string& blob) {
+  const std::string log_text = read_text(rec + "/log.jsonl");
+  std::istringstream log(log_text);
+  std::string line;
+  size_t rows = 0;
+  while (std::getline(log, line)) {
+    ASSERT_FALSE(log.eof()) << "log.jsonl: a cut last line: " << line;
+    const auto row = nlohmann::json::parse(line, nullptr, false);
+    ASSERT_FALSE(row.is_discarded()) << "log.jsonl line " << rows + 1 << ": " << line;
+    EXPECT_TRUE(fs::exists(rec + "/" + row.at("frame").get<std::string>())) << line;
+    ++rows;
+  }
+  EXPECT_GT(rows, 0u);
+  const std::string ticks_text = read_text(rec + "/ticks.csv");
+  ASSERT_FALSE(ticks_text.empty());
+  EXPECT_EQ(ticks_text.back(), '\n') << "ticks.csv cut mid-row";
+  EXPECT_EQ(ticks_text.find('\0'), std::string::npos) << "ticks.csv holds NUL bytes (a write past a cut)";
+  EXPECT_EQ(log_text.find('\0'), std::string::npos) << "log.jsonl holds NUL bytes (a write past a cut)";
+  std::istringstream ticks(ticks_text);
+  std::string header;
+  ASSERT_TRUE(std::getline(ticks, header));
+  const auto fields = [](const std::string& row) {
+    std::vector<std::string> out(1);
+    for (char c : row) {
+      if (c == ',') {
+        out.emplace_back();
+      } else {
+        out.back().push_back(c);
+      }
+    }
+    return out;
+  };
+  const std::vector<std::string> names = fields(header);
+  const size_t frame_column = static_cast<size_t>(std::find(names.begin(), names.end(), "frame") - names.begin());
+  ASSERT_LT(frame_column, names.size()) << header;
+  size_t tick_rows = 0, driving = 0;
+  while (std::getline(ticks, line)) {
+    const std::vector<std::string> cells = fields(line);
+    ASSERT_EQ(cells.size(), names.size()) << "ticks.csv row " << tick_rows + 1 << ": " << line;
+    EXPECT_TRUE(cells[frame_column].empty() || fs::exists(rec + "/" + cells[frame_column])) << line;
+    if (line.find(",ai,") != std::string::npos) ++driving;
+    ++tick_rows;
+  }
+  EXPECT_GT(driving, 0u) << "no tick driven by the policy was kept";
+  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
+                                   q(dir + "/int8.actb") + " --precision int8 --calib " + q(rec) + " --threads 1 -q");
+  EXPECT_EQ(convert.exit_code, 0) << convert.output;
+  const auto eval = run_command("timeout 60 " + std::string(ACT_EVAL_BIN) + " --episode " + q(rec) + " -m " + q(blob));
+  EXPECT_EQ(eval.exit_code, 0) << eval.output;
+  EXPECT_EQ(eval.output.find("cut short"), std::string::npos) << eval.output;
+}
+
 TEST(ActDriveCli, RecordingStopsWithAMessageAtTheFileSizeLimit) {
   // RLIMIT_FSIZE (ulimit -f 48: room for each frame, not for the 900 rows of ticks.csv) sends SIGXFSZ
   // to the writer, which used to end the run. Now the write fails instead, the recording stops with
   // one message, driving goes on to the end of the video (a replay, --realtime off, for speed), and
-  // what is on disk is a whole recording act_convert reads.
+  // what is on disk is a whole recording act_convert and act_eval read.
   ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
   const std::string dir = act::test::scratch_dir();
   const std::string blob = act_tiny_blob(dir);
@@ -782,26 +888,36 @@ TEST(ActDriveCli, RecordingStopsWithAMessageAtTheFileSizeLimit) {
   EXPECT_NE(r.output.find("File too large: the recording stops here ("), std::string::npos) << r.output;
   EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n') < 40, true) << "one message, not one per write:\n" << r.output;
   EXPECT_NE(r.output.find("end of video file " + video + " after 900 frames"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("(stopped early: a write failed, see above)"), std::string::npos) << r.output;
-  // Whole rows only, each observation's frame on disk.
-  std::istringstream log(read_text(rec + "/log.jsonl"));
-  std::string line;
-  size_t rows = 0;
-  while (std::getline(log, line)) {
-    ASSERT_FALSE(log.eof()) << "a cut last line: " << line;
-    const auto row = nlohmann::json::parse(line, nullptr, false);
-    ASSERT_FALSE(row.is_discarded()) << line;
-    EXPECT_TRUE(fs::exists(rec + "/" + row.at("frame").get<std::string>())) << line;
-    ++rows;
-  }
-  EXPECT_GT(rows, 0u);
-  const std::string ticks = read_text(rec + "/ticks.csv");
-  ASSERT_FALSE(ticks.empty());
-  EXPECT_EQ(ticks.back(), '\n') << "ticks.csv cut mid-row";
-  EXPECT_LE(ticks.size(), 48u * 1024u);
-  const auto convert = run_command(std::string(ACT_CONVERT_BIN) + " " + q(act::test::fixture_dir("act-tiny")) + " -o " +
-                                   q(dir + "/int8.actb") + " --precision int8 --calib " + q(rec) + " --threads 1 -q");
-  EXPECT_EQ(convert.exit_code, 0) << convert.output;
+  EXPECT_NE(r.output.find("(stopped early: a write failed, see above; "), std::string::npos) << r.output;
+  EXPECT_LE(read_text(rec + "/ticks.csv").size(), 48u * 1024u);
+  expect_whole_recording(dir, rec, blob);
+}
+
+// A full disk: a tmpfs of 384 kB in a mount namespace of act_drive's own (unshare; root or user
+// namespaces), so that the frames fill it. The recording stops with one message naming the error
+// and what was kept, driving goes on, and the folder (copied out before the namespace goes) reads.
+TEST(ActDriveCli, RecordingOnAFullDiskStopsWithAMessageAndStaysReadable) {
+  ACT_REQUIRE_PATH(act::test::fixture_dir("act-tiny"));
+  const std::string dir = act::test::scratch_dir();
+  const std::string disk = dir + "/disk";
+  fs::create_directories(disk);
+  const auto probe = run_command("unshare -rm sh -c " + q("mount -t tmpfs -o size=64k tmpfs " + q(disk)));
+  if (probe.exit_code != 0) GTEST_SKIP() << "cannot mount a tmpfs in a mount namespace here: " << probe.output;
+  const std::string blob = act_tiny_blob(dir);
+  const std::string video = write_test_video(dir + "/v.avi", 600, 30, 128, 96);
+  const std::string rec = disk + "/rec", kept = dir + "/kept";
+  const auto r = run_command("unshare -rm sh -c " +
+                             q("mount -t tmpfs -o size=384k tmpfs " + q(disk) + " || exit 99; " + kDrive + " -m " + q(blob) +
+                               " --camera " + q(video) + " --dry-run --realtime off --threads 1 --record " + q(rec) +
+                               " > /dev/null; code=$?; cp -a " + q(rec) + " " + q(kept) + " && exit $code"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("act_drive: error: --record: cannot write " + rec), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("No space left on device: the recording stops here ("), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("libpng"), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n') < 40, true) << "one message, not one per write:\n" << r.output;
+  EXPECT_NE(r.output.find("end of video file " + video + " after 600 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("(stopped early: a write failed, see above; "), std::string::npos) << r.output;
+  expect_whole_recording(dir, kept, blob);
 }
 
 TEST(ActDriveCli, CalibrateWithoutAPortPrintsAFileToEdit) {

@@ -2,7 +2,11 @@
 // what it was given, a stalled network stream is reopened, and stopping never waits for a backend
 // that blocks.
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <fstream>
 #include <functional>
@@ -79,6 +83,36 @@ TEST(Camera, EachFailureNamesTheSource) {
 
   error = open_error(dir + "/empty_%03d.png");  // a pattern that matches nothing
   EXPECT_NE(error.find("cannot open camera"), std::string::npos) << error;
+}
+
+// A FIFO given as the camera, or as an image sequence's first frame (which OpenCV opened and waited
+// on forever), is refused at once, naming it.
+TEST(Camera, RefusesAFifoAtOnce) {
+  const std::string dir = act::test::scratch_dir();
+  const std::string fifo = dir + "/camera.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  ASSERT_EQ(::mkfifo((dir + "/frame_000.png").c_str(), 0644), 0);
+  act::media::write_image(dir + "/frame_001.png", cv::Mat(48, 64, CV_8UC3, cv::Scalar(10, 20, 30)));
+  // A reader stuck on a FIFO is released after 3 s (an end of file), so a failure does not hang the suite.
+  std::atomic<bool> done{false};
+  std::thread release([&] {
+    const auto start = Clock::now();
+    while (!done.load()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      if (Clock::now() - start < std::chrono::seconds(3)) continue;
+      for (const std::string& path : {fifo, dir + "/frame_000.png"}) {
+        const int writer = ::open(path.c_str(), O_WRONLY | O_NONBLOCK);  // fails at once while nobody reads
+        if (writer >= 0) ::close(writer);
+      }
+    }
+  });
+  const std::string as_camera = open_error(fifo);
+  const std::string as_frame = open_error(dir + "/frame_%03d.png");
+  done.store(true);
+  release.join();
+  EXPECT_NE(as_camera.find("camera '" + fifo + "': is not a regular file (a FIFO)"), std::string::npos) << as_camera;
+  EXPECT_NE(as_frame.find("camera '" + dir + "/frame_%03d.png': '" + dir + "/frame_000.png' is not a regular file (a FIFO)"),
+            std::string::npos) << as_frame;
 }
 
 TEST(Camera, ReopensANetworkStreamThatStalls) {

@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <mutex>
+#include <optional>
 #include <sstream>
 
 
@@ -57,6 +60,37 @@ std::vector<FakeArduino::Command> drive_commands(const FakeArduino& board) {
   return ::testing::AssertionSuccess();
 }
 
+// The serial link, with a control thread that can be made to stall after a command (as a starved
+// CPU or SIGSTOP stalls it): the stall happens once, after the send it is asked for, and its end is
+// noted.
+class StallingLink : public ActuatorLink {
+ public:
+  explicit StallingLink(ActuatorLink& link) : link_(link) {}
+  void stall_after_next_send(milliseconds how_long) { stall_.store(how_long); }
+  std::optional<Clock::time_point> stall_ended() const {
+    std::lock_guard lock(mutex_);
+    return stall_ended_;
+  }
+  bool send(PwmCommand command, Clock::time_point now) override {
+    const bool sent = link_.send(command, now);
+    if (const milliseconds stall = stall_.exchange(milliseconds(0)); stall.count() > 0) {
+      std::this_thread::sleep_for(stall);
+      std::lock_guard lock(mutex_);
+      stall_ended_ = Clock::now();
+    }
+    return sent;
+  }
+  void poll(Clock::time_point now) override { link_.poll(now); }
+  void shutdown(PwmCommand neutral) override { link_.shutdown(neutral); }
+  std::string summary() const override { return link_.summary(); }
+
+ private:
+  ActuatorLink& link_;
+  std::atomic<milliseconds> stall_{milliseconds(0)};
+  mutable std::mutex mutex_;
+  std::optional<Clock::time_point> stall_ended_;
+};
+
 // One loop run with a fake model and a pseudo-terminal board.
 struct Rig {
   std::string dir = act::test::scratch_dir();
@@ -69,6 +103,7 @@ struct Rig {
   std::atomic<bool> stop{false};
   Clock::time_point started;
   std::string recording;
+  StallingLink* link = nullptr;  // during run()
 
   explicit Rig(bool symlinked_port = false) {
     board = std::make_unique<FakeArduino>(symlinked_port ? dir + "/tty" : "");
@@ -81,8 +116,10 @@ struct Rig {
     serial.path = board->port_path();
     serial.hello_delay = milliseconds(0);
     serial.failsafe = calibration.safe_command();
-    SerialLink link(serial, log);
-    link.connect();
+    SerialLink serial_link(serial, log);
+    serial_link.connect();
+    StallingLink stalling(serial_link);
+    link = &stalling;
     InferenceWorkerOptions worker_options;
     worker_options.max_frame_age = options.max_frame_age;
     worker_options.keep_model_inputs = !recording.empty();
@@ -90,7 +127,7 @@ struct Rig {
     std::optional<Recorder> recorder;
     if (!recording.empty()) recorder.emplace(recording, info.state_dim, info.action_dim, info.cameras.front().height,
                                                info.cameras.front().width, nlohmann::ordered_json{{"test", 1}});
-    ControlLoop loop(options, calibration, frames, worker, link, recorder ? &*recorder : nullptr, log);
+    ControlLoop loop(options, calibration, frames, worker, stalling, recorder ? &*recorder : nullptr, log);
     DriveSummary summary;
     started = Clock::now();
     std::thread control([&] { summary = loop.run(stop); });
@@ -98,6 +135,7 @@ struct Rig {
     stop.store(true);
     control.join();
     if (recorder) recorder->close();
+    link = nullptr;
     EXPECT_TRUE(board->bad_lines().empty()) << board->bad_lines().front();
     const auto commands = drive_commands(*board);
     EXPECT_FALSE(commands.empty());
@@ -344,6 +382,61 @@ TEST(ControlLoop, RecordWritesFramesObservationsAndTicks) {
 
 // The first observation gets the initial state; the executed actions follow, and the one that leaves
 // the training range (mean -/+ 3 standard deviations) is warned about once.
+// A write that fails in the middle of a batch (here: every observation frame, its folder replaced
+// by a file) once left the tables cut back to the previous batch while stdio still held the rest
+// of this one's rows, which the close then wrote past the cut: a hole of NUL bytes and a row cut in
+// two. Rows of ~20 kB (more than stdio's buffer) make that certain. Now the table holds whole rows.
+TEST(Recorder, AFailedWriteLeavesWholeRowsOnly) {
+  const std::string dir = act::test::scratch_dir() + "/rec";
+  const int state_dim = 2000;
+  std::ostringstream log;
+  Recorder recorder(dir, state_dim, 2, 48, 64, nlohmann::ordered_json{{"test", 1}}, &log);
+  fs::remove_all(dir + "/frames");
+  std::ofstream(dir + "/frames") << "not a folder";
+  for (int t = 0; t < 200; ++t) {
+    TickRecord tick;
+    tick.tick = t;
+    tick.source = "chunk";
+    tick.action = {0.25f, 0.5f};
+    tick.pwm = kDriving;
+    tick.sent = true;
+    tick.driver = "ai";
+    tick.state.assign(static_cast<size_t>(state_dim), 0.123456789f);
+    tick.command = {0.25f, 0.5f};
+    recorder.add(std::move(tick));
+  }
+  ObservationRecord observation;
+  observation.tick = 199;
+  observation.height = 48;
+  observation.width = 64;
+  observation.rgb.assign(48 * 64 * 3, 100);
+  observation.state.assign(static_cast<size_t>(state_dim), 0.5f);
+  recorder.add(std::move(observation));
+  recorder.close();
+  EXPECT_NE(recorder.failure().find("--record: cannot create " + dir + "/frames/000000.png.tmp.png: Not a directory: "
+                                    "the recording stops here ("),
+            std::string::npos) << recorder.failure();
+  const std::string text = log.str();
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1) << text;
+  std::ifstream in(dir + "/ticks.csv", std::ios::binary);
+  const std::string ticks((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(ticks.empty());
+  EXPECT_EQ(ticks.find('\0'), std::string::npos) << "NUL bytes in ticks.csv: a write past the cut";
+  EXPECT_EQ(ticks.back(), '\n') << "ticks.csv ends mid-row";
+  std::istringstream rows(ticks);
+  std::string header, row;
+  ASSERT_TRUE(std::getline(rows, header));
+  size_t count = 0;
+  while (std::getline(rows, row)) {
+    ASSERT_EQ(std::count(row.begin(), row.end(), ','), std::count(header.begin(), header.end(), ',')) << "row " << count + 1;
+    ++count;
+  }
+  EXPECT_EQ(count, 200u) << "the rows before the failed frame are whole: they are kept";
+  EXPECT_EQ(recorder.unrecorded_ticks(), 0u);
+  EXPECT_NE(recorder.failure().find("(200 ticks and 0 observations kept in "), std::string::npos) << recorder.failure();
+  EXPECT_EQ(std::ifstream(dir + "/log.jsonl").peek(), std::char_traits<char>::eof()) << "a line for a frame not on disk";
+}
+
 TEST(ControlLoop, InitialStateThenLastActionWithOneRangeWarning) {
   Rig rig;
   rig.recording = rig.dir + "/rec";
@@ -448,6 +541,39 @@ TEST(ControlLoop, AfterASuspensionNothingPlannedBeforeDrives) {
         << "did not drive again\n" << rig.log.str();
     EXPECT_NE(rig.log.str().find("resumed after a suspension"), std::string::npos) << rig.log.str();
   }
+}
+
+// A starved control loop (here: its thread held up for 400 ms after a command) used to drive on
+// from the chunk it had when it ran again: LeRobot's n_action_steps = 100 covers 3.3 s. Now the
+// first command after the stall is neutral, counted, and the policy drives again from a new frame.
+TEST(ControlLoop, AfterAStallTheFirstCommandIsNeutral) {
+  Rig rig;
+  rig.info = fake_model_info(false, 100);
+  auto camera = video_camera(rig.dir, 150);
+  Clock::time_point stalled;
+  std::optional<Clock::time_point> stall_ended;
+  const DriveSummary summary = rig.run(*camera, [&] {
+    ASSERT_TRUE(eventually([&] { return rig.controls->inferences.load() >= 1; }));
+    sleep_ms(600);  // driving from the one chunk
+    stalled = Clock::now();
+    rig.link->stall_after_next_send(milliseconds(400));
+    ASSERT_TRUE(eventually([&] { return rig.link->stall_ended().has_value(); }));
+    stall_ended = rig.link->stall_ended();
+    sleep_ms(800);
+  });
+  ASSERT_TRUE(stall_ended);
+  const auto commands = drive_commands(*rig.board);
+  EXPECT_TRUE(std::any_of(commands.begin(), commands.end(), [&](const auto& c) { return c.when < stalled && is(c, kDriving); }))
+      << rig.log.str();
+  const auto after = std::find_if(commands.begin(), commands.end(), [&](const auto& c) { return c.when >= *stall_ended; });
+  ASSERT_NE(after, commands.end());
+  EXPECT_TRUE(is(*after, kSafe)) << "the first command after the stall: " << after->steering_us << "/" << after->throttle_us;
+  report_fault_timing("the control loop stalled 400 ms", ms(after->when - *stall_ended), "the first command (neutral) after the stall");
+  EXPECT_TRUE(std::any_of(after, commands.end(), [](const auto& c) { return is(c, kDriving); }))
+      << "did not drive again\n" << rig.log.str();
+  EXPECT_GE(summary.late_ticks, 1u);
+  EXPECT_NE(rig.log.str().find("holding the safe action: control loop late ("), std::string::npos) << rig.log.str();
+  EXPECT_NE(summary.to_string().find("ticks sent neutral because the control loop ran late"), std::string::npos);
 }
 
 TEST(ControlLoop, ThreadPlacementFallsBackWithAWarning) {

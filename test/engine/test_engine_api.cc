@@ -198,13 +198,17 @@ TEST_F(EngineApiTest, BadObservationsAreNamed) {
 }
 
 TEST_F(EngineApiTest, NonFiniteOutputIsAnErrorNotAnAnswer) {
-  // Damaged weights (finite, 3e38, in the action head) overflows the output: infer must say so
-  // instead of returning OK with infinities (act_eval once wrote -inf and exited 0).
+  // A damaged blob whose every number passes Engine::open's checks (the action head's weights at
+  // 1e6, an action standard deviation of 3e38: finite, and statistics may be large) still
+  // overflows the actions: infer must say so instead of returning OK with infinities (act_eval
+  // once wrote -inf and exited 0).
   const std::string path = scratch_ + "/damaged.actb";
   rewrite_blob(blob_, path, [](nlohmann::json&, std::vector<TensorCopy>& tensors) {
-    TensorCopy& head = tensor_named(tensors, blob_names::kHeadWeight);
-    const std::vector<float> huge(head.bytes.size() / sizeof(float), 3e38f);
-    std::memcpy(head.bytes.data(), huge.data(), head.bytes.size());
+    for (const auto& [name, value] : {std::pair{blob_names::kHeadWeight, 1e6f}, std::pair{blob_names::kUnnormScale, 3e38f}}) {
+      TensorCopy& t = tensor_named(tensors, name);
+      const std::vector<float> values(t.bytes.size() / sizeof(float), value);
+      std::memcpy(t.bytes.data(), values.data(), t.bytes.size());
+    }
   });
   auto engine = Engine::open(path, {.threads = 1});
   ASSERT_TRUE(engine.ok()) << engine.status().to_string();
@@ -730,12 +734,53 @@ TEST_F(BlobSemanticsTest, Int8WeightsMustBeSymmetric) {
   expect_refused(blob_, "int8_in_fp32", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
     TensorCopy& t = tensor_named(tensors, weight);
     t.dtype = DType::kI8;
-    t.bytes.resize(t.bytes.size() / sizeof(float));
+    t.bytes.assign(t.bytes.size() / sizeof(float), 1);  // valid int8 values: only the precision is wrong
     t.quant = {std::vector<float>(static_cast<size_t>(t.shape[0]), 0.01f), std::vector<int32_t>(static_cast<size_t>(t.shape[0]), 0), 0};
   }, {weight, "precision is not int8"});
   expect_refused(blob_, "quant_on_float", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
     tensor_named(tensors, blob_names::kHeadBias).quant = {{0.5f}, {0}, 0};
   }, {blob_names::kHeadBias, "quantization parameters"});
+}
+
+// A tampered blob (checksum recomputed) with an absurd number opened, and the damage showed only as
+// a non-finite output at the first inference: the numbers the kernels read are checked at open.
+TEST_F(BlobSemanticsTest, StoredNumbersMustBePlausible) {
+  const std::string weight = blob_names::enc(0, "linear1.weight");
+  const auto set_f32 = [](TensorCopy& t, size_t index, float value) {
+    std::memcpy(t.bytes.data() + index * sizeof(float), &value, sizeof value);
+  };
+  expect_refused(blob_, "huge_weight", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    set_f32(tensor_named(tensors, weight), 7, 1e30f);
+  }, {weight, "holds 1e+30 at index 7", "the limit is 1e+08"});
+  expect_refused(blob_, "nan_bias", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    set_f32(tensor_named(tensors, blob_names::kHeadBias), 1, std::nanf(""));
+  }, {blob_names::kHeadBias, "at index 1", "finite"});
+  const std::string divisor = blob_names::norm_div("observation.state");
+  expect_refused(blob_, "zero_divisor", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    set_f32(tensor_named(tensors, divisor), 0, 0.0f);
+  }, {divisor, "holds 0 at index 0", "divisor"});
+  expect_refused(int8_blob(), "huge_scale", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    tensor_named(tensors, weight).quant.scales[3] = 1.8e19f;
+  }, {weight, "int8 scale 1.8e+19 for channel 3"});
+  expect_refused(int8_blob(), "subnormal_scale", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    tensor_named(tensors, weight).quant.scales[0] = 1e-40f;
+  }, {weight, "for channel 0", "outside ["});
+  expect_refused(int8_blob(), "int8_minus_128", [&](nlohmann::json&, std::vector<TensorCopy>& tensors) {
+    tensor_named(tensors, weight).bytes[5] = 0x80;
+  }, {weight, "holds -128 at index 5", "[-127, 127]"});
+  // A static blob's activation scales: the inverse of each quantizes a whole activation.
+  QuantConfig quant;
+  quant.mode = QuantMode::kStatic;
+  for (const std::string& name : engine_->intermediate_names()) quant.activations[name] = {0.01f, 0};
+  const std::string static_blob = scratch_ + "/static.actb";
+  write_int8_blob(import_lerobot_checkpoint(test::fixture_dir("act-tiny")), quant, static_blob);
+  const std::string activation = quant.activations.begin()->first;
+  expect_refused(static_blob, "huge_activation_scale", [&](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["quantization"]["activations"][activation] = {1.8e19, 0};
+  }, {"activation \"" + activation + "\"", "scale 1.8e+19 is outside"});
+  expect_refused(static_blob, "activation_zero_point", [&](nlohmann::json& config, std::vector<TensorCopy>&) {
+    config["quantization"]["activations"][activation] = {0.01, 300};
+  }, {"activation \"" + activation + "\"", "zero point 300"});
 }
 
 TEST_F(BlobSemanticsTest, InputNormMustNameEveryInputFeature) {

@@ -1,6 +1,6 @@
-// libFuzzer target: the .actb blob loader, the parsers of the blob's JSON config (model and
-// quantization sections) and their cross-check with the tensors (blob_model_config), as Engine::open
-// runs them. The checksum is skipped for most inputs (the first byte decides) so that mutations
+// libFuzzer target: the .actb blob loader, the range checks of the stored numbers, the parsers of
+// the blob's JSON config (model and quantization sections) and their cross-check with the tensors
+// (blob_model_config, which checks the numbers first, whatever the config), as Engine::open runs them. The checksum is skipped for most inputs (the first byte decides) so that mutations
 // reach the header and tensor-directory checks behind it. (The check that the network reads every
 // tensor needs a whole model, megabytes, beyond the inputs a fuzzer mutates.)
 #include "actengine/status.h"

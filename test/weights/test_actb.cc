@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <random>
@@ -420,6 +421,31 @@ TEST(ActbSemantics, ConfigAndTensorsMustAgree) {
   backbone["backbone"] = "vgg16";
   EXPECT_TRUE(throws_error([&] { blob_model_config(blob("vgg.actb", backbone, {0, 0})); }, StatusCode::kDataLoss,
                            {dir + "/vgg.actb", "\"vgg16\"", "resnet18, resnet34, resnet50, resnet101, resnet152"}));
+}
+
+// The stored numbers are checked before the config is parsed, so fuzz_actb's inputs reach the checks
+// with any config, and a blob with both problems names the number.
+TEST(ActbSemantics, StoredNumbersAreCheckedWhateverTheConfig) {
+  const std::string dir = test::scratch_dir();
+  const auto blob = [&](const std::string& name, const std::function<void(ActbWriter&)>& add) {
+    ActbWriter w;
+    w.set_config(nlohmann::json::object());  // no model config at all
+    add(w);
+    w.write(dir + "/" + name);
+    return ActbFile::open(dir + "/" + name);
+  };
+  const ActbFile huge = blob("huge.actb", [](ActbWriter& w) { w.add_f32("proj.state.weight", {2}, {0.5f, -1e30f}); });
+  EXPECT_TRUE(throws_error([&] { blob_model_config(huge); }, StatusCode::kDataLoss,
+                           {dir + "/huge.actb", "\"proj.state.weight\"", "-1e+30 at index 1"}));
+  const std::vector<int8_t> q = {1, -2, 3, -4, 5, -6};
+  const ActbFile scaled = blob("scale.actb", [&](ActbWriter& w) {
+    w.add_tensor("w", DType::kI8, {2, 3}, q.data(), q.size(), {{0.5f, 1.8e19f}, {0, 0}, 0});
+  });
+  EXPECT_TRUE(throws_error([&] { blob_model_config(scaled); }, StatusCode::kDataLoss,
+                           {dir + "/scale.actb", "\"w\"", "int8 scale 1.8e+19 for channel 1"}));
+  // Statistics may be large (a state in microseconds), never infinite.
+  const ActbFile stats = blob("stats.actb", [](ActbWriter& w) { w.add_f32("norm.observation.state.sub", {1}, {3e9f}); });
+  EXPECT_TRUE(throws_error([&] { blob_model_config(stats); }, StatusCode::kDataLoss, {"malformed model config"}));
 }
 
 TEST(ActbSemantics, TensorsNobodyReadAreNamed) {

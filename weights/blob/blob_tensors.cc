@@ -1,5 +1,11 @@
 #include "weights/blob/blob_tensors.h"
 
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
 #include "actengine/status.h"
 #include "weights/blob/quant_config.h"
 
@@ -45,10 +51,83 @@ void check_quantization(const ActbFile& blob, const ModelConfig& config) {
   }
 }
 
+// "1e+30", "-nan": a stored number as an error names it.
+std::string number_text(double x) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", x);
+  return text;
+}
+
+[[noreturn]] void bad_value(const ActbTensor& t, const std::string& problem) {
+  fail(StatusCode::kDataLoss, "tensor \"" + t.name + "\" " + problem + "; is the blob damaged?");
+}
+
+// Whether every value of x[0..n) lies within +/- limit (NaN does not): a branch-free reduction the
+// compiler vectorizes, as the whole network passes through it at every open.
+bool all_within(const float* x, size_t n, float limit) {
+  int ok = 1;
+  for (size_t i = 0; i < n; ++i) ok &= static_cast<int>(std::fabs(x[i]) <= limit);
+  return ok != 0;
+}
+
+// Input normalisation's statistics may be anything finite (a state in microseconds), except a zero
+// divisor; the network's values are bounded.
+void check_f32_values(const ActbTensor& t) {
+  const bool statistic = t.name.starts_with("norm.") || t.name.starts_with("unnorm.");
+  const bool divisor = t.name.starts_with("norm.") && t.name.ends_with(".div");
+  const float limit = statistic ? FLT_MAX : kMaxStoredValue;
+  const float* values = t.f32();
+  const uint64_t n = t.elements();
+  constexpr uint64_t kBlock = 4096;
+  for (uint64_t b = 0; b < n; b += kBlock) {
+    const uint64_t end = std::min(n, b + kBlock);
+    if (all_within(values + b, static_cast<size_t>(end - b), limit)) continue;
+    for (uint64_t i = b; i < end; ++i) {
+      const float x = values[i];
+      if (std::fabs(x) <= limit) continue;
+      bad_value(t, "holds " + number_text(x) + " at index " + std::to_string(i) +
+                       (std::isfinite(x) ? ": no network value is that large (the limit is " + number_text(kMaxStoredValue) + ")"
+                                         : ": every stored number must be finite"));
+    }
+  }
+  for (uint64_t i = 0; divisor && i < n; ++i) {
+    if (values[i] == 0.0f) {
+      bad_value(t, "holds 0 at index " + std::to_string(i) + ": a normalisation divisor of 0 makes that input infinite");
+    }
+  }
+}
+
+// Symmetric int8 weights: values in [-127, 127] (the kernels' packers require it), one plausible
+// scale per output channel.
+void check_i8_values(const ActbTensor& t) {
+  for (size_t c = 0; c < t.quant.scales.size(); ++c) {
+    const float s = t.quant.scales[c];
+    if (!(s >= FLT_MIN && s <= kMaxWeightScale)) {
+      bad_value(t, "has int8 scale " + number_text(s) + " for channel " + std::to_string(c) + ": outside [" + number_text(FLT_MIN) +
+                       ", " + number_text(kMaxWeightScale) + "] (a weight scale is its channel's largest weight / 127)");
+    }
+  }
+  const auto* values = reinterpret_cast<const int8_t*>(t.data);
+  const void* found = t.nbytes == 0 ? nullptr : std::memchr(values, 0x80, t.nbytes);
+  if (found != nullptr) {
+    bad_value(t, "holds -128 at index " + std::to_string(static_cast<const int8_t*>(found) - values) +
+                     ": int8 weights are symmetric, in [-127, 127]");
+  }
+}
+
 }  // namespace
+
+void check_tensor_values(const ActbFile& blob) {
+  for (const ActbTensor& t : blob.tensors()) {
+    if (t.dtype == DType::kF32) check_f32_values(t);
+    if (t.dtype == DType::kI8) check_i8_values(t);
+  }
+}
 
 ModelConfig blob_model_config(const ActbFile& blob) {
   try {
+    // First, so that a fuzzed config that does not parse still leaves the numbers checked.
+    check_tensor_values(blob);
     ModelConfig config = ModelConfig::from_json(blob.config());
     for (const ActbTensor& t : blob.tensors()) {
       if (const std::string problem = tensor_problem(t, config.precision); !problem.empty()) {

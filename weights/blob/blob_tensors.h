@@ -12,11 +12,24 @@
 
 namespace act {
 
+/// The largest magnitude of a stored network value (weights, biases, folded tables): 100 times the
+/// importer's limit on a checkpoint's weights (1e6), room for BatchNorm folding.
+inline constexpr float kMaxStoredValue = 1e8f;
+/// The largest per-channel scale of int8 weights: kMaxStoredValue / 127 (symmetric quantization).
+inline constexpr float kMaxWeightScale = kMaxStoredValue / 127.0f;
+
+/// The numbers the kernels read, before any of them runs: every float tensor finite, the network's
+/// within +/- kMaxStoredValue, no zero in an input normalisation's divisor, int8 weights in
+/// [-127, 127] and their scales in [FLT_MIN, kMaxWeightScale]. Throws kDataLoss naming the tensor,
+/// the value and its index (without the blob's path; blob_model_config adds it).
+void check_tensor_values(const ActbFile& blob);
+
 /// The model config of `blob`, parsed (ModelConfig::from_json) and checked against the tensors:
 /// every tensor is F32, or I8 in an int8 blob with one positive scale per output channel (axis 0) and
 /// every zero point 0 (the int8 kernels are symmetric); F32 tensors carry no quantization
 /// parameters; the "quantization" section is there exactly when the precision is int8, a dynamic one
-/// has no activation parameters, and its float_layers name F32 tensors of the blob. Throws act::Error.
+/// has no activation parameters, and its float_layers name F32 tensors of the blob; and, first, the
+/// stored numbers (check_tensor_values). Throws act::Error.
 ModelConfig blob_model_config(const ActbFile& blob);
 
 /// Reads tensors for a network built from the blob's config and records each one asked for, so that

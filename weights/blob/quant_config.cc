@@ -1,6 +1,8 @@
 #include "weights/blob/quant_config.h"
 
+#include <cfloat>
 #include <cmath>
+#include <cstdio>
 
 #include "actengine/status.h"
 #include "weights/blob/file_util.h"
@@ -35,6 +37,30 @@ nlohmann::json QuantConfig::to_json() const {
   return j;
 }
 
+namespace {
+
+// [scale, zero_point] of activation `name`, range-checked: the scale's inverse quantizes every
+// value of that activation, so an implausible one is damage, not a model.
+ActivationQuant activation_from_json(const std::string& name, const nlohmann::json& v) {
+  ActivationQuant q{};
+  const std::string where = "bad quantization parameters for activation \"" + name + "\"";
+  if (!v.is_array() || v.size() != 2 || !detail::json_to_f32(v.at(0), &q.scale) || !detail::json_to_i32(v.at(1), &q.zero_point)) {
+    fail(StatusCode::kDataLoss, where + ": expected [scale, zero point], got " + v.dump().substr(0, 80));
+  }
+  if (!(q.scale >= FLT_MIN && q.scale <= kMaxActivationScale)) {
+    char range[96];
+    std::snprintf(range, sizeof range, "scale %g is outside [%g, %g]", static_cast<double>(q.scale), static_cast<double>(FLT_MIN),
+                  static_cast<double>(kMaxActivationScale));
+    fail(StatusCode::kDataLoss, where + ": " + range);
+  }
+  if (q.zero_point < -128 || q.zero_point > 127) {
+    fail(StatusCode::kDataLoss, where + ": zero point " + std::to_string(q.zero_point) + " is outside [-128, 127]");
+  }
+  return q;
+}
+
+}  // namespace
+
 QuantConfig QuantConfig::from_json(const nlohmann::json& j) {
   QuantConfig c;
   try {
@@ -50,12 +76,7 @@ QuantConfig QuantConfig::from_json(const nlohmann::json& j) {
     }
     c.calibration = j.value("calibration", "");
     for (const auto& [name, v] : j.at("activations").items()) {
-      ActivationQuant q{};
-      if (!detail::json_to_f32(v.at(0), &q.scale) || !detail::json_to_i32(v.at(1), &q.zero_point) ||
-          !(q.scale > 0.0f) || q.zero_point < -128 || q.zero_point > 127) {
-        fail(StatusCode::kDataLoss, "bad quantization parameters for activation \"" + name + "\"");
-      }
-      c.activations[name] = q;
+      c.activations[name] = activation_from_json(name, v);
     }
     c.float_layers = j.at("float_layers").get<std::vector<std::string>>();
     const std::string attention = j.value("attention", "fp32");

@@ -22,6 +22,10 @@
 
 namespace act {
 
+/// The largest activation scale a blob may hold (a value range of 2.55e8; the converter's come from
+/// calibration, kernels/quant's choose_quant_s8, and are at least FLT_MIN).
+inline constexpr float kMaxActivationScale = 1e6f;
+
 struct ActivationQuant {
   float scale = 1.0f;
   int32_t zero_point = 0;
@@ -45,7 +49,8 @@ struct QuantConfig {
   const ActivationQuant& activation(const std::string& value_name) const;
 
   nlohmann::json to_json() const;
-  /// Throws act::Error(kDataLoss) on a malformed object (bad mode, non-positive scale, ...).
+  /// Throws act::Error(kDataLoss) on a malformed object (bad mode, a scale outside [FLT_MIN,
+  /// kMaxActivationScale], a zero point outside [-128, 127], ...), naming the activation.
   static QuantConfig from_json(const nlohmann::json& j);
 };
 

@@ -87,6 +87,7 @@ endfunction()
 #   *_avxvnni.cc     -mavx2 -mfma -mavxvnni                                    (x86-64 targets)
 #   *_avx512.cc      -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl              (x86-64 targets)
 #   *_avx512vnni.cc  -mavx2 -mfma -mavx512f -mavx512bw -mavx512vl -mavx512vnni (x86-64 targets)
+#   *_amx.cc         the avx512vnni flags and -mamx-tile -mamx-int8            (x86-64 targets)
 #   *_neon.cc        none: Advanced SIMD is part of the AArch64 baseline
 #   *_neondot.cc     -march=armv8.2-a+dotprod                                  (AArch64 targets)
 # On other targets the file compiles to nothing but its null table (its body is guarded by
@@ -110,6 +111,9 @@ function(act_set_isa_flags)
     elseif(act_x86 AND src MATCHES "_avx512vnni\\.cc$")
       set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS
         "-mavx2;-mfma;-mavx512f;-mavx512bw;-mavx512vl;-mavx512vnni")
+    elseif(act_x86 AND src MATCHES "_amx\\.cc$")
+      set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS
+        "-mavx2;-mfma;-mavx512f;-mavx512bw;-mavx512vl;-mavx512vnni;-mamx-tile;-mamx-int8")
     elseif(act_arm64 AND src MATCHES "_neondot\\.cc$")
       set_source_files_properties(${src} PROPERTIES COMPILE_OPTIONS "-march=armv8.2-a+dotprod")
     endif()

@@ -23,7 +23,7 @@ IsaTables isa_tables(Isa isa) {
     case Isa::kAvxVnni:
       return {gemm_s8_table_avxvnni(), nullptr, nullptr, nullptr, nullptr};
     case Isa::kAmx:
-      return {};
+      return {gemm_s8_table_amx(), nullptr, nullptr, nullptr, nullptr};
     case Isa::kNeon:
       return {nullptr, gemm_f32_table_neon(), quant_s8_table_neon(), elementwise_f32_table_neon(), maxpool_s8_table_neon()};
     case Isa::kNeonDot:

@@ -46,6 +46,8 @@ enum class GemmS8Layout : uint32_t {
   kNeon16x4 = 4,  ///< nr=16, kr=4: 16 columns x 4 bytes per k-group
   kVnni64x4U8A = 5,  ///< as kVnni64x4 with the weights as they are (s8), for unsigned activations
   kVnni16x4 = 6,  ///< nr=16, kr=4: kNeon16x4's order with the weights stored + 128 (u8), AVX-VNNI
+  kAmx64x4 = 7,      ///< nr=64, kr=4, weights as they are, K padded to 64 (one AMX tile row per k-group)
+  kAmx64x4U8A = 8,   ///< the same bytes, for unsigned activations (tdpbusd instead of tdpbssd)
 };
 
 inline constexpr uint32_t kGemmS8PackedMagic = 0x38534741u;  // "AGS8"

@@ -51,7 +51,14 @@ void pack_w_s8_64x4_goi_u8a(int n, int k, const int8_t* w, size_t ldw, const int
 /// nr=16, kr=4 in pack_w_s8_16x4_goi's order, weights stored as W XOR 0x80 (AVX-VNNI), padding 0.
 void pack_w_s8_16x4_goi_x80(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                             void* packed);
-/// The same five packers reading W^T: `wt` is [k x n] (row stride ldw >= n), W[j][i] = wt[i * ldw + j];
+/// AMX: nr=64, kr=4, W as it is, K padded with zeros to a multiple of 64 (kp): each k-group's
+/// 16-column quarter is one 64-byte row of an AMX weight tile. The _u8a twin writes the same bytes
+/// under the unsigned-activation layout.
+void pack_w_s8_64x4_goi_k64(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed);
+void pack_w_s8_64x4_goi_k64_u8a(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                                void* packed);
+/// The same six packers reading W^T: `wt` is [k x n] (row stride ldw >= n), W[j][i] = wt[i * ldw + j];
 /// each writes the bytes its pack_w_ twin writes for W. Attention packs its values this way, straight
 /// from their token-major int8 copy.
 void pack_wt_s8_1x1_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
@@ -63,6 +70,8 @@ void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const i
 void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                          void* packed);
 void pack_wt_s8_16x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed);
+void pack_wt_s8_64x4_goi_k64(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                              void* packed);
 
 // ---- ref (gemm_s8_ref.cc): the normative scalar definition ----------------------------------
@@ -95,6 +104,14 @@ const GemmS8Kernels* gemm_s8_table_avxvnni();
 // same kernels multiply as u8 x W as s8, without row sums. Needs cpu_supports(Isa::kAvx512Vnni).
 
 const GemmS8Kernels* gemm_s8_table_avx512vnni();
+
+// ---- AMX-INT8 (gemm_s8_amx.cc, x86-64 only; the avx512vnni flags + -mamx-tile -mamx-int8) ----
+// 32x64c4: 2 x 2 tiles of tdpbssd (tdpbusd for A stored unsigned) per half panel, A read in place
+// or copied into a K-padded stack buffer, the AVX-512 VNNI variant's epilogues. Packed by
+// pack_w_s8_64x4_goi_k64 (or its _u8a twin). Needs cpu_supports(Isa::kAmx), which includes the
+// OS's permission for the tile state.
+
+const GemmS8Kernels* gemm_s8_table_amx();
 
 // ---- NEON dot product (gemm_s8_neondot.cc, AArch64 only; -march=armv8.2-a+dotprod) -----------
 // 4x16c4 SDOT micro-kernel (activations read in place, 4 k-groups per 16-byte load via

@@ -18,15 +18,18 @@ struct LayoutDesc {
   int nr, kr;
   bool pair4;      // AVX2: store columns 0,4,1,5,2,6,3,7 inside each k-group
   bool w_plus128;  // VNNI: store W XOR 0x80 (W + 128 as u8) for the unsigned side of vpdpbusd
+  int k_align;     // K padded with zero weights to a multiple of this (kr, or a tile's 64 bytes)
 };
 
 constexpr LayoutDesc kLayouts[] = {
-    {GemmS8Layout::kRef1x1, 1, 1, false, false},
-    {GemmS8Layout::kAvx2_8x8, 8, 8, true, false},
-    {GemmS8Layout::kVnni64x4, 64, 4, false, true},
-    {GemmS8Layout::kNeon16x4, 16, 4, false, false},
-    {GemmS8Layout::kVnni64x4U8A, 64, 4, false, false},
-    {GemmS8Layout::kVnni16x4, 16, 4, false, true},
+    {GemmS8Layout::kRef1x1, 1, 1, false, false, 1},
+    {GemmS8Layout::kAvx2_8x8, 8, 8, true, false, 8},
+    {GemmS8Layout::kVnni64x4, 64, 4, false, true, 4},
+    {GemmS8Layout::kNeon16x4, 16, 4, false, false, 4},
+    {GemmS8Layout::kVnni64x4U8A, 64, 4, false, false, 4},
+    {GemmS8Layout::kVnni16x4, 16, 4, false, true, 4},
+    {GemmS8Layout::kAmx64x4, 64, 4, false, false, 64},
+    {GemmS8Layout::kAmx64x4U8A, 64, 4, false, false, 64},
 };
 
 const LayoutDesc& desc_of(GemmS8Layout layout) {
@@ -42,7 +45,7 @@ constexpr int kMaxNr = 64;
 size_t round_up(size_t x, size_t to) { return (x + to - 1) / to * to; }
 
 size_t panel_bytes(const LayoutDesc& d, int k) {
-  const size_t kp = round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr));
+  const size_t kp = round_up(static_cast<size_t>(k), static_cast<size_t>(d.k_align));
   return round_up(8 * static_cast<size_t>(d.nr) + kp * static_cast<size_t>(d.nr), kGemmS8PackedAlign);
 }
 
@@ -180,7 +183,7 @@ GemmS8PackedHeader gemm_s8_packed_header(GemmS8Layout layout, int n, int k, int3
   h.k = k;
   h.nr = d.nr;
   h.kr = d.kr;
-  h.kp = static_cast<int32_t>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.kr)));
+  h.kp = static_cast<int32_t>(round_up(static_cast<size_t>(k), static_cast<size_t>(d.k_align)));
   h.a_zero_point = a_zero_point;
   h.panel_bytes = panel_bytes(d, k);
   return h;
@@ -212,6 +215,16 @@ void pack_w_s8_64x4_goi_u8a(int n, int k, const int8_t* w, size_t ldw, const int
   pack_generic<4>(desc_of(GemmS8Layout::kVnni64x4U8A), n, k, w, ldw, bias, a_zero_point, packed);
 }
 
+void pack_w_s8_64x4_goi_k64(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                            void* packed) {
+  pack_generic<4>(desc_of(GemmS8Layout::kAmx64x4), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
+void pack_w_s8_64x4_goi_k64_u8a(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                                void* packed) {
+  pack_generic<4>(desc_of(GemmS8Layout::kAmx64x4U8A), n, k, w, ldw, bias, a_zero_point, packed);
+}
+
 void pack_w_s8_16x4_goi(int n, int k, const int8_t* w, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                         void* packed) {
   pack_generic<4>(desc_of(GemmS8Layout::kNeon16x4), n, k, w, ldw, bias, a_zero_point, packed);
@@ -235,6 +248,11 @@ void pack_wt_s8_8x8_goi_pair4(int n, int k, const int8_t* wt, size_t ldw, const 
 void pack_wt_s8_64x4_goi_x80(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
                              void* packed) {
   pack_generic<4, true>(desc_of(GemmS8Layout::kVnni64x4), n, k, wt, ldw, bias, a_zero_point, packed);
+}
+
+void pack_wt_s8_64x4_goi_k64(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,
+                             void* packed) {
+  pack_generic<4, true>(desc_of(GemmS8Layout::kAmx64x4), n, k, wt, ldw, bias, a_zero_point, packed);
 }
 
 void pack_wt_s8_16x4_goi(int n, int k, const int8_t* wt, size_t ldw, const int32_t* bias, int32_t a_zero_point,

@@ -8,6 +8,7 @@
 namespace act::kernels {
 
 const PeakProbe kPeakProbes[] = {
+    {"tdpbssd", Isa::kAmx, PeakKind::kInt8, peak_tdpbssd, true},
     {"vpdpbusd_zmm", Isa::kAvx512Vnni, PeakKind::kInt8, peak_vpdpbusd_zmm, true},
     {"vpdpbusd_zmm_6x64_loop", Isa::kAvx512Vnni, PeakKind::kInt8, peak_vpdpbusd_zmm_6x64_loop, false},
     {"vpdpbusd_ymm", Isa::kAvxVnni, PeakKind::kInt8, peak_vpdpbusd_ymm, true},

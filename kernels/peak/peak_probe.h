@@ -15,6 +15,9 @@ uint64_t peak_vpdpbusd_zmm(uint64_t iterations);
 /// The 6x64c4 kernel's inner loop with its operands in L1 (4 weight loads, 6 broadcasts, 24
 /// vpdpbusd per k-group): the ceiling of its instruction mix, below which the data's arrival lies.
 uint64_t peak_vpdpbusd_zmm_6x64_loop(uint64_t iterations);
+/// 4 independent tdpbssd tile chains per iteration (16 x 16 x 64 int8 MACs each), the operands in
+/// tiles. AMX-INT8 (with the OS's permission for the tile state).
+uint64_t peak_tdpbssd(uint64_t iterations);
 /// 14 independent VEX vpdpbusd ymm chains per iteration (32 int8 MACs each). AVX-VNNI.
 uint64_t peak_vpdpbusd_ymm(uint64_t iterations);
 /// The 6x16c4 AVX-VNNI kernel's inner loop with its operands in L1 (2 weight loads, 6 broadcasts,

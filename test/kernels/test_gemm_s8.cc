@@ -43,8 +43,11 @@ class GemmS8Variant : public ::testing::TestWithParam<Isa> {
   int mr() const { return variant().mr; }
   int nr() const { return variant().nr; }
   int kr() const { return variant().kr; }
-  // The K step of the main loop (NEON SDOT consumes 16 bytes of A per step).
-  int kblock() const { return GetParam() == Isa::kNeonDot ? 16 : kr(); }
+  // The K step of the main loop (NEON SDOT consumes 16 bytes of A per step, an AMX tile 64).
+  int kblock() const {
+    if (GetParam() == Isa::kNeonDot) return 16;
+    return GetParam() == Isa::kAmx ? 64 : kr();
+  }
   std::vector<int> m_sizes() const { return dedup_positive({1, mr() - 1, mr(), mr() + 1, 2 * mr() + 1, 37}); }
   std::vector<int> n_sizes() const {
     return dedup_positive({1, nr() - 1, nr(), nr() + 1, 2 * nr() + 3, 3 * nr() - 5});
@@ -83,6 +86,9 @@ TEST_P(GemmS8Variant, LargeShapes) {
   GemmS8Tester().m(67).n(3 * nr() + 7).k(576).out(GemmOut::kS8).a_zero_point(-3).seed(7).test(variant());
   GemmS8Tester().m(29).n(2 * nr() + 1).k(1153).out(GemmOut::kF32).per_row(true).seed(8).test(variant());
   GemmS8Tester().m(2 * mr() + 3).n(4 * nr()).k(2304 + 7).out(GemmOut::kS32).a_zero_point(11).seed(9).test(variant());
+  // Past 4608 bytes of K (ACT's largest, 3 x 3 x 512), AMX copies A chunk by chunk.
+  GemmS8Tester().m(mr() + 5).n(nr() + 9).k(4800).segments(192).out(GemmOut::kF32).per_row(true).seed(10).test(variant());
+  GemmS8Tester().m(2 * mr()).n(nr() + 61).k(4608 + 64 + 5).out(GemmOut::kS8).a_zero_point(-2).seed(11).test(variant());
 }
 
 // A in segments (a convolution's kernel rows read in place): segments of one and several k-steps,
@@ -380,6 +386,8 @@ GemmS8PackFn portable_packer(GemmS8Layout layout) {
     case GemmS8Layout::kNeon16x4: return pack_w_s8_16x4_goi;
     case GemmS8Layout::kVnni64x4U8A: return pack_w_s8_64x4_goi_u8a;
     case GemmS8Layout::kVnni16x4: return pack_w_s8_16x4_goi_x80;
+    case GemmS8Layout::kAmx64x4: return pack_w_s8_64x4_goi_k64;
+    case GemmS8Layout::kAmx64x4U8A: return pack_w_s8_64x4_goi_k64_u8a;
   }
   return nullptr;
 }
@@ -396,7 +404,8 @@ TEST(GemmS8Pack, TransposedPackerMatchesPackOfTranspose) {
                         {GemmS8Layout::kAvx2_8x8, pack_w_s8_8x8_goi_pair4, pack_wt_s8_8x8_goi_pair4},
                         {GemmS8Layout::kVnni64x4, pack_w_s8_64x4_goi_x80, pack_wt_s8_64x4_goi_x80},
                         {GemmS8Layout::kNeon16x4, pack_w_s8_16x4_goi, pack_wt_s8_16x4_goi},
-                        {GemmS8Layout::kVnni16x4, pack_w_s8_16x4_goi_x80, pack_wt_s8_16x4_goi_x80}};
+                        {GemmS8Layout::kVnni16x4, pack_w_s8_16x4_goi_x80, pack_wt_s8_16x4_goi_x80},
+                        {GemmS8Layout::kAmx64x4, pack_w_s8_64x4_goi_k64, pack_wt_s8_64x4_goi_k64}};
   uint32_t seed = 1000;
   for (const Pair& p : pairs) {
     for (int n : {1, 7, 16, 17, 64, 65}) {
@@ -487,10 +496,12 @@ GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(GemmS8Variant);
 TEST(GemmS8Dispatch, DetectedVariantsAreBuiltAndRun) {
   const CpuFeatures& f = cpu_features();
   std::cout << "cpu features (" << f.source << "): avx2=" << f.avx2 << " fma=" << f.fma << " avx512f=" << f.avx512f
-            << " avx512bw=" << f.avx512bw << " avx512vl=" << f.avx512vl << " avx512vnni=" << f.avx512vnni << " avxvnni=" << f.avxvnni
-            << " neon=" << f.neon << " dotprod=" << f.dotprod << "; runs " << isa_mask_names(cpu_isa_mask()) << "\n";
+            << " avx512bw=" << f.avx512bw << " avx512vl=" << f.avx512vl << " avx512vnni=" << f.avx512vnni
+            << " avxvnni=" << f.avxvnni << " amx=" << f.amx << (f.amx_refused ? " (" : "")
+            << (f.amx_refused ? f.amx_refused : "") << (f.amx_refused ? ")" : "") << " neon=" << f.neon
+            << " dotprod=" << f.dotprod << "; runs " << isa_mask_names(cpu_isa_mask()) << "\n";
 #if defined(__x86_64__)
-  const Isa simd[] = {Isa::kAvx2, Isa::kAvxVnni, Isa::kAvx512Vnni};
+  const Isa simd[] = {Isa::kAvx2, Isa::kAvxVnni, Isa::kAvx512Vnni, Isa::kAmx};
 #elif defined(__aarch64__)
   const Isa simd[] = {Isa::kNeonDot};
 #else
@@ -550,9 +561,10 @@ bool parse_tile(const std::string& s, bool with_kr, int* a, int* b, int* c) {
 // <family>_<dtypes>_<tile>_<isa> (kernels/README.md, "Adding a variant"), tile matching the table.
 // (A hand parser: std::regex trips GCC 12's -Wmaybe-uninitialized under ASan.)
 TEST(GemmS8Dispatch, KernelNamesFollowTheGrammar) {
-  const std::set<std::string> isa_suffixes = {"ref", "neon", "neondot", "neoni8mm", "avx2", "avxvnni", "avx512", "avx512vnni"};
-  const GemmS8Kernels* tables[] = {gemm_s8_table_ref(), gemm_s8_table_avx2(), gemm_s8_table_avxvnni(),
-                                   gemm_s8_table_avx512vnni(), gemm_s8_table_neondot()};
+  const std::set<std::string> isa_suffixes = {"ref",    "neon",   "neondot",    "neoni8mm", "avx2",
+                                              "avxvnni", "avx512", "avx512vnni", "amx"};
+  const GemmS8Kernels* tables[] = {gemm_s8_table_ref(), gemm_s8_table_avx2(), gemm_s8_table_avxvnni(), gemm_s8_table_avx512vnni(),
+                                   gemm_s8_table_amx(), gemm_s8_table_neondot()};
   int checked = 0;
   for (const GemmS8Kernels* t : tables) {
     if (t == nullptr) continue;
@@ -592,7 +604,8 @@ TEST(GemmS8Pack, HeaderAndFoldedBias) {
   const int8_t w[n * k] = {1, 2, 3, 4, 5, -1, -1, -1, -1, -1, 127, -127, 0, 0, 127};
   const int32_t bias[n] = {10, 20, 30};
   for (GemmS8Layout layout : {GemmS8Layout::kRef1x1, GemmS8Layout::kAvx2_8x8, GemmS8Layout::kVnni64x4,
-                              GemmS8Layout::kNeon16x4, GemmS8Layout::kVnni64x4U8A, GemmS8Layout::kVnni16x4}) {
+                              GemmS8Layout::kNeon16x4, GemmS8Layout::kVnni64x4U8A, GemmS8Layout::kVnni16x4,
+                              GemmS8Layout::kAmx64x4, GemmS8Layout::kAmx64x4U8A}) {
     const size_t bytes = gemm_s8_packed_size(layout, n, k);
     const PackedBuffer p = packed_buffer(bytes, 0);
     const int za = -3;

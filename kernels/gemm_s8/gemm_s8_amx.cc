@@ -71,13 +71,13 @@ struct alignas(64) TileConfig {
 };
 static_assert(sizeof(TileConfig) == 64);
 
-// Configures the tiles for one row block and releases them when it ends.
+// Configures the tiles for one row block and releases them when it ends. The configuration is
+// static: GCC 12 does not see ldtilecfg read its operand, so it would drop the stores that fill a
+// local one (and ldtilecfg then faults on the garbage).
+constexpr TileConfig kTileConfig{};
 class TileScope {
  public:
-  TileScope() {
-    static const TileConfig config;
-    _tile_loadconfig(&config);
-  }
+  TileScope() { _tile_loadconfig(&kTileConfig); }
   ~TileScope() { _tile_release(); }
   TileScope(const TileScope&) = delete;
   TileScope& operator=(const TileScope&) = delete;

@@ -12,13 +12,19 @@
 namespace act::kernels {
 
 #if defined(__x86_64__)
+namespace {
+// Palette 1, tiles 0-7 of 16 rows x 64 bytes. Static: GCC 12 does not see ldtilecfg read its
+// operand, and drops the stores that would fill a local configuration (then ldtilecfg faults).
+struct alignas(64) TileConfig {
+  uint8_t palette_id = 1, start_row = 0, reserved[14] = {};
+  uint16_t colsb[16] = {64, 64, 64, 64, 64, 64, 64, 64};
+  uint8_t rows[16] = {16, 16, 16, 16, 16, 16, 16, 16};
+};
+constexpr TileConfig kTileConfig{};
+}  // namespace
+
 uint64_t peak_tdpbssd(uint64_t iterations) {
-  struct alignas(64) {
-    uint8_t palette_id = 1, start_row = 0, reserved[14] = {};
-    uint16_t colsb[16] = {64, 64, 64, 64, 64, 64, 64, 64};
-    uint8_t rows[16] = {16, 16, 16, 16, 16, 16, 16, 16};
-  } config;
-  _tile_loadconfig(&config);
+  _tile_loadconfig(&kTileConfig);
   _tile_zero(0);
   _tile_zero(1);
   _tile_zero(2);

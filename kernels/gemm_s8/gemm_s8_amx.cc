@@ -83,20 +83,32 @@ class TileScope {
   TileScope& operator=(const TileScope&) = delete;
 };
 
+// len bytes from src to dst, 64 at a time (masked at the end: nothing past src + len is read).
+inline void copy_bytes(int8_t* dst, const int8_t* src, int len) {
+  int i = 0;
+  for (; i + 64 <= len; i += 64) _mm512_storeu_si512(dst + i, _mm512_loadu_si512(src + i));
+  if (i < len) {
+    const __mmask64 mask = (__mmask64{1} << (len - i)) - 1;
+    _mm512_mask_storeu_epi8(dst + i, mask, _mm512_maskz_loadu_epi8(mask, src + i));
+  }
+}
+
 // Bytes [k0, k0 + kc) of rows [m, m + rows) of A into buf (row stride kc), zero past K, and rows
-// [rows, row_tiles * 16) zero: the block a tile loads at stride kc.
+// [rows, row_tiles * 16) zero: the block a tile loads at stride kc. Vector moves, not memcpy: a
+// 3 x 3 conv's row is three segments of 3 * Cin bytes, and 96 memcpy calls per row block cost
+// more than the block's tile dot products.
 void copy_a(const GemmS8Args& g, int m, int rows, int row_tiles, int k0, int kc, int8_t* buf) {
   const int segments = segment_count(g), segment_k = g.k / segments;
+  const int k1 = std::min(g.k, k0 + kc);
   for (int r = 0; r < rows; ++r) {
     int8_t* dst = buf + static_cast<size_t>(r) * static_cast<size_t>(kc);
-    const int k1 = std::min(g.k, k0 + kc);
     for (int k = k0; k < k1;) {
       const int s = k / segment_k, in_segment = k - s * segment_k;
       const int len = std::min(k1 - k, segment_k - in_segment);
       const int8_t* src = g.a_segments != nullptr
                               ? g.a_segments[static_cast<size_t>(m + r) * static_cast<size_t>(segments) + s] + in_segment
                               : g.a + static_cast<size_t>(m + r) * g.lda + static_cast<size_t>(k);
-      std::memcpy(dst + (k - k0), src, static_cast<size_t>(len));
+      copy_bytes(dst + (k - k0), src, len);
       k += len;
     }
     if (k1 - k0 < kc) std::memset(dst + (k1 - k0), 0, static_cast<size_t>(kc - (k1 - k0)));
@@ -186,13 +198,39 @@ void panel_dots(const GemmS8Args& g, const GemmS8PackedHeader& h, const ABlock& 
   }
 }
 
+// One finished panel's rows through the epilogue: acc (int32 [32 x 64], from the tiles) + kbias,
+// minus (z_row - z_packed) * ksum where rows carry their own zero points (the packed kbias
+// assumed z_packed).
+template <class Epi>
+void finish_panel(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panel, const int32_t* acc, int m,
+                  int rows, int n, int lo, int hi, Epi& epi) {
+  __m512i kbias[kVecs], ksum[kVecs];
+  for (int j = 0; j < kVecs; ++j) {
+    kbias[j] = _mm512_loadu_si512(panel + 64 * j);
+    ksum[j] = _mm512_loadu_si512(panel + 4 * kNR + 64 * j);
+  }
+  epi.begin_panel(n, lo, hi);
+  for (int r = 0; r < rows; ++r) {
+    __m512i v[kVecs];
+    for (int j = 0; j < kVecs; ++j) v[j] = _mm512_add_epi32(_mm512_load_si512(acc + r * kNR + 16 * j), kbias[j]);
+    if (g.a_row_zero_point != nullptr) {
+      const __m512i dz = _mm512_set1_epi32(g.a_row_zero_point[m + r] - h.a_zero_point);
+      for (int j = 0; j < kVecs; ++j) v[j] = _mm512_sub_epi32(v[j], _mm512_mullo_epi32(dz, ksum[j]));
+    }
+    epi.row(m + r, n, v);
+  }
+}
+
 // Rows [m, m + rows) of C against panels [pb, pe): A placed once, then per panel the tile dot
-// products, kbias and the row zero points added, and the epilogue row by row.
+// products into one of two accumulator buffers while the previous panel goes through the epilogue
+// from the other: vector loads of what tilestored has just written wait for the stores to drain
+// (finishing each panel at once took 4x the dot products' time on K = 576), and the tile unit
+// works while the vector units finish.
 template <bool kTwoRowTiles, bool kUnsignedA, class Epi>
 void row_block_of(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_t* panels, int m, int rows, int pb,
                   int pe, int n0, int n1, Epi& epi, uint32_t& paths) {
   alignas(64) int8_t buf[kMR * kAChunk];
-  alignas(64) int32_t acc[kMR * kNR];
+  alignas(64) int32_t acc[2][kMR * kNR];
   const int row_tiles = kTwoRowTiles ? 2 : 1;
   ABlock ab{};
   if (g.a_segments == nullptr && g.k % kKStep == 0 && rows == 16 * row_tiles) {
@@ -204,28 +242,21 @@ void row_block_of(const GemmS8Args& g, const GemmS8PackedHeader& h, const uint8_
     ab = {buf, 0, true};
   }
   if (h.panel_bytes * static_cast<uint64_t>(pe - pb) > 48 * 1024) paths |= kPathStreamedWeights;
+  struct Pending {
+    const uint8_t* panel = nullptr;
+    int n = 0, lo = 0, hi = 0;
+  } pending;
+  int slot = 0;
   TileScope tiles;
   for_each_panel(pb, pe, n0, n1, paths, [&](int p, int n, int lo, int hi) {
     const uint8_t* panel = panels + static_cast<size_t>(p) * h.panel_bytes;
     epi.prefetch_rows(m, rows, n);
-    panel_dots<kTwoRowTiles, kUnsignedA>(g, h, ab, buf, m, rows, panel, hi, acc);
-    __m512i kbias[kVecs], ksum[kVecs];
-    for (int j = 0; j < kVecs; ++j) {
-      kbias[j] = _mm512_loadu_si512(panel + 64 * j);
-      ksum[j] = _mm512_loadu_si512(panel + 4 * kNR + 64 * j);
-    }
-    epi.begin_panel(n, lo, hi);
-    for (int r = 0; r < rows; ++r) {
-      __m512i v[kVecs];
-      // The packed kbias assumed z_packed: acc -= (z_row - z_packed) * ksum.
-      const __m512i dz = _mm512_set1_epi32(g.a_row_zero_point != nullptr ? g.a_row_zero_point[m + r] - h.a_zero_point : 0);
-      for (int j = 0; j < kVecs; ++j) {
-        const __m512i sum = _mm512_add_epi32(_mm512_load_si512(acc + r * kNR + 16 * j), kbias[j]);
-        v[j] = _mm512_sub_epi32(sum, _mm512_mullo_epi32(dz, ksum[j]));
-      }
-      epi.row(m + r, n, v);
-    }
+    panel_dots<kTwoRowTiles, kUnsignedA>(g, h, ab, buf, m, rows, panel, hi, acc[slot]);
+    if (pending.panel != nullptr) finish_panel(g, h, pending.panel, acc[slot ^ 1], m, rows, pending.n, pending.lo, pending.hi, epi);
+    pending = {panel, n, lo, hi};
+    slot ^= 1;
   });
+  if (pending.panel != nullptr) finish_panel(g, h, pending.panel, acc[slot ^ 1], m, rows, pending.n, pending.lo, pending.hi, epi);
 }
 
 template <class Epi>

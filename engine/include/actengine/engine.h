@@ -48,7 +48,7 @@ struct EngineOptions {
   /// inference (to compare with LeRobot layer by layer); costs memory, never changes results.
   bool keep_intermediates = false;
   /// The instruction set the kernels use: "auto" (the best this CPU runs; the ACT_ISA environment
-  /// variable, when set, overrides it) or one of ref, avx2, avx512, avx512vnni (x86-64), neon,
+  /// variable, when set, overrides it) or one of ref, avx2, avxvnni, avx512, avx512vnni, amx (x86-64), neon,
   /// neondot (AArch64). An unknown ISA, or one this CPU cannot run, fails Engine::open with a
   /// message listing the ISAs this CPU runs.
   std::string isa = "auto";

@@ -60,6 +60,9 @@ KernelConfigChoice kernel_config(std::string_view requested) {
     choice.error = "unknown ISA '" + std::string(requested) + "': " + runs;
   } else if (!cpu_supports(*isa)) {
     choice.error = "ISA '" + std::string(requested) + "' is not supported by this CPU: " + runs;
+    if (*isa == Isa::kAmx && cpu_features().amx_refused != nullptr) {
+      choice.error.append(" (the CPU has AMX-INT8, but ").append(cpu_features().amx_refused).append(")");
+    }
   } else {
     choice.config.emplace(kernel_config_for(*isa));
   }

@@ -112,6 +112,32 @@ TEST(KernelConfig, EachLevelsInt8PeakIsTheProbeOfItsGemmS8) {
   }
 }
 
+#if defined(__x86_64__)
+// AMX needs the OS's permission for the tile state as well as CPUID: where it is granted, auto runs
+// the amx gemm_s8; where Linux refuses it, asking for amx is an error that says so, and auto falls
+// back to the level below.
+TEST(KernelConfig, AmxRunsWhereTheOsGrantsItAndSaysWhyNotElsewhere) {
+  const CpuFeatures& f = cpu_features();
+  EXPECT_FALSE(f.amx && f.amx_refused != nullptr);
+  if (cpu_supports(Isa::kAmx)) {
+    const KernelConfigChoice c = kernel_config("auto");
+    ASSERT_TRUE(c.config.has_value()) << c.error;
+    EXPECT_EQ(c.config->isa, Isa::kAmx);
+    EXPECT_EQ(c.config->gemm_s8.isa, Isa::kAmx);
+    EXPECT_EQ(kernel_config_for(Isa::kAmx).quant.isa, Isa::kAvx512);
+    return;
+  }
+  const KernelConfigChoice c = kernel_config("amx");
+  EXPECT_FALSE(c.config.has_value());
+  if (f.amx_refused != nullptr) {
+    EXPECT_NE(c.error.find(f.amx_refused), std::string::npos) << c.error;
+  }
+  const KernelConfigChoice best = kernel_config("auto");
+  ASSERT_TRUE(best.config.has_value());
+  EXPECT_NE(best.config->isa, Isa::kAmx);
+}
+#endif
+
 TEST(KernelConfig, UnknownIsaIsAnErrorListingWhatThisCpuRuns) {
   const std::string runs = "this CPU runs " + isa_mask_names(cpu_isa_mask());
   for (const char* bad : {"bogus", "AVX2", "", "avx512vnni "}) {

@@ -52,6 +52,7 @@ struct Options {
   uint32_t seed = 1;
   bool portrait = false;
   std::string target = "here";  // here: measure (the Pi 5 estimate beside); pi5: only the estimate
+  std::string save_model;        // write the built-in model's blob here and time nothing
 };
 
 // --config HxW is height first, as every other tool's sizes (act_drive --camera-size, the model's
@@ -276,6 +277,7 @@ class Benchmark {
   int run() {
     open_outputs();
     choose_model();
+    if (!opt_.save_model.empty()) return save_model();
     blob_.emplace(act::bench::BlobFacts::open(blob_path_));
     open_engines();
     estimate_pi5();
@@ -323,6 +325,16 @@ class Benchmark {
     } else if (opt_.precision != "fp32") {
       act::fail(act::StatusCode::kInvalidArgument, "--precision chooses among the built-in models; a blob has its own precision");
     }
+  }
+
+  // --save-model: the built-in blob this run would benchmark, for act_convert --export-onnx and
+  // other runtimes (bench/tools/compare_ort.sh); nothing is timed.
+  int save_model() {
+    std::error_code ec;
+    fs::copy_file(blob_path_, opt_.save_model, fs::copy_options::overwrite_existing, ec);
+    if (ec) act::fail(act::StatusCode::kIoError, "--save-model " + opt_.save_model + ": " + ec.message());
+    std::printf("act_bench: wrote %s (%s, %s)\n", opt_.save_model.c_str(), model_label_.c_str(), opt_.precision.c_str());
+    return 0;
   }
 
   // The engine and, with --compare, the same model in the other precision.
@@ -677,8 +689,22 @@ int main(int argc, char** argv) {
   app.add_option("--target", opt.target, "here: time the model on this machine (a Raspberry Pi 5 estimate is printed "
                  "beside); pi5: only the Pi 5 estimate (nothing timed; a built-in model is then INT8 unless --precision "
                  "says otherwise)")->check(CLI::IsMember({"here", "pi5"}))->capture_default_str();
+  app.add_option("--save-model", opt.save_model, "write the built-in model (--config, --precision, --seed) as an .actb "
+                 "blob here and time nothing (for act_convert --export-onnx: the same model in ONNX Runtime)");
   app.set_version_flag("--version", act::version_line("act_bench"));
   CLI11_PARSE(app, argc, argv);
+  if (!opt.save_model.empty()) {
+    for (const char* other : {"--model", "--compare", "--compare-with", "--json", "--csv", "--trace", "--input", "--op_profiling"}) {
+      if (app.count(other)) {
+        std::cerr << "act_bench: error: --save-model writes the built-in model and times nothing: drop " << other << "\n";
+        return 1;
+      }
+    }
+    if (opt.target == "pi5") {
+      std::cerr << "act_bench: error: --save-model and --target pi5: give one\n";
+      return 1;
+    }
+  }
   if (opt.target == "pi5") {
     if (opt.model.empty() && !app.count("--precision")) opt.precision = "int8";  // what a Pi runs
     for (const char* timed : {"--compare", "--compare-with", "--csv", "--trace", "--input", "--op_profiling"}) {

@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "actengine/convert.h"
 #include "apps/bench_support.h"
 #include "apps/op_profile_report.h"
 #include "apps/pi5_estimate.h"
@@ -156,6 +157,42 @@ TEST(ActBench, BuiltInInt8AndCompare) {
   EXPECT_GT(c["action_max_abs"].get<double>(), 0.0);
   EXPECT_LE(c["action_mse"].get<double>(), 1e-3);
   EXPECT_LE(c["action_max_abs"].get<double>(), 0.1);
+}
+
+// --save-model writes the blob the built-in run benchmarks: the saved FP32 blob's actions are the
+// in-process model's exactly, and the saved INT8 blob against it differs from FP32 exactly as the
+// built-in --compare run's INT8 does (same inputs, same quantization).
+TEST(ActBench, SaveModelWritesTheBuiltInBlob) {
+  const std::string dir = test::scratch_dir();
+  const std::string bench = std::string(ACT_BENCH_BIN) + " --config 64x96 -t 1 ";
+  for (const char* precision : {"fp32", "int8"}) {
+    const auto r = run_command(bench + "--precision " + precision + " --save-model " + q(dir + "/" + precision + ".actb"));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("wrote " + dir + "/" + precision + ".actb"), std::string::npos) << r.output;
+  }
+  auto model = import_synthetic_model("64x96", 1);
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  ASSERT_TRUE((*model)->write_fp32(dir + "/ref.actb").ok());
+  const auto compare = [&](const std::string& blob, const std::string& other, const std::string& json) {
+    const auto r = run_command(std::string(ACT_BENCH_BIN) + " -m " + q(dir + "/" + blob) + " --compare --compare-with " +
+                               q(dir + "/" + other) + " -n 2 -w 0 -t 1 --json " + q(dir + "/" + json));
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return nlohmann::json::parse(std::ifstream(dir + "/" + json))["compare"];
+  };
+  const nlohmann::json same = compare("fp32.actb", "ref.actb", "same.json");
+  EXPECT_EQ(same["action_max_abs"].get<double>(), 0.0);
+  const nlohmann::json saved = compare("int8.actb", "fp32.actb", "saved.json");
+  const auto r = run_command(bench + "--precision int8 --compare -n 2 -w 0 --json " + q(dir + "/builtin.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json builtin = nlohmann::json::parse(std::ifstream(dir + "/builtin.json"))["compare"];
+  EXPECT_GT(saved["action_max_abs"].get<double>(), 0.0);
+  EXPECT_EQ(saved["action_max_abs"].get<double>(), builtin["action_max_abs"].get<double>());
+  EXPECT_EQ(saved["action_mse"].get<double>(), builtin["action_mse"].get<double>());
+  // It times nothing, so the timing outputs are refused.
+  const auto refused = run_command(bench + "--save-model " + q(dir + "/x.actb") + " --json " + q(dir + "/x.json"));
+  EXPECT_NE(refused.exit_code, 0);
+  EXPECT_NE(refused.output.find("--save-model writes the built-in model and times nothing: drop --json"), std::string::npos)
+      << refused.output;
 }
 
 // --op_profiling: a row per op whose shares add up, kinds that cover every op, the same in the

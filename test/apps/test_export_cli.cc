@@ -1,5 +1,6 @@
 // act_convert's exports as a user runs them: --export-calib's NumPy file (checked against the images
-// decoded here) and --export-onnx from a checkpoint and from a blob, with its bad inputs.
+// decoded here) and --export-onnx from a checkpoint and from a blob, with its bad inputs; and
+// bench/tools/ort_bench.js timing a QDQ export of act_bench's built-in model in ONNX Runtime.
 #include <gtest/gtest.h>
 
 
@@ -7,6 +8,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+
+#include <nlohmann/json.hpp>
 
 #include "apps/media/media_io.h"
 #include "support/command.h"
@@ -118,6 +121,46 @@ TEST(ActConvertExportCli, BadOnnxExportsFailAndWriteNothing) {
   expect_error(q(dir + "/m.actb") + " --export-calib " + q(dir + "/c.npy") + " --calib " + q(src) + " --export-onnx " +
                    q(dir + "/a.onnx") + " --onnx-normalization out",
                "--onnx-normalization in");
+}
+
+// The tool compare_ort.sh runs: a small built-in INT8 model saved by act_bench, exported as QDQ,
+// timed by ort_bench.js for 2 runs and profiled. Its JSON and its printed line hold positive
+// latencies (no timing limits) and the op types ONNX Runtime ran. "Onnx" in the name: the Release stage's Node tests (scripts/run_tests.sh).
+TEST(OnnxOrtBench, TimesAQdqExportOfTheBuiltInModel) {
+  ACT_REQUIRE_PATH(std::string(ACT_ONNX_DIR) + "/node_modules/onnxruntime-node/package.json");
+  ASSERT_EQ(run_command("node --version").exit_code, 0) << "node is not installed (scripts/install_deps.sh)";
+  const std::string dir = act::test::scratch_dir();
+  const CommandResult saved = run_command(std::string(ACT_BENCH_BIN) + " --config 64x96 --precision int8 -t 1 --save-model " +
+                                          q(dir + "/m.actb"));
+  ASSERT_EQ(saved.exit_code, 0) << saved.output;
+  const CommandResult exported = run_command(kConvert + " " + q(dir + "/m.actb") + " --export-onnx " + q(dir + "/m.onnx") + " -q");
+  ASSERT_EQ(exported.exit_code, 0) << exported.output;
+  const CommandResult r = run_command("node " + q(ACT_ORT_BENCH_JS) + " " + q(dir + "/m.onnx") +
+                                      " --threads 1 --warmup 1 --runs 2 --profile --json " + q(dir + "/ort.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("intra-op threads 1\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" ms (2 runs after 1 warm-up)"), std::string::npos) << r.output;
+  const nlohmann::json j = nlohmann::json::parse(read_file(dir + "/ort.json"));
+  EXPECT_EQ(j.at("runtime"), "onnxruntime-node");
+  EXPECT_EQ(j.at("threads"), 1);
+  const nlohmann::json& latency = j.at("latency_ms");
+  EXPECT_EQ(latency.at("count"), 2);
+  EXPECT_GT(latency.at("p50").get<double>(), 0.0);
+  EXPECT_LE(latency.at("min").get<double>(), latency.at("p50").get<double>());
+  EXPECT_LE(latency.at("p50").get<double>(), latency.at("p99").get<double>());
+  EXPECT_LE(latency.at("p99").get<double>(), latency.at("max").get<double>());
+  ASSERT_EQ(j.at("runs_ms").size(), 2u);
+  EXPECT_FALSE(j.at("inputs").empty());
+  // --profile: ONNX Runtime's time by op type; a QDQ model quantizes its activations somewhere.
+  const nlohmann::json& op_types = j.at("op_types_ms");
+  ASSERT_FALSE(op_types.empty());
+  for (const auto& [type, ms] : op_types.items()) EXPECT_GE(ms.get<double>(), 0.0) << type;
+  EXPECT_TRUE(op_types.contains("QuantizeLinear")) << op_types.dump();
+  EXPECT_NE(r.output.find("op types     ms per run"), std::string::npos) << r.output;
+  // Bad arguments are clear errors.
+  const CommandResult bad = run_command("node " + q(ACT_ORT_BENCH_JS) + " " + q(dir + "/absent.onnx"));
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("no file " + dir + "/absent.onnx"), std::string::npos) << bad.output;
 }
 
 }  // namespace

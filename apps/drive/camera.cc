@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "actengine/status.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::drive {
 

@@ -8,7 +8,7 @@
 #include <fstream>
 #include <iterator>
 
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "support/command.h"
 #include "support/test_paths.h"
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The pip packaging, end to end, offline: builds the wheel of the checkout (pyproject.toml, setup.py:
-# the whole core plus the module, about 6 minutes on 2 cores without a warm ccache) and the LeRobot
+# the whole core plus the module; a warm ccache makes it quick) and the LeRobot
 # plugin's wheel, then for each Python it checks
 #   - Debian's /usr/bin/python3 in a fresh `python3 -m venv --system-site-packages` (numpy from Debian);
 #   - pyenv's Python 3.11 (ACT_PYENV_PYTHON) in a plain venv: its own wheel, built by its own pip, with
@@ -46,7 +46,7 @@ check() {
   fi
   local start=$SECONDS
   # A fresh CMake folder, one level under the checkout like build/ (so ccache with CCACHE_BASEDIR set
-  # reuses a developer build's objects: 6 minutes become about one).
+  # reuses a developer build's objects).
   local cmake_dir="$root/build-wheel-check-$name"
   rm -rf "$cmake_dir"
   (cd "$root" && ACT_PIP_BUILD_DIR="$cmake_dir" "$venv/bin/python" -m pip wheel -q --no-index --no-deps \

@@ -45,7 +45,8 @@ class CMakeExtension(Extension):
 
 class CMakeBuild(build_ext):
     """Configures the project with only what the module needs (no apps, tests or benchmarks), builds the
-    target _actengine and copies it where setuptools puts extensions."""
+    target actengine_python (the extension, and where OpenCV is found the calibration readers) and
+    copies it where setuptools puts extensions."""
 
     def build_extension(self, ext):
         cmake = shutil.which("cmake")
@@ -74,7 +75,7 @@ class CMakeBuild(build_ext):
             args.append("-GNinja")
         args += shlex.split(os.environ.get("CMAKE_ARGS", ""))
         subprocess.run([cmake, *args], check=True)
-        build = [cmake, "--build", str(build_dir), "--target", "_actengine"]
+        build = [cmake, "--build", str(build_dir), "--target", "actengine_python"]
         if "CMAKE_BUILD_PARALLEL_LEVEL" not in os.environ:
             build += ["-j", str(os.cpu_count() or 1)]
         subprocess.run(build, check=True)
@@ -86,6 +87,11 @@ class CMakeBuild(build_ext):
         destination = Path(self.get_ext_fullpath(ext.name))
         destination.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(built, destination)
+        # Where OpenCV was found: the calibration readers (actengine._media) and their image and video
+        # module, beside the extension (engine/python/media_api.h, engine/media/media_io.h).
+        for optional in (f"_media{suffix}", "libact_media_io.so"):
+            if (built.parent / optional).exists():
+                shutil.copyfile(built.parent / optional, destination.parent / optional)
 
 
 setup(

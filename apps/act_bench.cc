@@ -23,7 +23,7 @@
 #include "actengine/status.h"
 #include "apps/bench_support.h"
 #include "apps/diff_stats.h"
-#include "apps/observation_file.h"
+#include "engine/src/convert/observation_file.h"
 #include "apps/op_profile_report.h"
 #include "apps/pi5_estimate.h"
 #include "apps/progress.h"

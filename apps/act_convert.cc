@@ -14,7 +14,7 @@
 
 #include "actengine/convert.h"
 #include "actengine/engine.h"
-#include "apps/convert/calib_frames.h"
+#include "actengine/calibration_files.h"
 #include "apps/convert/npy_file.h"
 #include "apps/deploy_package.h"
 #include "apps/eval/html_report.h"
@@ -236,19 +236,6 @@ std::string html_report(const act::Int8Report& report, const Options& o) {
   return act::eval::render_html_report({{"title", "act_convert: " + o.checkpoint + " -> " + o.output}, {"int8", int8}});
 }
 
-// What the calibration used of the frames given, first among the report's notes: "128 frames given,
-// 64 used for calibration, 16 held out, 48 left out (--calib-samples 64 sets how many are used)".
-std::string frames_used_note(size_t given, const act::Int8Report& report, size_t calib_samples) {
-  const size_t used = report.calibration_frames + report.holdout_frames;
-  std::string note = std::to_string(given) + " frames given, " + std::to_string(report.calibration_frames) +
-                     " used for calibration, " + std::to_string(report.holdout_frames) + " held out";
-  if (given > used) {
-    note += ", " + std::to_string(given - used) + " left out (--calib-samples " + std::to_string(calib_samples) +
-            " sets how many are used)";
-  }
-  return note;
-}
-
 // --action-names into the model, so that the blobs written carry them.
 void name_actions(act::ImportedCheckpoint& model, const Options& o) {
   if (o.action_names.empty()) return;
@@ -285,8 +272,10 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
   size_t frames_given = 0;
   if (!o.calib_sources.empty()) {
     if (progress) progress->message("reading calibration frames from " + std::to_string(o.calib_sources.size()) + " source(s) ...");
-    frames = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(int8),
-                                          &frames_given);
+    auto read = act::load_calibration_frames(o.calib_sources, model.summary().model, act::calibration_frames_wanted(int8),
+                                             &frames_given);
+    if (!read.ok()) throw act::Error(read.status());
+    frames = std::move(read).value();
     if (progress) {
       for (const auto& note : frames.notes) progress->message(note.rfind("warning: ", 0) == 0 ? note : "note: " + note);
     }
@@ -302,7 +291,7 @@ uint64_t convert(const act::ImportedCheckpoint& model, const Options& o) {
               << *o.int8.max_mse << ", more calibration frames, or another --calib-method.\n";
   }
   if (!report.ok()) throw act::Error(report.status());
-  if (frames_given > 0) report->notes.insert(report->notes.begin(), frames_used_note(frames_given, *report, int8.calib_samples));
+  if (frames_given > 0) report->note_frames_given(frames_given, int8.calib_samples);
   if (report_file) {
     report_file->write(std::filesystem::path(o.report_path).extension() == ".html" ? html_report(*report, o)
                                                                                   : report_json(*report, o).dump(2) + "\n");
@@ -363,7 +352,9 @@ void print_summary(const act::ImportSummary& s, const Options& o, uint64_t bytes
 // --export-calib: the frames as the ONNX model's camera inputs take them, NHWC, one file per camera
 // (all of them or none).
 void export_calibration(const act::ModelInfo& model, const Options& o) {
-  const act::CalibrationSet set = act::load_calibration_frames(o.calib_sources, model, o.int8.calib_samples);
+  auto read = act::load_calibration_frames(o.calib_sources, model, o.int8.calib_samples);
+  if (!read.ok()) throw act::Error(read.status());
+  const act::CalibrationSet set = std::move(read).value();
   const std::filesystem::path given(o.calib_npy);
   std::vector<std::unique_ptr<act::detail::AtomicFileWriter>> files;
   std::string lines;

@@ -18,7 +18,7 @@
 #include "apps/eval/episode.h"
 #include "apps/eval/html_report.h"
 #include "apps/eval/metrics.h"
-#include "apps/observation_file.h"
+#include "engine/src/convert/observation_file.h"
 #include "apps/version.h"
 #include "weights/blob/file_util.h"
 #include "weights/import/safetensors.h"

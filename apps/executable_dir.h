@@ -1,5 +1,4 @@
-// The running program's own folder, where act_drive finds act_pwm_watchdog and the apps find their
-// media module (media/media_io.h).
+// The running program's own folder, where act_drive finds act_pwm_watchdog.
 #pragma once
 
 #include <filesystem>

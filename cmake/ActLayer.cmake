@@ -129,6 +129,9 @@ endfunction()
 #   weights/import/safetensors.h the observation files (act_eval, act_bench --observations) are
 #                                safetensors; it includes weights/blob/file_mapping.h and
 #                                weights/blob/tensor_types.h, exported with it
+#   engine/src/convert/observation_file.h  observation files (act_eval, act_bench --observations)
+#   engine/media/media_io.h      image files and video through the module loaded on first use
+#                                (act_drive's camera and recordings, act_eval's episodes)
 # And act_bench_probes (bench/probes) exports bench_probes.h to act_bench.
 set(ACT_PROBES_EXPORTED_HEADERS bench/probes/bench_probes.h)
 set(ACT_APP_EXPORTED_HEADERS
@@ -136,4 +139,6 @@ set(ACT_APP_EXPORTED_HEADERS
   weights/blob/file_kind.h
   weights/import/safetensors.h
   weights/blob/file_mapping.h
-  weights/blob/tensor_types.h)
+  weights/blob/tensor_types.h
+  engine/src/convert/observation_file.h
+  engine/media/media_io.h)

@@ -3,7 +3,7 @@
 
 Each folder may include only the layers below it (docs: architecture, "Layers"):
   kernels < weights/blob < weights/import < weights/quantize < graph < engine/src
-          < engine/src/convert, engine/src/onnx, engine/vision
+          < engine/src/convert, engine/src/onnx, engine/vision < engine/media
 Below the engine, the one public header a layer may include is actengine/status.h (the error
 vocabulary). The public headers (engine/include/actengine) include only each other. The apps and
 act_soak see the public headers, the apps' own and the headers exported on purpose (--exported,
@@ -38,6 +38,7 @@ LAYER_OF_PREFIX = [
     ("engine/src/onnx/", "engine/src/onnx"),
     ("engine/src/", "engine/src"),
     ("engine/vision/", "engine/vision"),
+    ("engine/media/", "engine/media"),
     ("engine/python/", "python"),
     ("bench/act_kernel_bench.cc", "kernel_bench"),
     ("bench/tools/", "kernel_bench"),
@@ -58,6 +59,7 @@ MAY_INCLUDE = {
     "engine/src/convert": {"engine/src", "graph", *CORE, "public", "status"},
     "engine/src/onnx": {"engine/src", "graph", "weights/blob", "kernels", "public", "status"},
     "engine/vision": {"public", "status"},
+    "engine/media": {"engine/src/convert", "weights/blob", "public", "status"},
     "public": {"status"},
     "status": set(),
     "python": {"public", "status"},
@@ -77,6 +79,7 @@ RULES = {
     "engine/src/convert": "engine/src/convert includes the engine and the layers below it",
     "engine/src/onnx": "engine/src/onnx includes the engine, graph, weights/blob, kernels and the public headers",
     "engine/vision": "engine/vision includes only the public headers",
+    "engine/media": "engine/media includes the public headers, engine/src/convert and weights/blob",
     "public": "a public header includes only other public headers (they must stay self-contained)",
     "status": "actengine/status.h depends on nothing of the project's (every layer includes it)",
     "python": "the Python module uses only the public headers",

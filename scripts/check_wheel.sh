@@ -1,15 +1,19 @@
 #!/usr/bin/env bash
 # The pip packaging, end to end, offline: builds the wheel of the checkout (pyproject.toml, setup.py:
-# the whole core plus the module, about 6 minutes on 2 cores without a warm ccache) and the LeRobot
+# the whole core plus the module; a warm ccache makes it quick) and the LeRobot
 # plugin's wheel, then for each Python it checks
 #   - Debian's /usr/bin/python3 in a fresh `python3 -m venv --system-site-packages` (numpy from Debian);
 #   - pyenv's Python 3.11 (ACT_PYENV_PYTHON) in a plain venv: its own wheel, built by its own pip, with
 #     only Debian's dist-packages folder added for numpy (and the build's setuptools/wheel/pybind11);
 # that `import actengine` works from outside the source tree, that the module is the one built for
-# that interpreter, that actengine.__version__ is CMakeLists.txt's VERSION, and that act-tiny
-# converts (actengine.convert) and runs (Policy.select_action) against the fixture's reference.
-# Prints the wheels' build times and sizes. Not part of run_tests.sh (CI): run it when the packaging
-# changes (pyproject.toml, setup.py, MANIFEST.in, engine/python/**/CMakeLists.txt, the plugin's backend).
+# that interpreter, that actengine.__version__ is CMakeLists.txt's VERSION, that act-tiny converts
+# (actengine.convert, FP32, and INT8 calibrated on the fixture's folder of images where the wheel has
+# the readers) and runs (Policy.select_action) against the fixture's reference, and (Debian's, which
+# has torch) that LeRobot 0.6.2's register_third_party_plugins finds the plugin's policy type.
+# Prints the wheels' build times and sizes.
+#   check_wheel.sh [debian|pyenv ...]   (default both). CTest runs one each: python_wheel_debian,
+# python_wheel_pyenv. Exit 77 (CTest's skip): pyenv's Python missing (a property of the machine),
+# or Debian's python3/pip/setuptools/wheel/pybind11 missing outside CI (under CI=true: a failure).
 #   ACT_WHEEL_WORK (default /tmp/actengine-wheel-check), ACT_PYENV_PYTHON (default ~/.pyenv/versions/3.11*/bin/python3),
 #   ACT_SHARED_DIR (fixtures). Set CMAKE_ARGS for ccache, as setup.py says.
 set -euo pipefail
@@ -21,6 +25,13 @@ version="$(sed -n 's/^project(actengine VERSION \([0-9.]*\).*/\1/p' "$root/CMake
 [ -n "$version" ] || { echo "check_wheel: no project VERSION in CMakeLists.txt" >&2; exit 1; }
 [ -d "$fixture" ] || { echo "check_wheel: fixture missing: $fixture" >&2; exit 1; }
 pyenv_python="${ACT_PYENV_PYTHON:-$(ls -d "$HOME"/.pyenv/versions/3.11*/bin/python3 2>/dev/null | tail -n 1)}"
+which_pythons=("$@")
+[ ${#which_pythons[@]} -gt 0 ] || which_pythons=(debian pyenv)
+if ! { /usr/bin/python3 -c 'import setuptools, wheel, pybind11, venv' && /usr/bin/python3 -m pip --version; } >/dev/null 2>&1; then
+  echo "check_wheel: Debian's python3 with pip, setuptools, wheel, pybind11 and venv is needed (scripts/install_deps.sh)" >&2
+  [ "${CI:-}" = true ] && exit 1
+  exit 77
+fi
 rm -rf "$work"; mkdir -p "$work"
 pip_offline=(install -q --no-index --no-deps --no-build-isolation --disable-pip-version-check)
 
@@ -35,7 +46,7 @@ check() {
   fi
   local start=$SECONDS
   # A fresh CMake folder, one level under the checkout like build/ (so ccache with CCACHE_BASEDIR set
-  # reuses a developer build's objects: 6 minutes become about one).
+  # reuses a developer build's objects).
   local cmake_dir="$root/build-wheel-check-$name"
   rm -rf "$cmake_dir"
   (cd "$root" && ACT_PIP_BUILD_DIR="$cmake_dir" "$venv/bin/python" -m pip wheel -q --no-index --no-deps \
@@ -47,8 +58,8 @@ check() {
   [ "$built_for" = "$venv/bin/python" ] || { echo "check_wheel: the module was built for $built_for, not $venv/bin/python" >&2; exit 1; }
   "$venv/bin/python" -m pip "${pip_offline[@]}" "$dist"/actengine-*.whl
   "$venv/bin/python" -m pip "${pip_offline[@]}" "$root/engine/python/lerobot_policy_actengine"
-  (cd "$work" && ACT_FIXTURE="$fixture" ACT_VERSION="$version" ACT_VENV="$venv" "$venv/bin/python" - <<'PY'
-import importlib.metadata, os, sys, sysconfig
+  (cd "$work" && ACT_FIXTURE="$fixture" ACT_VERSION="$version" ACT_VENV="$venv" ACT_NAME="$name" "$venv/bin/python" - <<'PY'
+import importlib.metadata, importlib.util, os, sys, sysconfig
 from pathlib import Path
 import numpy as np
 import actengine
@@ -72,15 +83,36 @@ actions = np.array([policy.select_action(observation) for _ in range(10)])
 np.testing.assert_allclose(actions, ref["select_action.queue_sample0"], rtol=1e-4, atol=1e-4)
 print(f"checked   actengine {actengine.__version__} on Python {sys.version.split()[0]}: import, convert, "
       f"10 actions of act-tiny match LeRobot (max |diff| {np.abs(actions - ref['select_action.queue_sample0']).max():.1e})")
+if importlib.util.find_spec("actengine._media"):  # the calibration readers, where OpenCV was found
+    report = actengine.convert(fixture, "int8.actb", calib=fixture, calib_samples=3, holdout=1)["report"]
+    assert report["notes"][0] == "4 frames given, 3 used for calibration, 1 held out", report["notes"]
+    print("checked   convert(calib=folder): 4 frames read by the wheel's readers")
+else:
+    assert os.environ["ACT_NAME"] != "debian", "the wheel has no actengine._media (built without OpenCV?)"
+if os.environ["ACT_NAME"] == "debian":  # LeRobot's discovery, on Debian's torch
+    from lerobot_harness import loader
+    lerobot = loader.load(fixture.parents[1] / "tools" / "lerobot" / "lerobot-0.6.2")
+    lerobot.register_third_party_plugins()
+    assert "lerobot_policy_actengine" in sys.modules, "register_third_party_plugins did not import the plugin"
+    assert lerobot.PreTrainedConfig.get_choice_class("actengine").__name__ == "ActengineConfig"
+    print("checked   LeRobot's register_third_party_plugins found the policy type 'actengine'")
 PY
   )
 }
 
-check debian /usr/bin/python3 --system-site-packages
-if [ -n "$pyenv_python" ] && [ -x "$pyenv_python" ]; then
-  check pyenv "$pyenv_python" ""
-else
-  echo "check_wheel: no pyenv Python 3.11 (ACT_PYENV_PYTHON): skipped" >&2
-  [ "${CI:-}" != true ] || exit 1
-fi
+skipped=0
+for which in "${which_pythons[@]}"; do
+  case "$which" in
+    debian) check debian /usr/bin/python3 --system-site-packages ;;
+    pyenv)
+      if [ -n "$pyenv_python" ] && [ -x "$pyenv_python" ]; then
+        check pyenv "$pyenv_python" ""
+      else  # the machine's, not the project's: a skip, under CI too
+        echo "check_wheel: skipped pyenv: no pyenv Python 3.11 here (~/.pyenv/versions/3.11*/bin/python3; ACT_PYENV_PYTHON picks one)" >&2
+        skipped=1
+      fi ;;
+    *) echo "check_wheel: unknown interpreter '$which' (debian or pyenv)" >&2; exit 2 ;;
+  esac
+done
+[ "$skipped" = 0 ] || [ ${#which_pythons[@]} -gt 1 ] || exit 77
 echo "check_wheel: OK"

@@ -118,8 +118,10 @@ echo "== kernel benchmarks (smoke run; the numbers are not judged), and the Pyth
 "$root/build/bench/act_kernel_bench" --benchmark_min_time=0.01 >"$root/build/kernel_bench.txt" 2>&1 &
 kernel_bench=$!
 cmake -S "$root" -B "$root/build" -DACT_BUILD_PYTHON=ON >/dev/null  # a missing pybind11 fails here, not skips
-cmake --build "$root/build" -j "$jobs" --target _actengine act_convert act_eval
+cmake --build "$root/build" -j "$jobs" --target actengine_python act_convert act_eval
 run_ctest "$root/build" -R '^python_(module|lerobot_plugin)$'
+# The wheel, built by pip for Debian's Python and for pyenv's 3.11 (when the machine has it), one at a time.
+jobs=1 run_ctest "$root/build" -R '^python_wheel_(debian|pyenv)$'
 wait "$kernel_bench" || { tail -n 40 "$root/build/kernel_bench.txt"; echo "act_kernel_bench failed" >&2; exit 1; }
 echo "$(grep -c 'GMAC/s=' "$root/build/kernel_bench.txt") benchmarks ran (build/kernel_bench.txt)"
 stage_done python-tests+kernel-bench-smoke

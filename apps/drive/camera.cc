@@ -12,7 +12,7 @@
 #include <sys/stat.h>
 
 #include "actengine/status.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::drive {
 

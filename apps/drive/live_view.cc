@@ -24,7 +24,7 @@
 
 #include "actengine/status.h"
 #include "actengine/vision.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::drive {
 namespace {

@@ -16,7 +16,7 @@
 
 #include "apps/drive/camera.h"
 #include "apps/drive/cockpit.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::drive {
 

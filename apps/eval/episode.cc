@@ -13,7 +13,6 @@
 #include <nlohmann/json.hpp>
 
 #include "actengine/status.h"
-#include "apps/convert/calib_frames.h"
 #include "weights/blob/file_util.h"
 
 namespace act::eval {

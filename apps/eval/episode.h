@@ -23,7 +23,7 @@
 #include <opencv2/core.hpp>
 
 #include "actengine/engine.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::eval {
 

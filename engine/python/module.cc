@@ -7,7 +7,9 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <cerrno>
 #include <filesystem>
+#include <system_error>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -20,6 +22,7 @@
 #include "actengine/engine.h"
 #include "actengine/scheduler.h"
 #include "actengine/status.h"
+#include "media_api.h"
 #include "observation.h"
 
 namespace act::python {
@@ -192,7 +195,8 @@ struct ConvertArgs {
   std::filesystem::path checkpoint, output;
   std::string precision;
   std::optional<std::string> mode;
-  std::vector<py::dict> calib;
+  std::vector<py::dict> calib;          // observation dicts, or
+  std::vector<std::string> calib_paths;  // sources as act_convert --calib takes them
   size_t calib_samples = 64;
   std::optional<size_t> holdout;
   std::string calib_method;
@@ -213,8 +217,51 @@ bool any_pth_option(const PthOptions& p) {
          p.activation || !p.cameras.empty() || p.lerobot_defaults || p.no_normalization || !p.state_dict_key.empty();
 }
 
+// A conversion's progress, to the logger "actengine" and to convert()'s progress callback if given.
+// The callback gets every line (as act_convert prints them on a terminal); the logger, at INFO, a
+// task's start, each quarter and its end (as act_convert prints them to a log file), the other lines
+// at DEBUG. Used with the GIL held. Handles, not objects: copies of the conversion's callback may be
+// destroyed in threads that hold no GIL; convert()'s arguments keep the callback alive, logging's
+// registry the logger.
+class ProgressLog {
+ public:
+  explicit ProgressLog(py::handle callback)
+      : callback_(callback), logger_(py::module_::import("logging").attr("getLogger")("actengine")) {}
+
+  /// A line of its own: "info" or "warning".
+  void message(const char* level, const std::string& text) {
+    logger_.attr(level)("%s", text);
+    call(text);
+  }
+
+  void update(const ConversionProgress& p) {
+    if (p.total == 0) return message("info", p.task);
+    const std::string line = p.task + ": " + std::to_string(p.done) + "/" + std::to_string(p.total) + " " + p.unit;
+    const size_t quarter = p.done * 4 / p.total;
+    const bool milestone = p.task != task_ || quarter != quarter_;
+    task_ = p.task;
+    quarter_ = quarter;
+    logger_.attr(milestone ? "info" : "debug")("%s", line);
+    call(line);
+  }
+
+ private:
+  void call(const std::string& line) {
+    if (callback_.is_none()) return;
+    try {
+      callback_(line);
+    } catch (py::error_already_set& e) {
+      e.discard_as_unraisable("actengine.convert progress callback");
+    }
+  }
+
+  py::handle callback_, logger_;
+  std::string task_;
+  size_t quarter_ = 0;
+};
+
 // act_convert's option checks (check_options), in the same words with the Python argument names.
-Int8Options int8_options(const ConvertArgs& a) {
+Int8Options int8_options(const ConvertArgs& a, const std::shared_ptr<ProgressLog>& log) {
   Int8Options o;
   const std::string mode = a.mode.value_or("static");
   if (mode == "dynamic") {
@@ -237,9 +284,10 @@ Int8Options int8_options(const ConvertArgs& a) {
   o.threads = a.threads;
   o.seed = a.seed;
   o.layer_report = a.layer_report;
-  if (o.mode != Int8Mode::kDynamic && a.calib.empty()) {
-    throw py::value_error(mode + " quantization needs calibration frames: calib=[observation dict, ...] (or "
-                          "mode='dynamic', which needs none)");
+  if (o.mode != Int8Mode::kDynamic && a.calib.empty() && a.calib_paths.empty()) {
+    throw py::value_error(mode + " quantization needs calibration frames: calib=[observation dict, ...] or calib=path "
+                          "(a folder of images, a video, a LeRobot dataset, an act_drive recording; or a list of them), "
+                          "or mode='dynamic', which needs none");
   }
   if (a.attention == "int8") {
     o.attention = AttentionPrecision::kInt8;
@@ -262,21 +310,10 @@ Int8Options int8_options(const ConvertArgs& a) {
   if (o.mode == Int8Mode::kMixed && !o.target_mse) {
     throw py::value_error("mode='mixed' needs target_mse (held-out MSE in normalised units)");
   }
-  if (!a.progress.is_none()) {
-    // A handle, not an object: copies of the callback may be destroyed in threads that hold no GIL.
-    const py::handle progress = a.progress;
-    o.progress = [progress](const ConversionProgress& p) {
-      // One line, as act_convert prints it off a terminal: the task, and how far when it counts.
-      const std::string line = p.total == 0 ? p.task
-                                            : p.task + ": " + std::to_string(p.done) + "/" + std::to_string(p.total) + " " + p.unit;
-      const py::gil_scoped_acquire acquire;
-      try {
-        progress(line);
-      } catch (py::error_already_set& e) {
-        e.discard_as_unraisable("actengine.convert progress callback");
-      }
-    };
-  }
+  o.progress = [log](const ConversionProgress& p) {
+    const py::gil_scoped_acquire acquire;
+    log->update(p);
+  };
   return o;
 }
 
@@ -306,18 +343,102 @@ std::unique_ptr<ImportedCheckpoint> import(const ConvertArgs& a, std::vector<std
   return std::move(model).value();
 }
 
+// calib=: observation dicts, or paths (str, bytes or os.PathLike; one, or a list) to what act_convert
+// --calib takes. Fills a.calib or a.calib_paths.
+void read_calib_argument(const py::object& calib, ConvertArgs& a) {
+  const auto is_path = [](py::handle h) {
+    return py::isinstance<py::str>(h) || py::isinstance<py::bytes>(h) || py::hasattr(h, "__fspath__");
+  };
+  const py::object fsdecode = py::module_::import("os").attr("fsdecode");
+  if (calib.is_none()) return;
+  if (is_path(calib)) {
+    a.calib_paths.push_back(fsdecode(calib).cast<std::string>());
+    return;
+  }
+  const char* what = "calib takes observation dicts or paths (str or os.PathLike) to frame folders, videos, LeRobot "
+                     "datasets, act_drive recordings or observation .safetensors files";
+  if (py::isinstance<py::dict>(calib)) throw py::type_error(std::string(what) + ", in a list; got one dict");
+  if (!py::isinstance<py::iterable>(calib)) {
+    throw py::type_error(std::string(what) + "; got " + py::type::of(calib).attr("__name__").cast<std::string>());
+  }
+  size_t index = 0;
+  for (const py::handle item : calib) {
+    if (py::isinstance<py::dict>(item)) {
+      a.calib.push_back(py::reinterpret_borrow<py::dict>(item));
+    } else if (is_path(item)) {
+      a.calib_paths.push_back(fsdecode(item).cast<std::string>());
+    } else {
+      throw py::type_error(std::string(what) + "; calib[" + std::to_string(index) + "] is a " +
+                           py::type::of(item).attr("__name__").cast<std::string>());
+    }
+    ++index;
+  }
+  if (!a.calib.empty() && !a.calib_paths.empty()) {
+    throw py::value_error("calib takes observation dicts or paths, not both in one list");
+  }
+}
+
+// The calibration frames: convert()'s dicts, or the files of a.calib_paths read as act_convert reads
+// them (through actengine._media, media_api.h). `given`: how many frames the files hold.
+CalibrationSet calibration_frames(const ConvertArgs& a, const ModelInfo& model, const Int8Options& int8, ProgressLog& log,
+                                  size_t& given) {
+  CalibrationSet set;
+  if (a.calib_paths.empty()) {
+    for (const py::dict& observation : a.calib) set.frames.push_back(calibration_frame_from_dict(model, observation));
+    set.preprocessing = "frames given to actengine.convert";
+    return set;
+  }
+  for (const std::string& path : a.calib_paths) {  // act_convert's words, as Python's exception
+    std::error_code error;
+    if (!std::filesystem::exists(path, error)) {
+      PyErr_SetObject(PyExc_FileNotFoundError,
+                      py::make_tuple(ENOENT, "calibration source not found", path).ptr());
+      throw py::error_already_set();
+    }
+  }
+  py::object media;
+  try {
+    media = py::module_::import(kMediaModule);
+  } catch (py::error_already_set& e) {
+    if (!e.matches(PyExc_ImportError)) throw;
+    throw EngineError("calibration from files (calib=path) needs actengine's image and video support, the module " +
+                      std::string(kMediaModule) + ", which this installation lacks (" + py::str(e.value()).cast<std::string>() +
+                      "): build actengine where OpenCV is installed (libopencv-dev), or pass observation dicts");
+  }
+  const py::object capsule = py::getattr(media, kMediaApiAttribute, py::none());
+  const auto* api = static_cast<const MediaApi*>(PyCapsule_IsValid(capsule.ptr(), kMediaApiCapsule)
+                                                     ? PyCapsule_GetPointer(capsule.ptr(), kMediaApiCapsule)
+                                                     : nullptr);
+  if (api == nullptr || api->version != kMediaApiVersion) {
+    throw EngineError(std::string(kMediaModule) + " is from another build of actengine: reinstall actengine");
+  }
+  log.message("info", "reading calibration frames from " + std::to_string(a.calib_paths.size()) + " source(s) ...");
+  Status status;
+  {
+    py::gil_scoped_release release;
+    status = api->load_calibration_frames(a.calib_paths, model, calibration_frames_wanted(int8), set, given);
+  }
+  if (!status.ok()) raise(status);
+  for (const auto& note : set.notes) {
+    const bool warning = note.rfind("warning: ", 0) == 0;
+    log.message(warning ? "warning" : "info", warning ? note : "note: " + note);
+  }
+  return set;
+}
+
 py::dict convert(const ConvertArgs& a) {
   if (a.precision != "fp32" && a.precision != "int8") {
     throw py::value_error("precision must be 'fp32' or 'int8', got '" + a.precision + "'");
   }
-  if (a.precision == "fp32" && (!a.calib.empty() || a.mode || a.max_mse)) {
+  if (a.precision == "fp32" && (!a.calib.empty() || !a.calib_paths.empty() || a.mode || a.max_mse)) {
     throw py::value_error("mode, calib and max_mse need precision='int8'");
   }
   if (a.threads < 0 || a.threads > kMaxThreads) {
     throw py::value_error("threads must be in 0.." + std::to_string(kMaxThreads) + " (0 = one per online core), got " +
                           std::to_string(a.threads));
   }
-  const std::optional<Int8Options> int8 = a.precision == "int8" ? std::optional(int8_options(a)) : std::nullopt;
+  const auto log = std::make_shared<ProgressLog>(a.progress);
+  const std::optional<Int8Options> int8 = a.precision == "int8" ? std::optional(int8_options(a, log)) : std::nullopt;
   std::vector<std::string> notes;
   const std::unique_ptr<ImportedCheckpoint> model = import(a, notes);
   const ImportSummary& summary = model->summary();
@@ -336,9 +457,8 @@ py::dict convert(const ConvertArgs& a) {
     result["bytes"] = *bytes;
     return result;
   }
-  CalibrationSet calibration;
-  for (const py::dict& observation : a.calib) calibration.frames.push_back(calibration_frame_from_dict(summary.model, observation));
-  calibration.preprocessing = "frames given to actengine.convert";
+  size_t frames_given = 0;
+  const CalibrationSet calibration = calibration_frames(a, summary.model, *int8, *log, frames_given);
   StatusOr<Int8Report> report = [&] {
     py::gil_scoped_release release;
     return model->write_int8(a.output.string(), calibration, *int8);
@@ -351,6 +471,7 @@ py::dict convert(const ConvertArgs& a) {
     }
     raise(report.status());
   }
+  if (frames_given > 0) report->note_frames_given(frames_given, int8->calib_samples);
   result["bytes"] = report->int8_bytes;
   result["report"] = py::module_::import("json").attr("loads")(report->to_json());
   return result;
@@ -428,7 +549,7 @@ void define_convert(py::module_& m) {
   m.def(
       "convert",
       [](const std::filesystem::path& checkpoint, const std::filesystem::path& output, const std::string& precision,
-         const std::optional<std::string>& mode, const std::vector<py::dict>& calib, size_t calib_samples,
+         const std::optional<std::string>& mode, const py::object& calib, size_t calib_samples,
          const std::optional<size_t>& holdout, const std::string& calib_method, double percentile,
          const std::optional<double>& target_mse, const std::optional<double>& max_mse, int threads, uint64_t seed,
          bool layer_report, const py::object& progress, const std::string& attention, const std::string& linear_inputs,
@@ -438,8 +559,9 @@ void define_convert(py::module_& m) {
          const std::optional<int>& n_action_steps, const std::optional<int>& n_heads,
          const std::optional<std::string>& activation, const std::vector<std::string>& cameras, bool lerobot_defaults,
          bool no_normalization, const std::optional<std::string>& state_dict_key) {
-        ConvertArgs a{checkpoint, output, precision, mode, calib, calib_samples, holdout, calib_method, percentile,
+        ConvertArgs a{checkpoint, output, precision, mode, {}, {}, calib_samples, holdout, calib_method, percentile,
                       target_mse, max_mse, threads, seed, layer_report, progress, attention, linear_inputs, {}, {}};
+        read_calib_argument(calib, a);
         if (temporal_ensemble_coeff && no_temporal_ensembling) {
           throw py::value_error("give temporal_ensemble_coeff or no_temporal_ensembling, not both");
         }
@@ -460,12 +582,15 @@ void define_convert(py::module_& m) {
       R"(Converts a LeRobot ACT checkpoint (folder, training output or .pth) into an .actb blob, as act_convert does.
 
 precision "int8" (default) or "fp32". INT8: mode "static" (default; needs calib), "dynamic" (no
-calibration) or "mixed" (needs target_mse); calib is a list of observation dicts (uint8 HxWx3 images at
-the model's input size, states optional); calib_samples, holdout, calib_method ("minmax", "percentile",
+calibration) or "mixed" (needs target_mse); calib is what act_convert --calib takes: a path (str or
+os.PathLike) or a list of paths to folders of images, videos, LeRobot datasets, act_drive recordings or
+observation .safetensors files (read with OpenCV, as act_convert reads them), or a list of observation
+dicts (uint8 HxWx3 images at the model's input size, states optional); calib_samples, holdout, calib_method ("minmax", "percentile",
 "mse"), percentile, max_mse (fail, writing nothing, above it), threads, seed, layer_report,
 attention ("auto", "int8", "fp32": act_convert --attention), linear_inputs ("auto", "per-token",
 "per-tensor": act_convert --linear-inputs) and progress (called with each
-progress line). Deployment settings for every input: n_action_steps, temporal_ensemble_coeff (turns
+progress line). Progress also goes to the logger "actengine" (logging: INFO for each task's start,
+quarters and end, the calibration frames' notes and warnings; DEBUG for every other line). Deployment settings for every input: n_action_steps, temporal_ensemble_coeff (turns
 ensembling on; needs n_action_steps 1) or no_temporal_ensembling. A .pth takes act_convert's
 options: config, stats, image_size (height, width), n_heads, activation, cameras, lerobot_defaults,
 no_normalization, state_dict_key.
@@ -473,7 +598,7 @@ no_normalization, state_dict_key.
 Returns a dict: precision, bytes (the blob's size), model (one-line summary), notes, and for INT8 the
 accuracy report against FP32 (report: act_convert --report's JSON). Nothing is written on failure.)",
       py::arg("checkpoint"), py::arg("output"), py::arg("precision") = "int8", py::kw_only(),
-      py::arg("mode") = py::none(), py::arg("calib") = std::vector<py::dict>{}, py::arg("calib_samples") = 64,
+      py::arg("mode") = py::none(), py::arg("calib") = py::none(), py::arg("calib_samples") = 64,
       py::arg("holdout") = py::none(), py::arg("calib_method") = "mse", py::arg("percentile") = 99.99,
       py::arg("target_mse") = py::none(), py::arg("max_mse") = py::none(), py::arg("threads") = 0,
       py::arg("seed") = 1, py::arg("layer_report") = true, py::arg("progress") = py::none(),

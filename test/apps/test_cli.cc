@@ -59,7 +59,7 @@ TEST(ActConvertCli, MissingCheckpointNamesThePath) {
 }
 
 // OpenCV's image and video I/O pulls in about 250 libraries: the apps load it from their module
-// (apps/media/media_io.h) when they first read an image, never at start.
+// (engine/media/media_io.h) when they first read an image, never at start.
 TEST(ActConvertCli, ImagesAndVideoComeFromAModuleLoadedOnFirstUse) {
   std::vector<std::string> apps{ACT_CONVERT_BIN, ACT_EVAL_BIN};
 #ifdef ACT_DRIVE_BIN

@@ -14,7 +14,7 @@
 #include "actengine/vision.h"
 #include "apps/eval/episode.h"
 #include "apps/eval/metrics.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "support/act_test_util.h"
 #include "support/command.h"
 #include "support/file_test_util.h"

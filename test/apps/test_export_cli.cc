@@ -11,7 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "support/command.h"
 #include "support/test_paths.h"
 

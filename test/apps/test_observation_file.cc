@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "actengine/status.h"
-#include "apps/observation_file.h"
+#include "engine/src/convert/observation_file.h"
 #include "support/file_test_util.h"
 #include "support/test_paths.h"
 #include "weights/import/safetensors.h"

@@ -9,7 +9,7 @@
 #include <string>
 
 
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "apps/progress.h"
 #include "support/command.h"
 #include "support/test_paths.h"

@@ -20,7 +20,7 @@
 #include "apps/drive/calibration.h"
 #include "apps/drive/camera.h"
 #include "apps/drive/inference.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::drive::test {
 

@@ -21,7 +21,7 @@
 #include "apps/arduino/act_rover/rover_protocol.h"
 #include "apps/drive/calibration.h"
 #include "apps/drive/overlay_video.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "drive/drive_cli_util.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"

@@ -16,7 +16,7 @@
 
 #include "actengine/status.h"
 #include "apps/drive/camera.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "drive/drive_test_util.h"
 #include "drive/stalling_stream.h"
 #include "support/test_paths.h"

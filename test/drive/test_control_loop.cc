@@ -13,7 +13,7 @@
 
 
 #include "apps/drive/control_loop.h"
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 #include "drive/drive_test_util.h"
 #include "drive/fake_arduino.h"
 #include "support/test_paths.h"

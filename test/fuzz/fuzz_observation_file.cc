@@ -2,7 +2,7 @@
 // inputs). The model is a small fixed one (a camera, robot and environment state) so that valid
 // inputs stay a few hundred bytes.
 #include "actengine/status.h"
-#include "apps/observation_file.h"
+#include "engine/src/convert/observation_file.h"
 #include "test/fuzz/fuzz_input_file.h"
 #include "test/fuzz/fuzz_models.h"
 

@@ -9,7 +9,7 @@
 #include <filesystem>
 
 #include "actengine/engine.h"
-#include "apps/observation_file.h"
+#include "engine/src/convert/observation_file.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
 #include "weights/import/safetensors.h"

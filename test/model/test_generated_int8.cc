@@ -6,7 +6,7 @@
 #include <filesystem>
 
 #include "actengine/convert.h"
-#include "apps/convert/calib_frames.h"
+#include "actengine/calibration_files.h"
 #include "support/act_test_util.h"
 #include "support/test_paths.h"
 
@@ -51,10 +51,11 @@ TEST_P(GeneratedInt8Test, Int8StaysNearFp32) {
   const Int8Options opt = test::quick_int8_options(c.mode);
   auto model = import_checkpoint(dir);
   ASSERT_TRUE(model.ok()) << model.status().to_string();
-  const CalibrationSet frames = load_calibration_frames(
+  const StatusOr<CalibrationSet> frames = load_calibration_frames(
       {test::fixture_dir("act-tiny"), test::fixture_dir("act-tiny-legacy"), dir + "/reference.safetensors"},
       (*model)->summary().model, calibration_frames_wanted(opt));
-  const StatusOr<Int8Report> r = (*model)->write_int8(blob, frames, opt);
+  ASSERT_TRUE(frames.ok()) << frames.status().to_string();
+  const StatusOr<Int8Report> r = (*model)->write_int8(blob, *frames, opt);
   ASSERT_TRUE(r.ok()) << r.status().to_string();
   EXPECT_LE(r->action_error.mse, c.max_mse) << r->to_text();
   EXPECT_LE(r->action_error.max_abs, c.max_abs) << r->to_text();

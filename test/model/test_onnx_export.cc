@@ -13,8 +13,8 @@
 #include "actengine/convert.h"
 #include "actengine/engine.h"
 #include "actengine/onnx_export.h"
-#include "apps/convert/calib_frames.h"
-#include "apps/observation_file.h"
+#include "actengine/calibration_files.h"
+#include "engine/src/convert/observation_file.h"
 #include "support/act_test_util.h"
 #include "support/command.h"
 #include "support/test_paths.h"
@@ -254,10 +254,11 @@ TEST_P(OnnxExportTest, Int8QdqExportRunsInOnnxRuntimeNearFp32) {
   const Int8Options opt = test::quick_int8_options();
   auto model = import_checkpoint(dir_);
   ASSERT_TRUE(model.ok()) << model.status().to_string();
-  const CalibrationSet frames = load_calibration_frames({dir_ + "/reference.safetensors", test::fixture_dir("act-tiny")},
-                                                        (*model)->summary().model, calibration_frames_wanted(opt));
+  const StatusOr<CalibrationSet> frames = load_calibration_frames(
+      {dir_ + "/reference.safetensors", test::fixture_dir("act-tiny")}, (*model)->summary().model, calibration_frames_wanted(opt));
+  ASSERT_TRUE(frames.ok()) << frames.status().to_string();
   const std::string int8_blob = scratch_ + "/int8.actb";
-  const StatusOr<Int8Report> report = (*model)->write_int8(int8_blob, frames, opt);
+  const StatusOr<Int8Report> report = (*model)->write_int8(int8_blob, *frames, opt);
   ASSERT_TRUE(report.ok()) << report.status().to_string();
   const std::string onnx = scratch_ + "/qdq.onnx";
   const auto summary = export_onnx(int8_blob, onnx);

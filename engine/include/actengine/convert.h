@@ -289,6 +289,10 @@ struct Int8Report {
   /// Whether the held-out error is good (max |err| normalised: 0.05 or less "good", up to 0.2
   /// "check", above "poor"), with what to do next; in to_json() and to_text() too.
   std::string verdict() const;
+  /// Puts first among the notes what the calibration used of the `given` frames its sources held
+  /// (load_calibration_frames' count, actengine/calibration_files.h): "128 frames given, 64 used for
+  /// calibration, 16 held out, 48 left out (--calib-samples 64 sets how many are used)".
+  void note_frames_given(size_t given, size_t calib_samples);
 };
 
 // --------------------------------------------------------------------------------------- the model

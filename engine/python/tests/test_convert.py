@@ -82,7 +82,7 @@ def test_conversion_errors_carry_act_converts_message(act_tiny, tiny_blob, tmp_p
 
 @pytest.mark.parametrize("arguments, message", [
     (dict(precision="fp16"), "precision must be 'fp32' or 'int8', got 'fp16'"),
-    (dict(), "static quantization needs calibration frames: calib=[observation dict, ...] (or mode='dynamic'"),
+    (dict(), "static quantization needs calibration frames: calib=[observation dict, ...] or calib=path (a folder"),
     (dict(precision="fp32", mode="dynamic"), "mode, calib and max_mse need precision='int8'"),
     (dict(mode="mixed", calib=[{}]), "mode='mixed' needs target_mse"),
     (dict(mode="fast"), "mode must be 'dynamic', 'static' or 'mixed', got 'fast'"),

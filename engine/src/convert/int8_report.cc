@@ -1,7 +1,9 @@
-// Int8Report as JSON (act_convert --report) and as the text act_convert prints.
+// Int8Report as JSON (act_convert --report) and as the text act_convert prints, and its notes.
 #include <algorithm>
 #include <cstdio>
 #include <sstream>
+#include <string>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -48,6 +50,17 @@ std::string Int8Report::verdict() const {
                   "robot's camera, --mode mixed --target-mse, or --precision fp32", e.max_abs);
   }
   return text;
+}
+
+void Int8Report::note_frames_given(size_t given, size_t calib_samples) {
+  const size_t used = calibration_frames + holdout_frames;
+  std::string note = std::to_string(given) + " frames given, " + std::to_string(calibration_frames) +
+                     " used for calibration, " + std::to_string(holdout_frames) + " held out";
+  if (given > used) {
+    note += ", " + std::to_string(given - used) + " left out (--calib-samples " + std::to_string(calib_samples) +
+            " sets how many are used)";
+  }
+  notes.insert(notes.begin(), std::move(note));
 }
 
 std::string Int8Report::to_json() const {

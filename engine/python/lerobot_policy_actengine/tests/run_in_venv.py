@@ -5,7 +5,7 @@ LeRobot's register_third_party_plugins through the venv's distribution metadata.
     python3 run_in_venv.py VENV_DIR [pytest arguments...]
 
 actengine itself comes from PYTHONPATH (the CMake build tree's build/python): building the wheel
-compiles the whole core again, which scripts/check_wheel.sh does when the packaging changes.
+compiles the whole core again, which scripts/check_wheel.sh does (CTest python_wheel_debian, python_wheel_pyenv).
 """
 
 import os

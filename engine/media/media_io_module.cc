@@ -1,9 +1,9 @@
 // libact_media_io.so: OpenCV's imgcodecs and videoio behind act::media::MediaIo (media_io.h says why
-// they live in a module the apps load on first use).
+// they live in a module loaded on first use).
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "apps/media/media_io.h"
+#include "engine/media/media_io.h"
 
 namespace act::media {
 namespace {

@@ -1,4 +1,4 @@
-#include "apps/convert/calib_frames.h"
+#include "actengine/calibration_files.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,8 +14,8 @@
 
 #include "actengine/status.h"
 #include "actengine/vision.h"
-#include "apps/media/media_io.h"
-#include "apps/observation_file.h"
+#include "engine/media/media_io.h"
+#include "engine/src/convert/observation_file.h"
 #include "weights/blob/file_kind.h"
 #include "weights/blob/file_util.h"
 
@@ -327,7 +327,9 @@ std::vector<fs::path> files_in(const fs::path& dir, bool (*pick)(const fs::path&
   return out;
 }
 
-CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames,
+namespace {
+
+CalibrationSet read_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model, size_t max_frames,
                                        size_t* given) {
   if (sources.empty()) fail(StatusCode::kInvalidArgument, "no calibration sources given");
   Loader loader(model);
@@ -354,6 +356,19 @@ CalibrationSet load_calibration_frames(const std::vector<std::string>& sources, 
     set.preprocessing = model_preprocessing_description(model.cameras[0].height, model.cameras[0].width);
   }
   return set;
+}
+
+}  // namespace
+
+StatusOr<CalibrationSet> load_calibration_frames(const std::vector<std::string>& sources, const ModelInfo& model,
+                                                 size_t max_frames, size_t* given) {
+  try {
+    return read_calibration_frames(sources, model, max_frames, given);
+  } catch (const Error& e) {
+    return e.status();
+  } catch (const std::exception& e) {  // std::filesystem's, on a folder that cannot be listed
+    return Status(StatusCode::kIoError, "calibration sources: " + std::string(e.what()));
+  }
 }
 
 }  // namespace act

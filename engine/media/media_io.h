@@ -1,14 +1,17 @@
-// Image files and video (OpenCV's imgcodecs and videoio) for the apps and their tests, loaded on
-// first use from a module of their own, libact_media_io.so. Debian's builds of those two OpenCV
-// modules pull in about 250 shared libraries (GDAL, FFmpeg, GStreamer): linked into every app, they
-// took 0.35 s of each start (act_bench --help included) and 0.55 s under ASan. Through this module
-// only a program that reads or writes an image or a video pays, once, when it first does.
+// Image files and video (OpenCV's imgcodecs and videoio) for the apps, their tests and the calibration
+// readers (actengine/calibration_files.h), loaded on first use from a module of their own,
+// libact_media_io.so. Debian's builds of those two OpenCV modules pull in about 250 shared libraries
+// (GDAL, FFmpeg, GStreamer): linked into every app, they took 0.35 s of each start (act_bench --help
+// included) and 0.55 s under ASan. Through this module only a program that reads or writes an image
+// or a video pays, once, when it first does.
 //
-// The module lives in <libdir>/actengine/ (build tree: build/<libdir>/actengine/), found from the
-// program's own folder (<bindir> or build/apps, build/test). When it cannot be loaded (moved, or
-// an OpenCV library missing), the first call throws act::Error naming the file and why.
+// The module is found beside the shared object that holds this code (the Python package's
+// actengine/ folder), else in <libdir>/actengine/ from the program's own folder (<bindir>, or
+// build/apps and build/test in the build tree: build/<libdir>/actengine/). When it cannot be loaded
+// (moved, or an OpenCV library missing), the first call throws act::Error naming the paths tried and why.
 #pragma once
 
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -17,6 +20,17 @@
 // The flags below are OpenCV's (cv::IMREAD_*, cv::CAP_*, cv::CAP_PROP_*): enums, no code.
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
+
+namespace act {
+
+/// Image files (png, jpg, jpeg, bmp) and videos (mp4, avi, mkv, mov, webm), by extension in any case:
+/// what act_convert and act_eval read.
+bool is_image_file(const std::filesystem::path& p);
+bool is_video_file(const std::filesystem::path& p);
+/// The files of a folder and its subfolders that `pick` accepts, sorted by path.
+std::vector<std::filesystem::path> files_in(const std::filesystem::path& dir, bool (*pick)(const std::filesystem::path&));
+
+}  // namespace act
 
 namespace act::media {
 

@@ -1,4 +1,4 @@
-#include "apps/observation_file.h"
+#include "engine/src/convert/observation_file.h"
 
 #include <cmath>
 #include <cstring>

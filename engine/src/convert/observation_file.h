@@ -1,4 +1,5 @@
-// Observations stored in a safetensors file, in the fixtures' naming:
+// Observations stored in a safetensors file (act_eval's and act_bench's inputs, a calibration source),
+// in the fixtures' naming:
 //   input.<camera key>           F32 [N, 3, H, W] in [0, 1]     or
 //   input.<camera key>.u8_nhwc   U8  [N, H, W, 3]
 //   input.observation.state      [N, S]        input.<env key>   [N, E]   (when the model has them)

@@ -34,9 +34,9 @@ struct Model {
   double qdq_error_ratio = 2.0;
 };
 
-// The random resnet34's QDQ backbone in ONNX Runtime ends 2.6x the engine's error (split engine
-// fed by it: MSE 9.5e-4 against the engine's 3.6e-4; its 16 residual blocks round differently
-// there); with per-token linear inputs the engine's error was 4.8e-4 and the ratio 1.97.
+// ONNX Runtime runs each int8 residual block as QLinearConv + QLinearAdd, which rounds the sum
+// before the residual to int8 once more (the engine adds the residual to the exact sum); over the
+// random resnet34's 16 blocks that ends near 4x the engine's error (MSE 1.3e-3 against 3.5e-4).
 const Model kModels[] = {{"act-tiny", true},
                          {"act-tiny-legacy", true},
                          {"multicam-prenorm-gelu", false},
@@ -44,7 +44,7 @@ const Model kModels[] = {{"act-tiny", true},
                          {"quantiles-identity", false},
                          {"default-360x640-legacy", false},
                          {"default-480x640", false},
-                         {"resnet34-novae", false, 3.0},
+                         {"resnet34-novae", false, 5.0},
                          {"resnet50-dilation", false}};
 
 std::string checkpoint_dir(const Model& m) {

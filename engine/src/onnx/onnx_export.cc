@@ -102,9 +102,14 @@ class OnnxBuilder {
     return t->name();
   }
   std::string scalar_f32(const std::string& base, float v) { return constant_f32(base, {}, {v}); }
-  std::string scalar_i8(const std::string& base, int32_t v) {
-    const int8_t b = static_cast<int8_t>(v);
-    return constant_i8(base, {}, &b, 1);
+  // An activation's zero point as ONNX's uint8 (the engine's int8 code + 128: the same values).
+  std::string activation_zero_point(int32_t zero_point) {
+    const uint8_t b = static_cast<uint8_t>(zero_point + 128);
+    onnx::TensorProto* t = graph_->add_initializer();
+    t->set_name(fresh("zero_point"));
+    t->set_data_type(onnx::TensorProto::UINT8);
+    t->set_raw_data(&b, 1);
+    return t->name();
   }
 
   onnx::NodeProto* node(const std::string& type, const std::vector<std::string>& inputs, const std::string& output) {
@@ -217,15 +222,21 @@ class OnnxBuilder {
   }
 
   std::string dequantize(const std::string& x, const kernels::QuantS8& q) {
-    return op1("DequantizeLinear", {x, scalar_f32("scale", q.scale), scalar_i8("zero_point", q.zero_point)}, "dq");
+    return op1("DequantizeLinear", {x, scalar_f32("scale", q.scale), activation_zero_point(q.zero_point)}, "dq");
   }
   std::string quantize(const std::string& x, const kernels::QuantS8& q) {
-    return op1("QuantizeLinear", {x, scalar_f32("scale", q.scale), scalar_i8("zero_point", q.zero_point)}, "q");
+    return op1("QuantizeLinear", {x, scalar_f32("scale", q.scale), activation_zero_point(q.zero_point)}, "q");
   }
   // The value as a float ONNX tensor (dequantized when int8).
+  // One DequantizeLinear per int8 value, shared by its readers, as ONNX Runtime's quantizer writes
+  // them (its QDQ fusion gives each reader its own copy; separate twins were merged and then kept
+  // the convolutions that read a block's output in float).
   std::string float_of(ValueId id) {
     const OnnxValue& v = value(id);
-    return v.int8 ? dequantize(v.name, *v.int8) : v.name;
+    if (!v.int8) return v.name;
+    const auto [it, added] = dequantized_.try_emplace(id);
+    if (added) it->second = dequantize(v.name, *v.int8);
+    return it->second;
   }
   // A float image value in NCHW.
   std::string float_nchw(ValueId id) {
@@ -320,11 +331,11 @@ class OnnxBuilder {
     return from;
   }
 
-  // A Conv node over NCHW x; `weight` float OIHW; adds the residual and ReLU. Returns the float output.
-  std::string conv_node(const kernels::Conv2dShape& s, const std::string& x, const std::string& weight, const float* bias,
+  // A Conv node over NCHW x; `weight` float OIHW, `bias` a float [out_c] tensor; adds the residual
+  // and ReLU. Returns the float output.
+  std::string conv_node(const kernels::Conv2dShape& s, const std::string& x, const std::string& weight, const std::string& bias,
                         const std::string& residual, bool relu, const std::string& base) {
-    const std::string b = constant_f32("bias", {s.out_c}, {bias, bias + s.out_c});
-    onnx::NodeProto* n = node("Conv", {x, weight, b}, fresh(base));
+    onnx::NodeProto* n = node("Conv", {x, weight, bias}, fresh(base));
     attr_ints(n, "kernel_shape", {s.kernel_h, s.kernel_w});
     attr_ints(n, "strides", {s.stride, s.stride});
     attr_ints(n, "pads", {s.pad, s.pad, s.pad, s.pad});
@@ -333,6 +344,47 @@ class OnnxBuilder {
     if (!residual.empty()) y = op1("Add", {y, residual}, base);
     if (relu) y = op1("Relu", {y}, base);
     return y;
+  }
+
+  // Int8 parameters for a conv's sum before its residual is added. out = [relu](sum + residual)
+  // reaches its whole range from every residual only with sum in [out_lo - r_hi, out_hi - r_lo]
+  // (out_lo clipped to 0 by the ReLU), but that needs the two at opposite extremes at once; half of
+  // it keeps the step near the mean of the residual's and the output's steps, which clipped less
+  // than the output's own step and rounded finer than the whole range on the test checkpoints.
+  static kernels::QuantS8 residual_sum_quant(const kernels::QuantS8& residual, const kernels::QuantS8& out, bool relu) {
+    const auto lo = [](const kernels::QuantS8& q) { return (-128.0f - static_cast<float>(q.zero_point)) * q.scale; };
+    const auto hi = [](const kernels::QuantS8& q) { return (127.0f - static_cast<float>(q.zero_point)) * q.scale; };
+    const float out_lo = relu ? std::max(lo(out), 0.0f) : lo(out);
+    return kernels::choose_quant_s8(0.5f * (out_lo - hi(residual)), 0.5f * (hi(out) - lo(residual)));
+  }
+  std::string bias_f32(const float* bias, int n) { return constant_f32("bias", {n}, {bias, bias + n}); }
+
+  // A bias as the int32 accumulator units of an int8 product (x_scale * w_scale[j]), behind a
+  // DequantizeLinear: the form ONNX Runtime's QDQ fusion needs to run the Conv or Gemm on its int8
+  // kernels (a float bias keeps the whole node in float). The rounding is the one the engine packs.
+  std::string bias_s32(const float* bias, int n, float x_scale, const float* w_scale) {
+    std::vector<int32_t> q(static_cast<size_t>(n));
+    std::vector<float> scale(static_cast<size_t>(n));
+    for (size_t j = 0; j < q.size(); ++j) {
+      scale[j] = x_scale * w_scale[j];
+      const double v = std::nearbyint(static_cast<double>(bias[j]) / scale[j]);
+      q[j] = static_cast<int32_t>(std::clamp(v, -2147483647.0, 2147483647.0));
+    }
+    onnx::TensorProto* t = graph_->add_initializer();
+    t->set_name(fresh("bias_s32"));
+    t->set_data_type(onnx::TensorProto::INT32);
+    t->add_dims(n);
+    t->set_raw_data(q.data(), q.size() * sizeof(int32_t));
+    const std::vector<int32_t> zeros(q.size(), 0);
+    onnx::TensorProto* z = graph_->add_initializer();
+    z->set_name(fresh("bias_zero_point"));
+    z->set_data_type(onnx::TensorProto::INT32);
+    z->add_dims(n);
+    z->set_raw_data(zeros.data(), zeros.size() * sizeof(int32_t));
+    onnx::NodeProto* dq = node("DequantizeLinear", {t->name(), constant_f32("bias_scale", {n}, std::move(scale)), z->name()},
+                               fresh("bias"));
+    attr_int(dq, "axis", 0);
+    return dq->output(0);
   }
 
   // A conv's output value: an image, or (the 1x1 projection) tokens, kept also as NCHW features.
@@ -352,7 +404,7 @@ class OnnxBuilder {
     for (size_t i = 0; i < from.size(); ++i) w[i] = ohwi[from[i]];
     const std::string weight = constant_f32("weight", {s.out_c, s.in_c, s.kernel_h, s.kernel_w}, std::move(w));
     const std::string residual = op.residual() == graph::kNoValue ? "" : float_nchw(op.residual());
-    const std::string y = conv_node(s, float_nchw(op.inputs[0]), weight, op.bias(), residual, op.relu(), "conv");
+    const std::string y = conv_node(s, float_nchw(op.inputs[0]), weight, bias_f32(op.bias(), s.out_c), residual, op.relu(), "conv");
     set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
     if (const auto& pool = op.max_pool()) maxpool(op.outputs[0], op.outputs[1], pool->kernel, pool->stride, pool->pad);
   }
@@ -380,10 +432,24 @@ class OnnxBuilder {
     const std::string weight = dequantized_weight(spec.weight, {s.out_c, s.in_c, s.kernel_h, s.kernel_w}, spec.w_scale,
                                                   ohwi_to_oihw(s));
     // Static input parameters: the input is an int8 value; dynamic ones: it stayed float (translate()).
+    const std::optional<kernels::QuantS8> x_q = value(op.inputs[0]).int8;
     const std::string x = float_nchw(op.inputs[0]);
-    std::string residual;
-    if (spec.residual != graph::kNoValue) residual = float_nchw(spec.residual);
-    std::string y = conv_node(s, x, weight, spec.bias, residual, spec.relu, "conv");
+    const std::string bias = x_q ? bias_s32(spec.bias, s.out_c, x_q->scale, spec.w_scale) : bias_f32(spec.bias, s.out_c);
+    std::string y;
+    const std::optional<kernels::QuantS8> residual_q =
+        spec.residual == graph::kNoValue ? std::nullopt : value(spec.residual).int8;
+    if (spec.s8_out && x_q && residual_q) {
+      // The engine adds the residual to the conv's exact sum; ONNX Runtime runs an int8 ResNet block
+      // as QLinearConv + QLinearAdd, so the sum is quantized once more in between, over the range
+      // that sum needs for the block's output range to stay reachable (residual_sum_quant).
+      const kernels::QuantS8 mid = residual_sum_quant(*residual_q, spec.output_q, spec.relu);
+      y = dequantize(quantize(conv_node(s, x, weight, bias, "", false, "conv"), mid), mid);
+      y = op1("Add", {y, float_nchw(spec.residual)}, "conv");
+      if (spec.relu) y = op1("Relu", {y}, "conv");
+    } else {
+      const std::string residual = spec.residual == graph::kNoValue ? "" : float_nchw(spec.residual);
+      y = conv_node(s, x, weight, bias, residual, spec.relu, "conv");
+    }
     std::optional<kernels::QuantS8> q;
     if (spec.s8_out) {
       y = quantize(y, spec.output_q);
@@ -421,13 +487,14 @@ class OnnxBuilder {
       const std::string weight = w_s8 ? dequantized_weight(w_s8, {out, in, 1, 1}, w_scale, {})
                                       : constant_f32("weight", {out, in, 1, 1}, {w_f32, w_f32 + w_size});
       check(bias.value == graph::kNoValue && bias.ld == 0, StatusCode::kInternal, "ONNX export: projection bias is no vector");
-      const std::string y = conv_node(s, float_nchw(x_ref.value), weight, bias.constant + bias.col_offset, "", false, "proj");
+      const std::string y = conv_node(s, float_nchw(x_ref.value), weight, bias_f32(bias.constant + bias.col_offset, out), "", false, "proj");
       set_conv_output(op.outputs[0], y, std::nullopt, s.out_h, s.out_w);
       return;
     }
+    if (w_s8 != nullptr && !x_q) return set(op.outputs[0], {dynamic_product(p, w_s8, w_scale), false, std::nullopt});
     const std::string weight = w_s8 ? dequantized_weight(w_s8, {out, in}, w_scale, {})
                                     : constant_f32("weight", {out, in}, {w_f32, w_f32 + w_size});
-    set(op.outputs[0], {product(p, weight, x_q), false, std::nullopt});
+    set(op.outputs[0], {product(p, weight, x_q, w_s8 ? w_scale : nullptr), false, std::nullopt});
   }
 
   // rows of x W^T + bias (W float, packed), for the rows an op projects itself (the token
@@ -440,14 +507,53 @@ class OnnxBuilder {
   }
 
   // act(x W^T + bias [+ residual]) as ONNX nodes, W the initializer `weight` [out, in].
-  std::string product(const graph::LinearParams& p, const std::string& weight, std::optional<kernels::QuantS8> x_q) {
+  // With int8 input codes (x_q) and int8 weights (w_scale), a constant bias row goes in as int32
+  // (bias_s32), so that ONNX Runtime runs the Gemm on its int8 kernels.
+  std::string product(const graph::LinearParams& p, const std::string& weight, std::optional<kernels::QuantS8> x_q,
+                      const float* w_scale = nullptr) {
     const int rows = p.rows, in = p.in, out = p.out;
-    const MatrixRef &x_ref = p.x, &bias = p.bias, &residual = p.residual;
+    const MatrixRef &x_ref = p.x, &bias = p.bias;
     std::string x = matrix(x_ref, rows, in, "x");
     if (x_q) x = dequantize(quantize(x, *x_q), *x_q);
-    onnx::NodeProto* gemm = node("Gemm", {x, weight, matrix(bias, rows, out, "bias")}, fresh("linear"));
+    const bool int8_bias = x_q && w_scale != nullptr && bias.value == graph::kNoValue && bias.ld == 0;
+    const std::string b = int8_bias ? bias_s32(bias.constant + bias.col_offset, out, x_q->scale, w_scale)
+                                    : matrix(bias, rows, out, "bias");
+    onnx::NodeProto* gemm = node("Gemm", {x, weight, b}, fresh("linear"));
     attr_int(gemm, "transB", 1);
-    std::string y = gemm->output(0);
+    return epilogue(p, gemm->output(0));
+  }
+
+  // An int8 linear whose input the engine quantizes per token at run time: ONNX has no per-row
+  // dynamic quantization, so it is the form ONNX Runtime's own dynamic quantization writes (and
+  // fuses into DynamicQuantizeMatMul): x quantized per tensor (uint8, asymmetric) by
+  // DynamicQuantizeLinear, MatMulInteger with W^T int8, the product of the scales, then the bias.
+  // Coarser than the engine's codes (one scale for every row), no finer.
+  std::string dynamic_product(const graph::LinearParams& p, const int8_t* w_s8, const float* w_scale) {
+    const int rows = p.rows, in = p.in, out = p.out;
+    onnx::NodeProto* quant = graph_->add_node();
+    quant->set_op_type("DynamicQuantizeLinear");
+    const std::string xq = fresh("x_u8");
+    quant->set_name(xq);
+    quant->add_input(matrix(p.x, rows, in, "x"));
+    for (const std::string& o : {xq, fresh("x_scale"), fresh("x_zero_point")}) quant->add_output(o);
+    std::vector<int8_t> wt(static_cast<size_t>(in) * static_cast<size_t>(out));
+    for (size_t i = 0; i < static_cast<size_t>(in); ++i) {
+      for (size_t j = 0; j < static_cast<size_t>(out); ++j) wt[i * static_cast<size_t>(out) + j] = w_s8[j * static_cast<size_t>(in) + i];
+    }
+    const int8_t zero = 0;
+    const std::string acc = op1("MatMulInteger", {xq, constant_i8("weight_t_s8", {in, out}, wt.data(), wt.size()), quant->output(2),
+                                                  constant_i8("weight_zero_point", {}, &zero, 1)}, "linear");
+    onnx::NodeProto* cast = node("Cast", {acc}, fresh("linear"));
+    attr_int(cast, "to", onnx::TensorProto::FLOAT);
+    const std::string scale = op1("Mul", {quant->output(1), constant_f32("weight_scale", {out}, {w_scale, w_scale + out})}, "scale");
+    const std::string y = op1("Mul", {cast->output(0), scale}, "linear");
+    return epilogue(p, op1("Add", {y, matrix(p.bias, rows, out, "bias")}, "linear"));
+  }
+
+  // A linear's residual and activation after its product y.
+  std::string epilogue(const graph::LinearParams& p, std::string y) {
+    const int rows = p.rows, out = p.out;
+    const MatrixRef& residual = p.residual;
     if (residual.value != graph::kNoValue || residual.constant != nullptr) {
       y = op1("Add", {y, matrix(residual, rows, out, "residual")}, "linear");
     }
@@ -531,6 +637,7 @@ class OnnxBuilder {
   onnx::GraphProto* graph_ = nullptr;
   std::map<ValueId, OnnxValue> values_;
   std::map<ValueId, std::string> features_nchw_;  // projection outputs as [1, D, h, w]
+  std::map<ValueId, std::string> dequantized_;    // float_of's DequantizeLinear outputs
   int counter_ = 0;
 };
 

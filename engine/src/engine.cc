@@ -34,17 +34,25 @@ void check_finite(std::span<const float> values, const char* what) {
   }
 }
 
-// The kernels of an Engine: EngineOptions::isa, or ACT_ISA's when the option is "auto" and ACT_ISA
-// is set. An ISA that is unknown or that this CPU lacks is an error, never a silent fallback.
-kernels::KernelConfig engine_kernels(const std::string& isa_option) {
-  std::string requested = isa_option;
-  std::string source = "EngineOptions::isa";
-  if (const char* env = std::getenv("ACT_ISA"); isa_option == "auto" && env != nullptr && env[0] != '\0') {
-    requested = env;
-    source = "ACT_ISA";
+// An option, or the environment variable's value when the option is "auto" and the variable is set;
+// `source` names where it came from, for the error.
+std::string option_or_env(const std::string& option, const char* env_name, std::string& source) {
+  if (const char* env = std::getenv(env_name); option == "auto" && env != nullptr && env[0] != '\0') {
+    source = env_name;
+    return env;
   }
-  kernels::KernelConfigChoice choice = kernels::kernel_config(requested);
-  if (!choice.config) fail(StatusCode::kInvalidArgument, source + ": " + choice.error);
+  return option;
+}
+
+// The kernels of an Engine: EngineOptions::isa and ::uarch, or ACT_ISA's and ACT_UARCH's when the
+// option is "auto" and the variable is set. A name that is unknown, or an ISA this CPU lacks, is an
+// error, never a silent fallback.
+kernels::KernelConfig engine_kernels(const EngineOptions& options) {
+  std::string isa_source = "EngineOptions::isa", uarch_source = "EngineOptions::uarch";
+  const std::string isa = option_or_env(options.isa, "ACT_ISA", isa_source);
+  const std::string uarch = option_or_env(options.uarch, "ACT_UARCH", uarch_source);
+  kernels::KernelConfigChoice choice = kernels::kernel_config(isa, uarch);
+  if (!choice.config) fail(StatusCode::kInvalidArgument, (choice.tuning_error ? uarch_source : isa_source) + ": " + choice.error);
   return *choice.config;
 }
 
@@ -104,7 +112,7 @@ Engine::Impl::Impl(const std::string& blob_path, const EngineOptions& options, c
       blob_tensors_(blob_),
       config_(blob_model_config(blob_)),
       pool_(options.threads),
-      kernels_(engine_kernels(options.isa)),
+      kernels_(engine_kernels(options)),
       profile_(options.profile),
       keep_intermediates_(options.keep_intermediates),
       external_backbone_(options.external_backbone) {

@@ -7,6 +7,9 @@
 #include <asm/hwcap.h>
 #include <sys/auxv.h>
 #endif
+#if defined(__x86_64__)
+#include <cpuid.h>
+#endif
 #if defined(__linux__) && defined(__x86_64__)
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -19,6 +22,62 @@ namespace act::kernels {
 namespace {
 
 constexpr const char* kIsaNames[kIsaCount] = {"ref", "avx2", "avx512", "avx512vnni", "neon", "neondot", "avxvnni", "amx"};
+constexpr const char* kUarchNames[kUarchCount] = {"generic", "zen4", "zen5", "goldencove", "gracemont", "cortex-a76"};
+
+// The name of `value` in `names`, and back: the Isa and Uarch spellings.
+template <class Enum, int N>
+const char* enum_name(const char* const (&names)[N], Enum value) {
+  const auto i = static_cast<unsigned>(value);
+  return i < N ? names[i] : "?";
+}
+template <class Enum, int N>
+std::optional<Enum> parse_enum(const char* const (&names)[N], std::string_view name) {
+  for (int i = 0; i < N; ++i) {
+    if (name == names[i]) return static_cast<Enum>(i);
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+Uarch x86_uarch_from_cpuid(std::string_view vendor, uint32_t leaf1_eax, bool avx512f) {
+  const unsigned base_family = (leaf1_eax >> 8) & 0xF;
+  const unsigned family = base_family + (base_family == 0xF ? (leaf1_eax >> 20) & 0xFF : 0);
+  const unsigned model =
+      ((leaf1_eax >> 4) & 0xF) | (base_family == 0x6 || base_family == 0xF ? ((leaf1_eax >> 16) & 0xF) << 4 : 0);
+  if (vendor == "AuthenticAMD") {
+    if (family == 0x19 && avx512f) return Uarch::kZen4;
+    if (family == 0x1A) return Uarch::kZen5;
+  } else if (vendor == "GenuineIntel" && family == 0x6) {
+    switch (model) {
+      case 0x8F: case 0xCF: case 0xAD: case 0xAE:             // Sapphire, Emerald, Granite Rapids
+      case 0x97: case 0x9A: case 0xB7: case 0xBA: case 0xBF:  // Alder Lake, Raptor Lake
+      case 0xAA: case 0xAC:                                   // Meteor Lake
+        return Uarch::kGoldenCove;
+      case 0xBE:  // Alder Lake-N
+        return Uarch::kGracemont;
+      default: break;
+    }
+  }
+  return Uarch::kGeneric;
+}
+
+namespace {
+
+#if defined(__x86_64__)
+Uarch x86_uarch(bool avx512f) {
+  unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+  if (__get_cpuid(0, &eax, &ebx, &ecx, &edx) == 0) return Uarch::kGeneric;
+  char vendor[12];
+  for (int i = 0; i < 4; ++i) {
+    vendor[i] = static_cast<char>(ebx >> (8 * i));
+    vendor[4 + i] = static_cast<char>(edx >> (8 * i));
+    vendor[8 + i] = static_cast<char>(ecx >> (8 * i));
+  }
+  if (__get_cpuid(1, &eax, &ebx, &ecx, &edx) == 0) return Uarch::kGeneric;
+  return x86_uarch_from_cpuid(std::string_view(vendor, sizeof(vendor)), eax, avx512f);
+}
+#endif
 
 // Best first: the highest level of either chain that the CPU supports wins.
 constexpr Isa kPreference[] = {Isa::kAmx,    Isa::kAvx512Vnni, Isa::kAvx512, Isa::kAvxVnni,
@@ -53,14 +112,12 @@ CpuFeatures detect() {
     f.avx512bw = cpuinfo_has_x86_avx512bw();
     f.avx512vl = cpuinfo_has_x86_avx512vl();
     f.avx512vnni = cpuinfo_has_x86_avx512vnni();
-    if (const cpuinfo_core* core = cpuinfo_get_core(0); core != nullptr && core->vendor == cpuinfo_vendor_amd) {
-      const uint32_t signature = core->cpuid;  // CPUID leaf 1 EAX: family = base + extended when base is 0xF
-      const uint32_t family = ((signature >> 8) & 0xF) + (((signature >> 8) & 0xF) == 0xF ? (signature >> 20) & 0xFF : 0);
-      f.amd_zen4 = family == 0x19 && f.avx512f;
-    }
 #elif defined(__aarch64__)
     f.neon = cpuinfo_has_arm_neon();
     f.dotprod = cpuinfo_has_arm_neon_dot();
+    if (const cpuinfo_core* core = cpuinfo_get_core(0); core != nullptr && core->uarch == cpuinfo_uarch_cortex_a76) {
+      f.uarch = Uarch::kCortexA76;
+    }
 #endif
   }
 #endif
@@ -76,8 +133,10 @@ CpuFeatures detect() {
     f.avx512vl = __builtin_cpu_supports("avx512vl");
     f.avx512vnni = __builtin_cpu_supports("avx512vnni");
   }
-  // Debian 12's cpuinfo knows neither AVX-VNNI nor AMX: GCC's indicator (CPUID and XCR0) does.
+  // Debian 12's cpuinfo knows neither AVX-VNNI nor AMX nor Zen 4: GCC's indicator (CPUID and XCR0)
+  // and CPUID itself do.
   __builtin_cpu_init();
+  f.uarch = x86_uarch(f.avx512f);
   f.avxvnni = __builtin_cpu_supports("avxvnni");
   if (__builtin_cpu_supports("amx-tile") && __builtin_cpu_supports("amx-int8")) {
 #if defined(__linux__)
@@ -105,16 +164,15 @@ CpuFeatures detect() {
 
 }  // namespace
 
-const char* isa_name(Isa isa) {
-  const auto i = static_cast<unsigned>(isa);
-  return i < kIsaCount ? kIsaNames[i] : "?";
-}
+const char* isa_name(Isa isa) { return enum_name(kIsaNames, isa); }
+std::optional<Isa> parse_isa(std::string_view name) { return parse_enum<Isa>(kIsaNames, name); }
+const char* uarch_name(Uarch uarch) { return enum_name(kUarchNames, uarch); }
+std::optional<Uarch> parse_uarch(std::string_view name) { return parse_enum<Uarch>(kUarchNames, name); }
 
-std::optional<Isa> parse_isa(std::string_view name) {
-  for (int i = 0; i < kIsaCount; ++i) {
-    if (name == kIsaNames[i]) return static_cast<Isa>(i);
-  }
-  return std::nullopt;
+std::string uarch_names() {
+  std::string out;
+  for (const char* name : kUarchNames) out.append(out.empty() ? "" : ", ").append(name);
+  return out;
 }
 
 std::string isa_mask_names(IsaMask mask) {

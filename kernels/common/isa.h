@@ -47,6 +47,28 @@ std::string isa_mask_names(IsaMask mask);
 /// ref, neondot -> neon -> ref); nullopt for kRef.
 std::optional<Isa> isa_below(Isa isa);
 
+/// The core microarchitectures whose kernels are tuned apart (kernels/config/kernel_tuning.h), from
+/// the CPUID signature (x86-64) or the MIDR (AArch64) of the first core; kGeneric for every other.
+///   zen4        AMD family 19h with AVX-512 (Zen 3, the same family, has none)
+///   zen5        AMD family 1Ah
+///   goldencove  Intel's big cores from Golden Cove on: Sapphire/Emerald/Granite Rapids, the
+///               P-cores of Alder/Raptor/Meteor Lake
+///   gracemont   Intel's E-cores alone: Alder Lake-N (N100, N150, N200, N305)
+///   cortex-a76  the Raspberry Pi 5's core
+/// The values are stable (names, JSON).
+enum class Uarch : uint8_t { kGeneric = 0, kZen4 = 1, kZen5 = 2, kGoldenCove = 3, kGracemont = 4, kCortexA76 = 5 };
+inline constexpr int kUarchCount = 6;
+/// "generic", "zen4", "zen5", "goldencove", "gracemont" or "cortex-a76" (the spelling
+/// EngineOptions::uarch and ACT_UARCH use).
+const char* uarch_name(Uarch uarch);
+/// The inverse of uarch_name; nullopt for anything else (case-sensitive).
+std::optional<Uarch> parse_uarch(std::string_view name);
+/// Every name, comma-separated, in Uarch order.
+std::string uarch_names();
+/// The x86-64 core of a CPUID vendor string ("GenuineIntel", "AuthenticAMD") and leaf 1's EAX
+/// (family and model with their extended fields, as the SDM and AMD's APM define them).
+Uarch x86_uarch_from_cpuid(std::string_view vendor, uint32_t leaf1_eax, bool avx512f);
+
 /// What this CPU (and its OS) supports, detected once per process.
 struct CpuFeatures {
   bool avx2 = false, fma = false;                                       // x86-64
@@ -58,10 +80,8 @@ struct CpuFeatures {
   bool amx = false;
   const char* amx_refused = nullptr;
   bool neon = false, dotprod = false;                                   // AArch64
-  /// An AMD family 19h core with AVX-512: Zen 4 (Zen 3, the same family, has no AVX-512). From
-  /// cpuinfo's CPUID signature (Debian 12's cpuinfo names no Zen 4 uarch); false without cpuinfo.
-  /// Only a kernel tuning depends on it (gemm_f32_table_avx512).
-  bool amd_zen4 = false;
+  /// The microarchitecture (see Uarch). Only the kernels' tuning depends on it.
+  Uarch uarch = Uarch::kGeneric;
   /// How the features were found: "cpuinfo", "cpuinfo+auxv", "auxv", "cpuid" or "none".
   const char* source = "none";
 };

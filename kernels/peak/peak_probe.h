@@ -15,6 +15,12 @@ uint64_t peak_vpdpbusd_zmm(uint64_t iterations);
 /// The 6x64c4 kernel's inner loop with its operands in L1 (4 weight loads, 6 broadcasts, 24
 /// vpdpbusd per k-group): the ceiling of its instruction mix, below which the data's arrival lies.
 uint64_t peak_vpdpbusd_zmm_6x64_loop(uint64_t iterations);
+/// Other tile shapes' inner loops, the same way: 8x48c4 (3 weight loads, 8 broadcasts, 24 vpdpbusd
+/// per k-group), 12x32c4 (2, 12, 24) and 14x32c4 (2, 14, 28). Which shape streams fastest on a
+/// core is the evidence for its tuning (kernels/config/kernel_tuning.h).
+uint64_t peak_vpdpbusd_zmm_8x48_loop(uint64_t iterations);
+uint64_t peak_vpdpbusd_zmm_12x32_loop(uint64_t iterations);
+uint64_t peak_vpdpbusd_zmm_14x32_loop(uint64_t iterations);
 /// 4 independent tdpbssd tile chains per iteration (16 x 16 x 64 int8 MACs each), the operands in
 /// tiles. AMX-INT8 (with the OS's permission for the tile state).
 uint64_t peak_tdpbssd(uint64_t iterations);

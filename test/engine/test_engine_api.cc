@@ -307,27 +307,28 @@ TEST_F(EngineApiTest, EnginesOpenAndRunConcurrently) {
 }
 
 // Sets ACT_ISA for one scope (nullptr: unset), restoring the previous value.
-class ScopedActIsa {
+class ScopedEnv {
  public:
-  explicit ScopedActIsa(const char* value) {
-    const char* old = std::getenv("ACT_ISA");
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    const char* old = std::getenv(name);
     had_ = old != nullptr;
     if (had_) old_ = old;
     if (value != nullptr) {
-      setenv("ACT_ISA", value, 1);
+      setenv(name, value, 1);
     } else {
-      unsetenv("ACT_ISA");
+      unsetenv(name);
     }
   }
-  ~ScopedActIsa() {
+  ~ScopedEnv() {
     if (had_) {
-      setenv("ACT_ISA", old_.c_str(), 1);
+      setenv(name_, old_.c_str(), 1);
     } else {
-      unsetenv("ACT_ISA");
+      unsetenv(name_);
     }
   }
 
  private:
+  const char* name_;
   bool had_ = false;
   std::string old_;
 };
@@ -336,7 +337,7 @@ class ScopedActIsa {
 std::string isas_this_cpu_runs() { return "this CPU runs " + kernels::isa_mask_names(kernels::cpu_isa_mask()); }
 
 TEST_F(EngineApiTest, BadIsaOverrideIsAnError) {
-  ScopedActIsa env("sse9");
+  ScopedEnv env("ACT_ISA", "sse9");
   auto e = Engine::open(blob_);
   EXPECT_EQ(e.status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(e.status().message(), "ACT_ISA: unknown ISA 'sse9': " + isas_this_cpu_runs());
@@ -344,14 +345,14 @@ TEST_F(EngineApiTest, BadIsaOverrideIsAnError) {
   auto ref = Engine::open(blob_, {.threads = 2, .isa = "ref"});
   ASSERT_TRUE(ref.ok()) << ref.status().to_string();
   EXPECT_EQ((*ref)->model_info().isa, "ref");
-  ScopedActIsa ref_env("ref");
+  ScopedEnv ref_env("ACT_ISA", "ref");
   auto from_env = Engine::open(blob_, {.threads = 2});
   ASSERT_TRUE(from_env.ok()) << from_env.status().to_string();
   EXPECT_EQ((*from_env)->model_info().isa, "ref");
 }
 
 TEST_F(EngineApiTest, BadIsaOptionIsAnError) {
-  ScopedActIsa env(nullptr);
+  ScopedEnv env("ACT_ISA", nullptr);
   auto bogus = Engine::open(blob_, {.isa = "bogus"});
   EXPECT_EQ(bogus.status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(bogus.status().message(), "EngineOptions::isa: unknown ISA 'bogus': " + isas_this_cpu_runs());
@@ -366,10 +367,46 @@ TEST_F(EngineApiTest, BadIsaOptionIsAnError) {
             "EngineOptions::isa: ISA '" + foreign + "' is not supported by this CPU: " + isas_this_cpu_runs());
 }
 
+// Every tuning runs on every CPU and says which it is; an unknown one is an error naming its source.
+TEST_F(EngineApiTest, TuningOptionAndOverride) {
+  ScopedEnv no_env("ACT_UARCH", nullptr);
+  auto want = chunk();
+  {
+    auto e = Engine::open(blob_, {.threads = 2});
+    ASSERT_TRUE(e.ok()) << e.status().to_string();
+    ASSERT_TRUE((*e)->infer(observation(), want).ok());
+    const std::string detected = kernels::uarch_name(kernels::cpu_features().uarch);
+    EXPECT_NE((*e)->model_info().kernels.find(", tuned for " + detected + ": "), std::string::npos)
+        << (*e)->model_info().kernels;
+  }
+  for (int i = 0; i < kernels::kUarchCount; ++i) {
+    const std::string name = kernels::uarch_name(static_cast<kernels::Uarch>(i));
+    auto e = Engine::open(blob_, {.threads = 2, .uarch = name});
+    ASSERT_TRUE(e.ok()) << e.status().to_string();
+    EXPECT_NE((*e)->model_info().kernels.find(", tuned for " + name + ": "), std::string::npos)
+        << (*e)->model_info().kernels;
+    auto got = chunk();
+    ASSERT_TRUE((*e)->infer(observation(), got).ok());
+    for (size_t j = 0; j < got.size(); ++j) EXPECT_NEAR(got[j], want[j], 1e-4 * (1 + std::fabs(want[j]))) << name << " " << j;
+  }
+  const std::string choices = "choose auto or one of " + kernels::uarch_names();
+  auto bogus = Engine::open(blob_, {.uarch = "zen9"});
+  EXPECT_EQ(bogus.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(bogus.status().message(), "EngineOptions::uarch: unknown tuning 'zen9': " + choices);
+  ScopedEnv env("ACT_UARCH", "Zen4");
+  auto from_env = Engine::open(blob_);
+  EXPECT_EQ(from_env.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(from_env.status().message(), "ACT_UARCH: unknown tuning 'Zen4': " + choices);
+  ScopedEnv good_env("ACT_UARCH", "gracemont");
+  auto tuned = Engine::open(blob_, {.threads = 2});
+  ASSERT_TRUE(tuned.ok()) << tuned.status().to_string();
+  EXPECT_NE((*tuned)->model_info().kernels.find(", tuned for gracemont: "), std::string::npos);
+}
+
 // Every ISA this CPU runs gives an Engine of that level, describing its kernels, whose actions agree
 // with the default Engine's (FP32: the GEMMs may sum in another order).
 TEST_F(EngineApiTest, EveryIsaThisCpuRunsGivesTheSameActions) {
-  ScopedActIsa env(nullptr);  // the fixture's engine_ took ACT_ISA when the run sets it: open one without
+  ScopedEnv env("ACT_ISA", nullptr);  // the fixture's engine_ took ACT_ISA when the run sets it: open one without
   auto best = Engine::open(blob_, {.threads = 2});
   ASSERT_TRUE(best.ok()) << best.status().to_string();
   auto want = chunk();
@@ -380,7 +417,7 @@ TEST_F(EngineApiTest, EveryIsaThisCpuRunsGivesTheSameActions) {
     auto e = Engine::open(blob_, {.threads = 2, .isa = name});
     ASSERT_TRUE(e.ok()) << e.status().to_string();
     EXPECT_EQ((*e)->model_info().isa, name);
-    EXPECT_EQ((*e)->model_info().kernels.rfind(name + ": gemm_s8 ", 0), 0u) << (*e)->model_info().kernels;
+    EXPECT_EQ((*e)->model_info().kernels.rfind(name + ", tuned for ", 0), 0u) << (*e)->model_info().kernels;
     auto got = chunk();
     ASSERT_TRUE((*e)->infer(observation(), got).ok());
     for (size_t i = 0; i < got.size(); ++i) EXPECT_NEAR(got[i], want[i], 1e-4 * (1 + std::fabs(want[i]))) << name << " " << i;

@@ -28,7 +28,12 @@ TEST(KernelConfig, AutoIsTheBestLevelThisCpuRuns) {
   EXPECT_EQ(c.config->isa, best_cpu_isa());
   EXPECT_TRUE(cpu_supports(c.config->isa));
   const std::string described = c.config->describe();
-  EXPECT_EQ(described.rfind(std::string(isa_name(c.config->isa)) + ": gemm_s8 ", 0), 0u) << described;
+  EXPECT_EQ(described.rfind(std::string(isa_name(c.config->isa)) + ", tuned for " + uarch_name(cpu_features().uarch) +
+                                ": gemm_s8 ",
+                            0),
+            0u)
+      << described;
+  EXPECT_EQ(&c.config->tuning, &kernel_tuning(cpu_features().uarch));
   EXPECT_NE(described.find(c.config->gemm_f32.name), std::string::npos) << described;
 #if defined(__x86_64__)
   if (cpu_supports(Isa::kAvx2)) {
@@ -161,6 +166,68 @@ TEST(KernelConfig, IsaThisCpuLacksIsAnError) {
     const Isa isa = static_cast<Isa>(i);
     EXPECT_EQ(kernel_config(isa_name(isa)).config.has_value(), cpu_supports(isa)) << isa_name(isa);
   }
+}
+
+TEST(KernelTuning, EveryUarchHasItsRowAndNameBothWays) {
+  std::string names;
+  for (int i = 0; i < kUarchCount; ++i) {
+    const Uarch u = static_cast<Uarch>(i);
+    EXPECT_EQ(kernel_tuning(u).uarch, u) << uarch_name(u);
+    EXPECT_EQ(parse_uarch(uarch_name(u)), u) << uarch_name(u);
+    names.append(names.empty() ? "" : ", ").append(uarch_name(u));
+  }
+  EXPECT_EQ(uarch_names(), names);
+  for (const char* bad : {"", "Zen4", "zen4 ", "skylake", "?"}) EXPECT_FALSE(parse_uarch(bad).has_value()) << bad;
+}
+
+// Signatures of real parts (CPUID leaf 1 EAX).
+TEST(KernelTuning, CpuidSignaturesNameTheirCores) {
+  EXPECT_EQ(x86_uarch_from_cpuid("AuthenticAMD", 0x00A10F11, true), Uarch::kZen4);      // EPYC 9004 (Genoa)
+  EXPECT_EQ(x86_uarch_from_cpuid("AuthenticAMD", 0x00A60F12, true), Uarch::kZen4);      // Ryzen 7000 (Raphael)
+  EXPECT_EQ(x86_uarch_from_cpuid("AuthenticAMD", 0x00A00F11, false), Uarch::kGeneric);  // EPYC 7003 (Zen 3)
+  EXPECT_EQ(x86_uarch_from_cpuid("AuthenticAMD", 0x00B00F21, true), Uarch::kZen5);      // EPYC 9005 (Turin)
+  EXPECT_EQ(x86_uarch_from_cpuid("AuthenticAMD", 0x00830F10, false), Uarch::kGeneric);  // EPYC 7002 (Zen 2)
+  EXPECT_EQ(x86_uarch_from_cpuid("GenuineIntel", 0x000806F8, true), Uarch::kGoldenCove);  // Sapphire Rapids
+  EXPECT_EQ(x86_uarch_from_cpuid("GenuineIntel", 0x000C06F2, true), Uarch::kGoldenCove);  // Emerald Rapids
+  EXPECT_EQ(x86_uarch_from_cpuid("GenuineIntel", 0x00090672, false), Uarch::kGoldenCove); // Alder Lake-S
+  EXPECT_EQ(x86_uarch_from_cpuid("GenuineIntel", 0x000B06E0, false), Uarch::kGracemont);  // N100
+  EXPECT_EQ(x86_uarch_from_cpuid("GenuineIntel", 0x00050657, true), Uarch::kGeneric);     // Cascade Lake
+  EXPECT_EQ(x86_uarch_from_cpuid("GenuineIntel", 0x000A06A4, false), Uarch::kGoldenCove); // Meteor Lake
+  EXPECT_EQ(x86_uarch_from_cpuid("HygonGenuine", 0x00A10F11, true), Uarch::kGeneric);
+}
+
+// A tuning changes only what it says: the Zen 4 row drops the avx512 float GEMM's B prefetch,
+// every other row keeps it; at every level the rest of the choice is the same.
+TEST(KernelTuning, ChoosesAmongOneIsasVariantsOnly) {
+  for (Isa level : cpu_isas()) {
+    const KernelConfig generic = kernel_config_for(level, Uarch::kGeneric);
+    for (int i = 0; i < kUarchCount; ++i) {
+      const Uarch u = static_cast<Uarch>(i);
+      const KernelConfigChoice c = kernel_config(isa_name(level), uarch_name(u));
+      ASSERT_TRUE(c.config.has_value()) << c.error;
+      EXPECT_EQ(c.config->isa, level);
+      EXPECT_EQ(&c.config->tuning, &kernel_tuning(u));
+      EXPECT_EQ(&c.config->gemm_s8, &generic.gemm_s8) << uarch_name(u);
+      EXPECT_EQ(&c.config->quant, &generic.quant) << uarch_name(u);
+      EXPECT_EQ(c.config->gemm_f32.isa, generic.gemm_f32.isa) << uarch_name(u);
+      const bool prefetch_variant = c.config->gemm_f32.isa == Isa::kAvx512;
+      if (prefetch_variant) {
+        EXPECT_EQ(c.config->gemm_f32.name, std::string(gemm_f32_table_avx512(u != Uarch::kZen4)->name)) << uarch_name(u);
+      } else {
+        EXPECT_EQ(&c.config->gemm_f32, &generic.gemm_f32) << uarch_name(u);
+      }
+    }
+  }
+}
+
+TEST(KernelTuning, UnknownTuningIsAnErrorListingTheChoices) {
+  const KernelConfigChoice c = kernel_config("auto", "zen9");
+  EXPECT_FALSE(c.config.has_value());
+  EXPECT_TRUE(c.tuning_error);
+  EXPECT_EQ(c.error, "unknown tuning 'zen9': choose auto or one of " + uarch_names());
+  const KernelConfigChoice isa = kernel_config("bogus", "zen4");
+  EXPECT_FALSE(isa.tuning_error);
+  EXPECT_EQ(isa.error.rfind("unknown ISA 'bogus'", 0), 0u) << isa.error;
 }
 
 // The kernel tests honour ACT_ISA (the variant an Engine at that level runs): it must be valid.

@@ -52,6 +52,11 @@ struct EngineOptions {
   /// neondot (AArch64). An unknown ISA, or one this CPU cannot run, fails Engine::open with a
   /// message listing the ISAs this CPU runs.
   std::string isa = "auto";
+  /// The core the kernels are tuned for: "auto" (this CPU's; the ACT_UARCH environment variable,
+  /// when set, overrides it) or one of generic, zen4, zen5, goldencove, gracemont, cortex-a76
+  /// (kernels/config/kernel_tuning.h). Any of them runs on any CPU; an unknown name fails
+  /// Engine::open with a message listing them.
+  std::string uarch = "auto";
   /// The split engine: the cameras' backbones (ResNet + input projection) run elsewhere, e.g. the ONNX
   /// export's `--onnx-part backbone` on an accelerator, and every image of an Observation is their
   /// output, ImageView::backbone_features. The blob is the same; its backbone weights go unused.
@@ -114,7 +119,7 @@ struct ModelInfo {
   double temporal_ensemble_coeff = 0.0;
   std::string precision;  ///< "fp32", "int8 static", "int8 dynamic" or "int8 mixed"
   std::string isa;        ///< the instruction set the kernels were chosen for, e.g. "avx512vnni"
-  std::string kernels;    ///< the kernel variants in use, e.g. "avx512vnni: gemm_s8 6x64c4 avx512vnni, gemm_f32 6x64 avx512, ..."
+  std::string kernels;    ///< the kernel variants in use, e.g. "avx512vnni, tuned for zen4: gemm_s8 6x64c4 avx512vnni, ..."
   std::string summary;    ///< one line: backbone, dims, layers, cameras
   /// Where each part runs: "backbone: actengine (cpu), transformer: actengine (cpu)", or with
   /// EngineOptions::external_backbone "backbone: external (features given by the caller), ...".

@@ -1,0 +1,26 @@
+#include "kernels/config/kernel_tuning.h"
+
+namespace act::kernels {
+
+namespace {
+
+// In Uarch order. Rows without a field measured both ways keep the defaults (Zen 5, the Intel
+// cores: the prefetch was measured to gain on Intel's two FMA ports).
+constexpr KernelTuning kRows[kUarchCount] = {
+    {Uarch::kGeneric},
+    {Uarch::kZen4, /*gemm_f32_b_prefetch=*/false},
+    {Uarch::kZen5},
+    {Uarch::kGoldenCove},
+    {Uarch::kGracemont},
+    {Uarch::kCortexA76},
+};
+static_assert(kRows[kUarchCount - 1].uarch == Uarch::kCortexA76, "one row per Uarch, in order");
+
+}  // namespace
+
+const KernelTuning& kernel_tuning(Uarch uarch) {
+  const auto i = static_cast<unsigned>(uarch);
+  return kRows[i < kUarchCount ? i : 0];
+}
+
+}  // namespace act::kernels

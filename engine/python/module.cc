@@ -46,10 +46,11 @@ class EngineError : public std::runtime_error {
 /// An Engine shared by the Python objects that use it (Policy keeps it alive).
 class PyEngine {
  public:
-  PyEngine(const std::filesystem::path& path, int threads, const std::string& isa) {
+  PyEngine(const std::filesystem::path& path, int threads, const std::string& isa, const std::string& uarch) {
     EngineOptions options;
     options.threads = threads;
     options.isa = isa;
+    options.uarch = uarch;
     auto opened = [&] {
       py::gil_scoped_release release;
       return Engine::open(path.string(), options);
@@ -513,10 +514,11 @@ void define_model_info(py::module_& m) {
 void define_runtime(py::module_& m) {
   py::class_<PyEngine, std::shared_ptr<PyEngine>>(m, "Engine", R"(A converted ACT policy (.actb) ready to run.
 
-Engine(path, threads=0, isa="auto"): threads 0 = one per online core; isa "auto" (or ACT_ISA) picks the
-best kernels this CPU runs. Observations are dicts keyed by LeRobot feature names.)")
-      .def(py::init<const std::filesystem::path&, int, const std::string&>(), py::arg("path"), py::arg("threads") = 0,
-           py::arg("isa") = "auto")
+Engine(path, threads=0, isa="auto", uarch="auto"): threads 0 = one per online core; isa "auto" (or
+ACT_ISA) picks the best kernels this CPU runs, uarch "auto" (or ACT_UARCH) tunes them for this core
+(model_info.kernels says which). Observations are dicts keyed by LeRobot feature names.)")
+      .def(py::init<const std::filesystem::path&, int, const std::string&, const std::string&>(), py::arg("path"),
+           py::arg("threads") = 0, py::arg("isa") = "auto", py::arg("uarch") = "auto")
       .def_property_readonly("model_info", checked<kEngineType>(&PyEngine::model_info), py::return_value_policy::reference_internal)
       .def_property_readonly("threads", checked<kEngineType>(&PyEngine::threads))
       .def("infer", [](py::handle e, const py::dict& obs) { return initialised<PyEngine>(e, kEngineType).infer(obs, false); },

@@ -113,6 +113,12 @@ def test_a_blob_that_cannot_be_run_raises_actengine_error(tiny_blob, tmp_path):
         actengine.Engine(tmp_path / "missing.actb")
     with pytest.raises(ValueError, match="unknown ISA 'sse9': this CPU runs ref"):  # a bad argument
         actengine.Engine(tiny_blob, isa="sse9")
+    with pytest.raises(ValueError, match="unknown tuning 'zen9': choose auto or one of generic, zen4"):
+        actengine.Engine(tiny_blob, uarch="zen9")
+
+
+def test_the_kernels_say_which_core_they_are_tuned_for(tiny_blob):
+    assert ", tuned for gracemont: " in actengine.Engine(tiny_blob, threads=1, uarch="gracemont").model_info.kernels
 
 
 def test_a_second_thread_runs_while_the_engine_infers(act_tiny, tiny_engine):

@@ -291,18 +291,21 @@ INSTANTIATE_TEST_SUITE_P(Loads, LiveViewEstopUnderLoad,
                            return std::string(param_info.param.id);
                          });
 
-// issue 54: a scripted e-stop, `curl -X POST URL/estop`, no -d.
+// issue 54: a scripted e-stop, `curl -X POST URL/estop`, no -d. The e-stop bound on that request is
+// asserted where the request's bytes are sent from this process (estop_to_neutral sends curl's
+// exact request, LiveViewEstopUnderLoad): here the time also holds curl's own start, a fork and
+// exec of this process that took over 100 ms under ASan on a loaded machine, so it is reported,
+// and the rover must have gone neutral.
 TEST_F(LiveViewHttp, CurlEstopWithoutABodyWorks) {
-  start_driving();  // and on driving: only the e-stop can bring neutral within the bound
+  start_driving();  // and on driving: only the e-stop brings neutral
   const auto sent = Clock::now();
   const auto r = act::test::run_command("curl -sS -i -X POST http://" + host() + "/estop");
   const double to_neutral = ms_to_neutral(sent);
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_EQ(status_of(r.output), 200) << r.output;
   EXPECT_NE(r.output.find("neutral until resumed"), std::string::npos) << r.output;
-  ASSERT_GE(to_neutral, 0);
-  EXPECT_LE(to_neutral, ms(kFaultDeadline));
-  report_fault_timing("live view e-stop by curl -X POST without a body", to_neutral);
+  ASSERT_GE(to_neutral, 0) << "no neutral command on the wire within 5 s of the e-stop";
+  report_fault_timing("live view e-stop by curl -X POST without a body (curl's start included)", to_neutral);
   // Every refusal says why: an unknown page, a PUT without a length.
   const std::string missing = round_trip(port_, "GET /nope HTTP/1.1\r\nHost: " + host() + "\r\nConnection: close\r\n\r\n");
   EXPECT_EQ(status_of(missing), 404);

@@ -77,39 +77,35 @@ class OnnxBuilder {
   // ------------------------------------------------------------------------------ names, constants
   std::string fresh(const std::string& base) { return base + "_" + std::to_string(counter_++); }
 
-  std::string constant_f32(const std::string& base, const std::vector<int64_t>& dims, std::vector<float> data) {
+  // An initializer of `type` with raw little-endian `data` (`bytes` long); returns its name.
+  std::string constant(const std::string& base, onnx::TensorProto::DataType type, const std::vector<int64_t>& dims,
+                       const void* data, size_t bytes) {
     onnx::TensorProto* t = graph_->add_initializer();
     t->set_name(fresh(base));
-    t->set_data_type(onnx::TensorProto::FLOAT);
+    t->set_data_type(type);
     for (int64_t d : dims) t->add_dims(d);
-    t->set_raw_data(data.data(), data.size() * sizeof(float));
+    t->set_raw_data(data, bytes);
     return t->name();
+  }
+  std::string constant_f32(const std::string& base, const std::vector<int64_t>& dims, std::vector<float> data) {
+    return constant(base, onnx::TensorProto::FLOAT, dims, data.data(), data.size() * sizeof(float));
   }
   std::string constant_i8(const std::string& base, const std::vector<int64_t>& dims, const int8_t* data, size_t n) {
-    onnx::TensorProto* t = graph_->add_initializer();
-    t->set_name(fresh(base));
-    t->set_data_type(onnx::TensorProto::INT8);
-    for (int64_t d : dims) t->add_dims(d);
-    t->set_raw_data(data, n);
-    return t->name();
+    return constant(base, onnx::TensorProto::INT8, dims, data, n);
+  }
+  std::string constant_i32(const std::string& base, const std::vector<int32_t>& values) {
+    return constant(base, onnx::TensorProto::INT32, {static_cast<int64_t>(values.size())}, values.data(),
+                    values.size() * sizeof(int32_t));
   }
   std::string constant_i64(const std::string& base, const std::vector<int64_t>& values) {
-    onnx::TensorProto* t = graph_->add_initializer();
-    t->set_name(fresh(base));
-    t->set_data_type(onnx::TensorProto::INT64);
-    t->add_dims(static_cast<int64_t>(values.size()));
-    t->set_raw_data(values.data(), values.size() * sizeof(int64_t));
-    return t->name();
+    return constant(base, onnx::TensorProto::INT64, {static_cast<int64_t>(values.size())}, values.data(),
+                    values.size() * sizeof(int64_t));
   }
   std::string scalar_f32(const std::string& base, float v) { return constant_f32(base, {}, {v}); }
   // An activation's zero point as ONNX's uint8 (the engine's int8 code + 128: the same values).
   std::string activation_zero_point(int32_t zero_point) {
     const uint8_t b = static_cast<uint8_t>(zero_point + 128);
-    onnx::TensorProto* t = graph_->add_initializer();
-    t->set_name(fresh("zero_point"));
-    t->set_data_type(onnx::TensorProto::UINT8);
-    t->set_raw_data(&b, 1);
-    return t->name();
+    return constant("zero_point", onnx::TensorProto::UINT8, {}, &b, 1);
   }
 
   onnx::NodeProto* node(const std::string& type, const std::vector<std::string>& inputs, const std::string& output) {
@@ -361,7 +357,8 @@ class OnnxBuilder {
 
   // A bias as the int32 accumulator units of an int8 product (x_scale * w_scale[j]), behind a
   // DequantizeLinear: the form ONNX Runtime's QDQ fusion needs to run the Conv or Gemm on its int8
-  // kernels (a float bias keeps the whole node in float). The rounding is the one the engine packs.
+  // kernels (a float bias keeps the whole node in float). Rounded against the float scale the
+  // DequantizeLinear carries, so that its output is the float bias's nearest.
   std::string bias_s32(const float* bias, int n, float x_scale, const float* w_scale) {
     std::vector<int32_t> q(static_cast<size_t>(n));
     std::vector<float> scale(static_cast<size_t>(n));
@@ -370,18 +367,9 @@ class OnnxBuilder {
       const double v = std::nearbyint(static_cast<double>(bias[j]) / scale[j]);
       q[j] = static_cast<int32_t>(std::clamp(v, -2147483647.0, 2147483647.0));
     }
-    onnx::TensorProto* t = graph_->add_initializer();
-    t->set_name(fresh("bias_s32"));
-    t->set_data_type(onnx::TensorProto::INT32);
-    t->add_dims(n);
-    t->set_raw_data(q.data(), q.size() * sizeof(int32_t));
-    const std::vector<int32_t> zeros(q.size(), 0);
-    onnx::TensorProto* z = graph_->add_initializer();
-    z->set_name(fresh("bias_zero_point"));
-    z->set_data_type(onnx::TensorProto::INT32);
-    z->add_dims(n);
-    z->set_raw_data(zeros.data(), zeros.size() * sizeof(int32_t));
-    onnx::NodeProto* dq = node("DequantizeLinear", {t->name(), constant_f32("bias_scale", {n}, std::move(scale)), z->name()},
+    onnx::NodeProto* dq = node("DequantizeLinear",
+                               {constant_i32("bias_s32", q), constant_f32("bias_scale", {n}, std::move(scale)),
+                                constant_i32("bias_zero_point", std::vector<int32_t>(q.size(), 0))},
                                fresh("bias"));
     attr_int(dq, "axis", 0);
     return dq->output(0);

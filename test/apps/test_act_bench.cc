@@ -398,6 +398,23 @@ TEST(ActBench, ConfigIsHeightByWidthAndRefusesTheTransposedForm) {
   EXPECT_NE(r.output.find("--portrait goes with --config HxW"), std::string::npos) << r.output;
 }
 
+// ACT_UARCH as a user sets it: the kernels line and the JSON name the tuning; an unknown one is an
+// error naming the variable and the choices, before anything is timed.
+TEST(ActBench, ActUarchChoosesTheTuningAndRefusesUnknownNames) {
+  const std::string dir = test::scratch_dir();
+  const std::string bench = std::string(ACT_BENCH_BIN) + " --config 64x96 -n 1 -w 0 -t 1";
+  auto r = run_command("ACT_UARCH=gracemont " + bench + " --json " + q(dir + "/g.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find(", tuned for gracemont: gemm_s8 "), std::string::npos) << r.output;
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/g.json"));
+  EXPECT_NE(j["engine"]["kernels"].get<std::string>().find(", tuned for gracemont: "), std::string::npos);
+  r = run_command("ACT_UARCH=zen9 " + bench);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("ACT_UARCH: unknown tuning 'zen9': choose auto or one of generic, zen4"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("stage (ms)"), std::string::npos) << "benchmarked first:\n" << r.output;
+}
+
 TEST(ActBench, BadArgumentsAreClearErrors) {
   const std::string dir = test::scratch_dir();
   auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 12345");

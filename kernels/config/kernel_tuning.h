@@ -5,8 +5,8 @@
 // A field is here only when a measurement on that core chose it. The evidence is act_kernel_bench's
 // bare-loop probes (peak/vpdpbusd_zmm_<tile>_loop: which tile shape streams fastest from L1) and its
 // GEMM and conv rows run both ways (kernels/README.md has the tables). Today every x86 core measured
-// streams the 6x64c4 int8 tile at the speed of the best other shape, so the int8 tile is the ISA's
-// one; the float GEMM's B prefetch is the one choice that differs.
+// (Zen 4, Zen 5) streams the 6x64 int8 and float tiles at the speed of the best other shape, so the
+// tiles are the ISA's; the float GEMM's B prefetch is the one choice that differs.
 #pragma once
 
 #include "kernels/common/isa.h"

@@ -20,6 +20,10 @@ const PeakProbe kPeakProbes[] = {
     {"vpmaddwd+vpaddd_ymm", Isa::kAvx2, PeakKind::kInt8, peak_vpmaddwd_vpaddd_ymm, false},
     {"sdot", Isa::kNeonDot, PeakKind::kInt8, peak_sdot, true},
     {"vfmadd231ps_zmm", Isa::kAvx512, PeakKind::kFp32, peak_vfmadd_f32_zmm, true},
+    {"vfmadd231ps_zmm_6x64_loop", Isa::kAvx512, PeakKind::kFp32, peak_vfmadd_f32_zmm_6x64_loop, false},
+    {"vfmadd231ps_zmm_8x48_loop", Isa::kAvx512, PeakKind::kFp32, peak_vfmadd_f32_zmm_8x48_loop, false},
+    {"vfmadd231ps_zmm_12x32_loop", Isa::kAvx512, PeakKind::kFp32, peak_vfmadd_f32_zmm_12x32_loop, false},
+    {"vfmadd231ps_zmm_14x32_loop", Isa::kAvx512, PeakKind::kFp32, peak_vfmadd_f32_zmm_14x32_loop, false},
     {"vfmadd231ps_ymm", Isa::kAvx2, PeakKind::kFp32, peak_vfmadd_f32_ymm, true},
     {"fmla_4s", Isa::kNeon, PeakKind::kFp32, peak_fmla_f32, true},
 };

@@ -38,6 +38,13 @@ uint64_t peak_sdot(uint64_t iterations);
 /// 12 independent float FMA chains: vfmadd231ps ymm (8 MACs) / zmm (16 MACs).
 uint64_t peak_vfmadd_f32_ymm(uint64_t iterations);
 uint64_t peak_vfmadd_f32_zmm(uint64_t iterations);
+/// The avx512 float GEMM's 6x64 tile's inner loop with its operands in L1 (4 B loads, 6 broadcasts,
+/// 24 vfmadd231ps per k), and the other shapes of the vpdpbusd loop probes in float: 8x48, 12x32,
+/// 14x32. AVX-512 F.
+uint64_t peak_vfmadd_f32_zmm_6x64_loop(uint64_t iterations);
+uint64_t peak_vfmadd_f32_zmm_8x48_loop(uint64_t iterations);
+uint64_t peak_vfmadd_f32_zmm_12x32_loop(uint64_t iterations);
+uint64_t peak_vfmadd_f32_zmm_14x32_loop(uint64_t iterations);
 /// 16 independent fmla .4s chains (4 float MACs each). AArch64.
 uint64_t peak_fmla_f32(uint64_t iterations);
 

@@ -1,5 +1,6 @@
-// Float FMA throughput probe on zmm registers (AVX-512 F), the bound of the avx512 FP32 GEMM. Inline
-// assembly so that the loop is exactly the instructions measured.
+// Float FMA throughput probes on zmm registers (AVX-512 F), the bound of the avx512 FP32 GEMM, and
+// its tile shapes' inner loops. Inline assembly so that the loop is exactly the instructions
+// measured.
 #include "kernels/peak/peak_probe.h"
 
 namespace act::kernels {
@@ -30,8 +31,28 @@ uint64_t peak_vfmadd_f32_zmm(uint64_t iterations) {
       : "xmm0", "xmm1", "xmm2", "xmm3", "xmm4", "xmm5", "xmm6", "xmm7", "xmm8", "xmm9", "xmm10", "xmm11", "xmm14", "xmm15", "cc");
   return iterations * 12 * 16;
 }
+
+namespace {
+alignas(64) const float kProbeWeights[(16 * 1024 + 256) / 4] = {};
+alignas(64) const float kProbeRows[14 * 1024 / 4] = {};
+}  // namespace
+
+#include "kernels/peak/loop_probe.inc"
+#define ACT_B(row) "vbroadcastss " #row "*1024(%[a],%[ao]), %%zmm31\n\t"
+#define ACT_MAC(w, acc) "vfmadd231ps %%zmm31, %%zmm" #w ", %%zmm" #acc "\n\t"
+
+// The float GEMM's 6x64 tile (gemm_f32_avx512.cc) and the other shapes of the int8 probes, per k:
+// 4, 3, 2, 2 B loads, 6, 8, 12, 14 broadcasts of A (one float each) and 24, 24, 24, 28 FMAs.
+ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_6x64_loop, 24 * 16, 256, ACT_SHAPE_6X4)
+ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_8x48_loop, 24 * 16, 192, ACT_SHAPE_8X3)
+ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_12x32_loop, 24 * 16, 128, ACT_SHAPE_12X2)
+ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_14x32_loop, 28 * 16, 128, ACT_SHAPE_14X2)
 #else
 uint64_t peak_vfmadd_f32_zmm(uint64_t) { return 0; }
+uint64_t peak_vfmadd_f32_zmm_6x64_loop(uint64_t) { return 0; }
+uint64_t peak_vfmadd_f32_zmm_8x48_loop(uint64_t) { return 0; }
+uint64_t peak_vfmadd_f32_zmm_12x32_loop(uint64_t) { return 0; }
+uint64_t peak_vfmadd_f32_zmm_14x32_loop(uint64_t) { return 0; }
 #endif
 
 }  // namespace act::kernels

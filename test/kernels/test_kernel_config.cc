@@ -117,6 +117,35 @@ TEST(KernelConfig, EachLevelsInt8PeakIsTheProbeOfItsGemmS8) {
   }
 }
 
+// Every probe this CPU runs counts the MACs of its iterations, and a tile shape's loop probe
+// (<instruction>_<rows>x<columns>_loop) those of its shape: rows x columns per k step, times the 4
+// bytes of an int8 k-group (so a probe whose assembly dropped or repeated a row fails), and its
+// measured rate is positive.
+TEST(PeakProbes, EveryProbeCountsTheMacsOfItsLoop) {
+  int loops = 0;
+  for (int i = 0; i < kPeakProbeCount; ++i) {
+    const PeakProbe& p = kPeakProbes[i];
+    if (!cpu_supports(p.isa) || p.fn(1) == 0) continue;
+    SCOPED_TRACE(p.name);
+    const uint64_t one = p.fn(1);
+    EXPECT_EQ(p.fn(3), 3 * one);
+    const std::string name = p.name;
+    const size_t x = name.rfind('x'), end = name.rfind("_loop");
+    if (end != std::string::npos && end + 5 == name.size()) {
+      const size_t start = name.rfind('_', x) + 1;
+      const uint64_t rows = std::stoul(name.substr(start, x - start)), cols = std::stoul(name.substr(x + 1, end - x - 1));
+      EXPECT_EQ(one, rows * cols * (p.kind == PeakKind::kInt8 ? 4u : 1u));
+      ++loops;
+    }
+    EXPECT_GT(measure_peak_gmacs(p), 0.0);
+  }
+#if defined(__x86_64__)
+  if (cpu_supports(Isa::kAvx512Vnni)) {
+    EXPECT_GE(loops, 8) << "the vpdpbusd and vfmadd231ps tile-shape probes";
+  }
+#endif
+}
+
 #if defined(__x86_64__)
 // AMX needs the OS's permission for the tile state as well as CPUID: where it is granted, auto runs
 // the amx gemm_s8; where Linux refuses it, asking for amx is an error that says so, and auto falls

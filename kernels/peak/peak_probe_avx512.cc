@@ -32,21 +32,12 @@ uint64_t peak_vfmadd_f32_zmm(uint64_t iterations) {
   return iterations * 12 * 16;
 }
 
-namespace {
-alignas(64) const float kProbeWeights[(16 * 1024 + 256) / 4] = {};
-alignas(64) const float kProbeRows[14 * 1024 / 4] = {};
-}  // namespace
-
 #include "kernels/peak/loop_probe.inc"
 #define ACT_B(row) "vbroadcastss " #row "*1024(%[a],%[ao]), %%zmm31\n\t"
 #define ACT_MAC(w, acc) "vfmadd231ps %%zmm31, %%zmm" #w ", %%zmm" #acc "\n\t"
 
-// The float GEMM's 6x64 tile (gemm_f32_avx512.cc) and the other shapes of the int8 probes, per k:
-// 4, 3, 2, 2 B loads, 6, 8, 12, 14 broadcasts of A (one float each) and 24, 24, 24, 28 FMAs.
-ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_6x64_loop, 24 * 16, 256, ACT_SHAPE_6X4)
-ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_8x48_loop, 24 * 16, 192, ACT_SHAPE_8X3)
-ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_12x32_loop, 24 * 16, 128, ACT_SHAPE_12X2)
-ACT_LOOP_PROBE(peak_vfmadd_f32_zmm_14x32_loop, 28 * 16, 128, ACT_SHAPE_14X2)
+// The float GEMM's 6x64 tile (gemm_f32_avx512.cc) and the int8 probes' other shapes in float.
+ACT_TILE_SHAPE_PROBES(peak_vfmadd_f32_zmm, 16)
 #else
 uint64_t peak_vfmadd_f32_zmm(uint64_t) { return 0; }
 uint64_t peak_vfmadd_f32_zmm_6x64_loop(uint64_t) { return 0; }

@@ -38,29 +38,17 @@ uint64_t peak_vpdpbusd_zmm(uint64_t iterations) {
         "xmm13", "xmm14", "xmm15", "xmm30", "xmm31", "cc");
   return iterations * 16 * 64;
 }
-namespace {
-// 16 KB of weights and the widest step past its end (the offsets wrap at 16 KB, not at a step).
-alignas(64) const uint8_t kProbeWeights[16 * 1024 + 256] = {};
-alignas(64) const int8_t kProbeRows[14 * 1024] = {};
-}  // namespace
 
 #include "kernels/peak/loop_probe.inc"
 #define ACT_B(row) "vpbroadcastd " #row "*1024(%[a],%[ao]), %%zmm31\n\t"
 #define ACT_MAC(w, acc) "vpdpbusd %%zmm31, %%zmm" #w ", %%zmm" #acc "\n\t"
 
-// The 6x64c4 micro-kernel's inner loop as it runs, its operands in L1: per k-group 4 weight loads,
-// 6 A broadcasts and 24 vpdpbusd. What the kernel could reach if every byte it reads were in L1:
+// The 6x64c4 micro-kernel's inner loop as it runs (per k-group 4 weight loads, 6 A broadcasts, 24
+// vpdpbusd), and the other shapes, to tell which streams fastest on a core
+// (kernels/config/kernel_tuning.h). What the kernel could reach if every byte it reads were in L1:
 // the gap from peak_vpdpbusd_zmm is the loop's own cost, the gap from it to a GEMM the data's
 // arrival and the per-tile work (row sums, epilogue).
-ACT_LOOP_PROBE(peak_vpdpbusd_zmm_6x64_loop, 24 * 64, 256, ACT_SHAPE_6X4)
-
-// Other tile shapes' inner loops, the same way, to tell which shape streams fastest on a core
-// (kernels/config/kernel_tuning.h): a taller tile loads fewer weight vectors per row, a wider one
-// fewer broadcasts per column. 8x48c4: 3 weight loads, 8 broadcasts, 24 vpdpbusd per k-group;
-// 12x32c4: 2, 12, 24; 14x32c4: 2, 14, 28 (every register in use).
-ACT_LOOP_PROBE(peak_vpdpbusd_zmm_8x48_loop, 24 * 64, 192, ACT_SHAPE_8X3)
-ACT_LOOP_PROBE(peak_vpdpbusd_zmm_12x32_loop, 24 * 64, 128, ACT_SHAPE_12X2)
-ACT_LOOP_PROBE(peak_vpdpbusd_zmm_14x32_loop, 28 * 64, 128, ACT_SHAPE_14X2)
+ACT_TILE_SHAPE_PROBES(peak_vpdpbusd_zmm, 64)
 #else
 uint64_t peak_vpdpbusd_zmm(uint64_t) { return 0; }
 uint64_t peak_vpdpbusd_zmm_6x64_loop(uint64_t) { return 0; }

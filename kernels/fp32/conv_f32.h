@@ -22,9 +22,9 @@ struct ConvF32 {
 
 /// The lcm of every gemm_f32 variant's MR (1, 6, 8): tiles of output pixels start on multiples of it.
 inline constexpr int kConvF32TileQuantum = 24;
-/// Output pixels per tile at most: a multiple of kConvF32TileQuantum that keeps the patch
-/// buffer near 256 KB (L2-resident while the weights stream past it), at most 192 (small images
-/// still split into several tiles for the pool).
+/// Output pixels per tile at most: a multiple of kConvF32TileQuantum, at most 192 (small images
+/// still split into several tiles for the pool); 192 when the conv reads its input in place, else
+/// what keeps the patch buffer near 256 KB (L2-resident while the weights stream past it).
 int conv_f32_tile_pixels(const Conv2dShape& s);
 /// Floats of scratch conv_f32 needs for tiles of `tile_pixels` pixels (0 when it reads in place).
 size_t conv_f32_scratch_floats(const Conv2dShape& s, int tile_pixels);

@@ -246,14 +246,19 @@ AttentionOp::AttentionOp(const kernels::GemmF32Kernels& gemm, int nq, int nk, in
 }
 
 namespace {
-// Queries per pass: a multiple of every gemm_f32 MR (1, 6, 8) whose scores ([rows x nk], 29 KB at
-// ACT's 302 tokens) stay in L1 from QK^T through the softmax to P V.
+// Queries per pass: a multiple of every gemm_f32 MR (1, 6, 8) whose scores ([rows x nk], 30 KB at
+// ACT's 302 tokens in rows of 320) stay in L1 from QK^T through the softmax to P V.
 constexpr int kAttentionTileRows = 24;
-}
+
+// The scores' row stride: the keys rounded up to whole panels, so that QK^T stores whole tiles (the
+// packed keys' padding is zero: those scores are 0, and the softmax and P V never read them). The
+// panel cut by the 302nd key went through the GEMM's stack tile and a scalar copy: a tenth slower.
+int scores_ld(int nk, int nr) { return (nk + nr - 1) / nr * nr; }
+}  // namespace
 
 size_t AttentionOp::scratch_per_thread() const {
   const int hd = dim_ / heads_;
-  return static_cast<size_t>(kAttentionTileRows) * (static_cast<size_t>(nk_) + static_cast<size_t>(hd)) +
+  return static_cast<size_t>(kAttentionTileRows) * (static_cast<size_t>(scores_ld(nk_, nr_)) + static_cast<size_t>(hd)) +
          kernels::gemm_f32_packed_floats(nr_, nk_, hd) + kernels::gemm_f32_packed_floats(nr_, hd, nk_);
 }
 
@@ -267,11 +272,12 @@ void AttentionOp::run(const RunContext& ctx) const {
   float* out = ctx.data(outputs[0]);
   const int hd = dim_ / heads_;
   const float scale = 1.0f / std::sqrt(static_cast<float>(hd));
+  const int ld = scores_ld(nk_, nr_);
   // One task per head: its keys and values packed once, then one pass per tile of queries.
   ctx.pool().parallel_for(static_cast<size_t>(heads_), [&](size_t task, int thread) {
     const int h = static_cast<int>(task);
-    float* scores = ctx.scratch(thread);                                       // [tile rows, nk]
-    float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * nk_;  // [tile rows, hd]
+    float* scores = ctx.scratch(thread);                                         // [tile rows, ld]
+    float* q_scaled = scores + static_cast<size_t>(kAttentionTileRows) * ld;     // [tile rows, hd]
     float* packed_k = q_scaled + static_cast<size_t>(kAttentionTileRows) * hd;
     float* packed_v = packed_k + kernels::gemm_f32_packed_floats(nr_, nk_, hd);
     kernels::gemm_f32_pack(nr_, nk_, hd, k + static_cast<size_t>(h) * hd, k_.ld, packed_k);
@@ -283,10 +289,10 @@ void AttentionOp::run(const RunContext& ctx) const {
         const float* qr = q + static_cast<size_t>(r0 + r) * q_.ld + static_cast<size_t>(h) * hd;
         for (int c = 0; c < hd; ++c) q_scaled[static_cast<size_t>(r) * hd + c] = qr[c] * scale;
       }
-      gemm.packed({.m = rows, .n = nk_, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
-                   .c = scores, .ldc = static_cast<size_t>(nk_), .epilogue = {}});
-      ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(nk_));
-      gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(nk_), .packed_b = packed_v,
+      gemm.packed({.m = rows, .n = ld, .k = hd, .a = q_scaled, .lda = static_cast<size_t>(hd), .packed_b = packed_k,
+                   .c = scores, .ldc = static_cast<size_t>(ld), .epilogue = {}});
+      ctx.kernels().elementwise.softmax_rows(rows, nk_, scores, static_cast<size_t>(ld));
+      gemm.packed({.m = rows, .n = hd, .k = nk_, .a = scores, .lda = static_cast<size_t>(ld), .packed_b = packed_v,
                    .c = out + static_cast<size_t>(r0) * dim_ + static_cast<size_t>(h) * hd, .ldc = static_cast<size_t>(dim_),
                    .epilogue = {}});
     }

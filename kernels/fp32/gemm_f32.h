@@ -32,7 +32,8 @@ struct GemmF32Epilogue {
 };
 
 /// C[m x n] (overwritten) = epilogue(A[m x k] B^T) for columns [col0, col0 + n) of a B [N x k]
-/// packed by gemm_f32_pack for this variant's nr; col0 is a multiple of nr.
+/// packed by gemm_f32_pack for this variant's nr; col0 is a multiple of nr. n may reach past N to
+/// the end of the last panel, whose padding columns are zero.
 struct GemmF32PackedArgs {
   int m = 0, n = 0, k = 0;
   const float* a = nullptr;

@@ -13,6 +13,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "kernels/fp32/gemm_f32.h"
@@ -199,6 +200,37 @@ TEST(GemmF32Packed, RequiredLevelsRunSimdVariants) {
     EXPECT_NE(v.packed, gemm_f32_table_ref()->packed) << "no SIMD packed GEMM at " << isa_name(*isa);
     if (std::getenv("ACT_ISA") == nullptr) {
       EXPECT_NE(std::find(tested.begin(), tested.end(), v.isa), tested.end()) << isa_name(v.isa) << " was not tested";
+    }
+  }
+}
+
+// A call may run past B's last column to its panel's end (attention's scores in rows of whole
+// panels): those columns are exactly zero, the others the same bits as a call that stops at N.
+TEST(GemmF32Packed, ColumnsPastTheLastReachThePanelsZeroPadding) {
+  std::mt19937 rng(16);
+  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
+  for (Isa isa : test::isas_under_test(&IsaTables::gemm_f32)) {
+    const GemmF32Kernels& g = test::table_of(isa, &IsaTables::gemm_f32);
+    for (const int n : {g.nr + 3, 2 * g.nr - 1, 4 * g.nr + g.nr / 2 + 1}) {
+      const int m = 2 * g.mr + 1, k = 64, padded = (n + g.nr - 1) / g.nr * g.nr;
+      std::vector<float> a(static_cast<size_t>(m) * k), b(static_cast<size_t>(n) * k);
+      for (auto* v : {&a, &b}) {
+        for (float& x : *v) x = d(rng);
+      }
+      std::vector<float> packed(gemm_f32_packed_floats(g.nr, n, k));
+      gemm_f32_pack(g.nr, n, k, b.data(), static_cast<size_t>(k), packed.data());
+      std::vector<float> to_n(static_cast<size_t>(m) * padded, kSentinel), to_panel_end(to_n.size(), kSentinel);
+      for (auto [cols, c] : {std::pair{n, &to_n}, std::pair{padded, &to_panel_end}}) {
+        g.packed({.m = m, .n = cols, .k = k, .a = a.data(), .lda = static_cast<size_t>(k), .packed_b = packed.data(),
+                  .c = c->data(), .ldc = static_cast<size_t>(padded), .epilogue = {}});
+      }
+      for (int r = 0; r < m; ++r) {
+        for (int col = 0; col < padded; ++col) {
+          const size_t i = static_cast<size_t>(r) * padded + static_cast<size_t>(col);
+          const float want = col < n ? to_n[i] : 0.0f;
+          ASSERT_EQ(to_panel_end[i], want) << g.name << " n " << n << " C(" << r << "," << col << ")";
+        }
+      }
     }
   }
 }

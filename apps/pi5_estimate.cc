@@ -34,6 +34,9 @@ constexpr double kSoftmaxCyclesPerScoreS8 = 3.2, kSoftmaxCyclesPerScoreF32 = 15.
 constexpr int kMaxCores = 4;  // the Pi 5's
 
 bool is_int8_kind(const std::string& kind) { return kind.find("s8") != std::string::npos; }
+// Winograd F(2x2, 3x3) convs do 16 of the direct conv's 36 multiply-adds per 2x2 output tile.
+constexpr double kWinogradMacShare = 16.0 / 36.0;
+bool is_winograd_kind(const std::string& kind) { return kind.ends_with("_winograd"); }
 
 }  // namespace
 
@@ -43,8 +46,8 @@ std::string Pi5Estimate::method() {
   std::snprintf(text, sizeof text,
                 "estimate, not a measurement: the model's MACs per op kind at the NEON kernels' rates projected by "
                 "llvm-mca -mcpu=cortex-a76 on their inner loops (sdot %.0f %% of %.0f MACs/cycle, fmla %.0f %% of %.0f, "
-                "attention's softmax added), %.1f GHz, +%.0f %% for the ops without MACs, %.0f %% per added core; "
-                "DRAM stalls left out",
+                "attention's softmax added, Winograd convs at 16/36 of their MACs, transforms left out), %.1f GHz, +%.0f %% "
+                "for the ops without MACs, %.0f %% per added core; DRAM stalls left out",
                 r.sdot_efficiency * 100, r.sdot_macs_per_cycle, r.fmla_efficiency * 100, r.fmla_macs_per_cycle, r.clock_ghz,
                 (r.other_ops_factor - 1) * 100, r.parallel_efficiency * 100);
   return text;
@@ -62,7 +65,7 @@ Pi5Estimate Pi5Estimate::of(std::span<const OpProfile> ops, int head_dim) {
   for (Pi5KindCost& k : e.kinds) {
     const bool int8 = k.unit == "sdot";
     const double macs_per_cycle = int8 ? r.sdot_macs_per_cycle * r.sdot_efficiency : r.fmla_macs_per_cycle * r.fmla_efficiency;
-    double cycles = k.macs / macs_per_cycle;
+    double cycles = k.macs * (is_winograd_kind(k.kind) ? kWinogradMacShare : 1.0) / macs_per_cycle;
     if (k.kind.rfind("attention", 0) == 0 && head_dim > 0) {
       const double scores = k.macs / (2.0 * head_dim);
       cycles += scores * (int8 ? kSoftmaxCyclesPerScoreS8 : kSoftmaxCyclesPerScoreF32);

@@ -7,8 +7,9 @@
 //     360x640 camera through conv_s8_s8out (tiled im2col + gemm_s8, ReLU fused), shapes derived
 //     from the image size;
 //   - gemm_f32/<isa>/<linear>/<tokens>/threads:T and conv_f32/<isa>/<HxW>/<layer>/threads:T: the
-//     FP32 path's transformer linears (default and rover token counts) and convolutions (packed
-//     gemm_f32, bias and ReLU fused), pct_peak against the float FMA probe of the ISA;
+//     FP32 path's transformer linears (default and rover token counts) and convolutions (the graph's
+//     op: packed gemm_f32, bias and ReLU fused, the 3x3 stride-1 ones as Winograd F(2x2, 3x3)),
+//     pct_peak against the float FMA probe of the ISA (Winograd's counts the direct conv's MACs);
 //   - attention_f32/<isa>/<tokens>/threads:T: the float attention op, 8 heads of QK^T, softmax,
 //     PV on the packed gemm_f32, head dim 64, at 302 and 242 tokens;
 //   - quant/, pool/, eltwise/<isa>/...: quantize, dequantize, dynamic per-row quantization, max-pool,
@@ -47,6 +48,7 @@
 #include "actengine/engine.h"
 #include "graph/gemm_tiling.h"
 #include "graph/graph.h"
+#include "graph/ops_fp32.h"
 #include "graph/ops_int8.h"
 #include "graph/peak_together.h"
 #include "graph/thread_pool.h"
@@ -350,40 +352,32 @@ void bm_conv(benchmark::State& state, const GemmS8Kernels* v, ConvBench cb, doub
                  " tile " + std::to_string(tile));
 }
 
-// The float convolution as the FP32 graph runs it (kernels/fp32/conv_f32.h: tiles of output pixels,
-// im2col into per-thread scratch, packed gemm_f32 with bias and ReLU fused).
-void bm_conv_f32(benchmark::State& state, const kernels::GemmF32Kernels* g, ConvBench cb, double peak_gmacs, int threads,
-                 std::string key) {
+// The float convolution as the FP32 graph runs it: its op (graph/ops_fp32.h) as a one-op graph,
+// bias and ReLU fused; the 3x3 stride-1 convs as Winograd F(2x2, 3x3) (kernels/fp32/winograd_f32.h),
+// the others on tiles of output pixels (kernels/fp32/conv_f32.h). pct_peak counts the direct
+// convolution's MACs, so Winograd's can pass 100.
+void bm_conv_f32(benchmark::State& state, kernels::Isa isa, ConvBench cb, double peak_gmacs, int threads, std::string key) {
+  const kernels::KernelConfig config = kernels::kernel_config_for(isa);
   const kernels::Conv2dShape& s = cb.shape;
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::vector<float> x(static_cast<size_t>(s.in_h) * s.in_w * s.in_c), w(static_cast<size_t>(s.out_c) * s.patch_size()),
-      bias(static_cast<size_t>(s.out_c));
-  for (auto* v : {&x, &w, &bias}) {
+  std::vector<float> w(static_cast<size_t>(s.out_c) * s.patch_size()), bias(static_cast<size_t>(s.out_c));
+  for (auto* v : {&w, &bias}) {
     for (float& e : *v) e = u(rng);
   }
-  std::vector<float> packed(kernels::gemm_f32_packed_floats(g->nr, s.out_c, s.patch_size()));
-  kernels::gemm_f32_pack(g->nr, s.out_c, s.patch_size(), w.data(), static_cast<size_t>(s.patch_size()), packed.data());
-  const kernels::ConvF32 conv{s, g, packed.data()};
-  const int pixels = s.out_h * s.out_w;
-  const int tile = kernels::conv_f32_tile_pixels(s);
-  const int tiles = (pixels + tile - 1) / tile;
-  std::vector<std::vector<float>> scratch(static_cast<size_t>(threads), std::vector<float>(kernels::conv_f32_scratch_floats(s, tile)));
-  std::vector<float> y(static_cast<size_t>(pixels) * s.out_c);
-  kernels::GemmF32Epilogue epilogue;
-  epilogue.bias = bias.data();
-  epilogue.activation = kernels::GemmF32Activation::kRelu;
+  graph::Graph g;
+  const graph::ValueId x = g.add_input("x", {s.in_h * s.in_w, s.in_c});
+  const graph::ValueId y = g.add_value("y", {s.out_h * s.out_w, s.out_c});
+  auto packed = std::make_shared<const graph::PackedF32Weights>(config.gemm_f32, s.out_c, s.patch_size(), w.data());
+  g.add_op(std::make_unique<graph::Conv2dOp>(packed, s, bias.data(), true, x, graph::kNoValue, y));
+  g.mark_output(y);
+  g.plan(threads, false);
+  for (size_t i = 0; i < static_cast<size_t>(s.in_h) * s.in_w * s.in_c; ++i) g.data(x)[i] = u(rng);
   ThreadPool& tp = pool(threads);
-  run_timed(state, key, threads, static_cast<double>(cb.macs()), peak_gmacs, [&] {
-    tp.parallel_for(static_cast<size_t>(tiles), [&](size_t t, int thread) {
-      const int p0 = static_cast<int>(t) * tile;
-      kernels::conv_f32(conv, x.data(), y.data(), epilogue, p0, std::min(tile, pixels - p0), scratch[thread].data());
-    });
-  });
-  state.SetLabel(std::string(g->name) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
+  run_timed(state, key, threads, static_cast<double>(cb.macs()), peak_gmacs, [&] { g.run(tp, config); });
+  state.SetLabel(g.ops()[0]->kernel(config) + " " + std::to_string(s.in_h) + "x" + std::to_string(s.in_w) + "x" +
                  std::to_string(s.in_c) + " -> " + std::to_string(s.out_h) + "x" + std::to_string(s.out_w) + "x" +
-                 std::to_string(s.out_c) + " k" + std::to_string(s.kernel_h) + "/" + std::to_string(s.stride) +
-                 " tile " + std::to_string(tile));
+                 std::to_string(s.out_c) + " k" + std::to_string(s.kernel_h) + "/" + std::to_string(s.stride));
 }
 
 // ---- attention (f32) ---------------------------------------------------------------------------
@@ -682,7 +676,7 @@ void register_fp32(const BenchPlan& plan) {
                                 std::to_string(w) + "/" + cb.name;
         for (int t = 1; t <= plan.max_threads; ++t) {
           const std::string name = key + "/threads:" + std::to_string(t);
-          with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_conv_f32, g, cb,
+          with_stats(benchmark::RegisterBenchmark(name.c_str(), bm_conv_f32, isa, cb,
                                                   BenchPlan::peak_of(plan.peak_f32, f32_peak_isa, t), t, key));
         }
       }

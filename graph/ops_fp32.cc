@@ -6,6 +6,7 @@
 
 #include "actengine/status.h"
 #include "graph/gemm_tiling.h"
+#include "kernels/fp32/winograd_f32.h"
 
 namespace act::graph {
 
@@ -72,13 +73,19 @@ Conv2dOp::Conv2dOp(std::shared_ptr<const PackedF32Weights> weight, const kernels
       packed_(std::move(weight)) {
   check(packed_->rows() == shape.out_c && packed_->cols() == shape.patch_size(), StatusCode::kInternal,
         "conv2d_f32: packed weights do not match the convolution's shape");
+  if (kernels::winograd_f32_applies(shape, relu ? kernels::GemmF32Activation::kRelu : kernels::GemmF32Activation::kNone)) {
+    const int nr = packed_->panel_width();
+    winograd_ = AlignedBuffer(kernels::winograd_f32_packed_floats(nr, shape) * sizeof(float));
+    kernels::winograd_f32_pack(nr, shape, packed_->unpacked().data(), winograd_.floats());
+  }
   inputs = {input};
   if (residual != kNoValue) inputs.push_back(residual);
   outputs = {output};
 }
 
 void Conv2dOp::fuse_max_pool(int kernel, int stride, int pad, ValueId pooled) {
-  check(residual_ == kNoValue && !max_pool_, StatusCode::kInternal, "Conv2dOp: a max-pool fused into a conv with a residual or a pool already");
+  check(residual_ == kNoValue && !max_pool_ && !winograd(), StatusCode::kInternal,
+        "Conv2dOp: a max-pool fused into a conv with a residual, a pool already or Winograd's tiles");
   max_pool_ = FusedMaxPool::over(s_, kernel, stride, pad);
   outputs.push_back(pooled);
 }
@@ -90,6 +97,7 @@ size_t Conv2dOp::band_offset() const {
 }
 
 size_t Conv2dOp::scratch_per_thread() const {
+  if (winograd()) return kernels::winograd_f32_scratch_floats(s_);
   if (!max_pool_) return kernels::conv_f32_scratch_floats(s_, tile_pixels_);
   return band_offset() + max_pool_->band_bytes(static_cast<size_t>(s_.out_w) * s_.out_c * sizeof(float)) / sizeof(float);
 }
@@ -123,6 +131,17 @@ void Conv2dOp::run(const RunContext& ctx) const {
         [&](const std::byte* band, int q0, int q1, int band_row0) {
           pool_rows(reinterpret_cast<const float*>(band), q0, q1, band_row0);
         });
+  }
+  if (winograd()) {
+    // Tasks of whole row tiles of the GEMM: 80 tiles (layer4's) in tasks of 40 gave each GEMM a 4-row tail.
+    const EvenSplit tiles = split_evenly(kernels::winograd_f32_tiles(s_), conv.kernels->mr, kernels::kWinogradBlockTiles,
+                                         ctx.pool().threads());
+    ctx.pool().parallel_for(static_cast<size_t>(tiles.parts), [&](size_t task, int thread) {
+      int t0, t1;
+      tiles.range(static_cast<int>(task), t0, t1);
+      kernels::winograd_f32(*conv.kernels, s_, winograd_.floats(), x, y, epilogue, t0, t1 - t0, ctx.scratch(thread));
+    });
+    return;
   }
   const EvenSplit tiles = split_evenly(s_.out_h * s_.out_w, kernels::kConvF32TileQuantum, tile_pixels_, ctx.pool().threads());
   ctx.pool().parallel_for(static_cast<size_t>(tiles.parts), [&](size_t task, int thread) {

@@ -14,6 +14,7 @@
 
 #include <cstddef>
 
+#include "kernels/common/conv2d_shape.h"
 #include "kernels/common/covered_paths.h"
 #include "kernels/common/isa.h"
 
@@ -51,11 +52,33 @@ struct GemmF32PackedArgs {
   CoveredPaths* covered = nullptr;  ///< when set, records the tiles that ran (full, row tail, partial columns)
 };
 
+/// Winograd F(2x2, 3x3)'s input transform (winograd_f32.h) of tiles [tile_begin, tile_begin + count):
+/// point p of tile tile_begin + i, channel c, at v[p * ld_point + i * in_c + c].
+struct WinogradF32InputArgs {
+  const Conv2dShape* shape = nullptr;
+  const float* x = nullptr;  ///< the input [in_h, in_w, in_c]
+  int tile_begin = 0, count = 0;
+  float* v = nullptr;
+  size_t ld_point = 0;
+};
+/// Its output transform: the tiles' output pixels from the 16 products m (laid out as v, with
+/// out_c channels), then the epilogue (bias a vector, ld 0; residual [out_h * out_w, out_c]; ReLU).
+struct WinogradF32OutputArgs {
+  const Conv2dShape* shape = nullptr;
+  const float* m = nullptr;
+  size_t ld_point = 0;
+  int tile_begin = 0, count = 0;
+  float* y = nullptr;  ///< the output [out_h, out_w, out_c]
+  GemmF32Epilogue epilogue;
+};
+
 struct GemmF32Kernels {
   Isa isa;
   const char* name;  ///< e.g. "gemm_f32 6x64 avx512"
   int mr, nr;        ///< the register tile (nr: columns per packed panel)
   void (*packed)(const GemmF32PackedArgs& args);
+  void (*winograd_input)(const WinogradF32InputArgs& args);
+  void (*winograd_output)(const WinogradF32OutputArgs& args);
 };
 
 /// Floats of B [n x k] packed in panels of nr columns (n rounded up to nr, the padding zero).

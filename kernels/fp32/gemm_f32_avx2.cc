@@ -17,14 +17,17 @@
 namespace act::kernels {
 
 #include "kernels/fp32/gemm_f32_packed.inc"
+#include "kernels/fp32/winograd_f32_transforms.inc"
 
 namespace {
+using Winograd = WinogradTransforms<XsimdLanes<xsimd::fma3<xsimd::avx2>>>;
 using Packed = PackedGemm<xsimd::fma3<xsimd::avx2>, 6, 2>;
 void gemm_packed_avx2(const GemmF32PackedArgs& args) { Packed::run(Isa::kAvx2, args, elementwise_f32_table_avx2()->gelu); }
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_avx2() {
-  static const GemmF32Kernels table{Isa::kAvx2, "gemm_f32 6x16 avx2", Packed::kMr, Packed::NR, gemm_packed_avx2};
+  static const GemmF32Kernels table{Isa::kAvx2, "gemm_f32 6x16 avx2", Packed::kMr, Packed::NR, gemm_packed_avx2, Winograd::input,
+                                    Winograd::output};
   return &table;
 }
 }  // namespace act::kernels

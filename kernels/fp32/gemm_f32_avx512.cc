@@ -20,6 +20,7 @@
 namespace act::kernels {
 
 #include "kernels/fp32/gemm_f32_packed.inc"
+#include "kernels/fp32/winograd_f32_transforms.inc"
 
 namespace {
 template <>
@@ -29,6 +30,7 @@ xsimd::batch<float, xsimd::avx512f> multiply_add<xsimd::avx512f>(const xsimd::ba
   return _mm512_fmadd_ps(a, b, c);
 }
 
+using Winograd = WinogradTransforms<XsimdLanes<xsimd::avx512f>>;
 using Prefetching = PackedGemm<xsimd::avx512f, 6, 4, 1024>;
 using Plain = PackedGemm<xsimd::avx512f, 6, 4, 0>;
 template <class Gemm>
@@ -37,9 +39,9 @@ void gemm_packed(const GemmF32PackedArgs& args) { Gemm::run(Isa::kAvx512, args, 
 
 const GemmF32Kernels* gemm_f32_table_avx512(bool software_prefetch) {
   static const GemmF32Kernels prefetching{Isa::kAvx512, "gemm_f32 6x64 avx512", Prefetching::kMr, Prefetching::NR,
-                                          gemm_packed<Prefetching>};
+                                          gemm_packed<Prefetching>, Winograd::input, Winograd::output};
   static const GemmF32Kernels plain{Isa::kAvx512, "gemm_f32 6x64 avx512 (no B prefetch)", Plain::kMr, Plain::NR,
-                                    gemm_packed<Plain>};
+                                    gemm_packed<Plain>, Winograd::input, Winograd::output};
   return software_prefetch ? &prefetching : &plain;
 }
 }  // namespace act::kernels

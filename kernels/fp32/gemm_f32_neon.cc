@@ -13,14 +13,17 @@
 namespace act::kernels {
 
 #include "kernels/fp32/gemm_f32_packed.inc"
+#include "kernels/fp32/winograd_f32_transforms.inc"
 
 namespace {
+using Winograd = WinogradTransforms<XsimdLanes<xsimd::neon64>>;
 using Packed = PackedGemm<xsimd::neon64, 8, 3>;
 void gemm_packed_neon(const GemmF32PackedArgs& args) { Packed::run(Isa::kNeon, args, elementwise_f32_table_neon()->gelu); }
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_neon() {
-  static const GemmF32Kernels table{Isa::kNeon, "gemm_f32 8x12 neon", Packed::kMr, Packed::NR, gemm_packed_neon};
+  static const GemmF32Kernels table{Isa::kNeon, "gemm_f32 8x12 neon", Packed::kMr, Packed::NR, gemm_packed_neon, Winograd::input,
+                                    Winograd::output};
   return &table;
 }
 }  // namespace act::kernels

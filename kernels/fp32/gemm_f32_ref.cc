@@ -6,9 +6,20 @@
 
 namespace act::kernels {
 
+#include "kernels/fp32/winograd_f32_transforms.inc"
+
 namespace {
 
 constexpr int kRefNr = 8;
+
+struct ScalarLanes {
+  using V = float;
+  static constexpr int kWidth = 1;
+  static float load(const float* p) { return *p; }
+  static void store(float v, float* p) { *p = v; }
+  static float relu(float v) { return v < 0.0f ? 0.0f : v; }
+};
+using Winograd = WinogradTransforms<ScalarLanes>;
 
 float a_at(const GemmF32PackedArgs& g, int i, int p) {
   if (g.a_segments == nullptr) return g.a[static_cast<size_t>(i) * g.lda + static_cast<size_t>(p)];
@@ -38,7 +49,8 @@ void gemm_packed_ref(const GemmF32PackedArgs& g) {
 }  // namespace
 
 const GemmF32Kernels* gemm_f32_table_ref() {
-  static const GemmF32Kernels table{Isa::kRef, "gemm_f32 1x8 ref", 1, kRefNr, gemm_packed_ref};
+  static const GemmF32Kernels table{Isa::kRef, "gemm_f32 1x8 ref", 1, kRefNr, gemm_packed_ref, Winograd::input,
+                                    Winograd::output};
   return &table;
 }
 

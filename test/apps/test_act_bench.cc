@@ -278,10 +278,11 @@ TEST(Pi5Estimate, MacsPerKindAtTheProjectedRates) {
                                       {"b", "conv2d_s8_s8", "k", "backbone", 1e9, 0, 0},
                                       {"c", "linear_f32", "k", "decoder", 1e8, 0, 0},
                                       {"d", "attention_s8", "k", "encoder", 2.0 * 64 * 1e6, 0, 0},
-                                      {"e", "layernorm_f32", "k", "encoder", 0, 0, 0}};
+                                      {"e", "layernorm_f32", "k", "encoder", 0, 0, 0},
+                                      {"f", "conv2d_f32_winograd", "k", "backbone", 9e8, 0, 0}};
   const Pi5Rates& r = pi5_rates();
   const Pi5Estimate e = Pi5Estimate::of(ops, 64);
-  ASSERT_EQ(e.kinds.size(), 3u);  // the layer norm has no MACs
+  ASSERT_EQ(e.kinds.size(), 4u);  // the layer norm has no MACs
   EXPECT_EQ(e.kinds[0].kind, "conv2d_s8_s8");
   EXPECT_EQ(e.kinds[0].unit, "sdot");
   const double hz = r.clock_ghz * 1e9;
@@ -290,6 +291,10 @@ TEST(Pi5Estimate, MacsPerKindAtTheProjectedRates) {
     if (k.kind == "linear_f32") {
       EXPECT_EQ(k.unit, "fmla");
       EXPECT_NEAR(k.ms_one_core, 1e8 / (r.fmla_macs_per_cycle * r.fmla_efficiency) / hz * 1e3, 1e-9);
+    }
+    if (k.kind == "conv2d_f32_winograd") {  // 16 of the direct conv's 36 multiply-adds
+      EXPECT_EQ(k.unit, "fmla");
+      EXPECT_NEAR(k.ms_one_core, 9e8 * 16 / 36 / (r.fmla_macs_per_cycle * r.fmla_efficiency) / hz * 1e3, 1e-9);
     }
     if (k.kind == "attention_s8") {  // 1e6 scores of 2 x 64 MACs, each with its softmax
       EXPECT_GT(k.ms_one_core, 2.0 * 64 * 1e6 / (r.sdot_macs_per_cycle * r.sdot_efficiency) / hz * 1e3);

@@ -25,7 +25,7 @@ table() {
   python3 "$root/scripts/perf_table.py" \
     "$here/zen4.json" \
     --label "AMD EPYC Zen 5, 2 vCPU" \
-    --note "A shared host, quiet during the runs; \`vpdpbusd\` probe 519-536 GMAC/s per core, FMA 130-135 (the probes' readings move with the host's load)." \
+    --note "A shared host. INT8 rows: quiet during the runs, \`vpdpbusd\` probe 519-536 GMAC/s per core. FP32 rows: with the 3x3 stride-1 convs as Winograd F(2x2,3x3), whose shares count the direct convs' MACs (so they can pass 100 %), on a busier host, FMA probe 121-122 GMAC/s per core (the probes' readings move with the host's load)." \
     "$here"/zen5-2vcpu/*.json \
     --label "Intel Xeon, 2 vCPU" \
     --note "A loaded host: 2 vCPUs shared with four other engineers' builds (load average 4-7) during the runs, so these read well below the CPU's speed; \`vpdpbusd\` probe 383 GMAC/s per core, FMA 89." \

@@ -456,7 +456,7 @@ class Benchmark {
   double winograd_gmac() const {
     double macs = 0;
     for (const act::OpProfile& op : engine_->op_profile()) {
-      if (op.kind.ends_with("_winograd")) macs += op.macs;
+      if (act::is_winograd_kind(op.kind)) macs += op.macs;
     }
     return macs / 1e9;
   }

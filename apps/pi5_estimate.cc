@@ -36,9 +36,10 @@ constexpr int kMaxCores = 4;  // the Pi 5's
 bool is_int8_kind(const std::string& kind) { return kind.find("s8") != std::string::npos; }
 // Winograd F(2x2, 3x3) convs do 16 of the direct conv's 36 multiply-adds per 2x2 output tile.
 constexpr double kWinogradMacShare = 16.0 / 36.0;
-bool is_winograd_kind(const std::string& kind) { return kind.ends_with("_winograd"); }
 
 }  // namespace
+
+bool is_winograd_kind(const std::string& kind) { return kind.ends_with("_winograd"); }
 
 std::string Pi5Estimate::method() {
   const Pi5Rates& r = pi5_rates();

@@ -25,6 +25,10 @@ struct Pi5Rates {
 };
 const Pi5Rates& pi5_rates();
 
+/// An op kind (OpProfile::kind) whose convs run as Winograd F(2x2, 3x3): its MACs are the direct
+/// conv's, 36 per output tile where Winograd does 16.
+bool is_winograd_kind(const std::string& kind);
+
 /// The ops of one kind and what they cost on one A76 core.
 struct Pi5KindCost {
   std::string kind;      ///< OpProfile::kind, e.g. "conv2d_s8_s8"

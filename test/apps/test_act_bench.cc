@@ -232,6 +232,25 @@ TEST(ActBench, OpProfileAndTrace) {
   EXPECT_EQ(lanes, (std::set<int>{0, 1}));
 }
 
+// FP32 as a user runs it: the ResNet blocks' 3x3 stride-1 convs profile as Winograd, the stem and
+// the strided convs stay direct, and the output says why the shares can pass 100 %.
+TEST(ActBench, Fp32RunsTheBlocks3x3ConvsAsWinograd) {
+  const std::string dir = test::scratch_dir();
+  const auto r = run_command(std::string(ACT_BENCH_BIN) + " --config 64x96 --precision fp32 -n 1 -w 0 -t 1 " +
+                             "--enable_op_profiling --json " + q(dir + "/p.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("run as Winograd F(2x2,3x3)"), std::string::npos) << r.output;
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/p.json"));
+  int winograd = 0, direct = 0;
+  for (const auto& op : j.at("op_profile").at("ops")) {
+    const std::string kind = op.at("kind");
+    if (kind == "conv2d_f32_winograd") ++winograd;
+    if (kind.rfind("conv2d_f32", 0) == 0 && kind != "conv2d_f32_winograd") ++direct;
+  }
+  EXPECT_EQ(winograd, 13) << "resnet18's 3x3 stride-1 convs";
+  EXPECT_EQ(direct, 7) << "the stem, three strided 3x3 and three 1x1 downsamples";
+}
+
 // The table's arithmetic on a profile made by hand.
 TEST(OpProfileTable, MeansSharesRatesAndKinds) {
   const std::vector<OpProfile> profile = {{"a", "conv", "k1", "backbone", 1e6, 2, 4.0},
